@@ -1,0 +1,423 @@
+"""Theorem 1 of the paper: non-fragile (and nominal) gain synthesis, certificates.
+
+Closed loop (paper eq. 7)::
+
+    xi' = (A + B (K + E D(t) F)) xi + A_tau xi(t - tau),   D^T D <= I.
+
+Synthesis (paper eq. 8/16, written with ``X = P^-1``, ``W = Q^-1``, ``R = K X``)::
+
+    [ He(A X + B R)  eps B E   A_tau W   X    X F^T  ]
+    [  *             -eps I    0         0    0      ]
+    [  *              *        -W        0    0      ]  < 0,   K = R X^-1
+    [  *              *         *        -W   0      ]
+    [  *              *         *         *   -eps I ]
+
+(the paper prints ``K = R P``; with its own definition ``R = K P^-1`` that is
+``K = R X^-1`` here).  The LMI is homogeneous in ``(X, W, R, eps)``, so a bare
+feasibility problem returns a point of arbitrary scale.  We make the result
+well defined and strictly feasible by solving::
+
+    maximize t  s.t.  LMI <= -t I,  X >= t I,  W >= t I,  eps >= t,
+                      tr X + tr W + eps <= 1
+
+and accept it only if ``t >= margin`` (default 1e-6): ``t`` is the achieved
+strictness in these normalized units and is reported with the certificate.
+
+Independent verification (:func:`verify_certificate`) uses only
+``(K, P, Q, eps)``: by Schur complements the synthesis LMI is equivalent to ::
+
+    V = [ He(P (A + B K)) + Q + F^T F / eps   P A_tau   P B E    ]
+        [  *                                  -Q        0        ]  < 0
+        [  *                                   *        -I / eps ]
+
+and ``V < 0`` implies, by Petersen's lemma (paper Lemma 1), that the
+Lyapunov-Krasovskii matrix ``M`` of eq. (10) is negative definite for every
+``||D|| <= 1``.  With ``K`` fixed, ``V`` is linear in ``(P, Q, 1/eps)``: that
+is :func:`certify_gain`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .problem import Problem
+
+__all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
+           'Verification', 'SynthesisResult', 'CertifyResult', 'verify_certificate',
+           'synthesize', 'certify_gain', 'certified_perturbation_scale']
+
+DEFAULT_MARGIN = 1e-6
+DEFAULT_SOLVER = 'CLARABEL'
+
+
+class LmiError(RuntimeError):
+    """Base class of LMI failures."""
+
+
+class InfeasibleError(LmiError):
+    """The LMI has no strictly feasible point with the requested margin."""
+
+
+class SolverFailure(LmiError):
+    """The solver is missing or returned no usable status."""
+
+
+class CertificateError(LmiError):
+    """A solver result failed the independent numpy verification."""
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Outcome of :func:`verify_certificate`: all eigenvalue checks, worst first."""
+
+    ok: bool
+    max_eig_V: float         # largest eigenvalue of V (must be < 0)
+    min_eig_P: float         # smallest eigenvalue of P (must be > 0)
+    min_eig_Q: float         # smallest eigenvalue of Q (must be > 0)
+    tolerance: float         # relative slack demanded: max_eig_V < -tolerance * scale
+    scale: float             # spectral norm of V
+
+    @property
+    def worst_eigenvalue(self) -> float:
+        return self.max_eig_V
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """Lyapunov-Krasovskii certificate of Theorem 1 for a gain ``K``.
+
+    ``eps is None`` means the nominal (D = 0) condition.
+    """
+
+    K: np.ndarray
+    P: np.ndarray
+    Q: np.ndarray
+    eps: float | None
+    verification: Verification
+
+
+@dataclass(frozen=True)
+class SynthesisResult:
+    """A synthesized gain with its verified certificate and solver facts."""
+
+    K: np.ndarray
+    certificate: Certificate
+    margin_required: float
+    margin_achieved: float
+    status: str
+    solver: str
+    solve_time: float        # seconds inside the solver
+    wall_time: float         # seconds for build + solve + verification
+    nominal: bool
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.certificate.P
+
+    @property
+    def Q(self) -> np.ndarray:
+        return self.certificate.Q
+
+    @property
+    def eps(self) -> float | None:
+        return self.certificate.eps
+
+
+@dataclass(frozen=True)
+class CertifyResult:
+    """Whether Theorem 1's condition holds for a fixed ``K``."""
+
+    certified: bool
+    margin_achieved: float   # best t in normalized units (> 0 iff certified)
+    certificate: Certificate | None
+    status: str
+
+
+def _sym(M: np.ndarray) -> np.ndarray:
+    return 0.5 * (M + M.T)
+
+
+def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
+    """The matrix ``V`` of the module docstring (nominal form when ``eps is None``)."""
+    A0 = A + B @ K
+    top = P @ A0 + A0.T @ P + Q
+    n = A.shape[0]
+    if eps is None:
+        return _sym(np.block([[top, P @ A_tau], [A_tau.T @ P, -Q]]))
+    q = E.shape[1]
+    top = top + (F.T @ F) / eps
+    PBE = P @ B @ E
+    V = np.block([
+        [top, P @ A_tau, PBE],
+        [A_tau.T @ P, -Q, np.zeros((n, q))],
+        [PBE.T, np.zeros((q, n)), -np.eye(q) / eps],
+    ])
+    return _sym(V)
+
+
+def verify_certificate(problem: Problem, K, P, Q, eps, *, tol: float = 1e-9) -> Verification:
+    """Check Theorem 1's condition from ``(K, P, Q, eps)`` alone, with eigenvalues.
+
+    Passes iff ``P > 0``, ``Q > 0``, ``eps > 0`` (unless nominal) and
+    ``max eig(V) < -tol * ||V||``.  Never raises for a failed check: see ``ok``.
+    """
+    K = np.asarray(K, float)
+    P = _sym(np.asarray(P, float))
+    Q = _sym(np.asarray(Q, float))
+    V = verification_matrix(problem.A, problem.B, problem.A_tau, problem.E, problem.F,
+                            K, P, Q, eps)
+    ev = np.linalg.eigvalsh(V)
+    scale = float(np.max(np.abs(ev)))
+    min_p = float(np.linalg.eigvalsh(P)[0])
+    min_q = float(np.linalg.eigvalsh(Q)[0])
+    ok = (bool(np.all(np.isfinite(V))) and ev[-1] < -tol * scale and min_p > 0 and min_q > 0
+          and (eps is None or eps > 0))
+    return Verification(ok=bool(ok), max_eig_V=float(ev[-1]), min_eig_P=min_p, min_eig_Q=min_q,
+                        tolerance=tol, scale=scale)
+
+
+# ---------------------------------------------------------------------------------------------
+# cvxpy problems, built once per shape and re-solved with new data (DPP parameters).
+
+class _Theorem1Program:
+    """Parametrized synthesis SDP for fixed (n, m, q, p) and nominal flag."""
+
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
+        import cvxpy as cp
+        self.cp = cp
+        self.nominal = nominal
+        self.A = cp.Parameter((n, n), name='A')
+        self.B = cp.Parameter((n, m), name='B')
+        self.Ad = cp.Parameter((n, n), name='A_tau')
+        self.X = cp.Variable((n, n), symmetric=True, name='X')
+        self.W = cp.Variable((n, n), symmetric=True, name='W')
+        self.R = cp.Variable((m, n), name='R')
+        self.t = cp.Variable(name='t')
+        S = self.A @ self.X + self.B @ self.R
+        Z = np.zeros
+        if nominal:
+            blocks = [
+                [S + S.T, self.Ad @ self.W, self.X],
+                [(self.Ad @ self.W).T, -self.W, Z((n, n))],
+                [self.X, Z((n, n)), -self.W],
+            ]
+            size = 3 * n
+            self.eps = None
+            norm = cp.trace(self.X) + cp.trace(self.W)
+            extra = []
+        else:
+            self.BE = cp.Parameter((n, q), name='BE')
+            self.F = cp.Parameter((p, n), name='F')
+            self.eps = cp.Variable(name='eps')
+            XFt = self.X @ self.F.T
+            blocks = [
+                [S + S.T, self.eps * self.BE, self.Ad @ self.W, self.X, XFt],
+                [(self.eps * self.BE).T, -self.eps * np.eye(q), Z((q, n)), Z((q, n)), Z((q, p))],
+                [(self.Ad @ self.W).T, Z((n, q)), -self.W, Z((n, n)), Z((n, p))],
+                [self.X, Z((n, q)), Z((n, n)), -self.W, Z((n, p))],
+                [XFt.T, Z((p, q)), Z((p, n)), Z((p, n)), -self.eps * np.eye(p)],
+            ]
+            size = 3 * n + q + p
+            norm = cp.trace(self.X) + cp.trace(self.W) + self.eps
+            extra = [self.eps >= self.t]
+        L = cp.bmat(blocks)
+        L = 0.5 * (L + L.T)
+        cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
+                self.W >> self.t * np.eye(n)] + extra
+        if gain_bound:
+            # ||K||_2 <= kappa: X >= I and [[kappa^2 (2X - I), R^T], [R, I]] >= 0, because
+            # X^2 >= 2X - I gives R^T R <= kappa^2 (2X - I) <= kappa^2 X^2.  Here the scale
+            # is fixed by X >= I, so the trace normalization is replaced by t <= 1.
+            self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
+            G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
+                         [self.R, np.eye(m)]])
+            cons += [self.X >> np.eye(n), 0.5 * (G + G.T) >> 0, self.t <= 1]
+        else:
+            self.kappa2 = None
+            cons += [norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+        self.A.value = problem.A
+        self.B.value = problem.B
+        self.Ad.value = problem.A_tau
+        if not self.nominal:
+            self.BE.value = problem.B @ problem.E
+            self.F.value = problem.F
+        if self.kappa2 is not None:
+            self.kappa2.value = float(kappa) ** 2
+        try:
+            self.problem.solve(solver=solver)
+        except self.cp.error.SolverError as exc:
+            raise SolverFailure(f'solver {solver} failed on problem {problem.name!r}: {exc}. '
+                                'Check that the solver is installed (pip install clarabel).') \
+                from None
+        stats = self.problem.solver_stats
+        return (self.problem.status, self.t.value, self.X.value, self.W.value, self.R.value,
+                None if self.eps is None else self.eps.value,
+                float(stats.solve_time or 0.0) if stats is not None else 0.0)
+
+
+_PROGRAMS: dict[tuple, _Theorem1Program] = {}
+
+
+def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    prog = _PROGRAMS.get(key)
+    if prog is None:
+        prog = _PROGRAMS[key] = _Theorem1Program(*key)
+    return prog
+
+
+def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None = None,
+               solver: str | None = None, gain_bound: float | None = None,
+               verify_tol: float = 1e-9) -> SynthesisResult:
+    """Solve Theorem 1 (or its nominal form) and return a verified gain.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
+        delay-independent).
+    nominal : bool
+        Drop the ``E, F`` terms (the paper's "normal state feedback").
+    margin : float
+        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
+        or 1e-6.
+    solver : str
+        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
+    gain_bound : float, optional
+        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
+
+    Raises
+    ------
+    InfeasibleError
+        No point with ``t >= margin`` exists; nothing is returned.
+    SolverFailure
+        The solver is missing or returned no solution.
+    CertificateError
+        The solver's point failed :func:`verify_certificate`.
+    """
+    margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
+    solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
+    if gain_bound is not None and not gain_bound > 0:
+        raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
+    t0 = time.perf_counter()
+    prog = _program(problem, nominal, gain_bound is not None)
+    status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
+    kind = 'nominal' if nominal else 'non-fragile'
+    if status in ('infeasible', 'infeasible_inaccurate') or (
+            status in ('optimal', 'optimal_inaccurate') and (t is None or t < margin)):
+        best = 'no feasible point' if t is None else f'best margin t = {t:.3g}'
+        bound = '' if gain_bound is None else f' with ||K||_2 <= {gain_bound:g}'
+        raise InfeasibleError(
+            f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
+            f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
+            'nominal design, or the delay-dependent design.')
+    if status not in ('optimal', 'optimal_inaccurate') or X is None:
+        raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
+                            f'{problem.name!r}; no gain was produced')
+    P = np.linalg.inv(_sym(X))
+    Q = np.linalg.inv(_sym(W))
+    K = R @ P
+    eps_val = None if nominal else float(eps)
+    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
+    if not ver.ok:
+        raise CertificateError(
+            f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
+            f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
+            f'min eig Q = {ver.min_eig_Q:.3g}. Use CLARABEL or raise the margin.')
+    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
+    return SynthesisResult(K=K, certificate=cert, margin_required=margin,
+                           margin_achieved=float(t), status=status, solver=solver,
+                           solve_time=solve_time, wall_time=time.perf_counter() - t0,
+                           nominal=nominal,
+                           extra={} if gain_bound is None else {'gain_bound': gain_bound})
+
+
+# ---------------------------------------------------------------------------------------------
+# Certify a given K.
+
+def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | None = None,
+                 solver: str | None = None, verify_tol: float = 1e-9) -> CertifyResult:
+    """Decide whether Theorem 1's condition holds for the fixed gain ``K``.
+
+    Solves ``maximize t`` s.t. ``V(P, Q, d) <= -t I``, ``P, Q >= t I``, ``d >= t``,
+    ``tr P + tr Q + d <= 1`` where ``d = 1/eps``; certified iff ``t >= margin`` and the
+    resulting certificate passes :func:`verify_certificate`.
+    """
+    import cvxpy as cp
+    margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
+    solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
+    K = np.asarray(K, float)
+    if K.shape != (problem.m, problem.n):
+        raise ValueError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    n = problem.n
+    A0 = problem.A + problem.B @ K
+    P = cp.Variable((n, n), symmetric=True)
+    Q = cp.Variable((n, n), symmetric=True)
+    t = cp.Variable()
+    top = P @ A0 + A0.T @ P + Q
+    if nominal:
+        V = cp.bmat([[top, P @ problem.A_tau], [(P @ problem.A_tau).T, -Q]])
+        cons, norm, d = [], cp.trace(P) + cp.trace(Q), None
+    else:
+        q = problem.E.shape[1]
+        d = cp.Variable()
+        PBE = P @ problem.B @ problem.E
+        V = cp.bmat([[top + d * (problem.F.T @ problem.F), P @ problem.A_tau, PBE],
+                     [(P @ problem.A_tau).T, -Q, np.zeros((n, q))],
+                     [PBE.T, np.zeros((q, n)), -d * np.eye(q)]])
+        cons, norm = [d >= t], cp.trace(P) + cp.trace(Q) + d
+    V = 0.5 * (V + V.T)
+    cons += [V << -t * np.eye(V.shape[0]), P >> t * np.eye(n), Q >> t * np.eye(n), norm <= 1]
+    prob = cp.Problem(cp.Maximize(t), cons)
+    try:
+        prob.solve(solver=solver)
+    except cp.error.SolverError as exc:
+        raise SolverFailure(f'solver {solver} failed while certifying K: {exc}') from None
+    if prob.status not in ('optimal', 'optimal_inaccurate') or t.value is None:
+        return CertifyResult(False, float('-inf'), None, prob.status)
+    tv = float(t.value)
+    if tv < margin:
+        return CertifyResult(False, tv, None, prob.status)
+    eps = None if nominal else 1.0 / float(d.value)
+    ver = verify_certificate(problem, K, P.value, Q.value, eps, tol=verify_tol)
+    cert = Certificate(K=K, P=_sym(P.value), Q=_sym(Q.value), eps=eps, verification=ver)
+    return CertifyResult(ver.ok, tv, cert, prob.status)
+
+
+def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
+                                 rel_tol: float = 1e-3, solver: str | None = None) -> float:
+    """Largest ``s`` such that :func:`certify_gain` certifies ``K`` with ``F -> s F``.
+
+    Bisection: certification is monotone in ``s`` (a certificate for ``s`` also
+    certifies every smaller scale).  Returns 0.0 if even the nominal condition fails
+    and ``upper`` if ``upper`` itself is certified.  A solver failure at a trial
+    scale (it happens for extreme scales) counts as "not certified" there.
+    """
+    def ok(s: float) -> bool:
+        try:
+            return certify_gain(problem.replace(F=s * problem.F), K, solver=solver).certified
+        except SolverFailure:
+            return False
+
+    if not certify_gain(problem, K, nominal=True, solver=solver).certified:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while ok(hi):
+        lo = hi
+        if hi >= upper:
+            return upper
+        hi = min(2.0 * hi, upper)
+    while hi - lo > rel_tol * hi:
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo

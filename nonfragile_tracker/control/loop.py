@@ -1,0 +1,356 @@
+"""Step functions of the tracking loop, shared by the ROS nodes and the simulation.
+
+* :class:`UnicyclePlant` - kinematic unicycle driven by ``(v, w)`` with the paper's
+  delayed-state term ``A_tau xi(t - tau)`` added in linearized coordinates.
+* :class:`Tracker` - the tracking law ``u = xi_d'' + (K + E D F)(xi - xi_d)``
+  with the dynamic extension ``v' = a`` held as the tracker's own state.
+* :func:`step_time` - the time of step ``k`` (integer nanoseconds, as in ROS stamps).
+
+The ROS nodes call exactly these methods, in the same order as
+:func:`nonfragile_tracker.control.simulate.simulate_tracking`, so a lockstep ROS
+run and an in-process run agree to round-off.  Everything is plain floats for
+speed; nothing here imports ROS.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import xi_from_state
+from .reference import RefSample
+
+__all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', 'Tracker',
+           'Command', 'delay_steps', 'step_time', 'step_time_ns', 'yaw_to_quaternion',
+           'quaternion_to_yaw', 'validate_gain']
+
+
+class LoopConfigError(ValueError):
+    """A plant or tracker setting is invalid; the message names the setting."""
+
+
+def step_time_ns(k: int, dt: float) -> int:
+    """Stamp of step ``k`` in integer nanoseconds (``k * round(dt * 1e9)``)."""
+    return k * int(round(dt * 1e9))
+
+
+def step_time(k: int, dt: float) -> float:
+    """Time of step ``k`` in seconds, computed exactly as a ROS node reads a stamp."""
+    return step_time_ns(k, dt) * 1e-9
+
+
+def delay_steps(tau: float, dt: float) -> tuple[int, float]:
+    """Delay in whole steps: ``N = round(tau / dt)`` and the effective delay ``N dt``.
+
+    A delay that is not a multiple of the step is rounded to the nearest one; the
+    caller reports ``N dt`` when it differs from ``tau``.
+    """
+    if not (math.isfinite(tau) and tau >= 0):
+        raise LoopConfigError(f'delay tau must be a finite number >= 0 s, got {tau!r}')
+    if not (math.isfinite(dt) and dt > 0):
+        raise LoopConfigError(f'step dt must be a finite number > 0 s, got {dt!r}')
+    n = int(round(tau / dt))
+    return n, n * dt
+
+
+def yaw_to_quaternion(th: float) -> tuple[float, float, float, float]:
+    """Quaternion (x, y, z, w) of a rotation by ``th`` about z (REP-103)."""
+    return (0.0, 0.0, math.sin(0.5 * th), math.cos(0.5 * th))
+
+
+def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
+    """Yaw (rotation about z) of a quaternion; valid for any non-zero norm."""
+    return math.atan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
+
+
+def _matrix4(name: str, value) -> tuple[tuple[float, ...], ...]:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
+        raise LoopConfigError(f'{name} must be a finite 4x4 matrix, got {np.asarray(value)!r}')
+    return tuple(tuple(float(v) for v in row) for row in arr)
+
+
+# ---------------------------------------------------------------------------------------------
+# Plant
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Unicycle plant settings (SI units).  ``A_tau`` acts on ``xi = [x, x', y, y']``."""
+
+    dt: float = 0.01
+    tau: float = 0.2
+    A_tau: tuple = ((0.01, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0.02, 0), (0, 0, 0, 0))
+    x0: float = 0.7
+    y0: float = 0.1
+    th0: float = math.pi / 2
+    v0: float = 0.05
+
+    def __post_init__(self):
+        object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+        delay_steps(self.tau, self.dt)
+        for name in ('x0', 'y0', 'th0', 'v0'):
+            if not math.isfinite(getattr(self, name)):
+                raise LoopConfigError(f'{name} must be finite, got {getattr(self, name)!r}')
+
+    @property
+    def delay_steps(self) -> int:
+        return delay_steps(self.tau, self.dt)[0]
+
+
+class UnicyclePlant:
+    """Kinematic unicycle with the delayed-state term of paper eq. (5).
+
+    Dynamics over one step, with ``(v, w)`` and ``d = A_tau xi(t_k - N dt)`` held
+    constant (zero-order hold) and integrated exactly::
+
+        x' = v cos th + d0 + ox,   y' = v sin th + d2 + oy,   th' = w,
+        ox' = d1,                  oy' = d3,
+
+    i.e. the position rows of ``A_tau`` add to the position rates and the velocity
+    rows accumulate into a velocity offset ``(ox, oy)``.  The history buffer holds
+    ``xi_k = [x, v cos th + ox, y, v sin th + oy]`` at each step (``v`` the speed
+    applied from ``t_k``); before ``t = 0`` the history is the initial ``xi``.
+    """
+
+    def __init__(self, config: PlantConfig):
+        self.config = config
+        self.N = config.delay_steps
+        self.reset()
+
+    def reset(self) -> None:
+        c = self.config
+        self.k = 0
+        self.x, self.y, self.th = float(c.x0), float(c.y0), float(c.th0)
+        self.ox = self.oy = 0.0
+        self.v = float(c.v0)            # speed in force (last applied command)
+        self.w = 0.0
+        xi0 = xi_from_state(self.x, self.y, self.th, self.v)
+        self._hist: deque = deque([xi0] * (self.N + 1), maxlen=self.N + 1)
+
+    @property
+    def t(self) -> float:
+        return step_time(self.k, self.config.dt)
+
+    def xi(self, v: float | None = None) -> tuple[float, float, float, float]:
+        """Linearized state at the current step with speed ``v`` (default: in force)."""
+        v = self.v if v is None else v
+        c, s = math.cos(self.th), math.sin(self.th)
+        return (self.x, v * c + self.ox, self.y, v * s + self.oy)
+
+    def step(self, v: float, w: float) -> None:
+        """Apply ``(v, w)`` for one step ``dt``: ``k -> k + 1``."""
+        h = self.config.dt
+        xi_now = self.xi(v)
+        if self.N == 0:
+            d_xi = xi_now
+        else:
+            d_xi = self._hist[0]          # xi at step k - N
+        self._hist.append(xi_now)
+        At = self.config.A_tau
+        d = [At[i][0] * d_xi[0] + At[i][1] * d_xi[1] + At[i][2] * d_xi[2] + At[i][3] * d_xi[3]
+             for i in range(4)]
+        half = 0.5 * w * h
+        sinc = math.sin(half) / half if abs(half) > 1e-8 else 1.0 - half * half / 6.0
+        mid = self.th + half
+        arc = v * h * sinc
+        self.x += arc * math.cos(mid) + (d[0] + self.ox) * h + 0.5 * d[1] * h * h
+        self.y += arc * math.sin(mid) + (d[2] + self.oy) * h + 0.5 * d[3] * h * h
+        self.ox += d[1] * h
+        self.oy += d[3] * h
+        self.th = math.remainder(self.th + w * h, math.tau)
+        self.v, self.w = float(v), float(w)
+        self.k += 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Tracker
+
+def validate_gain(K, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
+                  A=None, B=None) -> np.ndarray:
+    """The one gain check used everywhere: shape, finiteness, Hurwitz nominal loop.
+
+    ``A, B`` default to the paper's double integrators (eq. 4).  Returns ``K`` as a
+    float array; raises :class:`LoopConfigError` saying what is wrong and what to do.
+    """
+    try:
+        arr = np.array(K, dtype=float)
+    except (TypeError, ValueError):
+        raise LoopConfigError(f'{name} must be numbers, got {K!r}') from None
+    if arr.size != shape[0] * shape[1]:
+        raise LoopConfigError(f'{name} has {arr.size} entries; a {shape[0]}x{shape[1]} gain '
+                              f'needs {shape[0] * shape[1]} (row-major)')
+    arr = arr.reshape(shape)
+    bad = np.argwhere(~np.isfinite(arr))
+    if bad.size:
+        i, j = bad[0]
+        raise LoopConfigError(f'{name}[{i}][{j}] is {arr[i, j]}; every gain entry must be finite')
+    if A is None or B is None:
+        from .model import double_integrator_model
+        mdl = double_integrator_model(shape[0])
+        A, B = mdl.A, mdl.B
+    eig = np.linalg.eigvals(A + B @ arr)
+    if not np.all(eig.real < 0):
+        worst = eig[np.argmax(eig.real)]
+        raise LoopConfigError(
+            f'{name} does not stabilize the nominal loop: A + B K has an eigenvalue '
+            f'{worst.real:.4g}{worst.imag:+.4g}j with real part >= 0. Use a gain from '
+            '`nonfragile_tracker synthesize` (K must make A + B K Hurwitz).')
+    return arr
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Tracker settings.  ``K`` is m x n (2 x 4); ``perturbation`` is ``E D F`` (added to K)."""
+
+    K: tuple
+    dt: float = 0.01
+    max_linear_speed: float = 1.0
+    max_angular_speed: float = 2.0
+    min_speed: float = 1e-3
+    perturbation: tuple | None = None
+    delay_compensation: bool = False
+    A_tau: tuple | None = None
+    tau: float = 0.0
+
+    def __post_init__(self):
+        K = validate_gain(self.K)
+        object.__setattr__(self, 'K', tuple(tuple(float(v) for v in row) for row in K))
+        if self.perturbation is not None:
+            P = np.asarray(self.perturbation, dtype=float)
+            if P.shape != (2, 4) or not np.all(np.isfinite(P)):
+                raise LoopConfigError('perturbation E D F must be a finite 2x4 matrix, got '
+                                      f'{np.asarray(self.perturbation)!r}')
+            object.__setattr__(self, 'perturbation', tuple(tuple(map(float, r)) for r in P))
+        for name in ('dt', 'max_linear_speed', 'max_angular_speed', 'min_speed'):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, float)) \
+                    or not math.isfinite(val) or val <= 0:
+                raise LoopConfigError(f'{name} must be a finite number > 0, got {val!r}')
+        if self.min_speed >= self.max_linear_speed:
+            raise LoopConfigError(f'min_speed ({self.min_speed}) must be below '
+                                  f'max_linear_speed ({self.max_linear_speed})')
+        if self.delay_compensation:
+            if self.A_tau is None:
+                raise LoopConfigError('delay_compensation needs A_tau')
+            object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+            delay_steps(self.tau, self.dt)
+
+    @property
+    def K_effective(self) -> tuple:
+        """The gain actually applied: ``K + E D F``."""
+        if self.perturbation is None:
+            return self.K
+        return tuple(tuple(a + b for a, b in zip(rk, rp))
+                     for rk, rp in zip(self.K, self.perturbation))
+
+
+@dataclass
+class Command:
+    """One tracker output with the quantities behind it (for logs and tests)."""
+
+    v: float                 # commanded linear speed (m/s), cmd_vel.linear.x
+    w: float                 # commanded angular speed (rad/s), cmd_vel.angular.z
+    a: float = 0.0           # acceleration of the compensator (m/s^2)
+    u: tuple = (0.0, 0.0)    # linear-model input
+    error: tuple = (0.0, 0.0, 0.0, 0.0)   # xi - xi_d
+    saturated: bool = False
+    floored: bool = False
+    extra: dict = field(default_factory=dict)
+
+
+class Tracker:
+    """Dynamic-feedback-linearizing tracker: ``u = xi_d'' + K_eff (xi - xi_d)``.
+
+    The compensator state is the speed ``v`` (``v' = a``).  Per step, with the
+    pose ``(x, y, th)`` and the reference sample: ``a = u1 cos th + u2 sin th``,
+    ``w = (u2 cos th - u1 sin th) / v_f`` where ``v_f`` is ``v`` floored to
+    ``|v_f| >= min_speed`` (keeping its sign; ``+`` at 0), ``w`` is clipped to
+    ``max_angular_speed``, ``v`` advances to ``clip(v + a dt)`` and the command
+    speed is the mean of the ramp, ``(v_k + v_{k+1}) / 2``, within
+    ``max_linear_speed``.
+
+    With ``delay_compensation`` the tracker follows the *delay-consistent*
+    reference ``xi*`` instead of ``xi_d`` (see :meth:`_compensated_reference`), so
+    that the error ``e = xi - xi*`` obeys ``e' = (A + B K) e + A_tau e(t - tau)``
+    exactly and the steady-state bias caused by ``A_tau xi(t - tau)`` vanishes.
+    """
+
+    def __init__(self, config: TrackerConfig):
+        self.config = config
+        self.v: float | None = None
+        self._ref_hist: deque | None = None
+        if config.delay_compensation:
+            n = delay_steps(config.tau, config.dt)[0]
+            self._ref_hist = deque(maxlen=max(n, 1))
+
+    def reset(self, v: float | None = None) -> None:
+        """Forget the compensator state (re-initialised from the next measured speed)."""
+        self.v = v
+        if self._ref_hist is not None:
+            self._ref_hist.clear()
+
+    def step(self, x: float, y: float, th: float, ref: RefSample,
+             measured_speed: float | None = None) -> Command:
+        c = self.config
+        if self.v is None:
+            self.v = float(measured_speed) if measured_speed is not None else 0.0
+            if not math.isfinite(self.v):
+                self.v = 0.0
+            self.v = max(-c.max_linear_speed, min(c.max_linear_speed, self.v))
+        v = self.v
+        cth, sth = math.cos(th), math.sin(th)
+        if self._ref_hist is None:
+            xd, ud = ref.xi, (ref.ax, ref.ay)
+        else:
+            xd, ud = self._compensated_reference(ref)
+        e = (x - xd[0], v * cth - xd[1], y - xd[2], v * sth - xd[3])
+        K = c.K_effective
+        u1 = ud[0] + K[0][0] * e[0] + K[0][1] * e[1] + K[0][2] * e[2] + K[0][3] * e[3]
+        u2 = ud[1] + K[1][0] * e[0] + K[1][1] * e[1] + K[1][2] * e[2] + K[1][3] * e[3]
+        floored = abs(v) < c.min_speed
+        vf = (c.min_speed if v >= 0 else -c.min_speed) if floored else v
+        a = u1 * cth + u2 * sth
+        w = (u2 * cth - u1 * sth) / vf
+        saturated = False
+        if w > c.max_angular_speed:
+            w, saturated = c.max_angular_speed, True
+        elif w < -c.max_angular_speed:
+            w, saturated = -c.max_angular_speed, True
+        vmax = c.max_linear_speed
+        v_next = v + a * c.dt
+        if v_next > vmax:
+            v_next, saturated = vmax, True
+        elif v_next < -vmax:
+            v_next, saturated = -vmax, True
+        self.v = v_next
+        cmd_v = 0.5 * (v + v_next)
+        return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
+                       floored=floored)
+
+    def _compensated_reference(self, ref: RefSample) -> tuple[tuple, tuple]:
+        """Delay-consistent reference ``xi*`` and its feedforward input ``u*``.
+
+        In the model, per axis ``p' = q + d_p`` and ``q' = u + d_q`` with
+        ``d = A_tau xi(t - tau)``.  For the position to follow ``p_d`` exactly, the
+        velocity state must be ``q* = p_d' - d*_p`` and the input
+        ``u* = q*' - d*_q = p_d'' - (d*_p)' - d*_q``, where ``d* = A_tau xi*(t - tau)``
+        and ``(d*)' = A_tau xi*'(t - tau)`` come from the tracker's own history of
+        ``(xi*, xi*')`` (delay rounded to whole steps; before the first sample the
+        history is the first sample at rest).  Then ``e = xi - xi*`` obeys
+        ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
+        """
+        At = self.config.A_tau
+        hist = self._ref_hist
+        p_dot = (ref.vx, ref.vy)
+        if not hist:
+            first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))
+            hist.extend([first] * hist.maxlen)
+        z, zdot = hist[0]
+        d = [sum(At[i][j] * z[j] for j in range(4)) for i in range(4)]
+        dd = [sum(At[i][j] * zdot[j] for j in range(4)) for i in range(4)]
+        xs = (ref.x, ref.vx - d[0], ref.y, ref.vy - d[2])
+        us = (ref.ax - dd[0] - d[1], ref.ay - dd[2] - d[3])
+        hist.append((xs, (p_dot[0], us[0] + d[1], p_dot[1], us[1] + d[3])))
+        return xs, us

@@ -1,0 +1,174 @@
+"""Synthesis problems (A, B, A_tau, tau, E, F, options): validation and YAML files.
+
+A problem file is a YAML mapping::
+
+    name: paper
+    A: [[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]]
+    B: [[0, 0], [1, 0], [0, 0], [0, 1]]
+    A_tau: [[0.01, 0, 0, 0], ...]
+    tau: 0.2
+    E: [[1, 0], [0, 1]]
+    F: [[0.5, 0.5, 0.5, 0.5], [0.5, 0.5, 0.5, 0.5]]
+    perturbations: {Delta_1: [[-1, 0], [0, -1]], Delta_2: [[1, 0], [0, 1]]}
+    options: {margin: 1.0e-6}
+
+Every check names the offending field; all errors are :class:`ProblemError`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+__all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from_mapping',
+           'is_stabilizable']
+
+
+class ProblemError(ValueError):
+    """A synthesis problem (or a matrix in it) is malformed; the message names the field."""
+
+
+def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None = None
+              ) -> np.ndarray:
+    """Convert ``value`` (nested lists / array / scalar) to a finite float 2-D array.
+
+    ``shape`` entries that are ``None`` are free.  Raises :class:`ProblemError`
+    naming ``name`` for non-numeric entries, ragged rows, NaN/inf or a wrong shape.
+    """
+    if isinstance(value, (str, bytes)) or value is None:
+        raise ProblemError(f'{name}: expected a matrix (list of rows of numbers), got {value!r}')
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(
+            f'{name}: expected a matrix of numbers, got {value!r} ({exc}); '
+            'write it as a list of rows, e.g. [[1.0, 0.0], [0.0, 1.0]]') from None
+    if arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    elif arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2:
+        raise ProblemError(f'{name}: expected a 2-D matrix, got an array with {arr.ndim} dimensions')
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise ProblemError(f'{name}: entry [{i}][{j}] is {arr[i, j]}; all entries must be finite')
+    if shape is not None:
+        for axis, (want, got) in enumerate(zip(shape, arr.shape)):
+            if want is not None and want != got:
+                raise ProblemError(
+                    f'{name}: expected shape {tuple("*" if s is None else s for s in shape)}, '
+                    f'got {arr.shape} (axis {axis} has {got}, needs {want})')
+    return arr
+
+
+def is_stabilizable(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> tuple[bool, list[complex]]:
+    """PBH test: return (stabilizable, unstabilizable eigenvalues) for continuous time."""
+    n = A.shape[0]
+    bad = []
+    for lam in np.linalg.eigvals(A):
+        if lam.real < -tol:
+            continue
+        pbh = np.hstack([A - lam * np.eye(n), B])
+        sv = np.linalg.svd(pbh, compute_uv=False)
+        if np.sum(sv > tol * max(1.0, sv[0])) < n:
+            bad.append(complex(lam))
+    return (not bad, bad)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Data of Theorem 1: ``xi' = (A + B(K + E D F)) xi + A_tau xi(t - tau)``."""
+
+    A: np.ndarray
+    B: np.ndarray
+    A_tau: np.ndarray
+    tau: float
+    E: np.ndarray
+    F: np.ndarray
+    name: str = 'problem'
+    perturbations: Mapping[str, np.ndarray] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.B.shape[1]
+
+    def replace(self, **changes: Any) -> 'Problem':
+        """Return a validated copy with some fields changed."""
+        data = dict(A=self.A, B=self.B, A_tau=self.A_tau, tau=self.tau, E=self.E, F=self.F,
+                    name=self.name, perturbations=dict(self.perturbations),
+                    options=dict(self.options))
+        data.update(changes)
+        return problem_from_mapping(data, check_stabilizable=False)
+
+
+_KNOWN_KEYS = {'name', 'A', 'B', 'A_tau', 'tau', 'E', 'F', 'perturbations', 'options',
+               'description'}
+
+
+def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
+                         check_stabilizable: bool = True) -> Problem:
+    """Validate a mapping and build a :class:`Problem`; errors name ``source`` and the field."""
+    if not isinstance(data, Mapping):
+        raise ProblemError(f'{source}: expected a mapping with keys A, B, A_tau, tau, E, F; '
+                           f'got {type(data).__name__}')
+    missing = [k for k in ('A', 'B', 'A_tau', 'tau', 'E', 'F') if k not in data]
+    if missing:
+        raise ProblemError(f'{source}: missing key(s) {", ".join(missing)}; a problem needs '
+                           'A, B, A_tau, tau, E and F (see config/paper_problem.yaml)')
+    unknown = sorted(set(data) - _KNOWN_KEYS)
+    if unknown:
+        raise ProblemError(f'{source}: unknown key(s) {", ".join(unknown)}; '
+                           f'allowed: {", ".join(sorted(_KNOWN_KEYS))}')
+    A = as_matrix(data['A'], f'{source}: A')
+    n = A.shape[0]
+    if A.shape != (n, n):
+        raise ProblemError(f'{source}: A must be square, got shape {A.shape}')
+    B = as_matrix(data['B'], f'{source}: B', (n, None))
+    m = B.shape[1]
+    A_tau = as_matrix(data['A_tau'], f'{source}: A_tau', (n, n))
+    E = as_matrix(data['E'], f'{source}: E', (m, None))
+    F = as_matrix(data['F'], f'{source}: F', (None, n))
+    tau = data['tau']
+    if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not math.isfinite(tau) \
+            or tau < 0:
+        raise ProblemError(f'{source}: tau must be a finite number >= 0 (seconds), got {tau!r}')
+    perts = {}
+    for key, val in dict(data.get('perturbations') or {}).items():
+        perts[str(key)] = as_matrix(val, f'{source}: perturbations.{key}', (E.shape[1], F.shape[0]))
+    options = data.get('options') or {}
+    if not isinstance(options, Mapping):
+        raise ProblemError(f'{source}: options must be a mapping, got {options!r}')
+    if check_stabilizable:
+        ok, bad = is_stabilizable(A, B)
+        if not ok:
+            raise ProblemError(
+                f'{source}: (A, B) is not stabilizable: eigenvalue(s) '
+                f'{", ".join(f"{z.real:.4g}{z.imag:+.4g}j" for z in bad)} of A are not reached '
+                'by B; no state feedback can stabilize this model')
+    return Problem(A=A, B=B, A_tau=A_tau, tau=float(tau), E=E, F=F,
+                   name=str(data.get('name', Path(source).stem if source != 'problem' else 'problem')),
+                   perturbations=perts, options=dict(options))
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem YAML file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ProblemError(f'{path}: cannot read problem file ({exc.strerror})') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ProblemError(f'{path}: not valid YAML ({exc})') from None
+    return problem_from_mapping(data, source=str(path))

@@ -1,0 +1,126 @@
+"""Fixed-step simulations: the linear delay loop (paper Figs. 2-5) and the tracking loop.
+
+:func:`simulate_tracking` runs exactly the sequence of the ROS lockstep loop:
+for each step ``k`` the plant's pose (yaw through a quaternion, as in the
+message) and the reference sample at ``t_k`` go into :meth:`Tracker.step`, and
+its command drives :meth:`UnicyclePlant.step`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .loop import (PlantConfig, Tracker, TrackerConfig, UnicyclePlant, quaternion_to_yaw,
+                   step_time, yaw_to_quaternion)
+from .metrics import TrackingMetrics, tracking_metrics
+from .reference import Path
+
+__all__ = ['TrackingRun', 'simulate_tracking', 'DelayRun', 'simulate_delay_loop',
+           'steps_for_duration']
+
+
+def steps_for_duration(duration: float, dt: float) -> int:
+    """Number of plant steps in ``duration`` seconds (at least 1)."""
+    if not duration > 0:
+        raise ValueError(f'duration must be > 0 s, got {duration!r}')
+    return max(1, int(round(duration / dt)))
+
+
+@dataclass(frozen=True)
+class TrackingRun:
+    """Samples of a tracking run, one row per step ``k = 0..steps`` (SI units).
+
+    Row ``k`` holds the pose at ``t_k``, the reference at ``t_k`` and the command
+    computed from them (the last command is computed but not applied).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    th: np.ndarray
+    speed: np.ndarray        # speed in force at t_k (what odom reports)
+    xd: np.ndarray
+    yd: np.ndarray
+    vxd: np.ndarray
+    vyd: np.ndarray
+    cmd_v: np.ndarray
+    cmd_w: np.ndarray
+
+    def metrics(self, tolerance: float = 0.01) -> TrackingMetrics:
+        return tracking_metrics(self.t, self.x, self.y, self.xd, self.yd, self.cmd_v,
+                                self.cmd_w, tolerance=tolerance)
+
+    @property
+    def error(self) -> np.ndarray:
+        return np.hypot(self.x - self.xd, self.y - self.yd)
+
+
+def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, path: Path,
+                      steps: int) -> TrackingRun:
+    """Run the nonlinear tracking loop for ``steps`` plant steps (``steps + 1`` samples)."""
+    if tracker_config.dt != plant_config.dt:
+        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal plant dt '
+                         f'({plant_config.dt}) in lockstep')
+    plant = UnicyclePlant(plant_config)
+    tracker = Tracker(tracker_config)
+    rows = np.empty((steps + 1, 11))
+    dt = plant_config.dt
+    for k in range(steps + 1):
+        t = step_time(k, dt)
+        q = yaw_to_quaternion(plant.th)
+        th = quaternion_to_yaw(*q)
+        ref = path.sample(t)
+        cmd = tracker.step(plant.x, plant.y, th, ref, measured_speed=plant.v)
+        rows[k] = (t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
+                   cmd.v, cmd.w)
+        if k < steps:
+            plant.step(cmd.v, cmd.w)
+    return TrackingRun(*rows.T.copy())
+
+
+@dataclass(frozen=True)
+class DelayRun:
+    """Trajectory of the linear delay loop: ``t`` (s) and ``xi`` (one row per time)."""
+
+    t: np.ndarray
+    xi: np.ndarray
+
+
+def simulate_delay_loop(A0, A1, tau: float, xi0, duration: float, dt: float = 1e-3,
+                        history=None) -> DelayRun:
+    """Integrate ``xi' = A0 xi + A1 xi(t - tau)`` with RK4 and a history buffer.
+
+    ``tau`` must be a multiple of ``dt`` (to 1e-9 relative); the delayed state at
+    the RK4 half step is the mean of the two neighbouring buffer samples.  The
+    initial function is ``history`` (callable ``s -> xi(s)`` for ``s`` in
+    ``[-tau, 0]``) or the constant ``xi0``.
+    """
+    A0 = np.asarray(A0, float)
+    A1 = np.asarray(A1, float)
+    xi0 = np.asarray(xi0, float)
+    n = A0.shape[0]
+    if A0.shape != (n, n) or A1.shape != (n, n) or xi0.shape != (n,):
+        raise ValueError(f'shapes do not match: A0 {A0.shape}, A1 {A1.shape}, xi0 {xi0.shape}')
+    N = int(round(tau / dt))
+    if abs(N * dt - tau) > 1e-9 * max(1.0, tau):
+        raise ValueError(f'tau = {tau} s is not a multiple of dt = {dt} s')
+    steps = steps_for_duration(duration, dt)
+    if N == 0:                      # no delay: xi' = (A0 + A1) xi
+        A0, A1 = A0 + A1, np.zeros_like(A1)
+    out = np.zeros((N + steps + 1, n))
+    for i in range(N + 1):
+        s = (i - N) * dt
+        out[i] = xi0 if history is None or i == N else np.asarray(history(s), float)
+    f = lambda x, xd: A0 @ x + A1 @ xd  # noqa: E731
+    for k in range(steps):
+        i = N + k
+        x = out[i]
+        d0, d1 = out[i - N], out[i - N + 1]
+        dm = 0.5 * (d0 + d1)
+        k1 = f(x, d0)
+        k2 = f(x + 0.5 * dt * k1, dm)
+        k3 = f(x + 0.5 * dt * k2, dm)
+        k4 = f(x + dt * k3, d1)
+        out[i + 1] = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return DelayRun(np.arange(steps + 1) * dt, out[N:].copy())
