@@ -187,6 +187,9 @@ def validate_gain(K, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
         i, j = bad[0]
         raise LoopConfigError(f'{name}[{i}][{j}] is {arr[i, j]}; every gain entry must be finite')
     if A is None or B is None:
+        if shape[1] != 2 * shape[0]:
+            raise LoopConfigError(f'{name} has shape {shape}; the tracking model has m double '
+                                  'integrators, so K must be m x 2m (2 x 4 for the unicycle)')
         from .model import double_integrator_model
         mdl = double_integrator_model(shape[0])
         A, B = mdl.A, mdl.B

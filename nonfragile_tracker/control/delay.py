@@ -1,0 +1,945 @@
+"""Exact stability analysis of the delayed closed loop (plain numpy / scipy, no ROS).
+
+The closed loop of the paper (eq. 7) with a *constant* gain perturbation is the
+linear retarded delay system ::
+
+    xi'(t) = A0 xi(t) + A1 xi(t - tau),   A0 = A + B (K + E Delta F),  A1 = A_tau,
+
+whose characteristic equation is ``det T(s) = 0`` with
+``T(s) = s I - A0 - A1 exp(-s tau)``.  It is exponentially stable iff every
+characteristic root has a negative real part.  This module computes
+
+* the rightmost characteristic roots (:func:`rightmost_roots`), the spectral
+  abscissa (:func:`spectral_abscissa`) and a stability test (:func:`is_stable`);
+* the delay margin (:func:`delay_margin`) from the exact imaginary-axis
+  crossings;
+* a *measured* fragility margin (:func:`fragility_margin`): the largest scale
+  ``alpha`` of the gain perturbation ``alpha E Delta F`` for which a worst-case
+  search over constant ``||Delta||_2 <= 1`` finds no destabilizing ``Delta``
+  (:func:`worst_case_abscissa` is the inner search).
+
+Unlike the LMI certificates in :mod:`.lmi` nothing here is conservative except
+the worst-case search of the fragility margin (see its Notes); unlike them it
+only covers *constant* perturbations ``Delta``.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Callable
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
+           'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',
+           'fragility_margin']
+
+N_MIN = 16          # smallest discretization degree used by the adaptive rule
+N_MAX = 192         # largest discretization degree the adaptive rule will use
+RES_TOL = 1e-9      # a refined root is accepted iff its relative residual is below this
+STABLE_TOL = 1e-10  # is_stable: abscissa < -STABLE_TOL
+
+
+# ----------------------------------------------------------------------------- validation
+
+def _matrix(value: Any, name: str, rows: int | None = None, cols: int | None = None
+            ) -> np.ndarray:
+    """Finite real 2-D float array (a scalar becomes 1x1); ValueError naming ``name``."""
+    if value is None or isinstance(value, (str, bytes)):
+        raise ValueError(f'{name}: expected a real matrix, got {value!r}')
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name}: expected a real matrix ({exc})') from None
+    if np.iscomplexobj(arr):
+        raise ValueError(f'{name}: expected a real matrix, got complex entries')
+    try:
+        arr = np.array(arr, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name}: expected a matrix of numbers ({exc})') from None
+    if arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    if arr.ndim != 2:
+        raise ValueError(f'{name}: expected a 2-D matrix, got an array of shape {arr.shape}')
+    want = (rows if rows is not None else arr.shape[0], cols if cols is not None else arr.shape[1])
+    if arr.shape != want:
+        exp = f"({'n' if rows is None else rows}, {'*' if cols is None else cols})"
+        raise ValueError(f'{name}: expected shape {exp}, got {arr.shape}')
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name}: all entries must be finite')
+    return arr
+
+
+def _square(value: Any, name: str, n: int | None = None) -> np.ndarray:
+    arr = _matrix(value, name)
+    if arr.shape[0] != arr.shape[1]:
+        raise ValueError(f'{name}: expected a square matrix, got shape {arr.shape}')
+    if n is not None and arr.shape != (n, n):
+        raise ValueError(f'{name}: expected shape ({n}, {n}), got {arr.shape}')
+    return arr
+
+
+def _delay(tau: Any, name: str = 'tau') -> float:
+    try:
+        t = float(tau)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name}: expected a real number, got {tau!r}') from None
+    if not math.isfinite(t) or t < 0.0:
+        raise ValueError(f'{name}: expected a finite delay >= 0, got {tau!r}')
+    return t
+
+
+def _pair(A0: Any, A1: Any, tau: Any) -> tuple[np.ndarray, np.ndarray, float]:
+    a0 = _square(A0, 'A0')
+    return a0, _square(A1, 'A1', a0.shape[0]), _delay(tau)
+
+
+def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any):
+    a = _square(A, 'A')
+    n = a.shape[0]
+    b = _matrix(B, 'B', n, None)
+    m = b.shape[1]
+    k = _matrix(K, 'K', m, n)
+    a1 = _square(A_tau, 'A_tau', n)
+    e = _matrix(E, 'E', m, None)
+    f = _matrix(F, 'F', None, n)
+    return a, b, k, a1, _delay(tau), e, f
+
+
+# ----------------------------------------------------------------------------- closed loop
+
+def closed_loop_matrix(A: Any, B: Any, K: Any, E: Any = None, F: Any = None,
+                       Delta: Any = None) -> np.ndarray:
+    """Return ``A + B (K + E Delta F)``, the undelayed closed-loop matrix ``A0``.
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+    B : array_like, shape (n, m)
+    K : array_like, shape (m, n)
+        State feedback gain, ``u = K xi``.
+    E : array_like, shape (m, q), optional
+        Defaults to the identity of size ``m``.
+    F : array_like, shape (r, n), optional
+        Defaults to the identity of size ``n``.
+    Delta : array_like, shape (q, r), optional
+        Constant gain perturbation; ``None`` means no perturbation.
+
+    Returns
+    -------
+    A0 : ndarray, shape (n, n)
+
+    Raises
+    ------
+    ValueError
+        If a matrix is not finite or has the wrong shape (the message names it).
+    """
+    a = _square(A, 'A')
+    n = a.shape[0]
+    b = _matrix(B, 'B', n, None)
+    m = b.shape[1]
+    k = _matrix(K, 'K', m, n)
+    e = np.eye(m) if E is None else _matrix(E, 'E', m, None)
+    f = np.eye(n) if F is None else _matrix(F, 'F', None, n)
+    if Delta is None:
+        return a + b @ k
+    d = _matrix(Delta, 'Delta', e.shape[1], f.shape[0])
+    return a + b @ (k + e @ d @ f)
+
+
+# ----------------------------------------------------------------------------- roots
+
+@dataclass(frozen=True)
+class RootsResult:
+    """Rightmost characteristic roots of ``det(s I - A0 - A1 exp(-s tau)) = 0``.
+
+    Attributes
+    ----------
+    roots : ndarray of complex
+        Roots sorted by decreasing real part (then decreasing imaginary part);
+        complex roots appear with their conjugate.
+    residuals : ndarray of float
+        ``sigma_min(T(s)) / (|s| + ||A0|| + ||A1|| |exp(-s tau)|)`` at each root.
+    abscissa : float
+        Largest real part (the spectral abscissa); ``-inf`` only for ``n = 0``.
+    N : int
+        Chebyshev degree of the discretization used (0: delay-free, solved by ``eig``).
+    converged : bool
+        ``True`` iff the discretization resolves every root with real part
+        ``>= abscissa`` and the refined roots agree with the discretized ones.
+    """
+
+    roots: np.ndarray
+    residuals: np.ndarray
+    abscissa: float
+    N: int
+    converged: bool
+
+
+@lru_cache(maxsize=32)
+def _cheb(N: int) -> np.ndarray:
+    """Chebyshev differentiation matrix on the extremal nodes cos(j pi / N) (Trefethen)."""
+    x = np.cos(np.pi * np.arange(N + 1) / N)
+    c = np.hstack([2.0, np.ones(N - 1), 2.0]) * (-1.0) ** np.arange(N + 1)
+    dx = x[:, None] - x[None, :]
+    D = np.outer(c, 1.0 / c) / (dx + np.eye(N + 1))
+    D -= np.diag(D.sum(axis=1))
+    D.setflags(write=False)
+    return D
+
+
+def _generator(A0: np.ndarray, A1: np.ndarray, tau: float, N: int) -> np.ndarray:
+    """BMV discretization of the infinitesimal generator, size n (N+1).
+
+    Nodes ``theta_j = tau (cos(j pi / N) - 1) / 2``: ``theta_0 = 0``, ``theta_N = -tau``.
+    """
+    n = A0.shape[0]
+    M = np.kron(_cheb(N) * (2.0 / tau), np.eye(n))
+    M[:n, :] = 0.0
+    M[:n, :n] = A0
+    M[:n, -n:] += A1
+    return M
+
+
+def _n_needed(radius: float, tau: float) -> int:
+    """Degree resolving every root of modulus <= radius (exp(s theta) on [-tau, 0])."""
+    rt = radius * tau
+    if not math.isfinite(rt):
+        return N_MAX + 1
+    return max(N_MIN, int(math.ceil(12 + 1.2 * rt)))
+
+
+class _Char:
+    """Characteristic matrix T(s) = s I - A0 - A1 exp(-s tau) and Newton refinement."""
+
+    def __init__(self, A0: np.ndarray, A1: np.ndarray, tau: float) -> None:
+        self.A0, self.A1, self.tau = A0, A1, tau
+        self.n = A0.shape[0]
+        self.I = np.eye(self.n)
+        self.nrm0 = float(np.linalg.norm(A0, 2)) if self.n else 0.0
+        self.nrm1 = float(np.linalg.norm(A1, 2)) if self.n else 0.0
+
+    def T(self, s: complex) -> np.ndarray:
+        return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
+
+    def dT(self, s: complex) -> np.ndarray:
+        return self.I + (self.tau * np.exp(-s * self.tau)) * self.A1
+
+    def residual(self, s: complex) -> float:
+        sv = np.linalg.svd(self.T(s), compute_uv=False)
+        scale = abs(s) + self.nrm0 + self.nrm1 * abs(np.exp(-s * self.tau))
+        return float(sv[-1] / scale) if scale > 0 else float(sv[-1])
+
+    def vectors(self, s: complex) -> tuple[np.ndarray, np.ndarray]:
+        """Left and right singular vectors of the smallest singular value of T(s)."""
+        U, _, Vh = np.linalg.svd(self.T(s))
+        return U[:, -1], Vh[-1].conj()
+
+    def newton(self, s0: complex, maxit: int = 40) -> tuple[complex, float]:
+        """Newton on the bordered system [T(s) v; c^H v - 1] = 0; returns (s, residual).
+
+        A real start is iterated in real arithmetic (the root stays exactly real).
+        A diverging iteration returns an infinite residual.
+        """
+        with np.errstate(over='ignore', invalid='ignore'):
+            try:
+                return self._newton(s0, maxit)
+            except np.linalg.LinAlgError:
+                return s0, math.inf
+
+    def _newton(self, s0: complex, maxit: int) -> tuple[complex, float]:
+        real = isinstance(s0, float) or np.imag(s0) == 0.0
+        s = float(np.real(s0)) if real else complex(s0)
+        _, v = self.vectors(s)
+        if real:
+            v = np.real(v)
+            v /= np.linalg.norm(v)
+        c = v.conj()
+        n = self.n
+        J = np.zeros((n + 1, n + 1), dtype=float if real else complex)
+        rhs = np.zeros(n + 1, dtype=J.dtype)
+        small = 0
+        for _ in range(maxit):
+            J[:n, :n] = self.T(s)
+            J[:n, n] = self.dT(s) @ v
+            J[n, :n] = c
+            rhs[:n] = -(J[:n, :n] @ v)
+            rhs[n] = 1.0 - c @ v
+            try:
+                d = np.linalg.solve(J, rhs)
+            except np.linalg.LinAlgError:
+                break
+            if not np.all(np.isfinite(d)):
+                return s, math.inf
+            v = v + d[:n]
+            s = s + d[n]
+            if self.tau * -np.real(s) > 700.0:      # exp(-s tau) would overflow
+                return s, math.inf
+            if abs(d[n]) <= 4e-16 * max(1.0, abs(s)):
+                small += 1
+                if small >= 2:
+                    break
+        if not np.isfinite(s):
+            return s, math.inf
+        return s, self.residual(s)
+
+
+def _sort_key(s: complex) -> tuple[float, float]:
+    return (-s.real, -s.imag)
+
+
+def _truncate(roots: list[complex], count: int) -> list[complex]:
+    """First ``count`` roots, extended so that a conjugate pair is never split."""
+    if len(roots) <= count:
+        return roots
+    k = count
+    last = roots[k - 1]
+    while k < len(roots) and last.imag > 0 and abs(roots[k] - np.conj(last)) <= \
+            1e-12 * max(1.0, abs(last)):
+        k += 1
+    return roots[:k]
+
+
+def _delay_free(ch: _Char, M: np.ndarray, count: int) -> RootsResult:
+    ev = sorted((complex(z) for z in np.linalg.eigvals(M)), key=_sort_key)
+    ev = _truncate(ev, count)
+    res = [ch.residual(z) for z in ev]
+    return RootsResult(np.array(ev, dtype=complex), np.array(res), max(z.real for z in ev),
+                       0, True)
+
+
+def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float], bool]:
+    """Discretize with degree N, refine the rightmost eigenvalues; (roots, residuals, agree)."""
+    ev = np.linalg.eigvals(_generator(ch.A0, ch.A1, ch.tau, N))
+    ev = ev[np.argsort(-ev.real, kind='stable')]
+    ncand = min(ev.size, 2 * count + ch.n + 2)
+    found: list[tuple[complex, float, complex]] = []   # (root, residual, start)
+    failed_above = -math.inf            # real part of the best candidate that failed
+    for z in ev[:ncand]:
+        if z.imag < 0:
+            continue
+        s, r = ch.newton(z)
+        if r > RES_TOL and z.imag == 0.0:     # near-double real pair: try complex Newton
+            s, r = ch.newton(complex(z.real, 1e-6 * max(1.0, abs(z))))
+        if r > RES_TOL:
+            failed_above = max(failed_above, z.real)
+            continue
+        s = complex(s)
+        if abs(s.imag) <= 1e-14 * max(1.0, abs(s)):
+            s = complex(s.real, 0.0)
+        elif s.imag < 0:
+            s = s.conjugate()
+        found.append((s, r, complex(z.real, abs(z.imag))))
+    # deduplicate (several discretized eigenvalues may refine to one root)
+    found.sort(key=lambda t: _sort_key(t[0]))
+    uniq: list[tuple[complex, float, complex]] = []
+    for t in found:
+        if not any(abs(t[0] - u[0]) <= 1e-8 * max(1.0, abs(u[0])) for u in uniq):
+            uniq.append(t)
+    roots: list[complex] = []
+    resid: list[float] = []
+    starts: list[complex] = []
+    for s, r, z in uniq:
+        roots.append(s)
+        resid.append(r)
+        starts.append(z)
+        if s.imag > 0:
+            roots.append(s.conjugate())
+            resid.append(r)
+            starts.append(z.conjugate())
+    order = sorted(range(len(roots)), key=lambda i: _sort_key(roots[i]))
+    roots = [roots[i] for i in order]
+    resid = [resid[i] for i in order]
+    starts = [starts[i] for i in order]
+    roots = _truncate(roots, count)
+    k = len(roots)
+    agree = k > 0 and all(abs(roots[i] - starts[i]) <= 1e-6 * max(1.0, abs(roots[i]))
+                          for i in range(k))
+    if k and failed_above >= roots[-1].real:
+        agree = False
+    return roots, resid[:k], agree
+
+
+def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
+               N: int | None = None, warn: bool = True) -> RootsResult:
+    ch = _Char(A0, A1, tau)
+    if ch.n == 0:
+        return RootsResult(np.zeros(0, complex), np.zeros(0), -math.inf, 0, True)
+    if tau == 0.0:
+        ch = _Char(A0 + A1, np.zeros_like(A1), 0.0)
+        return _delay_free(ch, A0 + A1, count)
+    if not np.any(A1):
+        return _delay_free(ch, A0, count)
+    adaptive = N is None
+    if adaptive:
+        # resolves the region Re s >= 0 (enough when the loop is near the stability
+        # boundary); capped because R(abscissa) is much smaller for unstable loops
+        N = min(_n_needed(ch.nrm0 + ch.nrm1, tau), 32)
+    N = int(N)
+    while True:
+        roots, resid, agree = _roots_at(ch, N, count)
+        absc = max((z.real for z in roots), default=math.nan)
+        if roots:
+            with np.errstate(over='ignore'):
+                radius = ch.nrm0 + ch.nrm1 * math.exp(min(-absc * tau, 700.0))
+            resolved = N >= _n_needed(radius, tau)
+        else:
+            resolved = False
+        ok = agree and resolved
+        if ok or not adaptive or N >= N_MAX:
+            break
+        need = _n_needed(radius, tau) if roots else 2 * N
+        N = min(N_MAX, max(need, 2 * N) if not agree else max(need, N + 8))
+    if not roots:
+        raise RuntimeError(f'rightmost_roots: no characteristic root could be refined (N={N})')
+    if warn and not ok:
+        warnings.warn(f'rightmost_roots: not converged at N={N} (abscissa {absc:.6g}); '
+                      'the result may miss roots', RuntimeWarning, stacklevel=3)
+    return RootsResult(np.array(roots, dtype=complex), np.array(resid), float(absc), N, ok)
+
+
+def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
+                    N: int | None = None) -> RootsResult:
+    """Rightmost roots of ``det(s I - A0 - A1 exp(-s tau)) = 0``.
+
+    Parameters
+    ----------
+    A0, A1 : array_like, shape (n, n)
+        Undelayed and delayed system matrices of ``x' = A0 x + A1 x(t - tau)``.
+    tau : float
+        Delay, ``>= 0``.
+    count : int, optional
+        Number of roots wanted (default 6); one more is returned if the last
+        one would split a conjugate pair.  Fewer are returned if fewer are found.
+    N : int, optional
+        Chebyshev degree of the discretization.  Default: adaptive (see Notes).
+
+    Returns
+    -------
+    RootsResult
+        ``roots``, ``residuals``, ``abscissa``, ``N`` and ``converged``.  A
+        ``RuntimeWarning`` is issued when ``converged`` is false.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-finite entries, negative or non-finite ``tau``, ``count < 1``.
+
+    Notes
+    -----
+    The infinitesimal generator of the delay equation is discretized by
+    pseudospectral collocation on the ``N + 1`` Chebyshev extremal nodes of
+    ``[-tau, 0]`` [1]_; the eigenvalues of that ``n (N+1)`` matrix with the
+    largest real parts are each refined by Newton's method on the bordered
+    system ``T(s) v = 0, c^H v = 1`` (``T(s) = s I - A0 - A1 exp(-s tau)``, ``c``
+    the starting null vector) [2]_.  Refined roots whose relative residual
+    exceeds ``1e-9`` are dropped and coincident ones merged, so in the delay
+    case each distinct root is listed once (multiplicity is not reported).
+
+    Adaptive degree: any root with ``Re s >= a`` satisfies
+    ``|s| <= ||A0|| + ||A1|| exp(-a tau) =: R(a)``; ``exp(s theta)`` on
+    ``[-tau, 0]`` is resolved for ``|s| <= R`` by ``N >= 12 + 1.2 R tau``
+    (at least 16).  The degree starts from ``R(0)`` and is raised (up to 192)
+    until it covers ``R(abscissa)`` and every returned root is within
+    ``1e-6`` (relative) of its discretized eigenvalue; ``converged`` reports
+    whether that succeeded.  An explicit ``N`` disables the adaptation.
+
+    ``tau == 0`` is solved as ``eig(A0 + A1)`` and ``A1 == 0`` as ``eig(A0)``
+    (``N = 0``; roots repeated with multiplicity, as LAPACK returns them).
+
+    References
+    ----------
+    .. [1] D. Breda, S. Maset, R. Vermiglio, "Pseudospectral differencing
+       methods for characteristic roots of delay differential equations",
+       SIAM J. Sci. Comput. 27(2):482-495, 2005.
+    .. [2] W. Michiels, S.-I. Niculescu, "Stability, Control, and Computation
+       for Time-Delay Systems", 2nd ed., SIAM, 2014, Sec. 1.2 and 2.2.
+
+    Examples
+    --------
+    >>> r = rightmost_roots([[0.0]], [[-2.0]], math.pi / 4)   # x' = -2 x(t - pi/4)
+    >>> np.round(r.roots[:2], 8)
+    array([0.+2.j, 0.-2.j])
+    """
+    a0, a1, t = _pair(A0, A1, tau)
+    if int(count) != count or count < 1:
+        raise ValueError(f'count: expected an integer >= 1, got {count!r}')
+    if N is not None and (int(N) != N or N < 2):
+        raise ValueError(f'N: expected an integer >= 2, got {N!r}')
+    return _rightmost(a0, a1, t, int(count), N)
+
+
+def spectral_abscissa(A0: Any, A1: Any, tau: float, **kw: Any) -> float:
+    """Largest real part of the characteristic roots (see :func:`rightmost_roots`).
+
+    Parameters
+    ----------
+    A0, A1 : array_like, shape (n, n)
+    tau : float
+    **kw
+        Passed to :func:`rightmost_roots` (``count``, ``N``).
+
+    Returns
+    -------
+    float
+    """
+    kw.setdefault('count', 2)
+    return rightmost_roots(A0, A1, tau, **kw).abscissa
+
+
+def is_stable(A0: Any, A1: Any, tau: float, *, tol: float = STABLE_TOL) -> bool:
+    """Exponential stability of ``x' = A0 x + A1 x(t - tau)``.
+
+    Returns ``spectral_abscissa(A0, A1, tau) < -tol`` (default ``tol = 1e-10``):
+    roots on (or within ``tol`` of) the imaginary axis count as unstable.
+    """
+    return spectral_abscissa(A0, A1, tau) < -tol
+
+
+# ----------------------------------------------------------------------------- delay margin
+
+def _crossing_candidates(A0: np.ndarray, A1: np.ndarray, unit_tol: float = 1e-5
+                         ) -> list[tuple[float, float, complex]]:
+    """Imaginary-axis crossings (omega > 0, tau_0 >= 0, z) for all delays.
+
+    ``s = i omega`` is a root for delay ``tau`` iff ``i omega`` is an eigenvalue
+    of ``A0 + A1 z`` with ``z = exp(-i omega tau)``; then ``-i omega`` is one of
+    ``A0 + A1 / z`` and ``0`` one of the Kronecker sum, i.e. ``z`` solves the
+    quadratic eigenvalue problem ``(z^2 A1 (x) I + z (A0 (x) I + I (x) A0) + I (x) A1) u = 0``.
+    """
+    n = A0.shape[0]
+    I = np.eye(n)
+    M2 = np.kron(A1, I)
+    M1 = np.kron(A0, I) + np.kron(I, A0)
+    M0 = np.kron(I, A1)
+    nn = n * n
+    Z = np.zeros((nn, nn))
+    In = np.eye(nn)
+    L = np.block([[Z, In], [-M0, -M1]])
+    R = np.block([[In, Z], [Z, M2]])
+    ab = sla.eig(L, R, right=False, homogeneous_eigvals=True)
+    alpha, beta = ab[0], ab[1]
+    scale = float(np.linalg.norm(A0, 2) + np.linalg.norm(A1, 2))
+    out: list[tuple[float, float, complex]] = []
+    for a, b in zip(alpha, beta):
+        if abs(b) == 0.0 or not np.isfinite(a / b):
+            continue
+        z = a / b
+        if abs(abs(z) - 1.0) > unit_tol:
+            continue
+        z = z / abs(z)
+        for lam in np.linalg.eigvals(A0 + A1 * z):
+            if abs(lam.real) > 1e-5 * max(1.0, scale) or lam.imag <= 1e-12 * max(1.0, scale):
+                continue
+            w = lam.imag
+            phi = (-np.angle(z)) % (2.0 * math.pi)
+            out.append((w, phi / w, z))
+    return out
+
+
+def _refine_crossing(ch: _Char, w: float, tau0: float) -> float:
+    """Secant on tau for Re s(tau) = 0, s tracked by Newton from i omega."""
+    def g(t: float, s0: complex) -> tuple[float, complex]:
+        c = _Char(ch.A0, ch.A1, t)
+        s, r = c.newton(s0)
+        if r > RES_TOL:
+            raise ArithmeticError
+        return float(np.real(s)), complex(s)
+    try:
+        t0, t1 = tau0, tau0 * (1.0 + 1e-6) + 1e-12
+        g0, s0 = g(t0, 1j * w)
+        g1, s1 = g(t1, s0)
+        for _ in range(30):
+            if abs(g1) <= 1e-14 * max(1.0, abs(s1)) or g1 == g0:
+                break
+            t0, t1, g0 = t1, t1 - g1 * (t1 - t0) / (g1 - g0), g1
+            g1, s1 = g(t1, s1)
+        if abs(t1 - tau0) <= 1e-3 * max(tau0, 1e-12) and abs(g1) <= 1e-9 * max(1.0, abs(s1)):
+            return t1
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+        pass
+    return tau0
+
+
+def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
+    """Delay margin of ``x' = A0 x + A1 x(t - tau)``.
+
+    Parameters
+    ----------
+    A0, A1 : array_like, shape (n, n)
+    tau_max : float, optional
+        Only delays up to ``tau_max`` are considered (default: all).
+
+    Returns
+    -------
+    float
+        The largest ``tau_m`` such that the system is exponentially stable for
+        every ``tau`` in ``[0, tau_m)``; equivalently the smallest delay at
+        which a characteristic root lies on the imaginary axis.  ``0.0`` if the
+        system is not stable at ``tau = 0`` (``A0 + A1`` not Hurwitz);
+        ``math.inf`` if it is stable for every ``tau <= tau_max``.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or entries, ``tau_max`` negative or NaN.
+
+    Notes
+    -----
+    For a retarded system roots can only enter the right half-plane through
+    the imaginary axis as ``tau`` grows.  ``s = i omega`` is a root for delay
+    ``tau`` iff ``i omega`` is an eigenvalue of ``A0 + A1 z``,
+    ``z = exp(-i omega tau)``; conjugating, ``0`` is then an eigenvalue of the
+    Kronecker sum ``(A0 + A1 z) (+) (A0 + A1 / z)``, which is a quadratic
+    eigenvalue problem in ``z`` of size ``n^2`` [1]_.  Its unimodular
+    solutions give every crossing frequency ``omega > 0`` and the smallest
+    crossing delay ``(-arg z mod 2 pi) / omega``; each is checked against
+    ``eig(A0 + A1 z)`` (the Kronecker sum has spurious zeros
+    ``lambda_i = -conj(lambda_j)``) and refined to full precision by a secant
+    iteration on ``Re s(tau) = 0`` with ``s`` tracked by Newton's method.  The
+    pencil is regular whenever ``A0 + A1`` is Hurwitz (its determinant at
+    ``z = 1`` is nonzero).  ``omega = 0`` is impossible then
+    (``det(A0 + A1) != 0``).  Unimodularity is tested with tolerance
+    ``1e-5``.
+
+    References
+    ----------
+    .. [1] J. Chen, G. Gu, C. N. Nett, "A new method for computing delay
+       margins for stability of linear delay systems", Systems & Control
+       Letters 26(2):107-117, 1995.
+    """
+    a0, a1 = _square(A0, 'A0'), None
+    a1 = _square(A1, 'A1', a0.shape[0])
+    try:
+        tmax = float(tau_max)
+    except (TypeError, ValueError):
+        raise ValueError(f'tau_max: expected a number, got {tau_max!r}') from None
+    if math.isnan(tmax) or tmax < 0:
+        raise ValueError(f'tau_max: expected a delay >= 0, got {tau_max!r}')
+    if a0.shape[0] == 0:
+        return math.inf
+    if not np.all(np.linalg.eigvals(a0 + a1).real < -STABLE_TOL):
+        return 0.0
+    if not np.any(a1):
+        return math.inf
+    ch = _Char(a0, a1, 0.0)
+    best = math.inf
+    for w, t0, _ in sorted(_crossing_candidates(a0, a1), key=lambda c: c[1]):
+        if t0 > min(best, tmax) * (1 + 1e-3) + 1e-12:
+            break
+        t = _refine_crossing(ch, w, t0)
+        best = min(best, t)
+    return best if best <= tmax else math.inf
+
+
+# ----------------------------------------------------------------------------- fragility
+
+class _Perturbed:
+    """Spectral abscissa of A + B (K + scale E Delta F) with A_tau, and its gradient in Delta."""
+
+    def __init__(self, A, B, K, A_tau, tau, E, F) -> None:
+        self.A0 = A + B @ K
+        self.BE = B @ E
+        self.F = F
+        self.A1, self.tau = A_tau, tau
+        self.shape = (E.shape[1], F.shape[0])
+        self.evaluations = 0
+        self.N: int | None = None
+
+    def __call__(self, Delta: np.ndarray, scale: float) -> tuple[float, np.ndarray]:
+        self.evaluations += 1
+        A0 = self.A0 + scale * (self.BE @ Delta @ self.F)
+        res = _rightmost(A0, self.A1, self.tau, count=1, N=None, warn=False)
+        s = complex(res.roots[0])
+        ch = _Char(A0, self.A1, self.tau)
+        u, v = ch.vectors(s)
+        den = u.conj() @ ch.dT(s) @ v
+        if den == 0:
+            return res.abscissa, np.zeros(self.shape)
+        grad = np.real(scale * np.outer(u.conj() @ self.BE, self.F @ v) / den)
+        return res.abscissa, grad
+
+
+def _project(M: np.ndarray) -> np.ndarray:
+    """Nearest point of the unit spectral-norm ball (clip singular values at 1)."""
+    U, S, Vt = np.linalg.svd(M, full_matrices=False)
+    return (U * np.minimum(S, 1.0)) @ Vt
+
+
+def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int
+                ) -> list[np.ndarray]:
+    q, r = shape
+    p = min(q, r)
+    out: list[np.ndarray] = []
+    if p <= 4:
+        for signs in range(2 ** p):
+            d = np.array([1.0 if (signs >> i) & 1 else -1.0 for i in range(p)])
+            M = np.zeros(shape)
+            M[:p, :p] = np.diag(d)
+            out.append(M)
+    else:
+        out += [np.eye(q, r), -np.eye(q, r)]
+    for _ in range(n_random):
+        U, _, Vt = np.linalg.svd(rng.standard_normal(shape), full_matrices=False)
+        out.append(U @ Vt)
+        a, b = rng.standard_normal(q), rng.standard_normal(r)
+        out.append(np.outer(a / np.linalg.norm(a), b / np.linalg.norm(b)))
+    return out
+
+
+def _ascent(f: Callable, D: np.ndarray, val: float, grad: np.ndarray, scale: float,
+            maxit: int, stop_at: float) -> tuple[float, np.ndarray]:
+    """Projected gradient ascent of the abscissa on the unit ball (adaptive step)."""
+    step = 0.25
+    for _ in range(maxit):
+        gn = np.linalg.norm(grad)
+        if gn == 0.0 or step < 1e-7 or val >= stop_at:
+            break
+        C = _project(D + (step / gn) * grad)
+        if np.linalg.norm(C - D) < 1e-9:
+            break
+        cv, cg = f(C, scale)
+        if cv > val + 1e-13:
+            D, val, grad = C, cv, cg
+            step = min(2.0 * step, 2.0)
+        else:
+            step *= 0.5
+    return val, D
+
+
+def _search(f: _Perturbed, scale: float, rng: np.random.Generator, *, n_random: int,
+            n_starts: int, maxit: int, warm: list[np.ndarray] | None = None,
+            stop_at: float = math.inf) -> tuple[float, np.ndarray]:
+    pool = list(warm or []) + _candidates(f.shape, rng, n_random)
+    evals = []
+    for D in pool:
+        v, g = f(D, scale)
+        evals.append((v, D, g))
+        if v >= stop_at:
+            return v, D
+    evals.sort(key=lambda t: -t[0])
+    best_v, best_D = evals[0][0], evals[0][1]
+    starts: list[tuple[float, np.ndarray, np.ndarray]] = []
+    for t in evals:
+        if len(starts) >= n_starts:
+            break
+        if all(np.linalg.norm(t[1] - s[1]) > 1e-6 for s in starts):
+            starts.append(t)
+    for v, D, g in starts:
+        v, D = _ascent(f, D, v, g, scale, maxit, stop_at)
+        if v > best_v:
+            best_v, best_D = v, D
+        if best_v >= stop_at:
+            break
+    return best_v, best_D
+
+
+def worst_case_abscissa(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: Any,
+                        scale: float = 1.0, seed: int = 0, *, n_random: int = 8,
+                        n_starts: int = 3, maxit: int = 60) -> tuple[float, np.ndarray]:
+    """Largest spectral abscissa found over constant ``||Delta||_2 <= 1``.
+
+    The loop is ``xi' = (A + B (K + scale E Delta F)) xi + A_tau xi(t - tau)``.
+
+    Parameters
+    ----------
+    A, B, K, A_tau : array_like
+        Shapes (n, n), (n, m), (m, n), (n, n).
+    tau : float
+        Delay ``>= 0``.
+    E, F : array_like
+        Shapes (m, q) and (r, n); ``Delta`` is (q, r).
+    scale : float, optional
+        Perturbation scale ``>= 0`` (default 1).
+    seed : int, optional
+        Seed of the random candidates; the result is deterministic given it.
+    n_random, n_starts, maxit : int, optional
+        Random orthogonal and rank-one candidates (each), number of local
+        ascents, iterations per ascent.
+
+    Returns
+    -------
+    abscissa : float
+        Largest spectral abscissa found.
+    Delta : ndarray, shape (q, r)
+        The maximizer found (``||Delta||_2 <= 1``).
+
+    Notes
+    -----
+    Candidates: all sign-diagonal matrices (``+-I`` and mixed signs, if
+    ``min(q, r) <= 4``), ``n_random`` random orthogonal and ``n_random``
+    random rank-one ``a b^T`` (unit ``a, b``).  The best ``n_starts`` start a
+    projected gradient ascent on the unit ball (projection = clipping the
+    singular values at 1), with the gradient of the rightmost root
+    ``d Re s / d Delta = Re(scale (B E)^T conj(u) (F v)^T / (u^H T'(s) v))``
+    (``u``, ``v`` left/right null vectors of ``T(s)``).  This is a local
+    search: the value is a lower bound of the true worst case.
+    """
+    a, b, k, a1, t, e, f = _loop(A, B, K, A_tau, tau, E, F)
+    sc = _delay(scale, 'scale')
+    f_ = _Perturbed(a, b, k, a1, t, e, f)
+    rng = np.random.default_rng(seed)
+    return _search(f_, sc, rng, n_random=n_random, n_starts=n_starts, maxit=maxit)
+
+
+@dataclass(frozen=True)
+class FragilityResult:
+    """Measured fragility margin (see :func:`fragility_margin`).
+
+    Attributes
+    ----------
+    alpha : float
+        Largest scale at which the search found no destabilizing ``Delta``
+        (``math.inf`` if none up to ``alpha_max``; ``0.0`` if the nominal loop
+        is unstable).
+    alpha_upper : float
+        Smallest scale at which a destabilizing ``Delta`` was found
+        (``alpha <= alpha_upper <= alpha (1 + rtol)``); ``inf`` if none.
+    worst_delta : ndarray, shape (q, r)
+        ``||Delta||_2 <= 1`` with ``A + B (K + alpha_upper E Delta F)`` not
+        exponentially stable (abscissa ``>= 0``); at ``alpha = inf`` the worst
+        case found at ``alpha_max``.
+    worst_abscissa : float
+        Worst-case spectral abscissa found over ``||Delta||_2 <= 1`` at scale 1.
+    worst_delta_at_1 : ndarray, shape (q, r)
+        Its maximizer.
+    evaluations : int
+        Number of spectral-abscissa evaluations.
+    """
+
+    alpha: float
+    alpha_upper: float
+    worst_delta: np.ndarray
+    worst_abscissa: float
+    worst_delta_at_1: np.ndarray
+    evaluations: int
+
+
+def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: Any, *,
+                     seed: int = 0, alpha_max: float = 1e3, rtol: float = 1e-6,
+                     n_random: int = 8, n_starts: int = 3, maxit: int = 60
+                     ) -> FragilityResult:
+    """Measured fragility margin of the gain ``K`` against ``Delta K = alpha E Delta F``.
+
+    Largest ``alpha`` such that ``xi' = (A + B (K + alpha E Delta F)) xi +
+    A_tau xi(t - tau)`` is exponentially stable for every constant
+    ``||Delta||_2 <= 1`` -- as *measured* by a worst-case search.
+
+    Parameters
+    ----------
+    A, B, K, A_tau, tau, E, F
+        As in :func:`worst_case_abscissa`.
+    seed : int, optional
+        Seed of the random candidates (deterministic given it).
+    alpha_max : float, optional
+        Largest scale tried (default 1e3); beyond it ``alpha = inf``.
+    rtol : float, optional
+        Relative width of the final bracket ``[alpha, alpha_upper]``.
+    n_random, n_starts, maxit : int, optional
+        Passed to the worst-case search (:func:`worst_case_abscissa`).
+
+    Returns
+    -------
+    FragilityResult
+
+    Notes
+    -----
+    ``w(alpha)`` = worst-case abscissa over ``||Delta|| <= 1`` at scale
+    ``alpha`` is nondecreasing in ``alpha`` (nested balls), so the margin is the
+    root of ``w``.  It is bracketed (``alpha = 1, 2, 4, ...`` or ``1, 1/2, ...``)
+    and located by regula falsi (Illinois variant) with a bisection
+    safeguard; each ``w`` evaluation is a worst-case search (see
+    :func:`worst_case_abscissa`) warm-started with the previous maximizers.
+
+    Honesty: instability at ``alpha_upper`` is *demonstrated* (``worst_delta``
+    is an explicit destabilizing perturbation), so ``alpha_upper`` is a
+    rigorous upper bound of the true margin (up to root-finding accuracy).
+    Stability at ``alpha`` is only *measured*: a local search that misses the
+    global worst case over-estimates the margin.  The true margin equals the
+    real stability radius of ``F T_K(s)^{-1} B E`` (``T_K`` the nominal
+    characteristic matrix) [1]_, which can be used as an independent check.
+    Only constant ``Delta`` are covered; the LMI certificate of
+    :mod:`.lmi` covers time-varying ``Delta(t)`` too.
+
+    References
+    ----------
+    .. [1] L. Qiu, B. Bernhardsson, A. Rantzer, E. J. Davison, P. M. Young,
+       J. C. Doyle, "A formula for computation of the real stability radius",
+       Automatica 31(6):879-890, 1995.
+    """
+    a, b, k, a1, t, e, f = _loop(A, B, K, A_tau, tau, E, F)
+    amax = float(alpha_max)
+    if not amax > 0 or math.isnan(amax):
+        raise ValueError(f'alpha_max: expected a number > 0, got {alpha_max!r}')
+    if not 0 < rtol < 1:
+        raise ValueError(f'rtol: expected 0 < rtol < 1, got {rtol!r}')
+    fn = _Perturbed(a, b, k, a1, t, e, f)
+    rng = np.random.default_rng(seed)
+    opts = dict(n_random=n_random, n_starts=n_starts, maxit=maxit)
+    zero = np.zeros(fn.shape)
+
+    w1, D1 = _search(fn, 1.0, rng, **opts)
+    nominal, _ = fn(zero, 0.0)
+    if nominal >= -STABLE_TOL:
+        return FragilityResult(0.0, 0.0, zero, w1, D1, fn.evaluations)
+
+    warm = [D1]
+
+    def w(alpha: float, full: bool = True) -> tuple[float, np.ndarray]:
+        o = dict(opts) if full else dict(opts, n_random=2, n_starts=2)
+        v, D = _search(fn, alpha, rng, warm=warm[-3:], **o)
+        warm.append(D)
+        return v, D
+
+    # bracket: lo stable (w < 0), hi unstable (w >= 0)
+    if w1 < -STABLE_TOL:
+        lo, w_lo, hi, w_hi, D_hi = 1.0, w1, math.nan, math.nan, D1
+        while True:
+            x = min(2.0 * lo, amax)
+            v, D = w(x)
+            if v >= -STABLE_TOL:
+                hi, w_hi, D_hi = x, v, D
+                break
+            lo, w_lo = x, v
+            if x >= amax:
+                return FragilityResult(math.inf, math.inf, D, w1, D1, fn.evaluations)
+    else:
+        hi, w_hi, D_hi = 1.0, w1, D1
+        lo, w_lo = 0.0, nominal
+        x = 0.5
+        while x > 1e-12:
+            v, D = w(x)
+            if v >= -STABLE_TOL:
+                hi, w_hi, D_hi = x, v, D
+                x *= 0.5
+            else:
+                lo, w_lo = x, v
+                break
+    # Illinois regula falsi with bisection safeguard
+    side = 0
+    while hi - lo > rtol * hi:
+        x = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi != w_lo else 0.5 * (lo + hi)
+        width = hi - lo
+        if not lo + 0.01 * width < x < hi - 0.01 * width:
+            x = 0.5 * (lo + hi)
+        v, D = w(x, full=False)
+        if v >= -STABLE_TOL:
+            hi, w_hi, D_hi = x, v, D
+            if side == 1:
+                w_lo *= 0.5
+            side = 1
+        else:
+            lo, w_lo = x, v
+            if side == -1:
+                w_hi *= 0.5
+            side = -1
+    # final confirmation of the stable end with the full search
+    v, D = w(lo)
+    while v >= -STABLE_TOL and lo > 0:      # the quick search missed something
+        hi, D_hi = lo, D
+        lo *= 1.0 - rtol
+        v, D = w(lo)
+    return FragilityResult(lo, hi, D_hi, w1, D1, fn.evaluations)

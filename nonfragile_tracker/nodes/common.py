@@ -1,0 +1,174 @@
+"""Shared ROS plumbing of the nodes: QoS, parameters with descriptors, message conversion,
+spinning and the Jazzy shutdown pattern.  No control math lives here."""
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from .. import topics
+from ..control.loop import quaternion_to_yaw, yaw_to_quaternion
+from ..control.reference import RefSample
+
+__all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
+           'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
+           'make_executor', 'run', 'StartupError']
+
+DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+MODES = ('lockstep', 'realtime')
+
+
+class StartupError(RuntimeError):
+    """A node cannot start with its parameters; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter declaration: name, default, description and optional range."""
+
+    name: str
+    default: Any
+    description: str
+    type: int | None = None
+    low: float | None = None
+    high: float | None = None
+    read_only: bool = False
+
+
+_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
+
+
+def declare(node: Node, params: Iterable[Param]) -> None:
+    """Declare parameters with descriptors (type, description, range, read-only)."""
+    for p in params:
+        ptype = p.type
+        if ptype is None:
+            if isinstance(p.default, list):
+                inner = type(p.default[0]) if p.default else float
+                ptype = {float: ParameterType.PARAMETER_DOUBLE_ARRAY,
+                         int: ParameterType.PARAMETER_INTEGER_ARRAY,
+                         str: ParameterType.PARAMETER_STRING_ARRAY}[inner]
+            else:
+                ptype = _TYPES[type(p.default)]
+        desc = ParameterDescriptor(description=p.description, type=ptype, read_only=p.read_only)
+        if p.low is not None and ptype == ParameterType.PARAMETER_DOUBLE:
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=float(p.low), to_value=float(p.high if p.high is not None else 1e300),
+                step=0.0)]
+        node.declare_parameter(p.name, p.default, desc)
+
+
+def get(node: Node, name: str) -> Any:
+    return node.get_parameter(name).value
+
+
+def check_mode(value: str, node_name: str) -> str:
+    if value not in MODES:
+        raise StartupError(f'{node_name}: parameter mode is {value!r}; use one of {MODES}')
+    return value
+
+
+def stamp_ns(stamp) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def ns_to_stamp(ns: int, stamp) -> None:
+    stamp.sec, stamp.nanosec = divmod(int(ns), 1_000_000_000)
+
+
+def fill_pose(pose, x: float, y: float, th: float) -> None:
+    """Fill a geometry_msgs/Pose from a planar pose (REP-103: yaw about +z)."""
+    pose.position.x, pose.position.y, pose.position.z = float(x), float(y), 0.0
+    q = pose.orientation
+    q.x, q.y, q.z, q.w = yaw_to_quaternion(th)
+
+
+def pose_from_odom(pose) -> tuple[float, float, float] | str:
+    """Planar pose from a geometry_msgs/Pose, or a reason string if it is unusable."""
+    p, q = pose.position, pose.orientation
+    vals = (p.x, p.y, q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in vals):
+        return f'non-finite pose {vals}'
+    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    if abs(norm - 1.0) > 1e-3:
+        return f'quaternion norm {norm:.6g} is not 1'
+    return (p.x, p.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+
+
+def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
+    fill_pose(pose_msg.pose, ref.x, ref.y, ref.heading)
+    tw = twist_msg.twist.linear
+    tw.x, tw.y, tw.z = ref.vx, ref.vy, 0.0
+    ac = accel_msg.accel.linear
+    ac.x, ac.y, ac.z = ref.ax, ref.ay, 0.0
+
+
+def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample | str:
+    """RefSample from the three reference messages, or a reason string if unusable."""
+    pose = pose_from_odom(pose_msg.pose)
+    if isinstance(pose, str):
+        return f'reference/pose: {pose}'
+    tw, ac = twist_msg.twist.linear, accel_msg.accel.linear
+    vals = (tw.x, tw.y, ac.x, ac.y)
+    if not all(math.isfinite(v) for v in vals):
+        return f'reference twist/accel not finite: {vals}'
+    return RefSample(t, pose[0], pose[1], tw.x, tw.y, ac.x, ac.y, pose[2])
+
+
+def make_executor():
+    """EventsExecutor (about 2x faster here) unless NONFRAGILE_EXECUTOR=single."""
+    if os.environ.get('NONFRAGILE_EXECUTOR', 'events') == 'single':
+        return rclpy.executors.SingleThreadedExecutor()
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor()
+
+
+def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
+    """Spin with a finite timeout (the EventsExecutor needs one) until ``done()``."""
+    while rclpy.ok() and not done():
+        executor.spin_once(timeout_sec=period)
+
+
+def run(factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Node main: init, build, spin until the node is finished, Jazzy-style shutdown.
+
+    Returns the process exit code: 0, the node's ``exit_code`` attribute if set,
+    or 2 when the node refuses to start (:class:`StartupError` or ``ValueError``).
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = factory()
+        except (StartupError, ValueError) as exc:
+            print(f'[FATAL] {exc}', file=sys.stderr)
+            return 2
+        executor = make_executor()
+        executor.add_node(node)
+        spin_until(executor, lambda: getattr(node, 'finished', False))
+        return int(getattr(node, 'exit_code', 0) or 0)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return int(getattr(node, 'exit_code', 0) or 0)
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,204 @@
+"""``plant``: kinematic unicycle with the paper's delayed-state term; the run's clock.
+
+Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w).
+Publishes ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``,
+twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
+and, in lockstep mode, ``/clock`` and ``run_done``.
+
+Lockstep (default): step ``k -> k+1`` happens only when the command for step
+``k`` has arrived; the plant waits for its peers to be discovered, republishes
+step ``k`` every ``lockstep_retry`` s while it waits (peers ignore repeats), and
+aborts with exit code 5 after ``lockstep_timeout`` s of silence.  Real time:
+a wall timer steps at ``1/dt`` with the latest command (zero after
+``cmd_timeout``).  The physics is :class:`control.loop.UnicyclePlant`.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import UInt64
+
+from .. import topics
+from ..control.loop import LoopConfigError, PlantConfig, UnicyclePlant, step_time_ns
+from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare, fill_pose,
+                     get, ns_to_stamp, run)
+
+PARAMS = [
+    Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
+          read_only=True),
+    Param('dt', 0.01, 'integration step (s)', low=1e-6, high=10.0, read_only=True),
+    Param('tau', 0.2, 'state delay (s); rounded to a whole number of steps', low=0.0,
+          high=1e3, read_only=True),
+    Param('A_tau', [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0,
+                    0.0], 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles row-major',
+          read_only=True),
+    Param('initial_pose', [0.7, 0.1, math.pi / 2], 'initial [x (m), y (m), yaw (rad)] in odom',
+          read_only=True),
+    Param('initial_speed', 0.05, 'speed in force before the first command (m/s)',
+          read_only=True),
+    Param('duration', 60.0, 'run length (s); lockstep stops after it, realtime: 0 = forever',
+          low=0.0, high=1e9, read_only=True),
+    Param('lockstep_timeout', 10.0, 'lockstep: abort if no command arrives for this long (s, wall)',
+          low=0.01, high=1e6),
+    Param('lockstep_retry', 0.25, 'lockstep: republish the current step after this long (s, wall)',
+          low=0.001, high=1e6),
+    Param('lockstep_subscribers', 1, 'lockstep: wait until odom has this many subscribers'),
+    Param('cmd_timeout', 0.5, 'realtime: command older than this (s) is replaced by a stop',
+          low=0.0, high=1e6),
+]
+
+
+class PlantNode(Node):
+    """ROS adapter around :class:`UnicyclePlant`."""
+
+    def __init__(self, **kwargs):
+        super().__init__('plant', **kwargs)
+        declare(self, PARAMS)
+        self.mode = check_mode(get(self, 'mode'), 'plant')
+        pose0 = list(get(self, 'initial_pose'))
+        if len(pose0) != 3:
+            raise StartupError(f'plant: initial_pose needs [x, y, yaw], got {pose0}')
+        a_tau = list(get(self, 'A_tau'))
+        if len(a_tau) != 16:
+            raise StartupError(f'plant: A_tau needs 16 doubles (4x4 row-major), got {len(a_tau)}')
+        try:
+            cfg = PlantConfig(dt=get(self, 'dt'), tau=get(self, 'tau'),
+                              A_tau=[a_tau[i:i + 4] for i in range(0, 16, 4)],
+                              x0=pose0[0], y0=pose0[1], th0=pose0[2],
+                              v0=get(self, 'initial_speed'))
+        except LoopConfigError as exc:
+            raise StartupError(f'plant: {exc}') from None
+        if abs(cfg.delay_steps * cfg.dt - cfg.tau) > 1e-9:
+            self.get_logger().warn(
+                f'tau = {cfg.tau} s is not a multiple of dt = {cfg.dt} s: using '
+                f'{cfg.delay_steps} steps = {cfg.delay_steps * cfg.dt:.6g} s')
+        self.plant = UnicyclePlant(cfg)
+        self.dt = cfg.dt
+        self.final_step = int(round(get(self, 'duration') / cfg.dt))
+        self.finished = False
+        self.exit_code = 0
+        self.progress_every = max(1, self.final_step // 10)
+
+        self.pub_odom = self.create_publisher(Odometry, topics.ODOM, DATA_QOS)
+        self.pub_pose = self.create_publisher(PoseStamped, topics.POSE, DATA_QOS)
+        self.sub_cmd = self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd, DATA_QOS)
+        self._odom, self._pose = Odometry(), PoseStamped()
+        self._odom.header.frame_id = self._pose.header.frame_id = topics.ODOM_FRAME
+        self._odom.child_frame_id = topics.BASE_FRAME
+        self.cmd = (cfg.v0, 0.0)
+        self.commands = 0
+        if self.mode == 'lockstep':
+            self.set_parameters([Parameter('use_sim_time', value=False)])
+            self.pub_clock = self.create_publisher(Clock, topics.CLOCK, DATA_QOS)
+            self.pub_done = self.create_publisher(UInt64, topics.RUN_DONE, LATCHED_QOS)
+            self._clock_msg = Clock()
+            self.started = False
+            self.waiting_since = time.monotonic()
+            self.last_publish = 0.0
+            self.watchdog = self.create_timer(0.02, self._lockstep_watchdog)
+        else:
+            self.last_cmd_time = None
+            self.timer = self.create_timer(cfg.dt, self._realtime_step)
+
+    # ------------------------------------------------------------------ publishing
+    def _publish_state(self, stamp_ns: int) -> None:
+        p = self.plant
+        if self.mode == 'lockstep':
+            ns_to_stamp(stamp_ns, self._clock_msg.clock)
+            self.pub_clock.publish(self._clock_msg)
+        for msg in (self._odom, self._pose):
+            ns_to_stamp(stamp_ns, msg.header.stamp)
+        fill_pose(self._odom.pose.pose, p.x, p.y, p.th)
+        self._odom.twist.twist.linear.x = p.v
+        self._odom.twist.twist.angular.z = p.w
+        self._pose.pose = self._odom.pose.pose
+        self.pub_odom.publish(self._odom)
+        self.pub_pose.publish(self._pose)
+        self.last_publish = time.monotonic()
+
+    # ------------------------------------------------------------------ lockstep
+    def _peers_ready(self) -> bool:
+        return (self.sub_cmd.get_publisher_count() >= 1
+                and self.pub_odom.get_subscription_count() >= get(self, 'lockstep_subscribers')
+                and self.pub_clock.get_subscription_count() >= 1)
+
+    def _lockstep_watchdog(self) -> None:
+        if self.finished:
+            return
+        now = time.monotonic()
+        if not self.started:
+            if self._peers_ready():
+                self.started = True
+                self.get_logger().info(f'peers matched: starting lockstep run of '
+                                       f'{self.final_step} steps (dt = {self.dt} s)')
+                self.waiting_since = now
+                self._publish_state(step_time_ns(self.plant.k, self.dt))
+            elif now - self.waiting_since > get(self, 'lockstep_timeout'):
+                self._abort('no tracker/reference discovered')
+            return
+        if now - self.waiting_since > get(self, 'lockstep_timeout'):
+            self._abort(f'no command for step {self.plant.k}')
+        elif now - self.last_publish > get(self, 'lockstep_retry'):
+            self._publish_state(step_time_ns(self.plant.k, self.dt))
+
+    def _abort(self, why: str) -> None:
+        self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
+                                f'{get(self, "lockstep_timeout")} s; is the tracker running '
+                                'on the same ROS_DOMAIN_ID and namespace?')
+        self.exit_code = 5
+        self._finish()
+
+    def _finish(self) -> None:
+        if self.mode == 'lockstep':
+            self.pub_done.publish(UInt64(data=self.plant.k))
+            self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
+        self.finished = True
+
+    def _on_cmd(self, msg: Twist) -> None:
+        v, w = msg.linear.x, msg.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.get_logger().warn(f'ignoring non-finite cmd_vel ({v}, {w})')
+            return
+        self.commands += 1
+        if self.mode != 'lockstep':
+            self.cmd = (v, w)
+            self.last_cmd_time = time.monotonic()
+            return
+        if not self.started or self.finished:
+            return
+        if self.plant.k >= self.final_step:      # command for the last pose: run complete
+            self.get_logger().info(f'lockstep run complete: {self.plant.k} steps, '
+                                   f't = {self.plant.t:.3f} s')
+            self._finish()
+            return
+        self.plant.step(v, w)
+        self.waiting_since = time.monotonic()
+        self._publish_state(step_time_ns(self.plant.k, self.dt))
+        if self.plant.k % self.progress_every == 0:
+            self.get_logger().info(f'progress: t = {self.plant.t:.2f} s of '
+                                   f'{self.final_step * self.dt:.2f} s')
+
+    # ------------------------------------------------------------------ real time
+    def _realtime_step(self) -> None:
+        stale = self.last_cmd_time is None or \
+            time.monotonic() - self.last_cmd_time > get(self, 'cmd_timeout')
+        v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
+        self._publish_state(self.get_clock().now().nanoseconds)
+        self.plant.step(v, w)
+        if self.final_step and self.plant.k >= self.final_step:
+            self._finish()
+
+
+def main(args=None) -> int:
+    return run(PlantNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
