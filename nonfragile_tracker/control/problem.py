@@ -60,8 +60,9 @@ def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None
     if shape is not None:
         for axis, (want, got) in enumerate(zip(shape, arr.shape)):
             if want is not None and want != got:
+                want_txt = ', '.join('*' if s is None else str(s) for s in shape)
                 raise ProblemError(
-                    f'{name}: expected shape {tuple("*" if s is None else s for s in shape)}, '
+                    f'{name}: expected shape ({want_txt}), '
                     f'got {arr.shape} (axis {axis} has {got}, needs {want})')
     return arr
 
