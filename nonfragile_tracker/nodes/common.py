@@ -10,6 +10,7 @@ from typing import Any, Callable, Iterable
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -158,6 +159,11 @@ def run(factory: Callable[[], Node], args: list[str] | None = None) -> int:
             node = factory()
         except (StartupError, ValueError) as exc:
             print(f'[FATAL] {exc}', file=sys.stderr)
+            return 2
+        except ParameterException as exc:
+            hint = (' Write doubles as 1.0, not 1, in parameter files.'
+                    if isinstance(exc, InvalidParameterTypeException) else '')
+            print(f'[FATAL] invalid parameter: {exc}.{hint}', file=sys.stderr)
             return 2
         executor = make_executor()
         executor.add_node(node)
