@@ -1,0 +1,163 @@
+"""Objectives on top of Theorem 1: each a bisection over the convex synthesis LMI.
+
+* :func:`max_perturbation_scale` - largest ``s`` such that Theorem 1 holds with
+  ``F -> s F`` (under a gain bound: without one, high gain makes ``s`` unbounded).
+* :func:`max_decay_rate` - largest ``alpha`` such that Theorem 1 holds for the
+  shifted system ``A + alpha I``, ``e^{alpha tau} A_tau``: then
+  ``xi_a(t) = e^{alpha t} xi(t)`` satisfies the shifted delay equation, so the
+  certificate proves ``|xi(t)| <= c e^{-alpha t}`` (a certified decay rate).
+* :func:`min_gain_norm` - smallest ``kappa`` with Theorem 1 feasible under
+  ``||K||_2 <= kappa``.
+
+Feasibility is monotone in each parameter, so bisection finds the boundary to
+``rel_tol``; the returned gain is the one synthesized at the last feasible point,
+with its verified certificate (:func:`lmi.synthesize` verifies every solve).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .lmi import InfeasibleError, LmiError, SynthesisResult, synthesize
+from .problem import Problem
+
+__all__ = ['DesignResult', 'max_perturbation_scale', 'max_decay_rate', 'min_gain_norm',
+           'shifted_problem', 'at_gain_norm']
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """The optimized value and the verified synthesis at that value."""
+
+    objective: str
+    value: float
+    synthesis: SynthesisResult
+    problem: Problem           # the problem actually certified (scaled F, shifted A, ...)
+    solves: int
+
+    @property
+    def K(self) -> np.ndarray:
+        return self.synthesis.K
+
+
+def shifted_problem(problem: Problem, alpha: float) -> Problem:
+    """``A + alpha I`` and ``e^{alpha tau} A_tau``: Theorem 1 on it certifies decay rate alpha."""
+    return problem.replace(A=problem.A + alpha * np.eye(problem.n),
+                           A_tau=math.exp(alpha * problem.tau) * problem.A_tau)
+
+
+def _bisect(feasible: Callable[[float], SynthesisResult | None], lo: float, hi: float,
+            rel_tol: float, lo_known: SynthesisResult | None = None,
+            grow: bool = True, hi_limit: float = 1e6) -> tuple[float, SynthesisResult | None, int]:
+    """Largest x in [lo, hi] with feasible(x) not None; ``hi`` doubles while feasible."""
+    best, solves = lo_known, 0
+    if grow:
+        while True:
+            r = feasible(hi)
+            solves += 1
+            if r is None:
+                break
+            lo, best = hi, r
+            if hi >= hi_limit:
+                return lo, best, solves
+            hi = min(2 * hi, hi_limit)
+    while hi - lo > rel_tol * max(abs(hi), 1e-12):
+        mid = 0.5 * (lo + hi)
+        r = feasible(mid)
+        solves += 1
+        if r is None:
+            hi = mid
+        else:
+            lo, best = mid, r
+    return lo, best, solves
+
+
+def _try(problem: Problem, **kw) -> SynthesisResult | None:
+    try:
+        return synthesize(problem, **kw)
+    except InfeasibleError:
+        return None
+    except LmiError:            # numerical trouble at an extreme trial value: not certified
+        return None
+
+
+def max_perturbation_scale(problem: Problem, *, gain_bound: float, rel_tol: float = 1e-3,
+                           hi_limit: float = 1e3) -> DesignResult:
+    """Largest ``s`` with Theorem 1 feasible for ``F -> s F`` and ``||K||_2 <= gain_bound``."""
+    def feas(s: float):
+        return _try(problem.replace(F=s * problem.F), gain_bound=gain_bound)
+
+    base = feas(1e-9)
+    if base is None:
+        raise InfeasibleError(f'Theorem 1 is infeasible for {problem.name!r} with '
+                              f'||K||_2 <= {gain_bound:g} even without perturbation')
+    s, best, n = _bisect(feas, 1e-9, 1.0, rel_tol, base, hi_limit=hi_limit)
+    return DesignResult('max_perturbation_scale', s, best, problem.replace(F=s * problem.F),
+                        n + 1)
+
+
+def max_decay_rate(problem: Problem, *, gain_bound: float, nominal: bool = False,
+                   rel_tol: float = 1e-3, hi_limit: float = 1e3) -> DesignResult:
+    """Largest certified decay rate ``alpha >= 0`` under ``||K||_2 <= gain_bound``."""
+    def feas(a: float):
+        return _try(shifted_problem(problem, a), gain_bound=gain_bound, nominal=nominal)
+
+    base = feas(0.0)
+    if base is None:
+        raise InfeasibleError(f'Theorem 1 is infeasible for {problem.name!r} with '
+                              f'||K||_2 <= {gain_bound:g}: no decay rate is certified')
+    a, best, n = _bisect(feas, 0.0, 0.5, rel_tol, base, hi_limit=hi_limit)
+    return DesignResult('max_decay_rate', a, best, shifted_problem(problem, a), n + 1)
+
+
+def min_gain_norm(problem: Problem, *, nominal: bool = False, rel_tol: float = 1e-3,
+                  hi: float = 1e3) -> DesignResult:
+    """Smallest ``kappa`` such that Theorem 1 is feasible with ``||K||_2 <= kappa``."""
+    best = _try(problem, gain_bound=hi, nominal=nominal)
+    if best is None:
+        raise InfeasibleError(f'Theorem 1 is infeasible for {problem.name!r} even with '
+                              f'||K||_2 <= {hi:g}')
+    lo, solves = 0.0, 1
+    while hi - lo > rel_tol * hi:
+        mid = 0.5 * (lo + hi)
+        r = _try(problem, gain_bound=mid, nominal=nominal)
+        solves += 1
+        if r is None:
+            lo = mid
+        else:
+            hi, best = mid, r
+    return DesignResult('min_gain_norm', hi, best, problem, solves)
+
+
+def at_gain_norm(design: Callable[..., DesignResult], problem: Problem, norm: float, *,
+                 rel_tol: float = 2e-3, **kw) -> DesignResult:
+    """Run ``design(problem, gain_bound=kappa, **kw)`` with the largest LMI bound ``kappa``
+    whose gain still has ``||K||_2 <= norm``.
+
+    The LMI form of the gain bound (``X >= I``, ``R^T R <= kappa^2 (2X - I)``) is
+    conservative: the realized ``||K||_2`` is often well below ``kappa``.  This outer
+    bisection over ``kappa`` in ``[norm, 4 norm]`` spends the whole budget ``norm``.
+    """
+    best = design(problem, gain_bound=norm, **kw)
+    lo, hi = norm, 4.0 * norm
+    top = _try_design(design, problem, hi, kw)
+    if top is not None and np.linalg.norm(top.K, 2) <= norm:
+        return top
+    while hi - lo > rel_tol * hi:
+        mid = 0.5 * (lo + hi)
+        r = _try_design(design, problem, mid, kw)
+        if r is not None and np.linalg.norm(r.K, 2) <= norm:
+            lo, best = mid, r
+        else:
+            hi = mid
+    return best
+
+
+def _try_design(design, problem, kappa, kw):
+    try:
+        return design(problem, gain_bound=kappa, **kw)
+    except LmiError:
+        return None
