@@ -1,0 +1,297 @@
+"""Reproduce the paper's Section IV (and compare with the designs beyond it).
+
+``nonfragile_tracker reproduce --out DIR`` computes every number and figure of
+the report into ``DIR`` (``reproduction.json``, ``paper_reproduction.md``, PNGs);
+``--docs`` also refreshes ``docs/paper_reproduction.md`` and its JSON, which are
+committed and checked against a fresh computation by the tests.
+"""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .control.analysis import analyse_gain
+from .control.design import at_gain_norm, max_decay_rate, max_perturbation_scale, min_gain_norm
+from .control.lmi import synthesize
+from .control.loop import PlantConfig, TrackerConfig
+from .control.problem import Problem, load_problem
+from .control.reference import circle
+from .control.simulate import simulate_delay_loop, simulate_tracking
+
+#: Initial condition of Figs. 2-5 (the paper does not state one).
+FIG_XI0 = (0.5, 0.0, -0.5, 0.0)
+FIG_DURATION = 10.0
+#: Initial pose of the tracking runs (x, y, yaw, v): as in the issue tracker's measurements.
+TRACK_POSE = (0.7, 0.1, math.pi / 2, 0.05)
+TRACK_STEPS = 62832                      # one period of the circle at dt = 0.01 s
+PAPER_NORM = 8.67
+
+
+def _gains(problem: Problem, paper: dict) -> dict[str, np.ndarray]:
+    out = {'paper K_nf': paper['K_nf'], 'paper K_normal': paper['K_normal']}
+    out['Theorem 1 K_nf'] = synthesize(problem, gain_bound=PAPER_NORM).K
+    out['Theorem 1 K_normal'] = synthesize(problem, nominal=True, gain_bound=PAPER_NORM).K
+    out['max decay rate'] = at_gain_norm(max_decay_rate, problem, PAPER_NORM).K
+    out['max perturbation scale'] = max_perturbation_scale(problem, gain_bound=PAPER_NORM).K
+    out['min gain norm'] = min_gain_norm(problem).K
+    return out
+
+
+def _tracking(K, compensation: bool) -> dict:
+    pc = PlantConfig(x0=TRACK_POSE[0], y0=TRACK_POSE[1], th0=TRACK_POSE[2], v0=TRACK_POSE[3])
+    tc = TrackerConfig(K=K, max_angular_speed=2.0, delay_compensation=compensation,
+                       A_tau=pc.A_tau, tau=pc.tau)
+    run = simulate_tracking(pc, tc, circle(), TRACK_STEPS)
+    m = run.metrics()
+    late = run.error[run.t > 20.0]
+    return {'first_within_1cm': m.first_within, 'settling_1cm': m.settling_time,
+            'steady_max_error': float(late.max()), 'final_error': m.final_error,
+            'peak_abs_w': m.peak_abs_w}
+
+
+def _figures(problem: Problem, paper: dict, out: Path) -> list[str]:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from .control.delay import closed_loop_matrix
+    names = []
+    cases = [('fig2_normal_delta1.png', 'K_normal', 'Delta_1', 2),
+             ('fig3_nonfragile_delta1.png', 'K_nf', 'Delta_1', 3),
+             ('fig4_normal_delta2.png', 'K_normal', 'Delta_2', 4),
+             ('fig5_nonfragile_delta2.png', 'K_nf', 'Delta_2', 5)]
+    for fname, kname, dname, num in cases:
+        A0 = closed_loop_matrix(problem.A, problem.B, paper[kname], problem.E, problem.F,
+                                problem.perturbations[dname])
+        run = simulate_delay_loop(A0, problem.A_tau, problem.tau, FIG_XI0, FIG_DURATION,
+                                  dt=1e-3)
+        fig, ax = plt.subplots(figsize=(6, 3.6))
+        for i, lab in enumerate(['x (m)', "x' (m/s)", 'y (m)', "y' (m/s)"]):
+            ax.plot(run.t, run.xi[:, i], label=f'xi{i + 1}: {lab}')
+        ax.set_xlabel('time (s)')
+        ax.set_ylabel('state xi')
+        ax.set_title(f"Fig. {num}: paper's {kname} with {dname}, tau = {problem.tau} s")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / fname, dpi=110)
+        plt.close(fig)
+        names.append(fname)
+    return names
+
+
+def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
+    """The paper's Fig. 6 from a real ROS run (three processes, lockstep) and its bag."""
+    import tempfile
+
+    from .bag.report import bag_report
+    from .cli import config_dir
+    from .control.gains import write_gain_file
+    from .runner import run_processes, scenario_parameters
+    with tempfile.TemporaryDirectory() as tmp:
+        gains = write_gain_file(Path(tmp) / 'paper_knf.yaml', paper_knf)
+        params = scenario_parameters(config_dir() / 'paper_scenario.yaml', gains,
+                                     {'plant': {'ros__parameters': {'duration': duration}}})
+        run_dir = Path(tmp) / 'run'
+        run_dir.mkdir()
+        res = run_processes(params, run_dir, record=True, progress=lambda s: None)
+        if any(c not in (0, None) for c in res.exit_codes.values()):
+            raise RuntimeError(f'ROS run for Fig. 6 failed: {res.exit_codes}')
+        rep = bag_report(res.bag, run_dir)
+        shutil.copy(run_dir / 'xy.png', out / 'fig6_xy.png')
+        m = rep.metrics
+        return {'duration': duration, 'final_error': m.final_error,
+                'first_within_1cm': m.first_within, 'rms_error': m.rms_error,
+                'peak_abs_w': m.peak_abs_w, 'steps': m.steps}
+
+
+def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = True) -> dict:
+    """All numbers of the report (and the figures into ``out``)."""
+    import yaml
+    t0 = time.monotonic()
+    problem = load_problem(config / 'paper_problem.yaml')
+    paper = {k: np.array(v, dtype=float) for k, v in
+             yaml.safe_load((config / 'paper_gains.yaml').read_text()).items()}
+    gains = _gains(problem, paper)
+    rows = {}
+    for name, K in gains.items():
+        a = analyse_gain(problem, K, name=name)
+        rows[name] = {
+            'K': np.round(K, 6).tolist(), 'norm': a.norm,
+            'certified_nominal': a.certified_nominal,
+            'certified_nonfragile': a.certified_nonfragile,
+            'abscissa_nominal': a.abscissa_nominal,
+            'abscissa_delta1': a.abscissa['Delta_1'], 'abscissa_delta2': a.abscissa['Delta_2'],
+            'worst_abscissa': a.worst_abscissa, 'measured_margin': a.measured_margin,
+            'certified_margin': a.certified_margin,
+            'tracking': _tracking(K, False), 'tracking_compensated': _tracking(K, True)}
+    out.mkdir(parents=True, exist_ok=True)
+    figures = _figures(problem, paper, out)
+    result = {'problem': 'config/paper_problem.yaml', 'tau': problem.tau,
+              'fig_xi0': list(FIG_XI0), 'track_pose': list(TRACK_POSE),
+              'track_steps': TRACK_STEPS, 'gains': rows, 'figures': figures}
+    if ros:
+        result['fig6'] = _fig6(out, paper['K_nf'], ros_duration)
+        result['figures'].append('fig6_xy.png')
+    result['wall_time'] = time.monotonic() - t0
+    return result
+
+
+def _f(x, nd: int = 3) -> str:
+    if isinstance(x, bool):
+        return 'yes' if x else 'no'
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return 'never'
+    if isinstance(x, float) and math.isinf(x):
+        return 'inf'
+    if isinstance(x, float) and x != 0 and (abs(x) < 1e-3 or abs(x) >= 1e4):
+        return f'{x:.2e}'
+    return f'{x:.{nd}f}'
+
+
+def render_markdown(r: dict) -> str:
+    """The report, every claim backed by a number in its tables."""
+    g = r['gains']
+    names = list(g)
+    head = '| | ' + ' | '.join(names) + ' |\n|---|' + '---|' * len(names) + '\n'
+
+    def row(label, key, sub=None, nd=3):
+        vals = [(g[n][sub][key] if sub else g[n][key]) for n in names]
+        return f'| {label} | ' + ' | '.join(_f(v, nd) for v in vals) + ' |\n'
+
+    pk, pn = g['paper K_nf'], g['paper K_normal']
+    t1 = g['Theorem 1 K_nf']
+    text = f"""# Reproduction of the paper's Section IV
+
+Generated by `nonfragile_tracker reproduce --docs` (do not edit by hand; the test
+`test/test_reproduction.py` checks these numbers against a fresh computation).
+Problem: `{r['problem']}` (A_tau = diag(0.01, 0, 0.02, 0), tau = {r['tau']} s,
+E = I, F = 0.5 ones(2, 4)).  Spectral abscissae are of the delay loop (eq. 7) at
+tau = {r['tau']} s from the characteristic roots (spectral discretization + Newton),
+not of A + BK.
+
+## 1. Gains
+
+""" + '\n'.join(f'- **{n}**: K = `{g[n]["K"]}`' for n in names) + """
+
+""" + head + row('norm of K (2-norm)', 'norm') + \
+        row('Theorem 1 nominal certified', 'certified_nominal') + \
+        row('Theorem 1 non-fragile certified', 'certified_nonfragile') + \
+        row('abscissa, Delta = 0', 'abscissa_nominal') + \
+        row('abscissa, Delta_1 = -I', 'abscissa_delta1') + \
+        row('abscissa, Delta_2 = +I', 'abscissa_delta2') + \
+        row('worst abscissa over norm(Delta) <= 1', 'worst_abscissa') + \
+        row('fragility margin, measured', 'measured_margin') + \
+        row('fragility margin, certified', 'certified_margin') + f"""
+"measured" is the largest scale alpha of alpha E Delta F for which a worst-case search
+over constant Delta (norm <= 1) finds no unstable loop; "certified" is the largest
+alpha for which Theorem 1's condition holds for the fixed K (bisection on the LMI).
+
+## 2. Tracking on the paper's circle
+
+Nonlinear unicycle with the delay term, 100 Hz, one period ({r['track_steps']} steps),
+initial pose (x, y, yaw, v) = {tuple(round(v, 4) for v in r['track_pose'])},
+|w| <= 2 rad/s.  "compensated" is the delay-consistent reference of this package
+(`delay_compensation: true`).
+
+""" + head + row('first within 1 cm (s)', 'first_within_1cm', 'tracking', 2) + \
+        row('within 1 cm for good from (s)', 'settling_1cm', 'tracking', 2) + \
+        row('max error after 20 s (m)', 'steady_max_error', 'tracking') + \
+        row('compensated: within 1 cm for good from (s)', 'settling_1cm',
+            'tracking_compensated', 2) + \
+        row('compensated: max error after 20 s (m)', 'steady_max_error',
+            'tracking_compensated') + \
+        row('peak abs(w) (rad/s)', 'peak_abs_w', 'tracking', 2) + """
+## 3. Figures
+
+Figs. 2-5: the linear delay loop (eq. 7) with the paper's printed gains, from
+xi(s) = """ + f"{tuple(r['fig_xi0'])}" + """ for s in [-tau, 0] (the paper states no initial
+condition).
+
+![Fig. 2](fig2_normal_delta1.png) ![Fig. 3](fig3_nonfragile_delta1.png)
+![Fig. 4](fig4_normal_delta2.png) ![Fig. 5](fig5_nonfragile_delta2.png)
+"""
+    if 'fig6' in r:
+        f6 = r['fig6']
+        text += f"""
+Fig. 6: the robot's x-y path with the paper's K_nf, from the bag of a ROS run (three
+node processes, lockstep, {f6['duration']:g} s simulated, {f6['steps']} steps); final
+error {_f(f6['final_error'])} m, first within 1 cm at {_f(f6['first_within_1cm'], 2)} s.
+
+![Fig. 6](fig6_xy.png)
+"""
+    claim_nf = pk['abscissa_delta2']
+    text += f"""
+## 4. Findings
+
+1. **Theorem 1 is feasible** on the paper's data, nominal and non-fragile: the
+   synthesized gains are certified (independent eigenvalue check of the
+   Lyapunov-Krasovskii condition) and stable under Delta_1 and Delta_2 (table 1).
+2. **LMI solutions are not unique.**  MATLAB's `feasp` stops at some feasible
+   point; Clarabel here returns the point we ask for (most strictly feasible
+   under a gain bound of 8.67 = the norm of the paper's K_nf).  Our K_nf therefore differs from
+   the printed one ({_f(t1['norm'])} vs {_f(pk['norm'])} in norm); the comparison that
+   makes sense is between properties (certificates, abscissae, margins), not entries.
+   Without a gain bound the most strictly feasible point has a norm of about 150: Theorem 1
+   is delay-independent and high gain dominates A_tau.
+3. **The paper's claim that K_normal is destabilized by Delta_2 does not hold with its
+   printed matrices**: the delay loop with K_normal + E Delta_2 F has spectral abscissa
+   {_f(pn['abscissa_delta2'])} (stable), and Theorem 1 even certifies K_normal for every
+   norm(Delta) <= 1 (certified margin {_f(pn['certified_margin'])} > 1).  K_nf is more robust
+   (margins {_f(pk['measured_margin'])} measured / {_f(pk['certified_margin'])} certified vs
+   {_f(pn['measured_margin'])} / {_f(pn['certified_margin'])}), and its abscissa under
+   Delta_2 is {_f(claim_nf)}.
+4. **Steady-state tracking error.**  A_tau xi(t - tau) acts on the position rows, which
+   the input does not reach directly; near the path it is a persistent disturbance of
+   size about 0.01 x_d and 0.02 y_d, and the paper's K_nf keeps an error of up to
+   {_f(pk['tracking']['steady_max_error'])} m after 20 s (it first enters 1 cm at
+   {_f(pk['tracking']['first_within_1cm'], 2)} s but does not stay).  Following the
+   delay-consistent reference removes it: {_f(pk['tracking_compensated']['steady_max_error'])} m.
+5. **theta_d(t) = t is inconsistent** with the circle x_d = 0.5 cos(0.01 t),
+   y_d = 0.5 sin(0.01 t), whose tangent heading is 0.01 t + pi/2.  The linearized law
+   does not use theta_d; the reference node publishes the tangent heading.
+6. **Beyond the paper** at norm(K) <= 8.67: the max-decay-rate design has worst-case
+   abscissa {_f(g['max decay rate']['worst_abscissa'])} (paper K_nf:
+   {_f(pk['worst_abscissa'])}) and, with delay compensation, stays within 1 cm from
+   {_f(g['max decay rate']['tracking_compensated']['settling_1cm'], 2)} s with
+   {_f(g['max decay rate']['tracking_compensated']['steady_max_error'])} m steady error;
+   the max-perturbation-scale design certifies a scale of
+   {_f(g['max perturbation scale']['certified_margin'])} (paper K_nf:
+   {_f(pk['certified_margin'])}).
+"""
+    return text
+
+
+def main_reproduce(args) -> int:
+    from .cli import config_dir
+    out = Path(args.out)
+    if out.exists() and any(out.iterdir()) and not args.force:
+        raise FileExistsError(f'{out} exists and is not empty; pass --force or another --out')
+    res = compute(config_dir(), out, ros_duration=args.duration, ros=not args.no_ros)
+    md = render_markdown(res)
+    (out / 'paper_reproduction.md').write_text(md)
+    (out / 'reproduction.json').write_text(json.dumps(res, indent=2))
+    if args.docs:
+        docs = config_dir().parent / 'docs'
+        docs.mkdir(exist_ok=True)
+        for name in res['figures']:
+            shutil.copy(out / name, docs / name)
+        (docs / 'paper_reproduction.md').write_text(md)
+        (docs / 'paper_reproduction.json').write_text(json.dumps(res, indent=2))
+    print(md)
+    print(f'wrote {out} in {res["wall_time"]:.1f} s')
+    return 0
+
+
+def add_subcommand(sub) -> None:
+    r = sub.add_parser('reproduce', help="the paper's Section IV: gains, Figs. 2-6, report")
+    r.add_argument('--out', default='runs/reproduction', help='output directory')
+    r.add_argument('--force', action='store_true', help='write into a non-empty --out')
+    r.add_argument('--docs', action='store_true', help='also refresh docs/paper_reproduction.*')
+    r.add_argument('--duration', type=float, default=60.0, help='simulated s of the ROS run')
+    r.add_argument('--no-ros', action='store_true', help='skip the ROS run (no Fig. 6)')
+    r.set_defaults(func=main_reproduce)
