@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -117,6 +118,9 @@ class UnicyclePlant:
     def __init__(self, config: PlantConfig):
         self.config = config
         self.N = config.delay_steps
+        # nonzero entries of A_tau per row: the delay term costs only what it uses
+        self._terms = tuple((i, j, a) for i, row in enumerate(config.A_tau)
+                            for j, a in enumerate(row) if a != 0.0)
         self.reset()
 
     def reset(self) -> None:
@@ -148,9 +152,9 @@ class UnicyclePlant:
         else:
             d_xi = self._hist[0]          # xi at step k - N
         self._hist.append(xi_now)
-        At = self.config.A_tau
-        d = [At[i][0] * d_xi[0] + At[i][1] * d_xi[1] + At[i][2] * d_xi[2] + At[i][3] * d_xi[3]
-             for i in range(4)]
+        d = [0.0, 0.0, 0.0, 0.0]
+        for i, j, a in self._terms:
+            d[i] += a * d_xi[j]
         half = 0.5 * w * h
         sinc = math.sin(half) / half if abs(half) > 1e-8 else 1.0 - half * half / 6.0
         mid = self.th + half
@@ -240,17 +244,12 @@ class TrackerConfig:
             object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
             delay_steps(self.tau, self.dt)
 
-    @property
-    def K_effective(self) -> tuple:
-        """The gain actually applied: ``K + E D F``."""
-        if self.perturbation is None:
-            return self.K
-        return tuple(tuple(a + b for a, b in zip(rk, rp))
-                     for rk, rp in zip(self.K, self.perturbation))
+        K = self.K if self.perturbation is None else tuple(
+            tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
+        object.__setattr__(self, 'K_effective', K)   # the gain actually applied: K + E D F
 
 
-@dataclass
-class Command:
+class Command(NamedTuple):
     """One tracker output with the quantities behind it (for logs and tests)."""
 
     v: float                 # commanded linear speed (m/s), cmd_vel.linear.x
@@ -260,7 +259,6 @@ class Command:
     error: tuple = (0.0, 0.0, 0.0, 0.0)   # xi - xi_d
     saturated: bool = False
     floored: bool = False
-    extra: dict = field(default_factory=dict)
 
 
 class Tracker:

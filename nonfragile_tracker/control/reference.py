@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, NamedTuple
 
 __all__ = ['RefSample', 'Path', 'circle', 'figure_eight', 'make_path', 'PATHS', 'PathError']
 
@@ -18,8 +18,7 @@ class PathError(ValueError):
     """Unknown path name or invalid path parameter."""
 
 
-@dataclass(frozen=True)
-class RefSample:
+class RefSample(NamedTuple):
     """Desired state at time ``t`` (SI units, ``odom`` frame)."""
 
     t: float

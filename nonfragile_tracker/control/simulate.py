@@ -64,19 +64,19 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
                          f'({plant_config.dt}) in lockstep')
     plant = UnicyclePlant(plant_config)
     tracker = Tracker(tracker_config)
-    rows = np.empty((steps + 1, 11))
+    rows = []
+    append = rows.append
     dt = plant_config.dt
     for k in range(steps + 1):
         t = step_time(k, dt)
-        q = yaw_to_quaternion(plant.th)
-        th = quaternion_to_yaw(*q)
+        th = quaternion_to_yaw(*yaw_to_quaternion(plant.th))   # as through a message
         ref = path.sample(t)
-        cmd = tracker.step(plant.x, plant.y, th, ref, measured_speed=plant.v)
-        rows[k] = (t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
-                   cmd.v, cmd.w)
+        cmd = tracker.step(plant.x, plant.y, th, ref, plant.v)
+        append((t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
+                cmd.v, cmd.w))
         if k < steps:
             plant.step(cmd.v, cmd.w)
-    return TrackingRun(*rows.T.copy())
+    return TrackingRun(*np.array(rows).T.copy())
 
 
 @dataclass(frozen=True)
