@@ -325,6 +325,10 @@ class Tracker:
             v_next, saturated = vmax, True
         elif v_next < -vmax:
             v_next, saturated = -vmax, True
+        if not (math.isfinite(w) and math.isfinite(v_next)):
+            # non-finite input slipped through: stop, keep the compensator state
+            return Command(v=0.0, w=0.0, a=0.0, u=(u1, u2), error=e, saturated=True,
+                           floored=floored)
         self.v = v_next
         cmd_v = 0.5 * (v + v_next)
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
