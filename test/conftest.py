@@ -10,6 +10,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'
 
+# Tests keep DDS discovery on this host, whatever the caller's environment says.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+
+def unique_domain_id(salt: str = '') -> int:
+    """A ROS_DOMAIN_ID in 100..199 derived from the process id and a salt."""
+    return 100 + (os.getpid() * 31 + sum(map(ord, salt))) % 100
+
 
 @pytest.fixture(scope='session')
 def paper_problem():
@@ -28,7 +36,7 @@ def paper_gains():
 def ros_env(tmp_path):
     """Environment for ROS subprocesses: an isolated domain on localhost."""
     env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() * 7 + hash(tmp_path.name)) % 100 + 100)
+    env['ROS_DOMAIN_ID'] = str(unique_domain_id(tmp_path.name))
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONPATH'] = str(ROOT) + os.pathsep + env.get('PYTHONPATH', '')
     return env

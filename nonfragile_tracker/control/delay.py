@@ -18,9 +18,10 @@ characteristic root has a negative real part.  This module computes
   search over constant ``||Delta||_2 <= 1`` finds no destabilizing ``Delta``
   (:func:`worst_case_abscissa` is the inner search).
 
-Unlike the LMI certificates in :mod:`.lmi` nothing here is conservative except
-the worst-case search of the fragility margin (see its Notes); unlike them it
-only covers *constant* perturbations ``Delta``.
+Nothing here is conservative, but the fragility margin is *measured*: a local
+search can miss the worst case, so it can only err on the optimistic side (see
+its Notes).  Unlike the LMI certificates of :mod:`.lmi`, only *constant*
+perturbations ``Delta`` are covered.
 """
 from __future__ import annotations
 
@@ -88,7 +89,7 @@ def _delay(tau: Any, name: str = 'tau') -> float:
     except (TypeError, ValueError):
         raise ValueError(f'{name}: expected a real number, got {tau!r}') from None
     if not math.isfinite(t) or t < 0.0:
-        raise ValueError(f'{name}: expected a finite delay >= 0, got {tau!r}')
+        raise ValueError(f'{name}: expected a finite number >= 0, got {tau!r}')
     return t
 
 
@@ -168,8 +169,10 @@ class RootsResult:
     N : int
         Chebyshev degree of the discretization used (0: delay-free, solved by ``eig``).
     converged : bool
-        ``True`` iff the discretization resolves every root with real part
-        ``>= abscissa`` and the refined roots agree with the discretized ones.
+        ``True`` iff the discretization resolves every root with a real part
+        ``>= roots[-1].real`` (so no root is missing from the list) and every
+        discretized eigenvalue in that region refined to a root within 1e-6
+        (relative).
     """
 
     roots: np.ndarray
@@ -261,7 +264,7 @@ class _Char:
         n = self.n
         J = np.zeros((n + 1, n + 1), dtype=float if real else complex)
         rhs = np.zeros(n + 1, dtype=J.dtype)
-        small = 0
+        small, prev = 0, math.inf
         for _ in range(maxit):
             J[:n, :n] = self.T(s)
             J[:n, n] = self.dT(s) @ v
@@ -278,10 +281,12 @@ class _Char:
             s = s + d[n]
             if self.tau * -np.real(s) > 700.0:      # exp(-s tau) would overflow
                 return s, math.inf
-            if abs(d[n]) <= 4e-16 * max(1.0, abs(s)):
+            step = abs(d[n]) / max(1.0, abs(s))
+            if step <= 1e-12 or (step < 1e-8 and step >= prev):   # converged / round-off
                 small += 1
                 if small >= 2:
                     break
+            prev = step
         if not np.isfinite(s):
             return s, math.inf
         return s, self.residual(s)
@@ -311,56 +316,66 @@ def _delay_free(ch: _Char, M: np.ndarray, count: int) -> RootsResult:
                        0, True)
 
 
+def _resolved_radius(N: int, tau: float) -> float:
+    """Inverse of :func:`_n_needed`: modulus up to which degree N resolves the roots."""
+    return (N - 12) / (1.2 * tau)
+
+
+def _radius(ch: _Char, re: float) -> float:
+    """Bound on |s| for every root with Re s >= re: ||A0|| + ||A1|| exp(-re tau)."""
+    return ch.nrm0 + ch.nrm1 * math.exp(min(-re * ch.tau, 700.0))
+
+
 def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float], bool]:
-    """Discretize with degree N, refine the rightmost eigenvalues; (roots, residuals, agree)."""
+    """Discretize with degree N, refine the rightmost eigenvalues; (roots, residuals, agree).
+
+    Only eigenvalues inside the resolved disc are used (the discretization also
+    has spurious eigenvalues of large modulus).  Candidates are refined in order
+    of decreasing real part until ``count`` roots are found and the remaining
+    candidates lie to their left.  ``agree`` is false if a candidate to the
+    right of the last returned root failed to refine or moved by more than
+    1e-6 (relative).
+    """
     ev = np.linalg.eigvals(_generator(ch.A0, ch.A1, ch.tau, N))
+    ev = ev[np.abs(ev) <= _resolved_radius(N, ch.tau)]
     ev = ev[np.argsort(-ev.real, kind='stable')]
-    ncand = min(ev.size, 2 * count + ch.n + 2)
-    found: list[tuple[complex, float, complex]] = []   # (root, residual, start)
-    failed_above = -math.inf            # real part of the best candidate that failed
-    for z in ev[:ncand]:
+    found: list[complex] = []          # distinct roots with Im >= 0
+    resid: list[float] = []
+    bad: list[float] = []              # real parts of candidates that failed / jumped
+    for z in ev:
         if z.imag < 0:
             continue
+        nfound = sum(1 if r.imag == 0 else 2 for r in found)
+        if nfound >= count:
+            last = min(r.real for r in found)
+            if z.real < last - 1e-6 * max(1.0, abs(z)):
+                break
         s, r = ch.newton(z)
         if r > RES_TOL and z.imag == 0.0:     # near-double real pair: try complex Newton
             s, r = ch.newton(complex(z.real, 1e-6 * max(1.0, abs(z))))
         if r > RES_TOL:
-            failed_above = max(failed_above, z.real)
+            bad.append(z.real)
             continue
         s = complex(s)
         if abs(s.imag) <= 1e-14 * max(1.0, abs(s)):
             s = complex(s.real, 0.0)
         elif s.imag < 0:
             s = s.conjugate()
-        found.append((s, r, complex(z.real, abs(z.imag))))
-    # deduplicate (several discretized eigenvalues may refine to one root)
-    found.sort(key=lambda t: _sort_key(t[0]))
-    uniq: list[tuple[complex, float, complex]] = []
-    for t in found:
-        if not any(abs(t[0] - u[0]) <= 1e-8 * max(1.0, abs(u[0])) for u in uniq):
-            uniq.append(t)
-    roots: list[complex] = []
-    resid: list[float] = []
-    starts: list[complex] = []
-    for s, r, z in uniq:
-        roots.append(s)
-        resid.append(r)
-        starts.append(z)
-        if s.imag > 0:
-            roots.append(s.conjugate())
+        if abs(s - z) > 1e-6 * max(1.0, abs(s)):
+            bad.append(z.real)
+        if not any(abs(s - u) <= 1e-8 * max(1.0, abs(u)) for u in found):
+            found.append(s)
             resid.append(r)
-            starts.append(z.conjugate())
-    order = sorted(range(len(roots)), key=lambda i: _sort_key(roots[i]))
-    roots = [roots[i] for i in order]
-    resid = [resid[i] for i in order]
-    starts = [starts[i] for i in order]
-    roots = _truncate(roots, count)
-    k = len(roots)
-    agree = k > 0 and all(abs(roots[i] - starts[i]) <= 1e-6 * max(1.0, abs(roots[i]))
-                          for i in range(k))
-    if k and failed_above >= roots[-1].real:
-        agree = False
-    return roots, resid[:k], agree
+    roots: list[tuple[complex, float]] = []
+    for s, r in zip(found, resid):
+        roots.append((s, r))
+        if s.imag > 0:
+            roots.append((s.conjugate(), r))
+    roots.sort(key=lambda t: _sort_key(t[0]))
+    out = _truncate([t[0] for t in roots], count)
+    k = len(out)
+    agree = k > 0 and not any(b >= out[-1].real - 1e-6 * max(1.0, abs(out[-1])) for b in bad)
+    return out, [t[1] for t in roots[:k]], agree
 
 
 def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
@@ -379,22 +394,24 @@ def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
         # boundary); capped because R(abscissa) is much smaller for unstable loops
         N = min(_n_needed(ch.nrm0 + ch.nrm1, tau), 32)
     N = int(N)
+    retried = False
     while True:
         roots, resid, agree = _roots_at(ch, N, count)
-        absc = max((z.real for z in roots), default=math.nan)
-        if roots:
-            with np.errstate(over='ignore'):
-                radius = ch.nrm0 + ch.nrm1 * math.exp(min(-absc * tau, 700.0))
-            resolved = N >= _n_needed(radius, tau)
-        else:
-            resolved = False
-        ok = agree and resolved
-        if ok or not adaptive or N >= N_MAX:
+        # complete iff every root right of the last one returned lies in the resolved disc
+        need = _n_needed(_radius(ch, roots[-1].real), tau) if roots else 2 * N
+        ok = agree and N >= need
+        if not adaptive or N >= N_MAX:
             break
-        need = _n_needed(radius, tau) if roots else 2 * N
-        N = min(N_MAX, max(need, 2 * N) if not agree else max(need, N + 8))
+        if not ok:
+            N = min(N_MAX, max(need, N + 8))
+        elif len(roots) < count and not retried:   # more roots may lie outside the disc
+            retried = True
+            N = min(N_MAX, 2 * N)
+        else:
+            break
     if not roots:
         raise RuntimeError(f'rightmost_roots: no characteristic root could be refined (N={N})')
+    absc = max(z.real for z in roots)
     if warn and not ok:
         warnings.warn(f'rightmost_roots: not converged at N={N} (abscissa {absc:.6g}); '
                       'the result may miss roots', RuntimeWarning, stacklevel=3)
@@ -413,7 +430,8 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
         Delay, ``>= 0``.
     count : int, optional
         Number of roots wanted (default 6); one more is returned if the last
-        one would split a conjugate pair.  Fewer are returned if fewer are found.
+        one would split a conjugate pair.  Fewer are returned if the resolved
+        region (see Notes) holds fewer after one doubling of ``N``.
     N : int, optional
         Chebyshev degree of the discretization.  Default: adaptive (see Notes).
 
@@ -442,10 +460,15 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
     Adaptive degree: any root with ``Re s >= a`` satisfies
     ``|s| <= ||A0|| + ||A1|| exp(-a tau) =: R(a)``; ``exp(s theta)`` on
     ``[-tau, 0]`` is resolved for ``|s| <= R`` by ``N >= 12 + 1.2 R tau``
-    (at least 16).  The degree starts from ``R(0)`` and is raised (up to 192)
-    until it covers ``R(abscissa)`` and every returned root is within
-    ``1e-6`` (relative) of its discretized eigenvalue; ``converged`` reports
-    whether that succeeded.  An explicit ``N`` disables the adaptation.
+    (at least 16), and only discretized eigenvalues inside that disc are used
+    (the discretization also has spurious ones of large modulus).  The
+    degree starts from ``R(0)`` (at most 32) and is raised, up to 192, until
+    it covers ``R(a)`` for ``a`` the real part of the last returned root and
+    every discretized eigenvalue right of ``a`` refined to a root within
+    ``1e-6`` (relative); ``converged`` reports whether that succeeded.  The
+    bound uses norms, so stiff systems (``||A0|| tau`` in the hundreds) hit
+    the cap and report ``converged=False`` although their rightmost roots are
+    usually right.  An explicit ``N`` disables the adaptation.
 
     ``tau == 0`` is solved as ``eig(A0 + A1)`` and ``A1 == 0`` as ``eig(A0)``
     (``N = 0``; roots repeated with multiplicity, as LAPACK returns them).
@@ -456,20 +479,28 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
        methods for characteristic roots of delay differential equations",
        SIAM J. Sci. Comput. 27(2):482-495, 2005.
     .. [2] W. Michiels, S.-I. Niculescu, "Stability, Control, and Computation
-       for Time-Delay Systems", 2nd ed., SIAM, 2014, Sec. 1.2 and 2.2.
+       for Time-Delay Systems: An Eigenvalue-Based Approach", 2nd ed.,
+       SIAM, 2014.
 
     Examples
     --------
     >>> r = rightmost_roots([[0.0]], [[-2.0]], math.pi / 4)   # x' = -2 x(t - pi/4)
-    >>> np.round(r.roots[:2], 8)
-    array([0.+2.j, 0.-2.j])
+    >>> bool(abs(r.roots[0] - 2j) < 1e-12 and abs(r.roots[1] + 2j) < 1e-12)
+    True
     """
     a0, a1, t = _pair(A0, A1, tau)
-    if int(count) != count or count < 1:
+    if not _is_int(count, 1):
         raise ValueError(f'count: expected an integer >= 1, got {count!r}')
-    if N is not None and (int(N) != N or N < 2):
+    if N is not None and not _is_int(N, 2):
         raise ValueError(f'N: expected an integer >= 2, got {N!r}')
-    return _rightmost(a0, a1, t, int(count), N)
+    return _rightmost(a0, a1, t, int(count), None if N is None else int(N))
+
+
+def _is_int(value: Any, minimum: int) -> bool:
+    try:
+        return int(value) == value and value >= minimum
+    except (TypeError, ValueError):
+        return False
 
 
 def spectral_abscissa(A0: Any, A1: Any, tau: float, **kw: Any) -> float:
@@ -493,8 +524,18 @@ def spectral_abscissa(A0: Any, A1: Any, tau: float, **kw: Any) -> float:
 def is_stable(A0: Any, A1: Any, tau: float, *, tol: float = STABLE_TOL) -> bool:
     """Exponential stability of ``x' = A0 x + A1 x(t - tau)``.
 
-    Returns ``spectral_abscissa(A0, A1, tau) < -tol`` (default ``tol = 1e-10``):
-    roots on (or within ``tol`` of) the imaginary axis count as unstable.
+    Parameters
+    ----------
+    A0, A1 : array_like, shape (n, n)
+    tau : float
+    tol : float, optional
+        Margin (default 1e-10).
+
+    Returns
+    -------
+    bool
+        ``spectral_abscissa(A0, A1, tau) < -tol``: roots on (or within ``tol``
+        of) the imaginary axis count as unstable.
     """
     return spectral_abscissa(A0, A1, tau) < -tol
 
@@ -502,8 +543,8 @@ def is_stable(A0: Any, A1: Any, tau: float, *, tol: float = STABLE_TOL) -> bool:
 # ----------------------------------------------------------------------------- delay margin
 
 def _crossing_candidates(A0: np.ndarray, A1: np.ndarray, unit_tol: float = 1e-5
-                         ) -> list[tuple[float, float, complex]]:
-    """Imaginary-axis crossings (omega > 0, tau_0 >= 0, z) for all delays.
+                         ) -> list[tuple[float, float]]:
+    """Imaginary-axis crossings ``(omega > 0, smallest delay tau_0)``.
 
     ``s = i omega`` is a root for delay ``tau`` iff ``i omega`` is an eigenvalue
     of ``A0 + A1 z`` with ``z = exp(-i omega tau)``; then ``-i omega`` is one of
@@ -523,7 +564,7 @@ def _crossing_candidates(A0: np.ndarray, A1: np.ndarray, unit_tol: float = 1e-5
     ab = sla.eig(L, R, right=False, homogeneous_eigvals=True)
     alpha, beta = ab[0], ab[1]
     scale = float(np.linalg.norm(A0, 2) + np.linalg.norm(A1, 2))
-    out: list[tuple[float, float, complex]] = []
+    out: list[tuple[float, float]] = []
     for a, b in zip(alpha, beta):
         if abs(b) == 0.0 or not np.isfinite(a / b):
             continue
@@ -536,14 +577,14 @@ def _crossing_candidates(A0: np.ndarray, A1: np.ndarray, unit_tol: float = 1e-5
                 continue
             w = lam.imag
             phi = (-np.angle(z)) % (2.0 * math.pi)
-            out.append((w, phi / w, z))
+            out.append((w, phi / w))
     return out
 
 
-def _refine_crossing(ch: _Char, w: float, tau0: float) -> float:
+def _refine_crossing(A0: np.ndarray, A1: np.ndarray, w: float, tau0: float) -> float:
     """Secant on tau for Re s(tau) = 0, s tracked by Newton from i omega."""
     def g(t: float, s0: complex) -> tuple[float, complex]:
-        c = _Char(ch.A0, ch.A1, t)
+        c = _Char(A0, A1, t)
         s, r = c.newton(s0)
         if r > RES_TOL:
             raise ArithmeticError
@@ -611,7 +652,7 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
        margins for stability of linear delay systems", Systems & Control
        Letters 26(2):107-117, 1995.
     """
-    a0, a1 = _square(A0, 'A0'), None
+    a0 = _square(A0, 'A0')
     a1 = _square(A1, 'A1', a0.shape[0])
     try:
         tmax = float(tau_max)
@@ -625,12 +666,11 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
         return 0.0
     if not np.any(a1):
         return math.inf
-    ch = _Char(a0, a1, 0.0)
     best = math.inf
-    for w, t0, _ in sorted(_crossing_candidates(a0, a1), key=lambda c: c[1]):
+    for w, t0 in sorted(_crossing_candidates(a0, a1), key=lambda c: c[1]):
         if t0 > min(best, tmax) * (1 + 1e-3) + 1e-12:
             break
-        t = _refine_crossing(ch, w, t0)
+        t = _refine_crossing(a0, a1, w, t0)
         best = min(best, t)
     return best if best <= tmax else math.inf
 
@@ -647,7 +687,6 @@ class _Perturbed:
         self.A1, self.tau = A_tau, tau
         self.shape = (E.shape[1], F.shape[0])
         self.evaluations = 0
-        self.N: int | None = None
 
     def __call__(self, Delta: np.ndarray, scale: float) -> tuple[float, np.ndarray]:
         self.evaluations += 1
@@ -691,12 +730,12 @@ def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int
 
 
 def _ascent(f: Callable, D: np.ndarray, val: float, grad: np.ndarray, scale: float,
-            maxit: int, stop_at: float) -> tuple[float, np.ndarray]:
+            maxit: int) -> tuple[float, np.ndarray]:
     """Projected gradient ascent of the abscissa on the unit ball (adaptive step)."""
     step = 0.25
     for _ in range(maxit):
         gn = np.linalg.norm(grad)
-        if gn == 0.0 or step < 1e-7 or val >= stop_at:
+        if gn == 0.0 or step < 1e-7:
             break
         C = _project(D + (step / gn) * grad)
         if np.linalg.norm(C - D) < 1e-9:
@@ -711,15 +750,14 @@ def _ascent(f: Callable, D: np.ndarray, val: float, grad: np.ndarray, scale: flo
 
 
 def _search(f: _Perturbed, scale: float, rng: np.random.Generator, *, n_random: int,
-            n_starts: int, maxit: int, warm: list[np.ndarray] | None = None,
-            stop_at: float = math.inf) -> tuple[float, np.ndarray]:
+            n_starts: int, maxit: int, warm: list[np.ndarray] | None = None
+            ) -> tuple[float, np.ndarray]:
+    """Evaluate the candidates (and warm starts), ascend from the best distinct ones."""
     pool = list(warm or []) + _candidates(f.shape, rng, n_random)
     evals = []
     for D in pool:
         v, g = f(D, scale)
         evals.append((v, D, g))
-        if v >= stop_at:
-            return v, D
     evals.sort(key=lambda t: -t[0])
     best_v, best_D = evals[0][0], evals[0][1]
     starts: list[tuple[float, np.ndarray, np.ndarray]] = []
@@ -729,11 +767,9 @@ def _search(f: _Perturbed, scale: float, rng: np.random.Generator, *, n_random: 
         if all(np.linalg.norm(t[1] - s[1]) > 1e-6 for s in starts):
             starts.append(t)
     for v, D, g in starts:
-        v, D = _ascent(f, D, v, g, scale, maxit, stop_at)
+        v, D = _ascent(f, D, v, g, scale, maxit)
         if v > best_v:
             best_v, best_D = v, D
-        if best_v >= stop_at:
-            break
     return best_v, best_D
 
 
@@ -800,8 +836,8 @@ class FragilityResult:
         (``alpha <= alpha_upper <= alpha (1 + rtol)``); ``inf`` if none.
     worst_delta : ndarray, shape (q, r)
         ``||Delta||_2 <= 1`` with ``A + B (K + alpha_upper E Delta F)`` not
-        exponentially stable (abscissa ``>= 0``); at ``alpha = inf`` the worst
-        case found at ``alpha_max``.
+        exponentially stable (abscissa ``>= -1e-10``); at ``alpha = inf`` the
+        worst case found at ``alpha_max``; zero if the nominal loop is unstable.
     worst_abscissa : float
         Worst-case spectral abscissa found over ``||Delta||_2 <= 1`` at scale 1.
     worst_delta_at_1 : ndarray, shape (q, r)
@@ -849,10 +885,15 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
     -----
     ``w(alpha)`` = worst-case abscissa over ``||Delta|| <= 1`` at scale
     ``alpha`` is nondecreasing in ``alpha`` (nested balls), so the margin is the
-    root of ``w``.  It is bracketed (``alpha = 1, 2, 4, ...`` or ``1, 1/2, ...``)
-    and located by regula falsi (Illinois variant) with a bisection
-    safeguard; each ``w`` evaluation is a worst-case search (see
-    :func:`worst_case_abscissa`) warm-started with the previous maximizers.
+    root of ``w`` ("unstable" meaning abscissa ``>= -1e-10``, as in
+    :func:`is_stable`).  It is bracketed (``[0, 1]``, or grown from 1 by
+    linear extrapolation, x1.25 to x4 per step) and located by regula falsi
+    (Illinois variant) with a bisection safeguard.  ``w(1)`` and the final
+    ``w(alpha)`` use the full worst-case search of
+    :func:`worst_case_abscissa`; the intermediate steps a quick one (the
+    sign-diagonal candidates plus the previous maximizers as warm starts,
+    one ascent).  If the final full search destabilizes ``alpha``, the
+    bracket is searched again with full searches.
 
     Honesty: instability at ``alpha_upper`` is *demonstrated* (``worst_delta``
     is an explicit destabilizing perturbation), so ``alpha_upper`` is a
@@ -871,75 +912,74 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
        Automatica 31(6):879-890, 1995.
     """
     a, b, k, a1, t, e, f = _loop(A, B, K, A_tau, tau, E, F)
-    amax = float(alpha_max)
-    if not amax > 0 or math.isnan(amax):
+    try:
+        amax = float(alpha_max)
+    except (TypeError, ValueError):
+        amax = math.nan
+    if not amax > 0:
         raise ValueError(f'alpha_max: expected a number > 0, got {alpha_max!r}')
     if not 0 < rtol < 1:
         raise ValueError(f'rtol: expected 0 < rtol < 1, got {rtol!r}')
     fn = _Perturbed(a, b, k, a1, t, e, f)
     rng = np.random.default_rng(seed)
-    opts = dict(n_random=n_random, n_starts=n_starts, maxit=maxit)
     zero = np.zeros(fn.shape)
+    full = dict(n_random=n_random, n_starts=n_starts, maxit=maxit)
+    quick = dict(n_random=0, n_starts=1, maxit=maxit)
+    warm: list[np.ndarray] = []
 
-    w1, D1 = _search(fn, 1.0, rng, **opts)
+    def w(alpha: float, opts: dict) -> tuple[float, np.ndarray]:
+        v, D = _search(fn, alpha, rng, warm=warm[-2:], **opts)
+        warm.append(D)
+        return v, D
+
+    w1, D1 = w(1.0, full)
     nominal, _ = fn(zero, 0.0)
     if nominal >= -STABLE_TOL:
         return FragilityResult(0.0, 0.0, zero, w1, D1, fn.evaluations)
 
-    warm = [D1]
+    def unstable(v: float) -> bool:          # the is_stable convention
+        return v >= -STABLE_TOL
 
-    def w(alpha: float, full: bool = True) -> tuple[float, np.ndarray]:
-        o = dict(opts) if full else dict(opts, n_random=2, n_starts=2)
-        v, D = _search(fn, alpha, rng, warm=warm[-3:], **o)
-        warm.append(D)
-        return v, D
+    # bracket [lo, hi]: w(lo) < 0 <= w(hi); grow by linear extrapolation (x1.25 .. x4)
+    lo, w_lo, hi, w_hi, D_hi = 0.0, nominal, 1.0, w1, D1
+    while not unstable(w_hi):
+        if hi >= amax:
+            return FragilityResult(math.inf, math.inf, D_hi, w1, D1, fn.evaluations)
+        guess = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi > w_lo else 4.0 * hi
+        x = min(amax, max(1.25 * hi, min(4.0 * hi, guess)))
+        lo, w_lo = hi, w_hi
+        hi, (w_hi, D_hi) = x, w(x, quick)
 
-    # bracket: lo stable (w < 0), hi unstable (w >= 0)
-    if w1 < -STABLE_TOL:
-        lo, w_lo, hi, w_hi, D_hi = 1.0, w1, math.nan, math.nan, D1
-        while True:
-            x = min(2.0 * lo, amax)
-            v, D = w(x)
-            if v >= -STABLE_TOL:
+    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray, opts: dict):
+        """Illinois regula falsi with a bisection safeguard."""
+        side = 0
+        while hi - lo > rtol * hi:
+            x = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi != w_lo else 0.5 * (lo + hi)
+            if not lo + 0.01 * (hi - lo) < x < hi - 0.01 * (hi - lo):
+                x = 0.5 * (lo + hi)
+            v, D = w(x, opts)
+            if unstable(v):
                 hi, w_hi, D_hi = x, v, D
-                break
-            lo, w_lo = x, v
-            if x >= amax:
-                return FragilityResult(math.inf, math.inf, D, w1, D1, fn.evaluations)
-    else:
-        hi, w_hi, D_hi = 1.0, w1, D1
-        lo, w_lo = 0.0, nominal
-        x = 0.5
-        while x > 1e-12:
-            v, D = w(x)
-            if v >= -STABLE_TOL:
-                hi, w_hi, D_hi = x, v, D
-                x *= 0.5
+                w_lo *= 0.5 if side == 1 else 1.0
+                side = 1
             else:
                 lo, w_lo = x, v
-                break
-    # Illinois regula falsi with bisection safeguard
-    side = 0
-    while hi - lo > rtol * hi:
-        x = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi != w_lo else 0.5 * (lo + hi)
-        width = hi - lo
-        if not lo + 0.01 * width < x < hi - 0.01 * width:
-            x = 0.5 * (lo + hi)
-        v, D = w(x, full=False)
-        if v >= -STABLE_TOL:
+                w_hi *= 0.5 if side == -1 else 1.0
+                side = -1
+        return lo, w_lo, hi, w_hi, D_hi
+
+    lo, w_lo, hi, w_hi, D_hi = locate(lo, w_lo, hi, w_hi, D_hi, quick)
+    # confirm the stable end with the full search; if it finds instability there,
+    # back off and locate again with full searches
+    for _ in range(4):
+        v, D = w(lo, full)
+        if not unstable(v):
+            break
+        hi, w_hi, D_hi = lo, v, D
+        x = lo
+        while unstable(v) and x > 0:
             hi, w_hi, D_hi = x, v, D
-            if side == 1:
-                w_lo *= 0.5
-            side = 1
-        else:
-            lo, w_lo = x, v
-            if side == -1:
-                w_hi *= 0.5
-            side = -1
-    # final confirmation of the stable end with the full search
-    v, D = w(lo)
-    while v >= -STABLE_TOL and lo > 0:      # the quick search missed something
-        hi, D_hi = lo, D
-        lo *= 1.0 - rtol
-        v, D = w(lo)
+            x *= 0.5
+            v, D = w(x, full)
+        lo, w_lo, hi, w_hi, D_hi = locate(x, v, hi, w_hi, D_hi, full)
     return FragilityResult(lo, hi, D_hi, w1, D1, fn.evaluations)

@@ -231,12 +231,14 @@ class TrackerNode(Node):
         self.commands += 1
 
     def _watchdog(self) -> None:
+        if self._last_odom_wall is None or self._last_ref_wall is None:
+            return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
         limit = get(self, 'input_timeout') * 1e9
         stale = [name for name, t in (('odom', self._last_odom_wall),
                                       ('reference', self._last_ref_wall))
-                 if t is None or now - t > limit]
-        if stale and self._odom is not None:
+                 if now - t > limit]
+        if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
                                        f'{get(self, "input_timeout")} s: publishing stop')

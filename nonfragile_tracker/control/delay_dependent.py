@@ -1,0 +1,675 @@
+r"""Delay-dependent non-fragile state feedback: descriptor method with Jensen's inequality.
+
+Closed loop (constant delay ``h``, time-varying gain perturbation)::
+
+    x'(t) = A_c(t) x(t) + A_d x(t - h),   A_c(t) = A + B (K + E D(t) F),  D^T D <= I,
+
+with ``A_d = problem.A_tau``.  Theorem 1 (:mod:`.lmi`) does not depend on the delay;
+here the condition depends on ``h``, so it can certify loops that Theorem 1 cannot
+(e.g. a delayed term that is destabilizing for large delays but not for small ones).
+
+Source
+------
+E. Fridman, U. Shaked, "An improved stabilization method for linear time-delay
+systems", IEEE Trans. Automat. Control 47(11):1931-1937, 2002 (descriptor
+representation, free matrices ``P2, P3``, the choice ``P3 = eps P2`` with a tuning
+scalar and the congruence with ``X = P2^{-1}``, ``Y = K X`` that makes the synthesis
+an LMI for fixed ``eps``); E. Fridman, "Tutorial on Lyapunov-based methods for
+time-delay systems", European J. Control 20(6):271-283, 2014 (the functional below
+with the ``h``-weighted double integral bounded by Jensen's inequality, which
+replaces the cross-term bounding of the earlier descriptor papers).  Taken from the
+sources: the functional, the descriptor identity, Jensen's inequality and the
+``P3 = eps P2`` / congruence device.  Derived here, self-contained (the sources were
+not at hand in full text, so nothing below relies on their printed formulas) and
+checked by :func:`verify_delay_dependent` and the tests: the matrix entries, the
+Petersen step for ``E D F`` (as in the paper's Lemma 1 / Theorem 1), the
+normalization, the gain-bound constraint for a non-symmetric ``X`` and the back
+transformation of the certificate.
+
+Functional::
+
+    V = x^T P1 x + int_{t-h}^t x^T(s) S x(s) ds
+        + h int_{-h}^0 int_{t+th}^t x'^T(s) R x'(s) ds dth,     P1, S, R > 0.
+
+Derivation
+----------
+1. ``V' = 2 x^T P1 x' + x^T S x - x_h^T S x_h + h^2 x'^T R x' - h int_{t-h}^t x'^T R x'``
+   (``x_h = x(t - h)``).
+2. Jensen: ``h int_{t-h}^t x'^T R x' >= (x - x_h)^T R (x - x_h)``.
+3. Descriptor identity (zero along solutions), ``P2, P3`` free ``n x n``::
+
+       0 = 2 [x^T P2^T + x'^T P3^T] [-x' + A_c x + A_d x_h].
+
+4. Adding 2-3 to 1 gives ``V' <= eta^T Phi eta``, ``eta = (x, x', x_h)``::
+
+       Phi = [ He(P2^T A_c) + S - R   P1 - P2^T + A_c^T P3    P2^T A_d + R ]
+             [  *                     -He(P3) + h^2 R          P3^T A_d     ]
+             [  *                      *                       -S - R       ]
+
+   ``Phi < 0`` (with ``P1 > 0``, ``S, R > 0``) gives ``V' <= -c |x|^2``: the loop is
+   exponentially stable (Lyapunov-Krasovskii).
+5. Uncertainty: ``Phi = Phi_0 + He(U D(t) V)`` with ``U = [P2^T B E; P3^T B E; 0]``,
+   ``V = [F, 0, 0]``; by Petersen's lemma (Young's inequality) ``Phi < 0`` for every
+   ``||D|| <= 1`` if, for some ``lam > 0``, ``Phi_0 + lam U U^T + V^T V / lam < 0``,
+   i.e. (Schur) ::
+
+       Psi = [ Phi_0      lam U     V^T    ]
+             [  *         -lam I    0      ]  < 0                  (original coordinates)
+             [  *          *        -lam I ]
+
+   This is what :func:`verify_delay_dependent` evaluates with numpy from
+   ``(K, h, P1, P2, P3, S, R, lam)``; ``D(t)`` may vary in time arbitrarily.
+6. Synthesis: ``P3 = eps P2`` (``eps > 0`` fixed); ``Phi_22 < 0`` forces
+   ``He(P2) > 0``, so ``P2`` is invertible; put ``X = P2^{-1}`` (not symmetric),
+   ``Y = K X`` and apply the congruence ``diag(X, X, X, I, I)`` (left factor
+   ``X^T``).  With ``Pb = X^T P1 X``, ``Sb = X^T S X``, ``Rb = X^T R X`` and
+   ``G = A X + B Y`` the condition becomes the LMI in ``(X, Y, Pb, Sb, Rb, lam)``::
+
+       [ He(G) + Sb - Rb   Pb - X + eps G^T    A_d X + Rb   lam B E       X^T F^T ]
+       [  *                -eps He(X) + h^2 Rb  eps A_d X   lam eps B E   0       ]
+       [  *                 *                   -Sb - Rb    0             0       ] < 0
+       [  *                 *                   *           -lam I        0       ]
+       [  *                 *                   *           *             -lam I  ]
+
+   (block sizes ``n, n, n, q, p``; ``U, V`` transform into ``[B E; eps B E; 0]`` and
+   ``[F X, 0, 0]``, so ``lam`` is the same number in both coordinates).  Back:
+   ``K = Y X^{-1}``, ``P2 = X^{-1}``, ``P3 = eps P2``, ``P1 = X^{-T} Pb X^{-1}`` and
+   likewise ``S, R``.  The nominal design drops the last two block rows/columns.
+   This is the form of math-notes section 6 plus the Petersen rows.
+7. Monotone in ``h``: the LMI depends on ``h`` only through ``+h^2 Rb``, ``Rb > 0``, so a
+   point feasible at ``h`` is feasible at every ``h' < h``: a certificate at ``h``
+   certifies every constant delay in ``(0, h]``.  This justifies bisection on ``h``.
+
+Normalization (as in :mod:`.lmi`)
+---------------------------------
+The LMI is homogeneous in ``(X, Y, Pb, Sb, Rb, lam)`` for fixed ``eps``; we solve ::
+
+    maximize t  s.t.  LMI <= -t I,  Pb, Sb, Rb >= t I,  lam >= t,
+                      tr Pb + tr Sb + tr Rb + tr X + lam <= 1
+
+(``tr X = tr He(X) / 2 > 0`` at any feasible point) and accept iff ``t >= margin``.
+
+Gain bound ``||K||_2 <= kappa``: ``(X + X^T)/2 >= I`` (fixes the scale, replacing the
+trace bound; with ``t <= 1``) and ``[[kappa^2 (X + X^T - I), Y^T], [Y, I]] >= 0``.
+Sound for non-symmetric ``X``: ``(X - I)^T (X - I) >= 0`` gives
+``X^T X >= X + X^T - I``, so ``Y^T Y <= kappa^2 (X + X^T - I) <= kappa^2 X^T X``, i.e.
+``||Y w|| <= kappa ||X w||`` for all ``w``; with ``w = X^{-1} v`` this is
+``||K v|| <= kappa ||v||``.  For symmetric ``X`` it is exactly the form of :mod:`.lmi`
+(``2X - I``).
+
+Tuning scalar ``eps``
+---------------------
+For fixed ``eps`` the condition is an LMI; ``eps`` itself enters bilinearly.  When it
+is not given, :func:`synthesize_delay_dependent` solves the LMI on a log-spaced grid
+(``DEFAULT_EPS_GRID``, 1e-3 .. 1e2) and keeps the ``eps`` with the largest strictness
+``t``, then refines it by a golden-section search in ``log eps`` on the bracket of
+grid neighbours (``refine`` steps; ``t(eps)`` need not be unimodal, so this is a
+heuristic: the returned point is always a verified certificate, only optimality of
+``eps`` is not guaranteed).
+
+Caveats
+-------
+* Constant delays only (the functional's derivative uses ``x(t - h)`` with constant
+  ``h``); the certificate covers every constant delay in ``(0, h]`` and every
+  time-varying ``D(t)``, ``||D|| <= 1``.
+* The strictness ``t`` is in normalized units.  Without a gain bound high gains can
+  certify very large delays with ever smaller ``t`` (for the Fridman-Shaked example
+  the plant is stabilizable for every ``h``), so ``max_certified_delay`` is then
+  limited by ``margin`` rather than by the plant; pair it with a gain bound.
+* With a gain bound ``t`` is capped at 1 (as in :mod:`.lmi`); for easy cases (small
+  ``h``) several ``eps`` reach the cap and the first one found is kept.
+* With ``A_tau = 0`` the condition holds for every ``h`` but ``t`` decays roughly like
+  ``1 / h^2`` (``Rb >= t I`` meets ``h^2 Rb``): very large ``h`` fall below ``margin``.
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from .lmi import CertificateError, InfeasibleError, SolverFailure
+from .problem import Problem
+
+__all__ = ['DEFAULT_EPS_GRID', 'DelayDependentVerification', 'DelayDependentCertificate',
+           'DelayDependentResult', 'descriptor_verification_matrix', 'verify_delay_dependent',
+           'synthesize_delay_dependent', 'max_certified_delay']
+
+DEFAULT_MARGIN = 1e-6
+DEFAULT_SOLVER = 'CLARABEL'
+DEFAULT_EPS_GRID: tuple[float, ...] = tuple(float(e) for e in np.logspace(-3, 2, 21))
+DEFAULT_REFINE = 8
+_OK = ('optimal', 'optimal_inaccurate')
+_INFEASIBLE = ('infeasible', 'infeasible_inaccurate')
+
+
+# ---------------------------------------------------------------------------------------------
+# records
+
+@dataclass(frozen=True)
+class DelayDependentVerification:
+    """Outcome of :func:`verify_delay_dependent` (eigenvalue checks in original coordinates)."""
+
+    ok: bool
+    max_eig_Psi: float       # largest eigenvalue of Psi (must be < -tolerance * scale)
+    min_eig_P1: float        # must be > 0
+    min_eig_S: float         # must be > 0
+    min_eig_R: float         # must be > 0
+    lam: float | None        # Petersen scalar (must be > 0; None: nominal)
+    tolerance: float
+    scale: float             # spectral norm of Psi
+
+    @property
+    def worst_eigenvalue(self) -> float:
+        return self.max_eig_Psi
+
+
+@dataclass(frozen=True)
+class DelayDependentCertificate:
+    """Lyapunov-Krasovskii certificate (original coordinates) for ``K`` at delay ``h``.
+
+    ``P3 = eps P2`` for certificates produced by the synthesis; the verification
+    accepts any ``P2, P3``.  ``lam is None`` means the nominal (D = 0) condition.
+    """
+
+    K: np.ndarray
+    h: float
+    eps: float
+    P1: np.ndarray
+    P2: np.ndarray
+    P3: np.ndarray
+    S: np.ndarray
+    R: np.ndarray
+    lam: float | None
+    verification: DelayDependentVerification
+
+
+@dataclass(frozen=True)
+class DelayDependentResult:
+    """A delay-dependent gain with its verified certificate and solver facts."""
+
+    K: np.ndarray
+    h: float
+    eps: float                       # the tuning scalar used (P3 = eps P2)
+    certificate: DelayDependentCertificate
+    margin_required: float
+    margin_achieved: float           # strictness t at the chosen eps (normalized units)
+    status: str
+    solver: str
+    solve_time: float                # seconds inside the solver, summed over the eps search
+    wall_time: float                 # seconds for build + all solves + verification
+    nominal: bool
+    gain_bound: float | None
+    eps_scan: tuple[tuple[float, float], ...] = ()   # (eps, t) of every solve; t = -inf: none
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def gain_norm(self) -> float:
+        return float(np.linalg.norm(self.K, 2))
+
+    @property
+    def P1(self) -> np.ndarray:
+        return self.certificate.P1
+
+    @property
+    def S(self) -> np.ndarray:
+        return self.certificate.S
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.certificate.R
+
+    @property
+    def lam(self) -> float | None:
+        return self.certificate.lam
+
+    @property
+    def verification(self) -> DelayDependentVerification:
+        return self.certificate.verification
+
+
+# ---------------------------------------------------------------------------------------------
+# independent verification (numpy only)
+
+def _sym(M: np.ndarray) -> np.ndarray:
+    return 0.5 * (M + M.T)
+
+
+def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, lam
+                                   ) -> np.ndarray:
+    """``Psi`` of the module docstring, step 5 (``Phi_0`` alone when ``lam is None``)."""
+    n = A.shape[0]
+    Ac = A + B @ K
+    phi11 = P2.T @ Ac + Ac.T @ P2 + S - R
+    phi12 = P1 - P2.T + Ac.T @ P3
+    phi13 = P2.T @ A_tau + R
+    phi22 = -(P3 + P3.T) + h * h * R
+    phi23 = P3.T @ A_tau
+    phi33 = -S - R
+    phi = _sym(np.block([[phi11, phi12, phi13],
+                         [phi12.T, phi22, phi23],
+                         [phi13.T, phi23.T, phi33]]))
+    if lam is None:
+        return phi
+    q, p = E.shape[1], F.shape[0]
+    BE = B @ E
+    U = np.vstack([P2.T @ BE, P3.T @ BE, np.zeros((n, q))])
+    V = np.hstack([F, np.zeros((p, 2 * n))])
+    psi = np.block([
+        [phi, lam * U, V.T],
+        [lam * U.T, -lam * np.eye(q), np.zeros((q, p))],
+        [V, np.zeros((p, q)), -lam * np.eye(p)],
+    ])
+    return _sym(psi)
+
+
+def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDependentCertificate,
+                           *, tol: float = 1e-9) -> DelayDependentVerification:
+    """Check the delay-dependent condition from ``(K, h, P1, P2, P3, S, R, lam)`` with numpy.
+
+    Uses only ``K``, ``h`` (the arguments) and the matrices/scalar of ``certificate``
+    (its own ``K``, ``h``, ``eps`` and ``verification`` are ignored).  Passes iff
+    ``P1, S, R > 0``, ``lam > 0`` (unless nominal) and
+    ``max eig(Psi) < -tol * ||Psi||``.  Never raises for a failed check: see ``ok``.
+    """
+    K = np.asarray(K, float)
+    h = float(h)
+    if K.shape != (problem.m, problem.n):
+        raise ValueError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    if not (math.isfinite(h) and h >= 0):
+        raise ValueError(f'h must be a finite delay >= 0, got {h!r}')
+    c = certificate
+    P1, S, R = (_sym(np.asarray(M, float)) for M in (c.P1, c.S, c.R))
+    P2, P3 = np.asarray(c.P2, float), np.asarray(c.P3, float)
+    lam = None if c.lam is None else float(c.lam)
+    Psi = descriptor_verification_matrix(problem.A, problem.B, problem.A_tau, problem.E,
+                                         problem.F, K, h, P1, P2, P3, S, R, lam)
+    finite = bool(np.all(np.isfinite(Psi)))
+    if finite:
+        ev = np.linalg.eigvalsh(Psi)
+        top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
+        mins = [float(np.linalg.eigvalsh(M)[0]) for M in (P1, S, R)]
+    else:
+        top, scale, mins = math.inf, math.inf, [-math.inf] * 3
+    ok = (finite and top < -tol * scale and all(m > 0 for m in mins)
+          and (lam is None or lam > 0))
+    return DelayDependentVerification(ok=bool(ok), max_eig_Psi=top, min_eig_P1=mins[0],
+                                      min_eig_S=mins[1], min_eig_R=mins[2], lam=lam,
+                                      tolerance=tol, scale=scale)
+
+
+# ---------------------------------------------------------------------------------------------
+# the SDP (built once per shape, re-solved with new data through DPP parameters)
+
+class _DescriptorProgram:
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
+        import cvxpy as cp
+        self.cp = cp
+        self.nominal = nominal
+        par = cp.Parameter
+        self.A, self.B, self.Ad = par((n, n)), par((n, m)), par((n, n))
+        self.eA, self.eB, self.eAd = par((n, n)), par((n, m)), par((n, n))   # eps-scaled
+        self.eps, self.h2 = par(nonneg=True), par(nonneg=True)
+        self.X = cp.Variable((n, n), name='X')
+        self.Y = cp.Variable((m, n), name='Y')
+        self.Pb = cp.Variable((n, n), symmetric=True, name='Pb')
+        self.Sb = cp.Variable((n, n), symmetric=True, name='Sb')
+        self.Rb = cp.Variable((n, n), symmetric=True, name='Rb')
+        self.t = cp.Variable(name='t')
+        X, Y, Pb, Sb, Rb = self.X, self.Y, self.Pb, self.Sb, self.Rb
+        G = self.A @ X + self.B @ Y
+        eG = self.eA @ X + self.eB @ Y                  # eps G, written DPP-compliant
+        b11 = G + G.T + Sb - Rb
+        b12 = Pb - X + eG.T
+        b13 = self.Ad @ X + Rb
+        b22 = -self.eps * (X + X.T) + self.h2 * Rb
+        b23 = self.eAd @ X
+        b33 = -Sb - Rb
+        Z = np.zeros
+        if nominal:
+            blocks = [[b11, b12, b13], [b12.T, b22, b23], [b13.T, b23.T, b33]]
+            size = 3 * n
+            self.lam = None
+            extra = []
+            norm = cp.trace(Pb) + cp.trace(Sb) + cp.trace(Rb) + cp.trace(X)
+        else:
+            self.BE, self.eBE, self.F = par((n, q)), par((n, q)), par((p, n))
+            self.lam = lam = cp.Variable(name='lam')
+            c1, c2 = lam * self.BE, lam * self.eBE
+            XF = X.T @ self.F.T
+            blocks = [
+                [b11, b12, b13, c1, XF],
+                [b12.T, b22, b23, c2, Z((n, p))],
+                [b13.T, b23.T, b33, Z((n, q)), Z((n, p))],
+                [c1.T, c2.T, Z((q, n)), -lam * np.eye(q), Z((q, p))],
+                [XF.T, Z((p, n)), Z((p, n)), Z((p, q)), -lam * np.eye(p)],
+            ]
+            size = 3 * n + q + p
+            extra = [lam >= self.t]
+            norm = cp.trace(Pb) + cp.trace(Sb) + cp.trace(Rb) + cp.trace(X) + lam
+        L = cp.bmat(blocks)
+        L = 0.5 * (L + L.T)
+        I = np.eye(n)
+        cons = [L << -self.t * np.eye(size), Pb >> self.t * I, Sb >> self.t * I,
+                Rb >> self.t * I] + extra
+        if gain_bound:
+            # ||K||_2 <= kappa with K = Y X^-1, X not symmetric: see the module docstring.
+            self.kappa2 = par(nonneg=True)
+            He = X + X.T
+            Gk = cp.bmat([[self.kappa2 * (He - I), Y.T], [Y, np.eye(m)]])
+            cons += [0.5 * He >> I, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
+        else:
+            self.kappa2 = None
+            cons += [norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+
+    def set_data(self, problem: Problem, kappa: float | None) -> None:
+        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
+        if not self.nominal:
+            self.BE.value = problem.B @ problem.E
+            self.F.value = problem.F
+        if self.kappa2 is not None:
+            self.kappa2.value = float(kappa) ** 2
+
+    def solve(self, problem: Problem, h: float, eps: float, solver: str) -> dict:
+        self.eps.value = eps
+        self.h2.value = h * h
+        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
+        self.eAd.value = eps * problem.A_tau
+        if not self.nominal:
+            self.eBE.value = eps * (problem.B @ problem.E)
+        try:
+            with warnings.catch_warnings():
+                # 'optimal_inaccurate' is reported in the status; the point is verified anyway
+                warnings.filterwarnings('ignore', message='Solution may be inaccurate')
+                self.problem.solve(solver=solver)
+        except self.cp.error.SolverError as exc:
+            return dict(status=f'solver_error: {exc}', t=None, solve_time=0.0, eps=eps)
+        stats = self.problem.solver_stats
+        st = float(stats.solve_time or 0.0) if stats is not None else 0.0
+        out = dict(status=self.problem.status, t=self.t.value, solve_time=st, eps=eps)
+        if self.problem.status in _OK and self.X.value is not None:
+            out.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
+                       Pb=np.array(self.Pb.value), Sb=np.array(self.Sb.value),
+                       Rb=np.array(self.Rb.value),
+                       lam=None if self.lam is None else float(self.lam.value))
+        return out
+
+
+_PROGRAMS: dict[tuple, _DescriptorProgram] = {}
+
+
+def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _DescriptorProgram:
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    prog = _PROGRAMS.get(key)
+    if prog is None:
+        prog = _PROGRAMS[key] = _DescriptorProgram(*key)
+    return prog
+
+
+def _t_of(sol: dict) -> float:
+    t = sol.get('t')
+    if sol['status'] not in _OK or t is None or 'X' not in sol:
+        return -math.inf
+    return float(t)
+
+
+def _certificate(problem: Problem, h: float, sol: dict, verify_tol: float
+                 ) -> DelayDependentCertificate:
+    """Back transformation of a solver point to original coordinates, then verification."""
+    eps = float(sol['eps'])
+    Xi = np.linalg.inv(sol['X'])
+    K = sol['Y'] @ Xi
+    P1 = _sym(Xi.T @ _sym(sol['Pb']) @ Xi)
+    S = _sym(Xi.T @ _sym(sol['Sb']) @ Xi)
+    R = _sym(Xi.T @ _sym(sol['Rb']) @ Xi)
+    P2 = Xi
+    P3 = eps * Xi
+    cert = DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
+                                     lam=sol['lam'], verification=None)  # type: ignore[arg-type]
+    ver = verify_delay_dependent(problem, K, h, cert, tol=verify_tol)
+    return DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
+                                     lam=sol['lam'], verification=ver)
+
+
+def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_bound) -> None:
+    if not (math.isfinite(h) and h > 0):
+        raise ValueError(f'h must be a finite delay > 0 (seconds), got {h!r}')
+    if gain_bound is not None and not gain_bound > 0:
+        raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
+    if not len(eps_grid) or not all(math.isfinite(e) and e > 0 for e in eps_grid):
+        raise ValueError(f'eps_grid must be a non-empty sequence of numbers > 0, got {eps_grid!r}')
+
+
+def _describe(problem: Problem, h: float, nominal: bool, gain_bound) -> str:
+    kind = 'nominal' if nominal else 'non-fragile'
+    bound = '' if gain_bound is None else f', ||K||_2 <= {gain_bound:g}'
+    return f'delay-dependent design ({kind}{bound}) for problem {problem.name!r} at h = {h:g}'
+
+
+def _golden(f, a: float, b: float, steps: int) -> None:
+    """Golden-section maximization of f on [a, b] (values are recorded by f itself)."""
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(max(0, steps - 2)):
+        if fc >= fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+
+
+def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
+                               eps: float | None = None,
+                               eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
+                               refine: int = DEFAULT_REFINE, nominal: bool = False,
+                               gain_bound: float | None = None, margin: float = DEFAULT_MARGIN,
+                               solver: str = DEFAULT_SOLVER,
+                               verify_tol: float = 1e-9) -> DelayDependentResult:
+    """Delay-dependent (non-fragile) state feedback for the constant delay ``h``.
+
+    Parameters
+    ----------
+    problem : Problem
+        ``A, B, A_tau, E, F`` (``problem.tau`` is the default delay).
+    h : float, optional
+        Delay to certify (seconds, > 0); default ``problem.tau``.  The certificate
+        also covers every constant delay in ``(0, h]``.
+    eps : float, optional
+        Tuning scalar ``P3 = eps P2``.  Default: line search over ``eps_grid`` (then
+        ``refine`` golden-section steps in ``log eps``) maximizing the strictness ``t``.
+    nominal : bool
+        Drop the ``E D F`` terms (``D = 0``).
+    gain_bound : float, optional
+        Also impose ``||K||_2 <= gain_bound``.
+    margin : float
+        Required strictness ``t`` (normalized units, see module docstring).
+
+    Raises
+    ------
+    InfeasibleError
+        No ``eps`` tried gives ``t >= margin``.
+    SolverFailure
+        The solver failed for every ``eps`` tried (no point, no infeasibility proof).
+    CertificateError
+        The chosen point fails :func:`verify_delay_dependent`.
+    """
+    t0 = time.perf_counter()
+    h = float(problem.tau if h is None else h)
+    grid = [float(eps)] if eps is not None else [float(e) for e in eps_grid]
+    _check_args(problem, h, grid, gain_bound)
+    prog = _program(problem, nominal, gain_bound is not None)
+    prog.set_data(problem, gain_bound)
+    sols: list[dict] = []
+
+    def run(e: float) -> float:
+        sol = prog.solve(problem, h, e, solver)
+        sols.append(sol)
+        return _t_of(sol)
+
+    ts = [run(e) for e in grid]
+    if eps is None and refine > 0 and len(grid) > 1 and max(ts) > -math.inf:
+        order = sorted(range(len(grid)), key=lambda i: grid[i])
+        k = max(range(len(order)), key=lambda j: ts[order[j]])
+        lo = math.log(grid[order[max(k - 1, 0)]])
+        hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
+        if hi > lo:
+            _golden(lambda u: run(math.exp(u)), lo, hi, refine)
+    solve_time = sum(s['solve_time'] for s in sols)
+    scan = tuple((float(s['eps']), _t_of(s)) for s in sols)
+    best = max(sols, key=_t_of)
+    t_best = _t_of(best)
+    what = _describe(problem, h, nominal, gain_bound)
+    if t_best < margin:
+        if t_best == -math.inf and not any(s['status'] in _INFEASIBLE or
+                                           (s['status'] in _OK) for s in sols):
+            raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
+                                f'(statuses {sorted({s["status"] for s in sols})}); no gain '
+                                'was produced. Check that the solver is installed.')
+        best_txt = ('no feasible point' if t_best == -math.inf
+                    else f'best margin t = {t_best:.3g} at eps = {best["eps"]:.3g}')
+        e_txt = (f'eps = {grid[0]:g}' if eps is not None
+                 else f'eps in [{min(grid):g}, {max(grid):g}]')
+        raise InfeasibleError(
+            f'{what} is infeasible: {best_txt} over {e_txt} (< required margin {margin:g}). '
+            'Try a smaller h (max_certified_delay gives the largest certifiable delay), a '
+            'looser gain bound, a wider eps_grid, a smaller A_tau or F, or nominal=True.')
+    try:
+        cert = _certificate(problem, h, best, verify_tol)
+    except np.linalg.LinAlgError:
+        raise CertificateError(f'{solver} returned a singular X for the {what} '
+                               f'(eps = {best["eps"]:.3g}); no gain can be recovered') from None
+    ver = cert.verification
+    if not ver.ok:
+        raise CertificateError(
+            f'{solver} returned a point for the {what} (eps = {best["eps"]:.3g}) that fails '
+            f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig P1 = '
+            f'{ver.min_eig_P1:.3g}, S = {ver.min_eig_S:.3g}, R = {ver.min_eig_R:.3g}. '
+            'Use CLARABEL or raise the margin.')
+    return DelayDependentResult(
+        K=cert.K, h=h, eps=float(best['eps']), certificate=cert, margin_required=margin,
+        margin_achieved=t_best, status=str(best['status']), solver=solver,
+        solve_time=solve_time, wall_time=time.perf_counter() - t0, nominal=nominal,
+        gain_bound=gain_bound, eps_scan=scan, extra={'solves': len(sols)})
+
+
+def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gain_bound,
+                 margin, solver, verify_tol, refine: int = DEFAULT_REFINE) -> float | None:
+    """An eps giving a verified certificate at ``h`` (None if none is found).
+
+    Tries ``order`` and stops at the first success; if none succeeds, runs ``refine``
+    golden-section steps in ``log eps`` around the best grid point (near the largest
+    certifiable delay the feasible eps interval becomes narrow and can fall between
+    grid points).
+    """
+    prog = _program(problem, nominal, gain_bound is not None)
+    prog.set_data(problem, gain_bound)
+
+    class _Found(Exception):
+        pass
+
+    tried: dict[float, float] = {}
+
+    def attempt(e: float) -> float:
+        sol = prog.solve(problem, h, e, solver)
+        t = _t_of(sol)
+        tried[e] = t
+        if t >= margin:
+            try:
+                if _certificate(problem, h, sol, verify_tol).verification.ok:
+                    raise _Found(e)
+            except np.linalg.LinAlgError:
+                pass
+        return t
+
+    try:
+        for e in order:
+            attempt(e)
+        grid = sorted(tried)
+        k = max(range(len(grid)), key=lambda i: tried[grid[i]])
+        if refine > 0 and len(grid) > 1 and tried[grid[k]] > -math.inf:
+            lo = math.log(grid[max(k - 1, 0)])
+            hi = math.log(grid[min(k + 1, len(grid) - 1)])
+            _golden(lambda u: attempt(math.exp(u)), lo, hi, refine)
+    except _Found as found:
+        return float(found.args[0])
+    return None
+
+
+def max_certified_delay(problem: Problem, *, nominal: bool = False,
+                        gain_bound: float | None = None, h_hi: float = 10.0,
+                        tol: float = 1e-3, eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
+                        refine: int = DEFAULT_REFINE, margin: float = DEFAULT_MARGIN,
+                        solver: str = DEFAULT_SOLVER, verify_tol: float = 1e-9
+                        ) -> tuple[float, DelayDependentResult]:
+    """Largest delay the delay-dependent condition certifies, by bisection on ``h``.
+
+    Feasibility is monotone in ``h`` (module docstring, step 7).  A trial delay counts
+    as certified iff some ``eps`` gives ``t >= margin`` and a verified certificate: the
+    last successful ``eps`` is tried first, then ``eps_grid`` (nearest first), then
+    ``refine`` golden-section steps around the best grid point; the first success
+    stops the search.  Because ``eps`` is searched heuristically the result is a
+    lower bound of the largest delay the LMI family certifies.  The bracket
+    ``[lo, hi]`` is found by halving ``h_hi`` and bisected until ``hi - lo <= tol``.
+    Returns ``(lo, result)``, ``result`` the full line search (with refinement) at ``lo``
+    (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi`` means ``h_hi`` itself is
+    certified (the condition may hold for every delay, e.g. ``A_tau = 0``).
+
+    Raises
+    ------
+    InfeasibleError
+        Not even the smallest delay tried (below ``tol``) is certified.
+    """
+    if not (math.isfinite(h_hi) and h_hi > 0 and tol > 0):
+        raise ValueError(f'need h_hi > 0 and tol > 0, got h_hi={h_hi!r}, tol={tol!r}')
+    kw = dict(nominal=nominal, gain_bound=gain_bound, margin=margin, solver=solver,
+              verify_tol=verify_tol)
+    grid = sorted(float(e) for e in eps_grid)
+    _check_args(problem, h_hi, grid, gain_bound)
+    last: list[float] = []
+
+    def ok(h: float) -> bool:
+        if last:                                  # the last success, then its nearest grid points
+            c = math.log(last[-1])
+            order = [last[-1]] + sorted(grid, key=lambda e: abs(math.log(e) - c))
+        else:
+            order = grid
+        e = _feasible_at(problem, h, order, refine=refine, **kw)
+        if e is not None:
+            last.append(e)
+        return e is not None
+
+    def final(h: float) -> DelayDependentResult:
+        return synthesize_delay_dependent(problem, h, eps_grid=grid, refine=refine, **kw)
+
+    if ok(h_hi):
+        return h_hi, final(h_hi)
+    hi, lo = h_hi, 0.5 * h_hi
+    while not ok(lo):
+        hi = lo
+        if lo < tol:
+            raise InfeasibleError(
+                f'{_describe(problem, lo, nominal, gain_bound)} is infeasible, and so for '
+                f'every delay tried down to h = {lo:g} (eps in [{grid[0]:g}, {grid[-1]:g}]). '
+                'Check that the loop is stabilizable for small delays with this gain bound: '
+                'try a looser gain bound, nominal=True, a smaller F, or a wider eps_grid.')
+        lo *= 0.5
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    try:
+        res = final(lo)
+    except (InfeasibleError, CertificateError):
+        # the full search ran with refinement; fall back to the eps that succeeded
+        res = synthesize_delay_dependent(problem, lo, eps=last[-1], **kw)
+    return lo, res

@@ -1,0 +1,112 @@
+"""Real-time mode: silence makes the tracker stop (once), it resumes after restarts."""
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import rclpy
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+
+from conftest import CONFIG, ROOT
+
+RT = ['-p', 'mode:=realtime']
+
+
+class Probe:
+    def __init__(self, domain_id):
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=domain_id)
+        self.node = rclpy.create_node('probe', context=self.ctx)
+        self.cmds, self.odoms = [], []
+        from nonfragile_tracker.nodes.common import DATA_QOS
+        self.node.create_subscription(Twist, 'cmd_vel', lambda m: self.cmds.append(
+            (time.monotonic(), m.linear.x, m.angular.z)), DATA_QOS)
+        self.node.create_subscription(Odometry, 'odom', lambda m: self.odoms.append(
+            time.monotonic()), DATA_QOS)
+        self.ex = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def spin(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def wait_for(self, pred, timeout=15.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.02)
+            if pred():
+                return True
+        return False
+
+    def close(self):
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+def start(name, env, *extra):
+    files = ['--params-file', str(CONFIG / 'paper_scenario.yaml')]
+    if name == 'tracker':
+        files += ['--params-file', str(CONFIG / 'tracker_gains.yaml')]
+    cmd = [sys.executable, '-m', f'nonfragile_tracker.nodes.{name}', '--ros-args', *files, *RT,
+           *extra]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+def stop(p):
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    return p.stdout.read()
+
+
+def test_silence_stop_and_resume(ros_env):
+    env = dict(ros_env)
+    probe = Probe(int(env['ROS_DOMAIN_ID']))
+    procs = {}
+    try:
+        procs['tracker'] = start('tracker', env, '-p', 'input_timeout:=0.3')
+        procs['reference'] = start('reference', env)
+        procs['plant'] = start('plant', env, '-p', 'duration:=0.0')
+        assert probe.wait_for(lambda: sum(1 for c in probe.cmds if c[1] != 0.0) > 20), \
+            'no commands from the tracker'
+        # silence of the reference: the tracker publishes stops
+        stop(procs.pop('reference'))
+        t_kill = time.monotonic()
+        assert probe.wait_for(lambda: any(c[0] > t_kill + 0.3 and c[1:] == (0.0, 0.0)
+                                          for c in probe.cmds))
+        probe.spin(0.5)
+        late = [c for c in probe.cmds if c[0] > t_kill + 0.6]
+        assert late and all(c[1:] == (0.0, 0.0) for c in late)
+        # the reference comes back: commands resume, non-zero again
+        procs['reference'] = start('reference', env)
+        t_back = time.monotonic()
+        assert probe.wait_for(lambda: sum(1 for c in probe.cmds if c[0] > t_back
+                                          and c[1] != 0.0) > 20)
+        # the plant dies and restarts: the tracker stops, then resumes
+        stop(procs.pop('plant'))
+        t_kill = time.monotonic()
+        assert probe.wait_for(lambda: any(c[0] > t_kill + 0.3 and c[1:] == (0.0, 0.0)
+                                          for c in probe.cmds))
+        procs['plant'] = start('plant', env, '-p', 'duration:=0.0')
+        t_back = time.monotonic()
+        assert probe.wait_for(lambda: sum(1 for c in probe.cmds if c[0] > t_back
+                                          and c[1] != 0.0) > 20)
+        assert all(math.isfinite(c[1]) and abs(c[1]) <= 1.0 and abs(c[2]) <= 2.0
+                   for c in probe.cmds)
+        assert procs['tracker'].poll() is None          # the tracker survived all of it
+    finally:
+        logs = {k: stop(p) for k, p in procs.items()}
+        probe.close()
+    log = logs['tracker']
+    assert log.count('publishing stop') == 2, log     # said once per silence
+    assert log.count('resuming') == 2, log
