@@ -32,6 +32,8 @@ class GainAnalysis:
     worst_abscissa: float = math.nan     # worst case over ||D|| <= 1 (measured)
     measured_margin: float = math.nan    # largest scale keeping every ||D|| <= 1 stable
     certified_margin: float = math.nan   # largest scale Theorem 1 certifies
+    delay_margin: float = math.nan       # true: smallest unstable delay, D = 0 (inf: none)
+    certified_delay: float = math.nan    # inf when Theorem 1 (delay-independent) certifies K
     tau: float = 0.0
 
     def as_dict(self) -> dict:
@@ -49,7 +51,9 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
     for key, D in problem.perturbations.items():
         A0 = delay.closed_loop_matrix(A, B, K, E, F, D)
         absc[key] = float(delay.spectral_abscissa(A0, Ad, tau))
-    a_nom = float(delay.spectral_abscissa(delay.closed_loop_matrix(A, B, K), Ad, tau))
+    A_nom = delay.closed_loop_matrix(A, B, K)
+    a_nom = float(delay.spectral_abscissa(A_nom, Ad, tau))
+    d_margin = float(delay.delay_margin(A_nom, Ad))
     worst = measured = certified = math.nan
     if margins:
         worst = float(delay.worst_case_abscissa(A, B, K, Ad, tau, E, F, seed=seed)[0])
@@ -59,7 +63,8 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
                         certified_nominal=nom.certified, certified_nonfragile=nf.certified,
                         certify_margin=float(nf.margin_achieved), abscissa_nominal=a_nom,
                         abscissa=absc, worst_abscissa=worst, measured_margin=measured,
-                        certified_margin=certified, tau=tau)
+                        certified_margin=certified, delay_margin=d_margin,
+                        certified_delay=math.inf if nf.certified else math.nan, tau=tau)
 
 
 def _fmt(x: float) -> str:
@@ -83,7 +88,9 @@ def format_analysis(rows: list[GainAnalysis]) -> str:
     lines += [(f'abscissa, D = {k}', [_fmt(r.abscissa[k]) for r in rows]) for k in keys]
     lines += [('worst abscissa, ||D|| <= 1', [_fmt(r.worst_abscissa) for r in rows]),
               ('fragility margin, measured', [_fmt(r.measured_margin) for r in rows]),
-              ('fragility margin, certified', [_fmt(r.certified_margin) for r in rows])]
+              ('fragility margin, certified', [_fmt(r.certified_margin) for r in rows]),
+              ('delay margin (s), true, D = 0', [_fmt(r.delay_margin) for r in rows]),
+              ('delay certified up to (s)', [_fmt(r.certified_delay) for r in rows])]
     w0 = max(len(a) for a, _ in lines)
     w = max(12, *(len(c) for _, cs in lines for c in cs))
     return '\n'.join(f'{a:<{w0}}  ' + '  '.join(f'{c:>{w}}' for c in cs) for a, cs in lines)
