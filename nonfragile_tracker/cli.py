@@ -220,9 +220,10 @@ def build_parser() -> argparse.ArgumentParser:
         a.add_argument('--json', help='also write the results as JSON')
         a.set_defaults(func=lambda args, m=margins_only: cmd_analyse(args, m))
 
-    from . import reproduce, runner
+    from . import golden, reproduce, runner
     runner.add_subcommands(sub)
     reproduce.add_subcommand(sub)
+    golden.add_subcommand(sub)
     return p
 
 

@@ -72,7 +72,8 @@ def new_run_dir(root: Path, name: str | None) -> Path:
 
 
 def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
-                  timeout: float = 600.0, progress=print) -> RunResult:
+                  timeout: float = 600.0, progress=print,
+                  recorder_topics: list[str] | None = None) -> RunResult:
     """Run the scenario with one process per node; returns exit codes per node."""
     env = isolated_env(env)
     params_file = run_dir / 'params.yaml'
@@ -90,7 +91,10 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
     try:
         if record:
-            start('recorder', ['-p', f'output:={bag}', '-p', 'use_sim_time:=true'])
+            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true']
+            if recorder_topics:
+                extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
+            start('recorder', extra)
         start('tracker')
         start('reference')
         start('plant', ['-p', f'lockstep_subscribers:={2 if record else 1}'])
@@ -130,7 +134,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
 
 def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
-                 timeout: float = 600.0) -> RunResult:
+                 timeout: float = 600.0, recorder_topics: list[str] | None = None) -> RunResult:
     """Run the scenario with all nodes in this process on one executor."""
     import rclpy
     from rclpy.parameter import Parameter
@@ -146,28 +150,32 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
         return [Parameter(k, value=v) for k, v in vals.items()]
 
     t0 = time.monotonic()
-    own_context = not rclpy.ok()
-    if own_context:
-        rclpy.init()
+    # a private context on a domain of our own (localhost discovery): no cross-talk
+    env = isolated_env()
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', env['ROS_AUTOMATIC_DISCOVERY_RANGE'])
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes = []
     bag = None
     try:
         if record:
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
-            nodes.append(Recorder(parameter_overrides=[Parameter('output', value=str(bag)),
-                                                       Parameter('use_sim_time', value=True)]))
-        nodes.append(TrackerNode(parameter_overrides=overrides('tracker')))
-        nodes.append(ReferenceNode(parameter_overrides=overrides('reference')))
-        plant = PlantNode(parameter_overrides=overrides(
+            rec_params = {'output': str(bag), 'use_sim_time': True}
+            if recorder_topics:
+                rec_params['topics'] = list(recorder_topics)
+            nodes.append(Recorder(context=ctx, **rec_params))
+        nodes.append(TrackerNode(parameter_overrides=overrides('tracker'), context=ctx))
+        nodes.append(ReferenceNode(parameter_overrides=overrides('reference'), context=ctx))
+        plant = PlantNode(context=ctx, parameter_overrides=overrides(
             'plant', {'lockstep_subscribers': 2 if record else 1}))
         nodes.append(plant)
-        ex = make_executor()
+        ex = make_executor(ctx)
         for n in nodes:
             ex.add_node(n)
         rec = nodes[0] if record else None
         deadline = time.monotonic() + timeout
-        while rclpy.ok() and time.monotonic() < deadline:
+        while ctx.ok() and time.monotonic() < deadline:
             ex.spin_once(timeout_sec=0.05)
             if plant.finished and (rec is None or rec.finished):
                 break
@@ -181,8 +189,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             if close is not None:
                 close()
             n.destroy_node()
-        if own_context:
-            rclpy.try_shutdown()
+        rclpy.try_shutdown(context=ctx)
 
 
 def add_subcommands(sub) -> None:

@@ -132,12 +132,12 @@ def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample |
     return RefSample(t, pose[0], pose[1], tw.x, tw.y, ac.x, ac.y, pose[2])
 
 
-def make_executor():
+def make_executor(context=None):
     """EventsExecutor (about 2x faster here) unless NONFRAGILE_EXECUTOR=single."""
     if os.environ.get('NONFRAGILE_EXECUTOR', 'events') == 'single':
-        return rclpy.executors.SingleThreadedExecutor()
+        return rclpy.executors.SingleThreadedExecutor(context=context)
     from rclpy.experimental import EventsExecutor
-    return EventsExecutor()
+    return EventsExecutor(context=context)
 
 
 def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
