@@ -91,7 +91,8 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
     try:
         if record:
-            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true']
+            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true', '-p',
+                     'lockstep_gate:=true']
             if recorder_topics:
                 extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
             start('recorder', extra)
@@ -161,7 +162,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
         if record:
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
-            rec_params = {'output': str(bag), 'use_sim_time': True}
+            rec_params = {'output': str(bag), 'use_sim_time': True, 'lockstep_gate': True}
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
             nodes.append(Recorder(context=ctx, **rec_params))
@@ -287,5 +288,5 @@ def cmd_bag_repair(args) -> int:
     except BagError as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 2
-    print(res)
+    print(res.summary())
     return 0

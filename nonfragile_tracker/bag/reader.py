@@ -1,0 +1,403 @@
+"""Read a recorded run back from a rosbag2 bag into numpy arrays.
+
+:func:`read_bag` returns per-topic message counts and receive times and a
+:class:`RunData` with the robot pose (``odom``, else ``pose``), the reference
+(``reference/pose`` + ``reference/twist`` + ``reference/accel`` matched by
+header stamp) and the commands (``cmd_vel``, by receive time).
+:func:`read_messages` yields ``(receive time, message)`` of one topic.
+
+Topic names: bags made by the recorder hold fully qualified names
+(``/odom``, or ``/robot1/odom`` under a namespace).  The logical names of
+:mod:`nonfragile_tracker.topics` are looked up as stored, under ``namespace``
+if given, else under the namespace that matches most of them.
+
+Messages repeated with the same header stamp (the plant republishes a step
+while it waits) are counted in ``duplicates`` and dropped from the arrays
+(the first copy is kept).  All errors are :class:`BagError` subclasses that
+say what to do.  No ROS (rclpy) import; rosbags only.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import Connection, Qos
+from rosbags.rosbag2 import Reader, ReaderError
+
+from .. import topics
+from ..control.loop import quaternion_to_yaw
+from .writer import BagError, jazzy_typestore
+
+__all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
+           'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
+           'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag',
+           'mcap_is_complete', 'resolve_topics', 'RUN_TOPICS', 'MCAP_MAGIC']
+
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+#: Logical topics a tracking run needs (odom may be replaced by pose).
+RUN_TOPICS = (topics.ODOM, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL, topics.CMD_VEL)
+
+
+class BagNotFoundError(BagError, FileNotFoundError):
+    """The bag directory does not exist."""
+
+
+class NotABagError(BagError):
+    """The path exists but is not a readable rosbag2 bag."""
+
+
+class BagTruncatedError(BagError):
+    """An MCAP file was never closed (recorder killed); it needs ``bag repair``."""
+
+
+class MissingTopicsError(BagError):
+    """The bag lacks topics that are needed; ``missing`` names them."""
+
+    def __init__(self, message: str, missing: Iterable[str] = ()):
+        super().__init__(message)
+        self.missing = tuple(missing)
+
+
+# ---------------------------------------------------------------------------------------------
+# Data
+
+@dataclass(frozen=True)
+class PoseSeries:
+    """Robot pose by header stamp: ``t`` (s), x, y (m), th (rad), v = odom twist.linear.x (m/s).
+
+    ``v`` is NaN when the pose comes from ``pose`` (PoseStamped has no twist).
+    """
+
+    stamp_ns: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    th: np.ndarray
+    v: np.ndarray
+    topic: str = ''
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class ReferenceSeries:
+    """Reference by header stamp: position (m), velocity (m/s), acceleration (m/s^2)."""
+
+    stamp_ns: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class CommandSeries:
+    """Commands by receive time: ``t`` (s), v = linear.x (m/s), w = angular.z (rad/s)."""
+
+    receive_ns: np.ndarray
+    t: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class RunData:
+    """The arrays of a tracking run; ``t`` everywhere is seconds on the bag's clock."""
+
+    pose: PoseSeries
+    reference: ReferenceSeries
+    commands: CommandSeries
+
+
+@dataclass(frozen=True)
+class BagData:
+    """What :func:`read_bag` found.  Dict keys are the topic names stored in the bag."""
+
+    path: Path
+    msgtypes: dict[str, str]
+    counts: dict[str, int]
+    receive_ns: dict[str, np.ndarray]
+    offered_qos: dict[str, list[Qos]]
+    topic_map: dict[str, str]            # logical name (topics.ODOM ...) -> bag topic
+    duplicates: dict[str, int]           # bag topic -> messages dropped as repeated stamps
+    run: RunData
+    missing: tuple[str, ...] = field(default=())
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.counts.values())
+
+    def count(self, name: str) -> int:
+        """Messages on a logical topic name (0 if absent)."""
+        topic = self.topic_map.get(name, name)
+        return self.counts.get(topic, 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Opening
+
+def mcap_is_complete(path: str | os.PathLike) -> bool:
+    """True if the MCAP file starts and ends with the MCAP magic (i.e. it was closed)."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+        if size < 2 * len(MCAP_MAGIC):
+            return False
+        with p.open('rb') as f:
+            head = f.read(len(MCAP_MAGIC))
+            f.seek(size - len(MCAP_MAGIC))
+            tail = f.read(len(MCAP_MAGIC))
+    except OSError:
+        return False
+    return head == MCAP_MAGIC and tail == MCAP_MAGIC
+
+
+def check_bag(path: str | os.PathLike) -> Path:
+    """Check that ``path`` is a readable bag directory and return the path to open.
+
+    That is the directory (with metadata.yaml) or, when metadata.yaml is
+    missing but there is one complete MCAP file, that file.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
+                               'recorder created (it holds metadata.yaml and a .mcap file)')
+    if not p.is_dir():
+        raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that holds '
+                           'metadata.yaml and the .mcap file')
+    meta = p / 'metadata.yaml'
+    mcaps = sorted(p.glob('*.mcap'))
+    if not meta.exists() and not mcaps:
+        raise NotABagError(f'{p} is not a rosbag2 bag: it holds neither metadata.yaml nor a '
+                           '.mcap file')
+    for m in mcaps:
+        if not mcap_is_complete(m):
+            raise BagTruncatedError(
+                f'{m} is truncated: it has no MCAP summary/end magic, so the recorder did not '
+                f'close it (killed?). Run `nonfragile_tracker bag repair {p}` to recover the '
+                f'complete chunks into {p}_repaired, then read that bag.')
+    if meta.exists():
+        return p
+    if len(mcaps) == 1:
+        return mcaps[0]
+    raise NotABagError(f'{p} has no metadata.yaml and {len(mcaps)} .mcap files; run '
+                       f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
+
+
+def open_reader(path: str | os.PathLike) -> Reader:
+    """An opened rosbags :class:`Reader` after :func:`check_bag`; close it when done."""
+    target = check_bag(path)
+    try:
+        reader = Reader(target)
+        reader.open()
+    except (ReaderError, KeyError, ValueError, OSError) as exc:
+        raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {exc}') from None
+    return reader
+
+
+# ---------------------------------------------------------------------------------------------
+# Topic names
+
+def _namespace_of(topic: str, name: str) -> str | None:
+    if topic == name:
+        return ''                          # stored relative: same as the root namespace
+    if topic.endswith('/' + name):
+        return topic[:-len(name) - 1]
+    return None
+
+
+def resolve_topics(available: Iterable[str], names: Iterable[str],
+                   namespace: str | None = None) -> dict[str, str]:
+    """Map logical topic names to the stored topics (absent names are left out).
+
+    With ``namespace`` (``'/robot1'``) a relative name ``n`` is looked up as
+    ``/robot1/n``; without it, as stored (``n``), as ``/n``, or under the
+    namespace that matches the most logical names of :data:`topics.TYPES`.
+    Absolute names (``/clock``) are looked up as they are.
+    """
+    avail = set(available)
+    names = list(names)
+    if namespace is not None:
+        ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+        out = {}
+        for n in names:
+            for cand in ((n,) if n.startswith('/') else (f'{ns}/{n}', n if not ns else None)):
+                if cand and cand in avail:
+                    out[n] = cand
+                    break
+        return out
+    score: dict[str, int] = {}
+    for n in topics.TYPES:
+        if n.startswith('/'):
+            continue
+        for t in avail:
+            ns = _namespace_of(t, n)
+            if ns is not None and (ns == '' or ns.startswith('/')):
+                score[ns] = score.get(ns, 0) + 1
+    best = sorted(score, key=lambda s: (-score[s], len(s)))
+    ns = best[0] if best else ''
+    return resolve_topics(avail, names, ns)
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+def _stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _connections_by_topic(reader: Reader) -> dict[str, Connection]:
+    out: dict[str, Connection] = {}
+    for c in reader.connections:
+        out.setdefault(c.topic, c)
+    return out
+
+
+def read_messages(path: str | os.PathLike, topic: str, *, namespace: str | None = None
+                  ) -> Iterator[tuple[int, Any]]:
+    """Yield ``(timestamp_ns, message)`` of ``topic`` in bag order (receive time).
+
+    ``topic`` is a stored name (``/odom``) or a logical one (``odom``).
+    Messages are deserialized with the Jazzy typestore.
+    """
+    reader = open_reader(path)
+    try:
+        conns = [c for c in reader.connections if c.topic == topic]
+        if not conns:
+            found = resolve_topics((c.topic for c in reader.connections), [topic], namespace)
+            conns = [c for c in reader.connections if c.topic == found.get(topic)]
+        if not conns:
+            raise MissingTopicsError(
+                f'bag {path} has no topic {topic!r}; it has '
+                f'{sorted({c.topic for c in reader.connections})}', [topic])
+        ts = jazzy_typestore()
+        for conn, timestamp, raw in reader.messages(connections=conns):
+            yield timestamp, ts.deserialize_cdr(raw, conn.msgtype)
+    finally:
+        reader.close()
+
+
+_EXPECTED_TYPES = {topics.ODOM: 'nav_msgs/msg/Odometry',
+                   topics.POSE: 'geometry_msgs/msg/PoseStamped',
+                   topics.REF_POSE: 'geometry_msgs/msg/PoseStamped',
+                   topics.REF_TWIST: 'geometry_msgs/msg/TwistStamped',
+                   topics.REF_ACCEL: 'geometry_msgs/msg/AccelStamped',
+                   topics.CMD_VEL: 'geometry_msgs/msg/Twist'}
+
+
+def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
+    missing = []
+    if topics.ODOM not in topic_map and topics.POSE not in topic_map:
+        missing.append(f'{topics.ODOM} (or {topics.POSE})')
+    missing += [n for n in RUN_TOPICS[1:] if n not in topic_map]
+    return missing
+
+
+def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None
+             ) -> BagData:
+    """Read a run: counts and receive times of every topic, and the run arrays.
+
+    With ``strict`` (default) a bag without a pose (``odom`` or ``pose``), the
+    three reference topics or ``cmd_vel`` raises :class:`MissingTopicsError`
+    naming the missing ones; otherwise the missing arrays are empty and
+    listed in ``BagData.missing``.
+    """
+    reader = open_reader(path)
+    try:
+        by_topic = _connections_by_topic(reader)
+        topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
+        missing = _missing_run_topics(topic_map)
+        if missing and strict:
+            raise MissingTopicsError(
+                f'bag {path} lacks topic(s) {", ".join(missing)} needed for a tracking run; '
+                f'it has {sorted(by_topic) or "no topics"}. Record them (recorder parameter '
+                '`topics`) or pass strict=False.', missing)
+        for name, expected in _EXPECTED_TYPES.items():
+            topic = topic_map.get(name)
+            if topic is not None and by_topic[topic].msgtype != expected:
+                raise NotABagError(f'topic {topic} in {path} has type '
+                                   f'{by_topic[topic].msgtype}, expected {expected}')
+        pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
+        role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
+                                          topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
+        ts = jazzy_typestore()
+        receive: dict[str, list[int]] = {t: [] for t in by_topic}
+        pose_rows: dict[int, tuple] = {}
+        ref_parts: dict[str, dict[int, tuple]] = {topics.REF_POSE: {}, topics.REF_TWIST: {},
+                                                   topics.REF_ACCEL: {}}
+        cmds: list[tuple[int, float, float]] = []
+        dup: dict[str, int] = {}
+        try:
+            for conn, timestamp, raw in reader.messages():
+                receive.setdefault(conn.topic, []).append(timestamp)
+                name = role.get(conn.topic)
+                if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
+                    continue
+                msg = ts.deserialize_cdr(raw, conn.msgtype)
+                if name == topics.CMD_VEL:
+                    cmds.append((timestamp, float(msg.linear.x), float(msg.angular.z)))
+                    continue
+                stamp = _stamp_ns(msg.header)
+                if name == pose_name:
+                    target = pose_rows
+                    p = msg.pose.pose if name == topics.ODOM else msg.pose
+                    q = p.orientation
+                    v = float(msg.twist.twist.linear.x) if name == topics.ODOM else math.nan
+                    row = (float(p.position.x), float(p.position.y),
+                           quaternion_to_yaw(q.x, q.y, q.z, q.w), v)
+                elif name == topics.REF_POSE:
+                    target = ref_parts[name]
+                    row = (float(msg.pose.position.x), float(msg.pose.position.y))
+                elif name == topics.REF_TWIST:
+                    target = ref_parts[name]
+                    row = (float(msg.twist.linear.x), float(msg.twist.linear.y))
+                else:
+                    target = ref_parts[name]
+                    row = (float(msg.accel.linear.x), float(msg.accel.linear.y))
+                if stamp in target:
+                    dup[conn.topic] = dup.get(conn.topic, 0) + 1
+                else:
+                    target[stamp] = row
+        except (ReaderError, ValueError, IndexError, KeyError) as exc:
+            raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                               'damaged - try `nonfragile_tracker bag repair`') from None
+        msgtypes = {t: c.msgtype for t, c in by_topic.items()}
+        offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
+                   if hasattr(c.ext, 'offered_qos_profiles')}
+    finally:
+        reader.close()
+
+    stamps = np.array(sorted(pose_rows), dtype=np.int64)
+    rows = np.array([pose_rows[s] for s in stamps], dtype=float).reshape(-1, 4)
+    pose = PoseSeries(stamps, stamps * 1e-9, rows[:, 0].copy(), rows[:, 1].copy(),
+                      rows[:, 2].copy(), rows[:, 3].copy(), topic_map.get(pose_name, ''))
+    common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
+        & set(ref_parts[topics.REF_ACCEL])
+    rstamps = np.array(sorted(common), dtype=np.int64)
+    rrows = np.array([ref_parts[topics.REF_POSE][s] + ref_parts[topics.REF_TWIST][s]
+                      + ref_parts[topics.REF_ACCEL][s] for s in rstamps],
+                     dtype=float).reshape(-1, 6)
+    reference = ReferenceSeries(rstamps, rstamps * 1e-9, *(rrows[:, i].copy() for i in range(6)))
+    crow = np.array(cmds, dtype=float).reshape(-1, 3)
+    cns = np.array([c[0] for c in cmds], dtype=np.int64)
+    commands = CommandSeries(cns, cns * 1e-9, crow[:, 1].copy(), crow[:, 2].copy())
+    return BagData(path=Path(path), msgtypes=msgtypes,
+                   counts={t: len(v) for t, v in receive.items()},
+                   receive_ns={t: np.array(v, dtype=np.int64) for t, v in receive.items()},
+                   offered_qos=offered, topic_map=topic_map, duplicates=dup,
+                   run=RunData(pose, reference, commands), missing=tuple(missing))

@@ -1,0 +1,405 @@
+"""``recorder``: records the run's topics into a rosbag2 (v9, MCAP) bag, like ``ros2 bag record``.
+
+Subscribes every topic of the ``topics`` parameter (default: all of
+:data:`nonfragile_tracker.topics.TYPES`) with ``raw=True`` and writes the CDR
+bytes unchanged with :class:`nonfragile_tracker.bag.writer.BagWriter`, stamped
+with the node clock at reception (``get_clock().now()``: sim time in lockstep
+runs with ``use_sim_time``).  Subscriptions are reliable, volatile, keep_last
+:data:`topics.DEPTH` (``/clock`` too); ``run_done`` is recorded with reliable +
+transient_local so a late recorder still gets it.
+
+Topics in the bag are fully qualified (``/odom``, ``/robot1/odom``).  A
+topic's connection is created lazily, at its first message, with the QoS
+profiles its publishers offer at that moment
+(``get_publishers_info_by_topic``; the package defaults if none is
+visible) - so topics that never carried a message are not in the bag.
+
+Parameters (read-only): ``output`` (bag directory to create; empty: a new
+``runs/run_YYYYmmdd_HHMMSS[_N]/bag``), ``topics``, ``drain_timeout``,
+``chunk_size``, ``flush_period``; and the standard ``use_sim_time``.
+
+Ending: SIGINT/SIGTERM close the bag cleanly (MCAP summary + metadata.yaml)
+and exit 0.  In a lockstep run the plant publishes ``run_done`` = S (the last
+step); the recorder then waits until it has S+1 distinct stamps on each of
+``odom``, ``pose``, ``reference/pose|twist|accel`` and S+1 ``cmd_vel``
+messages (those it records), or ``drain_timeout`` wall seconds, logs what it
+got (a warning lists shortfalls), closes the bag and exits 0.  Chunks are
+flushed to disk every ``chunk_size`` bytes or ``flush_period`` s, so a killed
+recorder loses at most that much (``nonfragile_tracker bag repair``).
+
+In-process use: ``Recorder(node_name='recorder', **overrides)`` (parameter values by
+name, e.g. ``output=str(path)``, and/or ``parameter_overrides=[Parameter(...)]``) is an
+rclpy ``Node`` (``namespace=`` and ``context=`` are passed on); add it to an
+executor, watch ``recorder.done`` (a Future whose result is the message count per
+recorded topic, by logical name) or ``recorder.finished``, and call
+``recorder.close()`` (also done by ``destroy_node()``).
+"""
+from __future__ import annotations
+
+import importlib
+import signal
+import struct
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rclpy.task import Future
+from std_msgs.msg import UInt64
+
+from .. import topics
+from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
+                          default_qos, make_qos, new_run_dir)
+from .common import Param, StartupError, declare, get, make_executor, spin_until
+
+__all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
+
+#: Topics whose S+1 samples the recorder waits for after ``run_done`` = S.
+LOCKSTEP_TOPICS = (topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST,
+                   topics.REF_ACCEL, topics.CMD_VEL)
+_STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
+_RUNS_ROOT = 'runs'
+
+PARAMS = [
+    Param('output', '', 'bag directory to create (never overwritten; relative to the working '
+          'directory); empty: a new run directory runs/run_YYYYmmdd_HHMMSS[_N] with the bag in '
+          'its subdirectory "bag"', read_only=True),
+    Param('topics', list(topics.TYPES), 'topics to record (names of nonfragile_tracker.topics; '
+          'relative names resolve in the node namespace)', read_only=True),
+    Param('drain_timeout', 5.0, 'after run_done: longest wait (wall s) for the last messages',
+          low=0.0, high=3600.0, read_only=True),
+    Param('chunk_size', DEFAULT_CHUNK_SIZE, 'write a chunk to disk when it holds this many '
+          'bytes (1 .. 1048576)', read_only=True),
+    Param('flush_period', DEFAULT_FLUSH_PERIOD, 'write pending messages to disk at least this '
+          'often (wall s)', low=0.01, high=3600.0, read_only=True),
+    Param('lockstep_gate', False, 'lockstep start gate: subscribe to odom only once every other '
+          'recorded topic has a matched publisher (the plant waits for odom subscribers, so the '
+          'run starts only when nothing can be missed)', read_only=True),
+    Param('gate_timeout', 30.0, 'lockstep_gate: subscribe to odom anyway after this long (wall s)',
+          low=0.0, high=3600.0, read_only=True),
+]
+
+_DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+_LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def import_message(msgtype: str) -> type:
+    """The rclpy message class of ``'pkg/msg/Name'`` (``importlib`` on ``pkg.msg``)."""
+    parts = msgtype.split('/')
+    if len(parts) != 3 or parts[1] != 'msg' or not all(parts):
+        raise StartupError(f'message type {msgtype!r} is not of the form pkg/msg/Name')
+    try:
+        return getattr(importlib.import_module(f'{parts[0]}.msg'), parts[2])
+    except (ImportError, AttributeError):
+        raise StartupError(f'message type {msgtype} is not installed (cannot import '
+                           f'{parts[0]}.msg.{parts[2]}); source the ROS environment') from None
+
+
+def qos_from_rclpy(profile: Any):
+    """An offered rclpy ``QoSProfile`` as the rosbags ``Qos`` stored in the bag (v9)."""
+    return make_qos(history=profile.history, depth=int(profile.depth),
+                    reliability=profile.reliability, durability=profile.durability,
+                    deadline_ns=int(profile.deadline.nanoseconds),
+                    lifespan_ns=int(profile.lifespan.nanoseconds),
+                    liveliness=profile.liveliness,
+                    liveliness_lease_duration_ns=int(
+                        profile.liveliness_lease_duration.nanoseconds),
+                    avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
+
+
+def _header_stamp_ns(raw: bytes) -> int | None:
+    """Header stamp of a CDR message whose first field is a std_msgs/Header."""
+    if len(raw) < 12:
+        return None
+    fmt = '<iI' if raw[1] & 1 else '>iI'          # encapsulation: 0x0001 = CDR little endian
+    sec, nsec = struct.unpack_from(fmt, raw, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+class Recorder(Node):
+    """Raw-CDR recorder node; ``done`` completes after a ``run_done`` drain (or on close)."""
+
+    def __init__(self, node_name: str = 'recorder', *, namespace: str | None = None,
+                 context=None, parameter_overrides: list[Parameter] | None = None,
+                 **overrides: Any):
+        params = list(parameter_overrides or [])
+        params += [Parameter(k, value=v) for k, v in overrides.items()]
+        kwargs: dict[str, Any] = {'parameter_overrides': params}
+        if namespace is not None:
+            kwargs['namespace'] = namespace
+        if context is not None:
+            kwargs['context'] = context
+        super().__init__(node_name, **kwargs)
+        self.writer: BagWriter | None = None
+        try:
+            self._setup()
+        except BaseException:
+            if self.writer is not None:
+                self.writer.close()
+            super().destroy_node()
+            raise
+
+    def _setup(self) -> None:
+        declare(self, PARAMS)
+        self.done: Future = Future()
+        self.finished = False
+        self.exit_code = 0
+        self.counts: dict[str, int] = {}
+        self.stamps: dict[str, set[int]] = {}
+        self.final_step: int | None = None
+        self._drain_deadline: float | None = None
+        self._drain_timer = None
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+
+        names = self._topic_list(get(self, 'topics'))
+        chunk = get(self, 'chunk_size')
+        if not 1 <= chunk <= 2 ** 20:
+            raise StartupError(f'recorder: chunk_size must be 1 .. 1048576 bytes, got {chunk}')
+        self.bag_path = self._output_path(get(self, 'output'))
+        self._types = {n: import_message(topics.TYPES[n]) for n in names}
+        try:
+            self.writer = BagWriter(self.bag_path, chunk_size=chunk,
+                                    flush_period=get(self, 'flush_period'),
+                                    custom_data={'recorder': self.get_fully_qualified_name()})
+        except BagError as exc:
+            raise StartupError(f'recorder: {exc}') from None
+        self._subs = {}
+        self._resolved: dict[str, str] = {}
+        gated = get(self, 'lockstep_gate') and topics.ODOM in names
+        for name in names:
+            self.counts[name] = 0
+            if name in _STAMPED:
+                self.stamps[name] = set()
+            if gated and name == topics.ODOM:
+                self._resolved[name] = self.resolve_topic_name(name)
+                continue
+            self._subscribe(name)
+        self._gate_timer = None
+        if gated:
+            self._gate_started = self._steady.now()
+            self._gate_timer = self.create_timer(0.02, self._check_gate, clock=self._steady)
+        # run_done: recorded and handled by one subscription (so it is in the bag before the
+        # drain can close it); a deserialized one if it is not recorded
+        self._done_sub = None if topics.RUN_DONE in names else self.create_subscription(
+            UInt64, topics.RUN_DONE, self._on_run_done, _LATCHED_QOS)
+        self._flush_timer = self.create_timer(get(self, 'flush_period'), self._flush,
+                                              clock=self._steady)
+        self.get_logger().info(f'recording {len(names)} topics to {self.bag_path}: '
+                               f'{", ".join(self._resolved[n] for n in names)}')
+
+    # ------------------------------------------------------------------ setup
+    def _subscribe(self, name: str) -> None:
+        qos = _LATCHED_QOS if name == topics.RUN_DONE else _DATA_QOS
+        sub = self.create_subscription(self._types[name], name, self._make_callback(name),
+                                       qos, raw=True)
+        self._subs[name] = sub
+        self._resolved[name] = sub.topic_name
+
+    def _check_gate(self) -> None:
+        """Open the lockstep gate: subscribe to odom once the other topics are matched."""
+        waiting = [n for n, sub in self._subs.items()
+                   if n not in (topics.CLOCK, topics.RUN_DONE, topics.POSE)
+                   and sub.get_publisher_count() < 1]
+        elapsed = (self._steady.now() - self._gate_started).nanoseconds * 1e-9
+        if waiting and elapsed < get(self, 'gate_timeout'):
+            return
+        if waiting:
+            self.get_logger().warn(f'gate timeout: no publisher yet on {", ".join(waiting)}; '
+                                   'recording odom anyway')
+        self._gate_timer.cancel()
+        self._subscribe(topics.ODOM)
+
+    @staticmethod
+    def _topic_list(values) -> list[str]:
+        names: list[str] = []
+        for raw in values:
+            name = raw if raw in topics.TYPES else raw.lstrip('/')
+            if name not in topics.TYPES:
+                raise StartupError(f'recorder: unknown topic {raw!r} in parameter topics; known '
+                                   f'topics: {", ".join(topics.TYPES)}')
+            if name not in names:
+                names.append(name)
+        if not names:
+            raise StartupError('recorder: parameter topics is empty; name at least one topic')
+        return names
+
+    @staticmethod
+    def _output_path(output: str) -> Path:
+        if output:
+            path = Path(output).expanduser()
+            if path.exists():
+                raise StartupError(f'recorder: output {path} exists already; a bag is never '
+                                   'overwritten. Pass a new directory (or leave output empty '
+                                   'for a fresh run directory).')
+            return path
+        return new_run_dir(_RUNS_ROOT) / 'bag'
+
+    # ------------------------------------------------------------------ recording
+    def _make_callback(self, name: str):
+        topic_stamps = self.stamps.get(name)
+        is_done = name == topics.RUN_DONE
+
+        def callback(raw: bytes) -> None:
+            writer = self.writer
+            if writer is None or writer.closed:
+                return
+            topic = self._resolved[name]
+            if not writer.has_connection(topic):
+                writer.add_connection(topic, topics.TYPES[name], self._offered_qos(name))
+            writer.write(topic, self.get_clock().now().nanoseconds, raw)
+            self.counts[name] += 1
+            if topic_stamps is not None:
+                stamp = _header_stamp_ns(raw)
+                if stamp is not None:
+                    topic_stamps.add(stamp)
+            if is_done:
+                self._on_run_done(deserialize_message(raw, UInt64))
+            elif self.final_step is not None and self._drained():
+                self._finish()
+        return callback
+
+    def _offered_qos(self, name: str) -> list:
+        try:
+            infos = self.get_publishers_info_by_topic(self._resolved[name])
+            profiles = [qos_from_rclpy(i.qos_profile) for i in infos]
+        except Exception as exc:          # noqa: BLE001 - never lose data over QoS metadata
+            self.get_logger().warn(f'offered QoS of {self._resolved[name]} unavailable ({exc}); '
+                                   'storing the package defaults')
+            profiles = []
+        return profiles or [default_qos(name)]
+
+    def _flush(self) -> None:
+        if self.writer is not None and not self.writer.closed:
+            self.writer.flush()
+
+    # ------------------------------------------------------------------ run_done
+    def _received(self, name: str) -> int:
+        return len(self.stamps[name]) if name in self.stamps else self.counts.get(name, 0)
+
+    def _shortfalls(self) -> dict[str, int]:
+        if self.final_step is None:
+            return {}
+        need = self.final_step + 1
+        return {n: need - self._received(n) for n in LOCKSTEP_TOPICS
+                if n in self.counts and self._received(n) < need}
+
+    def _drained(self) -> bool:
+        return not self._shortfalls()
+
+    def _on_run_done(self, msg: UInt64) -> None:
+        if self.final_step is not None or self.finished:
+            return
+        self.final_step = int(msg.data)
+        timeout = get(self, 'drain_timeout')
+        self._drain_deadline = time.monotonic() + timeout
+        self.get_logger().info(f'run_done: last step {self.final_step}; waiting up to {timeout} s '
+                               f'for {self.final_step + 1} samples per lockstep topic')
+        if self._drained():
+            self._finish()
+        else:
+            self._drain_timer = self.create_timer(0.05, self._check_drain, clock=self._steady)
+
+    def _check_drain(self) -> None:
+        if self.finished:
+            return
+        if self._drained() or time.monotonic() >= self._drain_deadline:
+            self._finish()
+
+    def _finish(self) -> None:
+        if self.finished:
+            return
+        short = self._shortfalls()
+        got = ', '.join(f'{self._resolved[n]} {self._received(n)}' for n in self.counts)
+        if short:
+            miss = ', '.join(f'{self._resolved[n]} short by {k}' for n, k in short.items())
+            self.get_logger().warn(f'run_done {self.final_step}: drain timeout '
+                                   f'({get(self, "drain_timeout")} s) with {miss}; got {got}')
+        else:
+            self.get_logger().info(f'run_done {self.final_step}: all samples received ({got})')
+        self.close()
+
+    # ------------------------------------------------------------------ closing
+    def close(self) -> None:
+        """Close the bag (MCAP summary + metadata.yaml) and complete ``done``.  Idempotent."""
+        if self.finished:
+            return
+        self.finished = True
+        for timer in (self._flush_timer, self._drain_timer):
+            if timer is not None:
+                timer.cancel()
+        writer, self.writer = self.writer, None
+        if writer is not None:
+            try:
+                writer.close()
+                self._log('info', f'bag closed: {writer.path} ({writer.message_count} messages)')
+            except BagError as exc:
+                self.exit_code = 1
+                self._log('error', str(exc))
+
+    def _log(self, level: str, text: str) -> None:
+        # after shutdown (SIGINT) rosout is gone: print instead of a 'context is invalid' error
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:
+            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
+        if not self.done.done():
+            self.done.set_result(dict(self.counts))
+
+    def destroy_node(self) -> None:
+        self.close()
+        super().destroy_node()
+
+
+_stop_signal: list[int] = []
+
+
+def _on_signal(signum, frame) -> None:            # noqa: ARG001
+    """Python-level SIGINT/SIGTERM handler: no exception in the middle of a write.
+
+    It is installed *before* ``rclpy.init`` so rclpy's own handler (which
+    shuts the context down and wakes the executor) chains to it; the bag is
+    then closed in ``main``'s ``finally`` between callbacks.
+    """
+    _stop_signal.append(signum)
+    rclpy.try_shutdown()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point; returns the exit code (0 also after SIGINT/SIGTERM)."""
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = Recorder()
+        except (StartupError, ValueError) as exc:
+            print(f'[FATAL] {exc}', file=sys.stderr)
+            return 2
+        executor = make_executor()
+        executor.add_node(node)
+        spin_until(executor, lambda: node.finished)
+        return node.exit_code
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return node.exit_code if node is not None else 0
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
