@@ -1,0 +1,88 @@
+"""The committed reproduction report (docs/) matches a fresh computation."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from nonfragile_tracker import reproduce
+from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.reference import circle
+from nonfragile_tracker.control.simulate import simulate_tracking
+
+from conftest import CONFIG, ROOT
+
+DOCS = ROOT / 'docs'
+
+
+@pytest.fixture(scope='module')
+def committed():
+    return json.loads((DOCS / 'paper_reproduction.json').read_text())
+
+
+@pytest.fixture(scope='module')
+def fresh(tmp_path_factory):
+    return reproduce.compute(CONFIG, tmp_path_factory.mktemp('repro'), ros=False)
+
+
+def close(a, b, rel, abs_=1e-9):
+    if isinstance(a, bool) or isinstance(b, bool) or a is None or b is None:
+        return a == b
+    if math.isnan(a) or math.isinf(a):
+        return (math.isnan(a) and math.isnan(b)) or a == b
+    return abs(a - b) <= abs_ + rel * abs(a)
+
+
+def test_markdown_is_rendered_from_the_committed_numbers(committed):
+    assert (DOCS / 'paper_reproduction.md').read_text() == reproduce.render_markdown(committed)
+    for fig in committed['figures']:
+        assert (DOCS / fig).stat().st_size > 10_000, fig
+
+
+def test_gain_table_matches_fresh_computation(committed, fresh):
+    assert list(committed['gains']) == list(fresh['gains'])
+    tol = {'norm': 1e-6, 'abscissa_nominal': 1e-6, 'abscissa_delta1': 1e-6,
+           'abscissa_delta2': 1e-6, 'worst_abscissa': 1e-4, 'measured_margin': 1e-3,
+           'certified_margin': 2e-3, 'delay_margin': 1e-6, 'certified_delay': 0}
+    for name, row in committed['gains'].items():
+        new = fresh['gains'][name]
+        np.testing.assert_allclose(row['K'], new['K'], atol=1e-4, err_msg=name)
+        for key in ('certified_nominal', 'certified_nonfragile'):
+            assert row[key] == new[key], (name, key)
+        for key, rel in tol.items():
+            assert close(row[key], new[key], rel), (name, key, row[key], new[key])
+        for part in ('tracking', 'tracking_compensated'):
+            for key, val in row[part].items():
+                assert close(val, new[part][key], 1e-6, 1e-9), (name, part, key)
+
+
+def test_harder_delay_section_matches(committed, fresh):
+    a, b = committed['harder'], fresh['harder']
+    assert a['theorem1_feasible'] is False and b['theorem1_feasible'] is False
+    assert close(a['h_max'], b['h_max'], 0, 2e-3)
+    for k, v in a['true_delay_margin'].items():
+        assert v > a['h_max'] and close(v, b['true_delay_margin'][k], 1e-3)
+
+
+def test_claims_are_backed_by_the_numbers(committed):
+    g = committed['gains']
+    # K_normal with Delta_2 is stable (the paper claims it is not), and certified
+    assert g['paper K_normal']['abscissa_delta2'] < 0
+    assert g['paper K_normal']['certified_nonfragile']
+    # both Theorem 1 designs are feasible and certified
+    assert g['Theorem 1 K_nf']['certified_nonfragile'] and g['Theorem 1 K_normal']['certified_nominal']
+    # the paper's K_nf keeps about 1 cm; compensation removes it
+    assert 0.009 < g['paper K_nf']['tracking']['steady_max_error'] < 0.013
+    assert g['paper K_nf']['tracking_compensated']['steady_max_error'] < 1e-4
+
+
+def test_fig6_numbers_equal_the_in_process_simulation(committed):
+    """Fig. 6 comes from a ROS run; the lockstep run equals the simulation to round-off."""
+    import yaml
+    f6 = committed['fig6']
+    K = np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'])
+    steps = int(round(f6['duration'] / 0.01))
+    m = simulate_tracking(PlantConfig(), TrackerConfig(K=K), circle(), steps).metrics()
+    assert f6['steps'] == steps + 1
+    assert f6['final_error'] == pytest.approx(m.final_error, abs=1e-9)
+    assert f6['first_within_1cm'] == pytest.approx(m.first_within, abs=1e-9)
