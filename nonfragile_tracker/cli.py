@@ -228,6 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .bag.writer import BagError
     from .control.gains import GainFileError
     from .control.lmi import CertificateError, InfeasibleError, SolverFailure
     from .control.loop import LoopConfigError
@@ -235,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ProblemError, GainFileError, LoopConfigError, FileExistsError,
+    except (ProblemError, GainFileError, LoopConfigError, BagError, FileExistsError,
             FileNotFoundError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -71,23 +71,45 @@ def new_run_dir(root: Path, name: str | None) -> Path:
     return _new(root, name)
 
 
+def _doubles(value):
+    """Lists mixing ints and floats are written as doubles (rcl rejects mixed sequences)."""
+    if isinstance(value, dict):
+        return {k: _doubles(v) for k, v in value.items()}
+    if isinstance(value, list) and any(isinstance(v, float) for v in value):
+        return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
+    return value
+
+
 def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
                   timeout: float = 600.0, progress=print,
                   recorder_topics: list[str] | None = None) -> RunResult:
-    """Run the scenario with one process per node; returns exit codes per node."""
+    """Run the scenario with one process per node; returns exit codes per node.
+
+    Each node's output goes to ``<run_dir>/<node>.log``; the plant's progress lines
+    are passed to ``progress``.  If a node dies before the plant has finished, the
+    run is stopped at once (its exit code tells which).
+    """
     env = isolated_env(env)
     params_file = run_dir / 'params.yaml'
-    params_file.write_text(yaml.safe_dump(params, sort_keys=False))
+    params_file.write_text(yaml.safe_dump(_doubles(params), sort_keys=False))
     py = sys.executable
     procs: dict[str, subprocess.Popen] = {}
+    logs: dict[str, object] = {}
     bag = run_dir / 'bag' if record else None
     t0 = time.monotonic()
 
     def start(name: str, extra: list[str] = ()) -> None:
         cmd = [py, '-m', f'nonfragile_tracker.nodes.{name}', '--ros-args', '--params-file',
                str(params_file), *extra]
-        procs[name] = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE,
+        logs[name] = open(run_dir / f'{name}.log', 'w')
+        procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
                                        stderr=subprocess.STDOUT, text=True)
+
+    def report_plant(reader, final: bool = False) -> None:
+        for line in reader.readlines():
+            line = line.rstrip()
+            if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
+                progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
 
     try:
         if record:
@@ -100,15 +122,21 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         start('reference')
         start('plant', ['-p', f'lockstep_subscribers:={2 if record else 1}'])
         plant = procs['plant']
-        for line in plant.stdout:
-            line = line.rstrip()
-            if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
-                progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
-            if time.monotonic() - t0 > timeout:
-                progress('[runner] timeout: stopping the run')
-                break
-        plant.wait(timeout=30)
-        if record:
+        with open(run_dir / 'plant.log') as reader:
+            while plant.poll() is None:
+                report_plant(reader)
+                dead = {n: p.returncode for n, p in procs.items()
+                        if n != 'plant' and p.poll() is not None}
+                if dead:
+                    progress(f'[runner] node(s) exited early: {dead}; stopping the run '
+                             f'(logs in {run_dir})')
+                    break
+                if time.monotonic() - t0 > timeout:
+                    progress('[runner] timeout: stopping the run')
+                    break
+                time.sleep(0.05)
+            report_plant(reader)
+        if plant.poll() is not None and record:
             try:
                 procs['recorder'].wait(timeout=30)
             except subprocess.TimeoutExpired:
@@ -124,11 +152,9 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+        for fh in logs.values():
+            fh.close()
     codes = {name: p.returncode for name, p in procs.items()}
-    logs = {name: (p.stdout.read() if p.stdout and not p.stdout.closed else '')
-            for name, p in procs.items()}
-    for name, text in logs.items():
-        (run_dir / f'{name}.log').write_text(text or '')
     steps = int(round(params['plant']['ros__parameters'].get('duration', 60.0)
                       / params['plant']['ros__parameters'].get('dt', 0.01)))
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
@@ -216,7 +242,8 @@ def add_subcommands(sub) -> None:
     bs = b.add_subparsers(dest='bag_command', required=True)
     rep = bs.add_parser('report', help='metrics and PNG plots of a recorded run')
     rep.add_argument('bag')
-    rep.add_argument('--out', help='directory for the plots (default: next to the bag)')
+    rep.add_argument('--out', help='directory for the plots (default: <bag>_report)')
+    rep.add_argument('--force', action='store_true', help='replace existing plots')
     rep.set_defaults(func=cmd_bag_report)
     rp = bs.add_parser('repair', help='recover a bag whose recorder died without closing it')
     rp.add_argument('bag')
@@ -272,7 +299,8 @@ def cmd_bag_report(args) -> int:
     from .bag.report import bag_report, format_report
     from .bag.reader import BagError
     try:
-        rep = bag_report(Path(args.bag), Path(args.out) if args.out else None)
+        rep = bag_report(Path(args.bag), Path(args.out) if args.out else None,
+                         overwrite=args.force)
     except BagError as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 2

@@ -117,12 +117,12 @@ def _require(data: BagData) -> None:
 
 
 def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
-               tolerance: float = 0.01, plots: bool = True, namespace: str | None = None
-               ) -> Report:
+               tolerance: float = 0.01, plots: bool = True, namespace: str | None = None,
+               overwrite: bool = False) -> Report:
     """Metrics, counts, gaps and (with ``plots``) the four PNGs of the run in bag ``path``.
 
-    Figures go to ``out_dir`` (default ``<path>_report``; created, existing
-    figures are replaced).  Raises :class:`BagError` subclasses: for a bag
+    Figures go to ``out_dir`` (default ``<path>_report``; created).  Existing
+    figures are never replaced unless ``overwrite`` (:class:`BagError` otherwise).  Raises :class:`BagError` subclasses: for a bag
     without odom/pose, reference or cmd_vel a :class:`MissingTopicsError`
     naming the missing topics.
     """
@@ -162,6 +162,11 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BagError(f'cannot create report directory {out}: {exc.strerror or exc}') from None
+    names = ('xy.png', 'errors.png', 'xi.png', 'commands.png')
+    existing = [n for n in names if (out / n).exists()]
+    if existing and not overwrite:
+        raise BagError(f'{out} already holds {", ".join(existing)}; pass --force to replace '
+                       'them or choose another --out')
     files = {
         'xy.png': _plot_xy(x, y, xd, yd, ref.x, ref.y, pose.topic),
         'errors.png': _plot_errors(t, x - xd, y - yd, tolerance),

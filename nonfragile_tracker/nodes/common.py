@@ -152,7 +152,11 @@ def run(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     Returns the process exit code: 0, the node's ``exit_code`` attribute if set,
     or 2 when the node refuses to start (:class:`StartupError` or ``ValueError``).
     """
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments/params files so
+        print(f'[FATAL] cannot start: {exc}'.split(', at /')[0], file=sys.stderr)
+        return 2
     node = None
     try:
         try:

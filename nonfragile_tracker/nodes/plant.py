@@ -47,6 +47,8 @@ PARAMS = [
           low=0.0, high=1e9, read_only=True),
     Param('lockstep_timeout', 10.0, 'lockstep: abort if no command arrives for this long (s, wall)',
           low=0.01, high=1e6),
+    Param('startup_timeout', 60.0, 'lockstep: abort if the peers are not discovered within this '
+          'long (s, wall)', low=0.01, high=1e6),
     Param('lockstep_retry', 0.25, 'lockstep: republish the current step after this long (s, wall)',
           low=0.001, high=1e6),
     Param('lockstep_subscribers', 1, 'lockstep: wait until odom has this many subscribers'),
@@ -140,17 +142,17 @@ class PlantNode(Node):
                                        f'{self.final_step} steps (dt = {self.dt} s)')
                 self.waiting_since = now
                 self._publish_state(step_time_ns(self.plant.k, self.dt))
-            elif now - self.waiting_since > get(self, 'lockstep_timeout'):
-                self._abort('no tracker/reference discovered')
+            elif now - self.waiting_since > get(self, 'startup_timeout'):
+                self._abort('no tracker/reference discovered', 'startup_timeout')
             return
         if now - self.waiting_since > get(self, 'lockstep_timeout'):
             self._abort(f'no command for step {self.plant.k}')
         elif now - self.last_publish > get(self, 'lockstep_retry'):
             self._publish_state(step_time_ns(self.plant.k, self.dt))
 
-    def _abort(self, why: str) -> None:
+    def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
         self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
-                                f'{get(self, "lockstep_timeout")} s; is the tracker running '
+                                f'{get(self, limit)} s ({limit}); is the tracker running '
                                 'on the same ROS_DOMAIN_ID and namespace?')
         self.exit_code = 5
         self._finish()

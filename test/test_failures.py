@@ -1,0 +1,128 @@
+"""Faults: a dead node ends a lockstep run cleanly; bad bags give clear errors; two systems
+run side by side without cross-talk."""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from nonfragile_tracker.bag.reader import read_bag
+from nonfragile_tracker.cli import main
+from nonfragile_tracker.runner import isolated_env, run_processes, scenario_parameters
+
+from conftest import CONFIG, ROOT, unique_domain_id
+
+
+def params(duration, **plant):
+    ov = {'plant': {'ros__parameters': {'duration': duration, **plant}}}
+    return scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov)
+
+
+@pytest.mark.parametrize('sig', [signal.SIGSTOP, signal.SIGKILL])
+def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path, sig):
+    """SIGSTOP: the tracker stops answering, the plant aborts after lockstep_timeout (exit 5).
+    SIGKILL: the runner sees the dead node and stops the run.  Either way: no hang, a clear
+    message, and a closed, readable bag."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id(f'kill{int(sig)}')))
+    hit = threading.Event()
+    lines = []
+
+    def progress(line):
+        lines.append(line)
+        if 'progress' in line and not hit.is_set():
+            out = subprocess.run(['pgrep', '-f', f'nodes.tracker.*{tmp_path}'],
+                                 capture_output=True, text=True)
+            for pid in out.stdout.split():
+                os.kill(int(pid), sig)
+                hit.set()
+
+    start = time.monotonic()
+    res = run_processes(params(200.0, lockstep_timeout=2.0), tmp_path, env=env,
+                        progress=progress)
+    assert hit.is_set() and time.monotonic() - start < 60          # no hang
+    if sig == signal.SIGSTOP:
+        assert res.exit_codes['plant'] == 5
+        log = (tmp_path / 'plant.log').read_text()
+        assert 'lockstep run aborted' in log and 'no command for step' in log
+    else:
+        assert res.exit_codes['tracker'] == -signal.SIGKILL
+        assert any('exited early' in line and 'tracker' in line for line in lines)
+    assert res.exit_codes['recorder'] == 0
+    bag = read_bag(res.bag)                                    # closed and readable
+    assert 1000 <= len(bag.run.pose) < 20001
+
+
+def test_bag_commands_reject_bad_bags(tmp_path, capsys):
+    assert main(['bag', 'report', str(tmp_path / 'nope')]) == 2
+    assert 'does not exist' in capsys.readouterr().err
+    # a truncated MCAP without metadata (a killed recorder)
+    src = ROOT / 'test' / 'data' / 'golden_paper'
+    cut = tmp_path / 'cut'
+    cut.mkdir()
+    data = (src / 'bag.mcap').read_bytes()
+    (cut / 'bag.mcap').write_bytes(data[: len(data) // 2])
+    assert main(['bag', 'report', str(cut)]) == 2
+    assert 'bag repair' in capsys.readouterr().err
+    assert main(['bag', 'repair', str(cut)]) == 0
+    out = capsys.readouterr().out
+    assert '/odom' in out
+    rep = read_bag(tmp_path / 'cut_repaired', strict=False)
+    assert 0 < rep.counts['/odom'] < 251
+    # a bag without the expected topics
+    from nonfragile_tracker.bag.writer import BagWriter
+    with BagWriter(tmp_path / 'other', connections={'/chatter': 'std_msgs/msg/UInt64'}) as w:
+        w.write('/chatter', 1, b'\x00\x01\x00\x00' + bytes(8))
+    assert main(['bag', 'report', str(tmp_path / 'other')]) == 2
+    err = capsys.readouterr().err
+    assert 'odom' in err and 'cmd_vel' in err
+    # the report never overwrites plots unless asked
+    shutil.copytree(src, tmp_path / 'g')
+    assert main(['bag', 'report', str(tmp_path / 'g')]) == 0
+    assert main(['bag', 'report', str(tmp_path / 'g')]) == 2
+    assert 'pass --force' in capsys.readouterr().err
+    assert main(['bag', 'report', str(tmp_path / 'g'), '--force']) == 0
+
+
+def test_run_refuses_a_bad_gain_file_and_never_reuses_a_run_dir(tmp_path, capsys):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('tracker:\n  ros__parameters:\n    K: [1.0, 1.0]\n    K_shape: [2, 4]\n')
+    assert main(['run', '--gains', str(bad), '--out', str(tmp_path)]) == 2
+    assert 'has 2 entries' in capsys.readouterr().err
+    assert main(['run', '--name', '../escape', '--out', str(tmp_path), '--no-record',
+                 '--duration', '0.1']) == 2
+    assert 'escape' in capsys.readouterr().err
+
+
+def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
+    """Two lockstep systems at once (one with a perturbed gain) each equal their own run."""
+    results = {}
+
+    def run(name, domain, delta):
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+        p = params(5.0)
+        p['tracker']['ros__parameters']['Delta'] = delta
+        d = tmp_path / name
+        d.mkdir()
+        results[name] = run_processes(p, d, env=env, progress=lambda s: None)
+
+    a = threading.Thread(target=run, args=('a', unique_domain_id('two-a'), [0.0] * 4))
+    b = threading.Thread(target=run, args=('b', unique_domain_id('two-b') + 1 if
+                                           unique_domain_id('two-b') == unique_domain_id('two-a')
+                                           else unique_domain_id('two-b'), [1.0, 0.0, 0.0, 1.0]))
+    a.start(); b.start(); a.join(); b.join()
+    bags = {k: read_bag(v.bag) for k, v in results.items()}
+    from nonfragile_tracker.control.gains import read_gain_file
+    from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.reference import circle
+    from nonfragile_tracker.control.simulate import simulate_tracking
+    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    F = np.full((2, 4), 0.5)
+    for name, pert in (('a', None), ('b', F)):
+        sim = simulate_tracking(PlantConfig(), TrackerConfig(K=K, perturbation=pert), circle(), 500)
+        assert bags[name].counts['/odom'] == 501
+        np.testing.assert_allclose(bags[name].run.pose.x, sim.x, atol=1e-9)
