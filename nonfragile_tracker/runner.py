@@ -44,17 +44,36 @@ def _merge(dst: dict, src: dict) -> dict:
     return dst
 
 
+def node_key(key: str) -> str:
+    """Node name of a parameter-file key: ``tracker``, ``/tracker`` and ``/**/tracker`` -> tracker."""
+    for prefix in ('/**/', '/'):
+        if key.startswith(prefix):
+            return key[len(prefix):]
+    return key
+
+
 def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | None = None
                         ) -> dict:
-    """One parameter mapping {node: {'ros__parameters': {...}}} from the files and overrides."""
+    """One parameter mapping {node: {'ros__parameters': {...}}} from the files and overrides.
+
+    File keys may be ``node``, ``/node`` or ``/**/node`` (any namespace); the mapping uses
+    the bare node name and :func:`write_parameter_file` writes ``/**/node`` again.
+    """
     params: dict = {}
     for path in (scenario, gains):
         if path is None:
             continue
         data = yaml.safe_load(Path(path).read_text()) or {}
-        _merge(params, data)
+        _merge(params, {node_key(k): v for k, v in data.items()})
     _merge(params, overrides or {})
     return params
+
+
+def write_parameter_file(params: dict, path: Path) -> Path:
+    """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too."""
+    path.write_text(yaml.safe_dump({f'/**/{k}': v for k, v in _doubles(params).items()},
+                                   sort_keys=False))
+    return path
 
 
 @dataclass
@@ -90,8 +109,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     run is stopped at once (its exit code tells which).
     """
     env = isolated_env(env)
-    params_file = run_dir / 'params.yaml'
-    params_file.write_text(yaml.safe_dump(_doubles(params), sort_keys=False))
+    params_file = write_parameter_file(params, run_dir / 'params.yaml')
     py = sys.executable
     procs: dict[str, subprocess.Popen] = {}
     logs: dict[str, object] = {}

@@ -38,7 +38,7 @@ RUN = ['/odom', '/pose', '/reference/pose', '/reference/twist', '/reference/acce
 
 def gain():
     data = yaml.safe_load((ROOT / 'config' / 'tracker_gains.yaml').read_text())
-    return np.array(data['tracker']['ros__parameters']['K'], float).reshape(2, 4)
+    return np.array(data['/**/tracker']['ros__parameters']['K'], float).reshape(2, 4)
 
 
 def simulated_run(steps: int = 300):

@@ -19,7 +19,7 @@ def test_synthesize_writes_a_tracker_parameter_file(tmp_path, capsys):
     out = tmp_path / 'gains.yaml'
     assert main(['synthesize', PAPER, '-o', str(out)]) == 0
     data = yaml.safe_load(out.read_text())
-    params = data['tracker']['ros__parameters']
+    params = data['/**/tracker']['ros__parameters']
     assert params['K_shape'] == [2, 4]
     assert len(params['K']) == 8 and all(isinstance(v, float) for v in params['K'])
     K = read_gain_file(out)

@@ -1,8 +1,8 @@
 """The tracker's gain parameter format: one reader, one writer, one check.
 
-A gain file is a ROS 2 parameter file for the ``tracker`` node::
+A gain file is a ROS 2 parameter file for the ``tracker`` node (in any namespace)::
 
-    tracker:
+    /**/tracker:
       ros__parameters:
         K: [-4.4453, -4.8047, ...]   # row-major, doubles
         K_shape: [2, 4]
@@ -63,7 +63,7 @@ def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite:
     params = gain_parameters(K)
     params.update(extra or {})
     text = ''.join(f'# {line}\n' for line in comment.splitlines())
-    text += yaml.safe_dump({TRACKER_NODE: {'ros__parameters': params}},
+    text += yaml.safe_dump({f'/**/{TRACKER_NODE}': {'ros__parameters': params}},
                            default_flow_style=None, sort_keys=False)
     mode = 'w' if overwrite else 'x'
     try:
@@ -85,7 +85,7 @@ def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndar
         raise GainFileError(f'{path}: not valid YAML ({exc})') from None
     if not isinstance(data, dict):
         raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section')
-    for key in (node, f'/{node}', '/**'):
+    for key in (f'/**/{node}', node, f'/{node}', '/**'):
         section = data.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict) \
                 and 'K' in section['ros__parameters']:
