@@ -89,3 +89,19 @@ def test_processes_exit_2_with_a_clear_message(tmp_path, ros_env):
                              env=ros_env, timeout=60)
         assert out.returncode == 2, (args, out.stderr)
         assert text in out.stderr and 'Traceback' not in out.stderr
+
+
+def test_plant_rounds_a_delay_that_is_not_a_multiple_of_the_step(context):
+    node = PlantNode(context=context, parameter_overrides=[Parameter('tau', value=0.2049),
+                                                           Parameter('dt', value=0.01)])
+    try:
+        assert node.plant.N == 20                       # effective delay 0.2 s (logged)
+        assert node.plant.N * node.dt == pytest.approx(0.2)
+    finally:
+        node.destroy_node()
+
+
+def test_zero_or_negative_limits_refuse_to_start(context):
+    from rclpy.exceptions import InvalidParameterValueException
+    with pytest.raises(InvalidParameterValueException):
+        make_tracker(context, max_linear_speed=0.0)
