@@ -166,6 +166,18 @@ def cmd_analyse(args, margins_only: bool = False) -> int:
                   f'{r.certified_margin:9.4g}')
     else:
         print(format_analysis(rows))
+    if getattr(args, 'tracking', False):
+        from .reproduce import TRACK_POSE, TRACK_STEPS, _tracking
+        print(f'\ntracking on the paper circle, {TRACK_STEPS} steps of 0.01 s from (x, y, yaw, v) '
+              f'= {tuple(round(v, 4) for v in TRACK_POSE)}, |w| <= 2 rad/s:')
+        print(f'{"gain":<24} {"compensation":>12} {"first 1 cm (s)":>15} {"stays (s)":>10} '
+              f'{"max err >20 s (m)":>18} {"peak |w|":>9}')
+        for r in rows:
+            for comp in (False, True):
+                m = _tracking(np.array(r.K), comp)
+                print(f'{r.name:<24} {"yes" if comp else "no":>12} {m["first_within_1cm"]:15.3f} '
+                      f'{m["settling_1cm"]:10.3f} {m["steady_max_error"]:18.3g} '
+                      f'{m["peak_abs_w"]:9.3f}')
     if args.json:
         Path(args.json).write_text(json.dumps([r.as_dict() for r in rows], indent=2))
     return 0
@@ -217,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
         a.add_argument('--gains', action='append', help='tracker gain file (repeatable)')
         a.add_argument('--paper', action='store_true', help="include the paper's printed gains")
         a.add_argument('--no-margins', action='store_true', help='skip the margin searches')
+        a.add_argument('--tracking', action='store_true',
+                       help='also simulate the paper scenario with each gain (with and without '
+                       'delay compensation)')
         a.add_argument('--json', help='also write the results as JSON')
         a.set_defaults(func=lambda args, m=margins_only: cmd_analyse(args, m))
 

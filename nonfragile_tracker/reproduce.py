@@ -104,7 +104,8 @@ def _gain_row(config: str, name: str, K) -> dict:
             'abscissa_nominal': a.abscissa_nominal,
             'abscissa_delta1': a.abscissa['Delta_1'], 'abscissa_delta2': a.abscissa['Delta_2'],
             'worst_abscissa': a.worst_abscissa, 'measured_margin': a.measured_margin,
-            'certified_margin': a.certified_margin, 'delay_margin': a.delay_margin,
+            'certified_margin': a.certified_margin, 'certified_decay': a.certified_decay,
+            'delay_margin': a.delay_margin,
             'certified_delay': a.certified_delay,
             'tracking': _tracking(K, False), 'tracking_compensated': _tracking(K, True)}
 
@@ -237,6 +238,7 @@ not of A + BK.
         row('worst abscissa over norm(Delta) <= 1', 'worst_abscissa') + \
         row('fragility margin, measured', 'measured_margin') + \
         row('fragility margin, certified', 'certified_margin') + \
+        row('decay rate, certified (1/s)', 'certified_decay') + \
         row('delay margin (s), true, Delta = 0', 'delay_margin') + \
         row('delay certified up to (s)', 'certified_delay') + f"""
 "measured" is the largest scale alpha of alpha E Delta F for which a worst-case search

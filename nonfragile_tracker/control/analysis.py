@@ -14,7 +14,7 @@ from . import delay
 from .lmi import certified_perturbation_scale, certify_gain
 from .problem import Problem
 
-__all__ = ['GainAnalysis', 'analyse_gain', 'format_analysis']
+__all__ = ['GainAnalysis', 'analyse_gain', 'format_analysis', 'certified_decay_rate']
 
 
 @dataclass(frozen=True)
@@ -32,6 +32,7 @@ class GainAnalysis:
     worst_abscissa: float = math.nan     # worst case over ||D|| <= 1 (measured)
     measured_margin: float = math.nan    # largest scale keeping every ||D|| <= 1 stable
     certified_margin: float = math.nan   # largest scale Theorem 1 certifies
+    certified_decay: float = math.nan    # largest alpha Theorem 1 certifies for this K
     delay_margin: float = math.nan       # true: smallest unstable delay, D = 0 (inf: none)
     certified_delay: float = math.nan    # inf when Theorem 1 (delay-independent) certifies K
     tau: float = 0.0
@@ -54,8 +55,9 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
     A_nom = delay.closed_loop_matrix(A, B, K)
     a_nom = float(delay.spectral_abscissa(A_nom, Ad, tau))
     d_margin = float(delay.delay_margin(A_nom, Ad))
-    worst = measured = certified = math.nan
+    worst = measured = certified = decay = math.nan
     if margins:
+        decay = certified_decay_rate(problem, K)
         worst = float(delay.worst_case_abscissa(A, B, K, Ad, tau, E, F, seed=seed)[0])
         measured = float(delay.fragility_margin(A, B, K, Ad, tau, E, F, seed=seed).alpha)
         certified = float(certified_perturbation_scale(problem, K))
@@ -63,8 +65,37 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
                         certified_nominal=nom.certified, certified_nonfragile=nf.certified,
                         certify_margin=float(nf.margin_achieved), abscissa_nominal=a_nom,
                         abscissa=absc, worst_abscissa=worst, measured_margin=measured,
-                        certified_margin=certified, delay_margin=d_margin,
+                        certified_margin=certified, certified_decay=decay,
+                        delay_margin=d_margin,
                         certified_delay=math.inf if nf.certified else math.nan, tau=tau)
+
+
+def certified_decay_rate(problem: Problem, K, *, hi: float = 50.0, rel_tol: float = 1e-3
+                         ) -> float:
+    """Largest ``alpha`` with Theorem 1 (non-fragile) certifying ``K`` on the shifted problem
+    (``A + alpha I``, ``e^{alpha tau} A_tau``): every ``||D(t)|| <= 1`` decays at least as
+    ``e^{-alpha t}``.  0.0 if ``K`` is not certified at all."""
+    from .design import shifted_problem
+
+    def ok(a: float) -> bool:
+        try:
+            return certify_gain(shifted_problem(problem, a), K).certified
+        except Exception:  # noqa: BLE001 - numerical trouble at an extreme trial: not certified
+            return False
+
+    if not ok(0.0):
+        return 0.0
+    lo, step = 0.0, 0.5
+    while step <= hi and ok(step):
+        lo, step = step, 2 * step
+    up = min(step, hi)
+    while up - lo > rel_tol * max(up, 1e-9):
+        mid = 0.5 * (lo + up)
+        if ok(mid):
+            lo = mid
+        else:
+            up = mid
+    return lo
 
 
 def _fmt(x: float) -> str:
@@ -87,6 +118,8 @@ def format_analysis(rows: list[GainAnalysis]) -> str:
               [_fmt(r.abscissa_nominal) for r in rows])]
     lines += [(f'abscissa, D = {k}', [_fmt(r.abscissa[k]) for r in rows]) for k in keys]
     lines += [('worst abscissa, ||D|| <= 1', [_fmt(r.worst_abscissa) for r in rows]),
+              ('decay rate, true (worst case)', [_fmt(-r.worst_abscissa) for r in rows]),
+              ('decay rate, certified', [_fmt(r.certified_decay) for r in rows]),
               ('fragility margin, measured', [_fmt(r.measured_margin) for r in rows]),
               ('fragility margin, certified', [_fmt(r.certified_margin) for r in rows]),
               ('delay margin (s), true, D = 0', [_fmt(r.delay_margin) for r in rows]),
