@@ -76,26 +76,18 @@ def certified_decay_rate(problem: Problem, K, *, hi: float = 50.0, rel_tol: floa
     (``A + alpha I``, ``e^{alpha tau} A_tau``): every ``||D(t)|| <= 1`` decays at least as
     ``e^{-alpha t}``.  0.0 if ``K`` is not certified at all."""
     from .design import shifted_problem
+    from .search import largest_feasible
 
-    def ok(a: float) -> bool:
+    def trial(a: float):
         try:
-            return certify_gain(shifted_problem(problem, a), K).certified
+            res = certify_gain(shifted_problem(problem, a), K)
         except Exception:  # noqa: BLE001 - numerical trouble at an extreme trial: not certified
-            return False
+            return None
+        return res if res.certified else None
 
-    if not ok(0.0):
+    if trial(0.0) is None:
         return 0.0
-    lo, step = 0.0, 0.5
-    while step <= hi and ok(step):
-        lo, step = step, 2 * step
-    up = min(step, hi)
-    while up - lo > rel_tol * max(up, 1e-9):
-        mid = 0.5 * (lo + up)
-        if ok(mid):
-            lo = mid
-        else:
-            up = mid
-    return lo
+    return largest_feasible(trial, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi)[0]
 
 
 def _fmt(x: float) -> str:

@@ -23,6 +23,7 @@ import numpy as np
 
 from .lmi import InfeasibleError, LmiError, SynthesisResult, synthesize
 from .problem import Problem
+from .search import largest_feasible
 
 __all__ = ['DesignResult', 'max_perturbation_scale', 'max_decay_rate', 'min_gain_norm',
            'shifted_problem', 'at_gain_norm']
@@ -49,32 +50,6 @@ def shifted_problem(problem: Problem, alpha: float) -> Problem:
                            A_tau=math.exp(alpha * problem.tau) * problem.A_tau)
 
 
-def _bisect(feasible: Callable[[float], SynthesisResult | None], lo: float, hi: float,
-            rel_tol: float, lo_known: SynthesisResult | None = None,
-            grow: bool = True, hi_limit: float = 1e6) -> tuple[float, SynthesisResult | None, int]:
-    """Largest x in [lo, hi] with feasible(x) not None; ``hi`` doubles while feasible."""
-    best, solves = lo_known, 0
-    if grow:
-        while True:
-            r = feasible(hi)
-            solves += 1
-            if r is None:
-                break
-            lo, best = hi, r
-            if hi >= hi_limit:
-                return lo, best, solves
-            hi = min(2 * hi, hi_limit)
-    while hi - lo > rel_tol * max(abs(hi), 1e-12):
-        mid = 0.5 * (lo + hi)
-        r = feasible(mid)
-        solves += 1
-        if r is None:
-            hi = mid
-        else:
-            lo, best = mid, r
-    return lo, best, solves
-
-
 def _try(problem: Problem, **kw) -> SynthesisResult | None:
     try:
         return synthesize(problem, **kw)
@@ -94,7 +69,8 @@ def max_perturbation_scale(problem: Problem, *, gain_bound: float, rel_tol: floa
     if base is None:
         raise InfeasibleError(f'Theorem 1 is infeasible for {problem.name!r} with '
                               f'||K||_2 <= {gain_bound:g} even without perturbation')
-    s, best, n = _bisect(feas, 1e-9, 1.0, rel_tol, base, hi_limit=hi_limit)
+    s, best, n = largest_feasible(feas, 1e-9, 1.0, rel_tol=rel_tol, hi_limit=hi_limit,
+                                  lo_result=base)
     return DesignResult('max_perturbation_scale', s, best, problem.replace(F=s * problem.F),
                         n + 1)
 
@@ -109,7 +85,8 @@ def max_decay_rate(problem: Problem, *, gain_bound: float, nominal: bool = False
     if base is None:
         raise InfeasibleError(f'Theorem 1 is infeasible for {problem.name!r} with '
                               f'||K||_2 <= {gain_bound:g}: no decay rate is certified')
-    a, best, n = _bisect(feas, 0.0, 0.5, rel_tol, base, hi_limit=hi_limit)
+    a, best, n = largest_feasible(feas, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit,
+                                  lo_result=base)
     return DesignResult('max_decay_rate', a, best, shifted_problem(problem, a), n + 1)
 
 

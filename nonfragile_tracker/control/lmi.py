@@ -400,24 +400,15 @@ def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
     and ``upper`` if ``upper`` itself is certified.  A solver failure at a trial
     scale (it happens for extreme scales) counts as "not certified" there.
     """
-    def ok(s: float) -> bool:
+    from .search import largest_feasible
+
+    def trial(s: float):
         try:
-            return certify_gain(problem.replace(F=s * problem.F), K, solver=solver).certified
+            res = certify_gain(problem.replace(F=s * problem.F), K, solver=solver)
         except SolverFailure:
-            return False
+            return None
+        return res if res.certified else None
 
     if not certify_gain(problem, K, nominal=True, solver=solver).certified:
         return 0.0
-    lo, hi = 0.0, 1.0
-    while ok(hi):
-        lo = hi
-        if hi >= upper:
-            return upper
-        hi = min(2.0 * hi, upper)
-    while hi - lo > rel_tol * hi:
-        mid = 0.5 * (lo + hi)
-        if ok(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    return largest_feasible(trial, 0.0, 1.0, rel_tol=rel_tol, hi_limit=upper)[0]

@@ -60,14 +60,18 @@ def _finite(name: str, value: Any) -> float:
     return float(value)
 
 
+def _path_params(radius, rate, center_x, center_y, phase) -> tuple[float, ...]:
+    r = _finite('radius', radius)
+    if r <= 0:
+        raise PathError(f'path parameter radius must be > 0 m, got {r}')
+    return (r, _finite('rate', rate), _finite('center_x', center_x),
+            _finite('center_y', center_y), _finite('phase', phase))
+
+
 def circle(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
            center_y: float = 0.0, phase: float = 0.0) -> Path:
     """Circle ``c + r [cos(W t + phase), sin(W t + phase)]`` (paper: r = 0.5, W = 0.01)."""
-    r, w = _finite('radius', radius), _finite('rate', rate)
-    cx, cy, ph = _finite('center_x', center_x), _finite('center_y', center_y), \
-        _finite('phase', phase)
-    if r <= 0:
-        raise PathError(f'path parameter radius must be > 0 m, got {r}')
+    r, w, cx, cy, ph = _path_params(radius, rate, center_x, center_y, phase)
 
     def fn(t: float):
         a = w * t + ph
@@ -81,11 +85,7 @@ def circle(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
 def figure_eight(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
                  center_y: float = 0.0, phase: float = 0.0) -> Path:
     """Lemniscate of Gerono: ``x = c_x + r sin(a)``, ``y = c_y + (r/2) sin(2a)``, ``a = W t + phase``."""
-    r, w = _finite('radius', radius), _finite('rate', rate)
-    cx, cy, ph = _finite('center_x', center_x), _finite('center_y', center_y), \
-        _finite('phase', phase)
-    if r <= 0:
-        raise PathError(f'path parameter radius must be > 0 m, got {r}')
+    r, w, cx, cy, ph = _path_params(radius, rate, center_x, center_y, phase)
 
     def fn(t: float):
         a = w * t + ph

@@ -1,0 +1,39 @@
+"""One bisection for every "largest value that is still certified/feasible" search."""
+from __future__ import annotations
+
+from typing import Callable, TypeVar
+
+__all__ = ['largest_feasible']
+
+T = TypeVar('T')
+
+
+def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *,
+                     rel_tol: float = 1e-3, hi_limit: float = 1e6,
+                     lo_result: T | None = None) -> tuple[float, T | None, int]:
+    """Largest ``x`` in ``[lo, hi_limit]`` with ``trial(x)`` not None, by doubling then bisection.
+
+    ``trial`` must be monotone (feasible at ``x`` implies feasible below ``x``) and
+    ``lo`` known feasible (its result ``lo_result``).  ``hi`` doubles while feasible,
+    up to ``hi_limit`` (returned as is if feasible there), then the bracket is
+    bisected until ``hi - lo <= rel_tol * hi``.  Returns ``(x, trial(x), trials)``.
+    """
+    best, trials = lo_result, 0
+    while True:
+        r = trial(hi)
+        trials += 1
+        if r is None:
+            break
+        lo, best = hi, r
+        if hi >= hi_limit:
+            return lo, best, trials
+        hi = min(2.0 * hi, hi_limit)
+    while hi - lo > rel_tol * max(abs(hi), 1e-12):
+        mid = 0.5 * (lo + hi)
+        r = trial(mid)
+        trials += 1
+        if r is None:
+            hi = mid
+        else:
+            lo, best = mid, r
+    return lo, best, trials
