@@ -98,11 +98,16 @@ def test_stamps_backwards_and_duplicates_are_ignored(node):
     for k in (base, base + 1):
         feed(node, *messages(k, 0.5, 0.0, 1.57, 0.05, ref))
     assert len(node.sent) == 2
+    j0 = node.jumps
     before = node.rejected
     feed(node, *messages(base + 1, 0.5, 0.0, 1.57, 0.05, ref))      # duplicate: ignored silently
     assert len(node.sent) == 2 and node.rejected == before
     feed(node, *messages(base - 5, 0.5, 0.0, 1.57, 0.05, ref))      # backwards: rejected
     assert len(node.sent) == 2 and node.rejected == before + 1
+    node.tracker.v = 0.9                                              # a stale compensator
+    feed(node, *messages(base + 500, 0.5, 0.0, 1.57, 0.05, ref))    # 4.99 s jump ahead
+    assert node.jumps == j0 + 1 and len(node.sent) == 3
+    assert node.tracker.v == pytest.approx(0.05, abs=0.05)           # re-initialised from odom
 
 
 def test_core_tracker_never_returns_non_finite():

@@ -12,7 +12,8 @@ older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
 
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
-go backwards) are ignored and counted in ``rejected``.
+go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
+ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``).
 """
 from __future__ import annotations
 
@@ -53,9 +54,11 @@ PARAMS = [
     Param('tau', 0.2, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
     Param('input_timeout', 0.5, 'realtime: stop if pose or reference is older than this (s)',
           low=1e-6, high=1e6),
+    Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
+          'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
 ]
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
-           'input_timeout'}
+           'input_timeout', 'max_stamp_jump'}
 
 
 def _mat(values, rows: int, cols: int, name: str) -> np.ndarray:
@@ -123,6 +126,7 @@ class TrackerNode(Node):
         self.last_stamp = -1
         self.last_odom_stamp = -1
         self.rejected = 0
+        self.jumps = 0
         self.commands = 0
         self.finished = False
         self._cmd = Twist()
@@ -173,6 +177,11 @@ class TrackerNode(Node):
             if s < self.last_odom_stamp:
                 self._reject(f'odom stamp going backwards ({s} < {self.last_odom_stamp} ns)')
             return                         # repeat of the current step: already handled
+        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > get(self, 'max_stamp_jump') * 1e9:
+            self.jumps += 1
+            self.get_logger().warn(f'odom stamp jumped {(s - self.last_odom_stamp) * 1e-9:.3f} s '
+                                   'ahead: re-initialising the compensator from odom')
+            self.tracker.reset()
         self._odom = msg
         if self.mode == 'realtime':
             self._last_odom_wall = self.get_clock().now().nanoseconds
