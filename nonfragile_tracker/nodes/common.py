@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
@@ -146,12 +147,33 @@ def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
         executor.spin_once(timeout_sec=period)
 
 
+def _on_signal(signum, frame) -> None:            # noqa: ARG001
+    """Python-level SIGINT/SIGTERM handler: no exception in the middle of a callback.
+
+    Installed *before* ``rclpy.init`` so rclpy's own handler (which shuts the
+    context down and wakes the executor) chains to it; the node is then closed
+    in :func:`run`'s ``finally`` between callbacks (the recorder closes its bag).
+    """
+    rclpy.try_shutdown()
+
+
 def run(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Node main: init, build, spin until the node is finished, Jazzy-style shutdown.
 
+    SIGINT and SIGTERM end the spin cleanly (``close()`` and ``destroy_node()`` run).
     Returns the process exit code: 0, the node's ``exit_code`` attribute if set,
-    or 2 when the node refuses to start (:class:`StartupError` or ``ValueError``).
+    or 2 when the node refuses to start (:class:`StartupError`, ``ValueError``, a
+    bad parameter or arguments rcl cannot parse).
     """
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _run(factory, args)
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _run(factory: Callable[[], Node], args: list[str] | None) -> int:
     try:
         rclpy.init(args=args)
     except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments/params files so

@@ -37,7 +37,6 @@ recorded topic, by logical name) or ``recorder.finished``, and call
 from __future__ import annotations
 
 import importlib
-import signal
 import struct
 import sys
 import time
@@ -46,7 +45,6 @@ from typing import Any
 
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -57,7 +55,7 @@ from std_msgs.msg import UInt64
 from .. import topics
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
                           default_qos, make_qos, new_run_dir)
-from .common import Param, StartupError, declare, get, make_executor, spin_until
+from .common import Param, StartupError, declare, get, run
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -361,44 +359,9 @@ class Recorder(Node):
         super().destroy_node()
 
 
-_stop_signal: list[int] = []
-
-
-def _on_signal(signum, frame) -> None:            # noqa: ARG001
-    """Python-level SIGINT/SIGTERM handler: no exception in the middle of a write.
-
-    It is installed *before* ``rclpy.init`` so rclpy's own handler (which
-    shuts the context down and wakes the executor) chains to it; the bag is
-    then closed in ``main``'s ``finally`` between callbacks.
-    """
-    _stop_signal.append(signum)
-    rclpy.try_shutdown()
-
-
 def main(args: list[str] | None = None) -> int:
     """Console entry point; returns the exit code (0 also after SIGINT/SIGTERM)."""
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = Recorder()
-        except (StartupError, ValueError) as exc:
-            print(f'[FATAL] {exc}', file=sys.stderr)
-            return 2
-        executor = make_executor()
-        executor.add_node(node)
-        spin_until(executor, lambda: node.finished)
-        return node.exit_code
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return node.exit_code if node is not None else 0
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for s, h in previous.items():
-            signal.signal(s, h)
+    return run(Recorder, args)
 
 
 if __name__ == '__main__':
