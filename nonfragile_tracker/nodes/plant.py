@@ -122,7 +122,8 @@ class PlantNode(Node):
         self._odom.twist.twist.angular.z = p.w
         self._pose.pose = self._odom.pose.pose
         self.pub_odom.publish(self._odom)
-        self.pub_pose.publish(self._pose)
+        if self.pub_pose.get_subscription_count():       # nobody listening: skip the copy
+            self.pub_pose.publish(self._pose)
         self.last_publish = time.monotonic()
 
     # ------------------------------------------------------------------ lockstep
