@@ -86,3 +86,14 @@ def test_design_and_delay_dependent(tmp_path, capsys):
     assert main(['delay-dependent', HARDER, '--delay', '0.2', '-o', str(out2)]) == 0
     assert 'certified for every constant delay in (0, 0.2]' in capsys.readouterr().out
     assert np.linalg.norm(read_gain_file(out2), 2) <= 3.0 * (1 + 1e-6)
+
+
+def test_missing_solver_exits_4_without_a_gain_file(tmp_path, capsys):
+    text = (CONFIG / 'paper_problem.yaml').read_text().replace(
+        'options:\n', 'options:\n  solver: MOSEK\n')
+    prob = tmp_path / 'p.yaml'
+    prob.write_text(text)
+    out = tmp_path / 'g.yaml'
+    assert main(['synthesize', str(prob), '-o', str(out)]) == 4
+    err = capsys.readouterr().err
+    assert 'MOSEK' in err and 'installed' in err and not out.exists()
