@@ -7,7 +7,9 @@ numbers within ``atol + rtol * |expected|``, strings exactly.  Header stamps are
 message fields and are compared; the bag's receive timestamps are not by default
 (``receive_time=True`` compares them): they are the recorder's sim-time clock at
 reception, which follows ``/clock`` asynchronously and may differ by a few steps
-between two identical runs.
+between two identical runs.  A stamped message repeating a header stamp already
+seen on its topic (a lockstep step republished while the plant waited) is dropped
+before comparing, as :func:`reader.read_bag` does.
 :func:`format_differences` prints a readable diff: topic, message index,
 field, expected vs got.
 """
@@ -49,6 +51,7 @@ class Comparison:
     messages: dict[str, int]
     differences: list[Difference] = field(default_factory=list)
     max_abs_error: dict[str, float] = field(default_factory=dict)
+    repeats: dict[str, int] = field(default_factory=dict)   # repeated stamps dropped (new bag)
 
     @property
     def equal(self) -> bool:
@@ -74,16 +77,28 @@ def flatten(msg: Any, prefix: str = '') -> Iterator[tuple[str, Any]]:
         yield from flatten(getattr(msg, name), f'{prefix}.{name}' if prefix else name)
 
 
-def _messages(path, typestore) -> dict[str, list[tuple[int, Any]]]:
+def _messages(path, typestore) -> tuple[dict[str, list[tuple[int, Any]]], dict[str, int]]:
+    """Messages per topic; repeats of a header stamp already seen on the topic (the plant
+    republishes a lockstep step while it waits) are dropped and counted."""
     out: dict[str, list[tuple[int, Any]]] = {}
+    repeats: dict[str, int] = {}
+    seen: dict[str, set] = {}
     reader = open_reader(path)
     try:
         for conn, ts, raw in reader.messages():
             msg = typestore.deserialize_cdr(raw, conn.msgtype)
+            header = getattr(msg, 'header', None)
+            if header is not None:
+                stamp = (header.stamp.sec, header.stamp.nanosec)
+                stamps = seen.setdefault(conn.topic, set())
+                if stamp in stamps:
+                    repeats[conn.topic] = repeats.get(conn.topic, 0) + 1
+                    continue
+                stamps.add(stamp)
             out.setdefault(conn.topic, []).append((ts, msg))
     finally:
         reader.close()
-    return out
+    return out, repeats
 
 
 def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
@@ -91,9 +106,10 @@ def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
                  receive_time: bool = False, max_differences: int = 50) -> Comparison:
     """Compare ``got`` with the golden bag ``expected`` (see module docstring)."""
     ts = jazzy_typestore()
-    exp, new = _messages(expected, ts), _messages(got, ts)
+    (exp, _), (new, repeats) = _messages(expected, ts), _messages(got, ts)
     names = sorted(topics) if topics is not None else sorted(set(exp) | set(new))
-    result = Comparison(topics=names, messages={k: len(v) for k, v in exp.items()})
+    result = Comparison(topics=names, messages={k: len(v) for k, v in exp.items()},
+                        repeats=repeats)
     diffs = result.differences
 
     def add(d: Difference) -> bool:
