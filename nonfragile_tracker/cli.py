@@ -17,10 +17,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-import numpy as np
+# The matrices here are small: BLAS threads only add contention (a 132x132 eigvals took
+# 40x longer with threads on a busy 2-core machine, benchmarks/README.md).  Set before
+# numpy is imported; an explicit OPENBLAS_NUM_THREADS from the caller wins.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+import numpy as np  # noqa: E402
 
 EXIT_BAD_INPUT, EXIT_INFEASIBLE, EXIT_SOLVER, EXIT_RUN = 2, 3, 4, 5
 
