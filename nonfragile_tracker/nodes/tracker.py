@@ -183,6 +183,7 @@ class TrackerNode(Node):
                                    'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
         self._odom = msg
+        self.last_odom_stamp = s
         if self.mode == 'realtime':
             self._last_odom_wall = self.get_clock().now().nanoseconds
         self._try_compute()
@@ -218,13 +219,13 @@ class TrackerNode(Node):
                 return
         pose = pose_from_odom(odom.pose.pose)
         if isinstance(pose, str):
-            self.last_odom_stamp = s
+            self._odom = None
             return self._reject(f'odom: {pose}')
         t_ref = stamp_ns(self._ref[0].header.stamp) * 1e-9
         ref = reference_from_msgs(t_ref, *self._ref)
         if isinstance(ref, str):
             return self._reject(ref)
-        self.last_stamp = self.last_odom_stamp = s
+        self.last_stamp = s
         speed = odom.twist.twist.linear.x
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
                                 measured_speed=speed if math.isfinite(speed) else 0.0)
