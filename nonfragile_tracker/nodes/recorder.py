@@ -47,7 +47,6 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_msgs.msg import UInt64
@@ -55,7 +54,7 @@ from std_msgs.msg import UInt64
 from .. import topics
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
                           default_qos, make_qos, new_run_dir)
-from .common import Param, StartupError, declare, get, run
+from .common import DATA_QOS, LATCHED_QOS, Param, StartupError, declare, get, run
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -84,12 +83,7 @@ PARAMS = [
           low=0.0, high=3600.0, read_only=True),
 ]
 
-_DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-_LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_DATA_QOS, _LATCHED_QOS = DATA_QOS, LATCHED_QOS        # the same profiles as the publishers
 
 
 def import_message(msgtype: str) -> type:
