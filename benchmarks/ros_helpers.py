@@ -56,10 +56,7 @@ def cmd_probe(args) -> int:
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    from nonfragile_tracker.nodes.common import DATA_QOS as qos
     namespaces = [n for n in args.namespaces.split(',')] if args.namespaces else ['']
     pids = [int(p) for p in args.pids.split(',') if p] if args.pids else []
     rclpy.init()
@@ -138,10 +135,7 @@ def cmd_probe(args) -> int:
 def cmd_publish(args) -> int:
     import rclpy
     from nav_msgs.msg import Odometry
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    from nonfragile_tracker.nodes.common import DATA_QOS as qos
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
     pub = node.create_publisher(Odometry, args.topic, qos)
@@ -190,10 +184,7 @@ def cmd_echo(args) -> int:
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from rclpy.experimental import EventsExecutor
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    from nonfragile_tracker.nodes.common import DATA_QOS as qos
     rclpy.init()
     node = rclpy.create_node('bench_echo')
     pub = node.create_publisher(Twist, 'cmd_vel', qos)

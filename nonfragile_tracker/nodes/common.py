@@ -17,7 +17,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .. import topics
-from ..control.loop import quaternion_to_yaw, yaw_to_quaternion
+import numpy as np
+
+from ..control.loop import LoopConfigError, quaternion_to_yaw, yaw_to_quaternion
 from ..control.reference import RefSample
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
@@ -32,6 +34,8 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 MODES = ('lockstep', 'realtime')
+#: The paper's delay matrix, 16 doubles row-major on xi = [x, vx, y, vy] (default of the nodes).
+PAPER_A_TAU = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
 class StartupError(RuntimeError):
@@ -73,6 +77,18 @@ def declare(node: Node, params: Iterable[Param]) -> None:
                 from_value=float(p.low), to_value=float(p.high if p.high is not None else 1e300),
                 step=0.0)]
         node.declare_parameter(p.name, p.default, desc)
+
+
+def matrix_param(values, rows: int, cols: int, name: str) -> np.ndarray:
+    """A flat row-major double-array parameter as a finite ``rows x cols`` matrix."""
+    vals = list(values)
+    if len(vals) != rows * cols:
+        raise LoopConfigError(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
+                              f'got {len(vals)}')
+    arr = np.array(vals, dtype=float).reshape(rows, cols)
+    if not np.all(np.isfinite(arr)):
+        raise LoopConfigError(f'{name} has non-finite entries: {vals}')
+    return arr
 
 
 def get(node: Node, name: str) -> Any:

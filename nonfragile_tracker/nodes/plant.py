@@ -27,8 +27,8 @@ from std_msgs.msg import UInt64
 
 from .. import topics
 from ..control.loop import LoopConfigError, PlantConfig, UnicyclePlant, step_time_ns
-from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare, fill_pose,
-                     get, ns_to_stamp, run)
+from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
+                     declare, fill_pose, get, matrix_param, ns_to_stamp, run)
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
@@ -36,9 +36,8 @@ PARAMS = [
     Param('dt', 0.01, 'integration step (s)', low=1e-6, high=10.0, read_only=True),
     Param('tau', 0.2, 'state delay (s); rounded to a whole number of steps', low=0.0,
           high=1e3, read_only=True),
-    Param('A_tau', [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0,
-                    0.0], 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles row-major',
-          read_only=True),
+    Param('A_tau', PAPER_A_TAU, 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles '
+          'row-major', read_only=True),
     Param('initial_pose', [0.7, 0.1, math.pi / 2], 'initial [x (m), y (m), yaw (rad)] in odom',
           read_only=True),
     Param('initial_speed', 0.05, 'speed in force before the first command (m/s)',
@@ -67,12 +66,9 @@ class PlantNode(Node):
         pose0 = list(get(self, 'initial_pose'))
         if len(pose0) != 3:
             raise StartupError(f'plant: initial_pose needs [x, y, yaw], got {pose0}')
-        a_tau = list(get(self, 'A_tau'))
-        if len(a_tau) != 16:
-            raise StartupError(f'plant: A_tau needs 16 doubles (4x4 row-major), got {len(a_tau)}')
         try:
             cfg = PlantConfig(dt=get(self, 'dt'), tau=get(self, 'tau'),
-                              A_tau=[a_tau[i:i + 4] for i in range(0, 16, 4)],
+                              A_tau=matrix_param(get(self, 'A_tau'), 4, 4, 'A_tau'),
                               x0=pose0[0], y0=pose0[1], th0=pose0[2],
                               v0=get(self, 'initial_speed'))
         except LoopConfigError as exc:

@@ -29,8 +29,8 @@ from rclpy.parameter import Parameter
 from .. import topics
 from ..control.gains import GainFileError, gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
-from .common import (DATA_QOS, Param, StartupError, check_mode, declare, get, pose_from_odom,
-                     reference_from_msgs, run, stamp_ns)
+from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
+                     matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
 
 PAPER_F = [0.5] * 8
 PARAMS = [
@@ -49,8 +49,8 @@ PARAMS = [
           'the applied gain is K + E Delta F'),
     Param('delay_compensation', False, 'follow the delay-consistent reference (zero '
           'steady-state error); needs A_tau and tau', read_only=True),
-    Param('A_tau', [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0,
-                    0.0], 'delay matrix for delay_compensation (16 doubles)', read_only=True),
+    Param('A_tau', PAPER_A_TAU, 'delay matrix for delay_compensation (16 doubles)',
+          read_only=True),
     Param('tau', 0.2, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
     Param('input_timeout', 0.5, 'realtime: stop if pose or reference is older than this (s)',
           low=1e-6, high=1e6),
@@ -61,28 +61,17 @@ RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 
            'input_timeout', 'max_stamp_jump'}
 
 
-def _mat(values, rows: int, cols: int, name: str) -> np.ndarray:
-    vals = list(values)
-    if len(vals) != rows * cols:
-        raise LoopConfigError(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
-                              f'got {len(vals)}')
-    arr = np.array(vals, dtype=float).reshape(rows, cols)
-    if not np.all(np.isfinite(arr)):
-        raise LoopConfigError(f'{name} has non-finite entries: {vals}')
-    return arr
-
-
 def tracker_config(values: dict) -> TrackerConfig:
     """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
     try:
         K = gain_from_parameters(values['K'], values['K_shape'])
     except GainFileError as exc:
         raise LoopConfigError(str(exc)) from None
-    E = _mat(values['E'], 2, 2, 'E')
-    F = _mat(values['F'], 2, 4, 'F')
-    D = _mat(values['Delta'], 2, 2, 'Delta')
+    E = matrix_param(values['E'], 2, 2, 'E')
+    F = matrix_param(values['F'], 2, 4, 'F')
+    D = matrix_param(values['Delta'], 2, 2, 'Delta')
     pert = E @ D @ F
-    a_tau = _mat(values['A_tau'], 4, 4, 'A_tau')
+    a_tau = matrix_param(values['A_tau'], 4, 4, 'A_tau')
     return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
                          max_angular_speed=values['max_angular_speed'],
                          min_speed=values['min_speed'],
@@ -177,9 +166,10 @@ class TrackerNode(Node):
             if s < self.last_odom_stamp:
                 self._reject(f'odom stamp going backwards ({s} < {self.last_odom_stamp} ns)')
             return                         # repeat of the current step: already handled
-        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > get(self, 'max_stamp_jump') * 1e9:
+        jump = s - self.last_odom_stamp
+        if self.last_odom_stamp >= 0 and jump > get(self, 'max_stamp_jump') * 1e9:
             self.jumps += 1
-            self.get_logger().warn(f'odom stamp jumped {(s - self.last_odom_stamp) * 1e-9:.3f} s '
+            self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
         self._odom = msg
