@@ -28,7 +28,7 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-EXIT_BAD_INPUT, EXIT_INFEASIBLE, EXIT_SOLVER, EXIT_RUN = 2, 3, 4, 5
+from .errors import EXIT_BAD_INPUT, EXIT_INFEASIBLE, EXIT_RUN, EXIT_SOLVER  # noqa: E402,F401
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 
@@ -249,26 +249,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .bag.writer import BagError
-    from .control.gains import GainFileError
-    from .control.lmi import CertificateError, InfeasibleError, SolverFailure
-    from .control.loop import LoopConfigError
-    from .control.problem import ProblemError
+    from .errors import NonfragileError, exit_code
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ProblemError, GainFileError, LoopConfigError, BagError, FileExistsError,
-            FileNotFoundError) as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except InfeasibleError as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return EXIT_INFEASIBLE
-    except (SolverFailure, CertificateError) as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return EXIT_SOLVER
-    except KeyboardInterrupt:
-        return 130
+    except (NonfragileError, OSError, KeyboardInterrupt) as exc:
+        if not isinstance(exc, KeyboardInterrupt):
+            print(f'error: {exc}', file=sys.stderr)
+        return exit_code(exc)
 
 
 if __name__ == '__main__':

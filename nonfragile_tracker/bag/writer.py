@@ -34,6 +34,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from .. import topics
+from ..errors import InputError
 
 __all__ = ['BagError', 'BagExistsError', 'InvalidRunNameError', 'BagWriter', 'make_qos',
            'default_qos', 'qos_to_dicts', 'new_run_dir', 'jazzy_typestore', 'BAG_VERSION',
@@ -57,7 +58,7 @@ ConnectionSpec = Union[str, tuple[str, Sequence[QosSpec]]]
 # ---------------------------------------------------------------------------------------------
 # Errors (shared by the whole bag package)
 
-class BagError(Exception):
+class BagError(InputError):
     """A bag cannot be written, read, repaired or reported; the message says what to do."""
 
 

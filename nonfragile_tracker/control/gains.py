@@ -19,6 +19,8 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
+from ..errors import InputError
+
 from .loop import LoopConfigError, validate_gain
 
 __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
@@ -27,7 +29,7 @@ __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_ga
 TRACKER_NODE = 'tracker'
 
 
-class GainFileError(ValueError):
+class GainFileError(InputError):
     """A gain file or gain parameter is malformed; the message says which and why."""
 
 

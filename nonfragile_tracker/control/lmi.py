@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .problem import Problem
 
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
@@ -51,22 +52,6 @@ __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', '
 
 DEFAULT_MARGIN = 1e-6
 DEFAULT_SOLVER = 'CLARABEL'
-
-
-class LmiError(RuntimeError):
-    """Base class of LMI failures."""
-
-
-class InfeasibleError(LmiError):
-    """The LMI has no strictly feasible point with the requested margin."""
-
-
-class SolverFailure(LmiError):
-    """The solver is missing or returned no usable status."""
-
-
-class CertificateError(LmiError):
-    """A solver result failed the independent numpy verification."""
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..errors import InputError
 from .model import xi_from_state
 from .reference import RefSample
 
@@ -28,7 +29,7 @@ __all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', '
            'quaternion_to_yaw', 'validate_gain']
 
 
-class LoopConfigError(ValueError):
+class LoopConfigError(InputError):
     """A plant or tracker setting is invalid; the message names the setting."""
 
 

@@ -18,13 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = [
     'SingularSpeedError', 'LinearizedModel', 'double_integrator_model',
     'xi_from_state', 'u_from_inputs', 'inputs_from_u',
 ]
 
 
-class SingularSpeedError(ValueError):
+class SingularSpeedError(InputError):
     """Raised when the linearizing map is evaluated at (or too near) ``v = 0``."""
 
 

@@ -24,47 +24,21 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from ..errors import InputError
+from . import validate
+
 __all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from_mapping',
            'is_stabilizable']
 
 
-class ProblemError(ValueError):
+class ProblemError(InputError):
     """A synthesis problem (or a matrix in it) is malformed; the message names the field."""
 
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None = None
               ) -> np.ndarray:
-    """Convert ``value`` (nested lists / array / scalar) to a finite float 2-D array.
-
-    ``shape`` entries that are ``None`` are free.  Raises :class:`ProblemError`
-    naming ``name`` for non-numeric entries, ragged rows, NaN/inf or a wrong shape.
-    """
-    if isinstance(value, (str, bytes)) or value is None:
-        raise ProblemError(f'{name}: expected a matrix (list of rows of numbers), got {value!r}')
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(
-            f'{name}: expected a matrix of numbers, got {value!r} ({exc}); '
-            'write it as a list of rows, e.g. [[1.0, 0.0], [0.0, 1.0]]') from None
-    if arr.ndim == 0:
-        arr = arr.reshape(1, 1)
-    elif arr.ndim == 1:
-        arr = arr.reshape(1, -1)
-    if arr.ndim != 2:
-        raise ProblemError(f'{name}: expected a 2-D matrix, got an array with {arr.ndim} dimensions')
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise ProblemError(f'{name}: entry [{i}][{j}] is {arr[i, j]}; all entries must be finite')
-    if shape is not None:
-        for axis, (want, got) in enumerate(zip(shape, arr.shape)):
-            if want is not None and want != got:
-                want_txt = ', '.join('*' if s is None else str(s) for s in shape)
-                raise ProblemError(
-                    f'{name}: expected shape ({want_txt}), '
-                    f'got {arr.shape} (axis {axis} has {got}, needs {want})')
-    return arr
+    """:func:`control.validate.as_matrix` raising :class:`ProblemError` (problem files)."""
+    return validate.as_matrix(value, name, shape, error=ProblemError)
 
 
 def is_stabilizable(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> tuple[bool, list[complex]]:

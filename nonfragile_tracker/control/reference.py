@@ -11,10 +11,12 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, NamedTuple
 
+from ..errors import InputError
+
 __all__ = ['RefSample', 'Path', 'circle', 'figure_eight', 'make_path', 'PATHS', 'PathError']
 
 
-class PathError(ValueError):
+class PathError(InputError):
     """Unknown path name or invalid path parameter."""
 
 

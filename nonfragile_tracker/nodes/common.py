@@ -19,6 +19,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from .. import topics
 import numpy as np
 
+from ..errors import InputError
 from ..control.loop import LoopConfigError, quaternion_to_yaw, yaw_to_quaternion
 from ..control.reference import RefSample
 
@@ -38,7 +39,7 @@ MODES = ('lockstep', 'realtime')
 PAPER_A_TAU = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
-class StartupError(RuntimeError):
+class StartupError(InputError):
     """A node cannot start with its parameters; the message says which and why."""
 
 
