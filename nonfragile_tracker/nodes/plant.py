@@ -16,19 +16,19 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
 from .. import topics
-from ..control.loop import LoopConfigError, PlantConfig, UnicyclePlant, step_time_ns
-from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
-                     declare, fill_pose, get, matrix_param, ns_to_stamp, run)
+from ..control.loop import PlantConfig, UnicyclePlant, step_time_ns
+from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, AdapterNode, Param, StartupError,
+                     check_mode, fill_pose, matrix_param, ns_to_stamp, run)
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
@@ -56,32 +56,53 @@ PARAMS = [
 ]
 
 
-class PlantNode(Node):
+@dataclass(frozen=True)
+class PlantSettings:
+    """The plant node's validated parameters (see :data:`PARAMS`)."""
+
+    mode: str
+    plant: PlantConfig
+    final_step: int
+    lockstep_timeout: float
+    startup_timeout: float
+    lockstep_retry: float
+    lockstep_subscribers: int
+    cmd_timeout: float
+
+
+def plant_settings(values: dict) -> PlantSettings:
+    """Validate the plant's parameter values (start-up and runtime sets); InputError if bad."""
+    mode = check_mode(values['mode'])
+    pose0 = list(values['initial_pose'])
+    if len(pose0) != 3:
+        raise StartupError(f'initial_pose needs [x, y, yaw], got {pose0}')
+    cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
+                      A_tau=matrix_param(values['A_tau'], 4, 4, 'A_tau'),
+                      x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'])
+    return PlantSettings(mode=mode, plant=cfg,
+                         final_step=int(round(values['duration'] / cfg.dt)),
+                         lockstep_timeout=values['lockstep_timeout'],
+                         startup_timeout=values['startup_timeout'],
+                         lockstep_retry=values['lockstep_retry'],
+                         lockstep_subscribers=values['lockstep_subscribers'],
+                         cmd_timeout=values['cmd_timeout'])
+
+
+class PlantNode(AdapterNode):
     """ROS adapter around :class:`UnicyclePlant`."""
 
-    def __init__(self, **kwargs):
-        super().__init__('plant', **kwargs)
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'plant')
-        pose0 = list(get(self, 'initial_pose'))
-        if len(pose0) != 3:
-            raise StartupError(f'plant: initial_pose needs [x, y, yaw], got {pose0}')
-        try:
-            cfg = PlantConfig(dt=get(self, 'dt'), tau=get(self, 'tau'),
-                              A_tau=matrix_param(get(self, 'A_tau'), 4, 4, 'A_tau'),
-                              x0=pose0[0], y0=pose0[1], th0=pose0[2],
-                              v0=get(self, 'initial_speed'))
-        except LoopConfigError as exc:
-            raise StartupError(f'plant: {exc}') from None
+    def __init__(self, node_name: str = 'plant', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = self.bind_parameters(PARAMS, plant_settings)
+        self.mode = self.config.mode
+        cfg = self.config.plant
         if abs(cfg.delay_steps * cfg.dt - cfg.tau) > 1e-9:
             self.get_logger().warn(
                 f'tau = {cfg.tau} s is not a multiple of dt = {cfg.dt} s: using '
                 f'{cfg.delay_steps} steps = {cfg.delay_steps * cfg.dt:.6g} s')
         self.plant = UnicyclePlant(cfg)
         self.dt = cfg.dt
-        self.final_step = int(round(get(self, 'duration') / cfg.dt))
-        self.finished = False
-        self.exit_code = 0
+        self.final_step = self.config.final_step
         self.progress_every = max(1, self.final_step // 10)
 
         self.pub_odom = self.create_publisher(Odometry, topics.ODOM, DATA_QOS)
@@ -125,7 +146,7 @@ class PlantNode(Node):
     # ------------------------------------------------------------------ lockstep
     def _peers_ready(self) -> bool:
         return (self.sub_cmd.get_publisher_count() >= 1
-                and self.pub_odom.get_subscription_count() >= get(self, 'lockstep_subscribers')
+                and self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers
                 and self.pub_clock.get_subscription_count() >= 1)
 
     def _lockstep_watchdog(self) -> None:
@@ -139,17 +160,17 @@ class PlantNode(Node):
                                        f'{self.final_step} steps (dt = {self.dt} s)')
                 self.waiting_since = now
                 self._publish_state(step_time_ns(self.plant.k, self.dt))
-            elif now - self.waiting_since > get(self, 'startup_timeout'):
+            elif now - self.waiting_since > self.config.startup_timeout:
                 self._abort('no tracker/reference discovered', 'startup_timeout')
             return
-        if now - self.waiting_since > get(self, 'lockstep_timeout'):
+        if now - self.waiting_since > self.config.lockstep_timeout:
             self._abort(f'no command for step {self.plant.k}')
-        elif now - self.last_publish > get(self, 'lockstep_retry'):
+        elif now - self.last_publish > self.config.lockstep_retry:
             self._publish_state(step_time_ns(self.plant.k, self.dt))
 
     def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
         self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
-                                f'{get(self, limit)} s ({limit}); is the tracker running '
+                                f'{getattr(self.config, limit)} s ({limit}); is the tracker running '
                                 'on the same ROS_DOMAIN_ID and namespace?')
         self.exit_code = 5
         self._finish()
@@ -157,8 +178,12 @@ class PlantNode(Node):
     def _finish(self) -> None:
         if self.mode == 'lockstep':
             self.pub_done.publish(UInt64(data=self.plant.k))
+        self.finished = True          # run() stops spinning, then drain() waits for the acks
+
+    def drain(self) -> None:
+        """After the run: give ``run_done`` up to 2 s to reach its subscribers."""
+        if self.mode == 'lockstep':
             self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
-        self.finished = True
 
     def _on_cmd(self, msg: Twist) -> None:
         v, w = msg.linear.x, msg.angular.z
@@ -187,7 +212,7 @@ class PlantNode(Node):
     # ------------------------------------------------------------------ real time
     def _realtime_step(self) -> None:
         stale = self.last_cmd_time is None or \
-            time.monotonic() - self.last_cmd_time > get(self, 'cmd_timeout')
+            time.monotonic() - self.last_cmd_time > self.config.cmd_timeout
         v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
         self._publish_state(self.get_clock().now().nanoseconds)
         self.plant.step(v, w)

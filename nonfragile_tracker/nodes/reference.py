@@ -10,14 +10,15 @@ clock's time.  Real time: a wall timer at ``publish_rate``.  The path is
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from .. import topics
-from ..control.reference import PathError, make_path
-from .common import (DATA_QOS, Param, StartupError, check_mode, declare, fill_reference, get,
+from ..control.reference import Path, make_path
+from .common import (DATA_QOS, AdapterNode, Param, StartupError, check_mode, fill_reference,
                      ns_to_stamp, run, stamp_ns)
 
 PARAMS = [
@@ -33,36 +34,47 @@ PARAMS = [
 ]
 
 
-class ReferenceNode(Node):
+@dataclass(frozen=True)
+class ReferenceSettings:
+    """The reference node's validated parameters (see :data:`PARAMS`)."""
+
+    mode: str
+    path: Path
+    publish_rate: float
+
+
+def reference_settings(values: dict) -> ReferenceSettings:
+    """Validate the reference's parameter values; InputError (e.g. PathError) if bad."""
+    mode = check_mode(values['mode'])
+    center = list(values['center'])
+    if len(center) != 2:
+        raise StartupError(f'center needs [x, y], got {center}')
+    path = make_path(values['path'], radius=values['radius'], rate=values['rate'],
+                     center_x=center[0], center_y=center[1], phase=values['phase'])
+    return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'])
+
+
+class ReferenceNode(AdapterNode):
     """ROS adapter around :class:`control.reference.Path`."""
 
-    def __init__(self, **kwargs):
-        super().__init__('reference', **kwargs)
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'reference')
-        center = list(get(self, 'center'))
-        if len(center) != 2:
-            raise StartupError(f'reference: center needs [x, y], got {center}')
-        try:
-            self.path = make_path(get(self, 'path'), radius=get(self, 'radius'),
-                                  rate=get(self, 'rate'), center_x=center[0],
-                                  center_y=center[1], phase=get(self, 'phase'))
-        except PathError as exc:
-            raise StartupError(f'reference: {exc}') from None
+    def __init__(self, node_name: str = 'reference', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = self.bind_parameters(PARAMS, reference_settings)
+        self.mode = self.config.mode
+        self.path = self.config.path
         self.pub_pose = self.create_publisher(PoseStamped, topics.REF_POSE, DATA_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, topics.REF_TWIST, DATA_QOS)
         self.pub_accel = self.create_publisher(AccelStamped, topics.REF_ACCEL, DATA_QOS)
         self._msgs = (PoseStamped(), TwistStamped(), AccelStamped())
         for m in self._msgs:
             m.header.frame_id = topics.ODOM_FRAME
-        self.finished = False
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
             self.sub_clock = self.create_subscription(Clock, topics.CLOCK, self._on_clock,
                                                       DATA_QOS)
         else:
             self.t0_ns = self.get_clock().now().nanoseconds   # path time 0 = node start
-            self.timer = self.create_timer(1.0 / get(self, 'publish_rate'), self._on_timer)
+            self.timer = self.create_timer(1.0 / self.config.publish_rate, self._on_timer)
 
     def publish_sample(self, t_ns: int, t: float) -> None:
         """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``."""

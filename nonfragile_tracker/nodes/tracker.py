@@ -18,22 +18,24 @@ ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``)
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
+from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
 from .. import topics
 from ..control.gains import GainFileError, gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
-from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
+from .common import (DATA_QOS, PAPER_A_TAU, AdapterNode, Param, StartupError, check_mode,
                      matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
 
 PAPER_F = [0.5] * 8
 PARAMS = [
+    Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
+          '`nonfragile_tracker synthesize`', type=ParameterType.PARAMETER_DOUBLE_ARRAY),
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
           read_only=True),
     Param('K_shape', [2, 4], 'shape [rows, cols] of K', read_only=True),
@@ -57,12 +59,23 @@ PARAMS = [
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
 ]
-RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
-           'input_timeout', 'max_stamp_jump'}
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """The tracker node's validated parameters (see :data:`PARAMS`)."""
+
+    mode: str
+    tracker: TrackerConfig
+    input_timeout: float
+    max_stamp_jump: float
 
 
 def tracker_config(values: dict) -> TrackerConfig:
     """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
+    if values['K'] is None:
+        raise StartupError('parameter K is not set; pass a gain file, e.g. '
+                           '--ros-args --params-file config/tracker_gains.yaml')
     try:
         K = gain_from_parameters(values['K'], values['K_shape'])
     except GainFileError as exc:
@@ -80,29 +93,21 @@ def tracker_config(values: dict) -> TrackerConfig:
                          tau=values['tau'])
 
 
-class TrackerNode(Node):
+def tracker_settings(values: dict) -> TrackerSettings:
+    """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad."""
+    return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
+                           input_timeout=values['input_timeout'],
+                           max_stamp_jump=values['max_stamp_jump'])
+
+
+class TrackerNode(AdapterNode):
     """ROS adapter around :class:`control.loop.Tracker`."""
 
-    def __init__(self, **kwargs):
-        super().__init__('tracker', **kwargs)
-        from rcl_interfaces.msg import ParameterDescriptor
-        self.declare_parameter('K', Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
-            description='gain K, row-major doubles (see K_shape); from a gain file written '
-                        'by `nonfragile_tracker synthesize`'))
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'tracker')
-        try:
-            k_value = self.get_parameter('K').value
-        except Exception:  # noqa: BLE001 - ParameterUninitializedException
-            k_value = None
-        if k_value is None:
-            raise StartupError('tracker: parameter K is not set; pass a gain file, e.g. '
-                               '--ros-args --params-file config/tracker_gains.yaml')
-        try:
-            self.tracker = Tracker(tracker_config(self._values()))
-        except LoopConfigError as exc:
-            raise StartupError(f'tracker: {exc}') from None
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+    def __init__(self, node_name: str = 'tracker', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = self.bind_parameters(PARAMS, tracker_settings)
+        self.mode = self.config.mode
+        self.tracker = Tracker(self.config.tracker)
         self.pub_cmd = self.create_publisher(Twist, topics.CMD_VEL, DATA_QOS)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
@@ -117,39 +122,15 @@ class TrackerNode(Node):
         self.rejected = 0
         self.jumps = 0
         self.commands = 0
-        self.finished = False
         self._cmd = Twist()
         self._stopped = False
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
 
-    # ------------------------------------------------------------------ parameters
-    def _values(self, overrides: dict | None = None) -> dict:
-        names = ['K', 'K_shape'] + [p.name for p in PARAMS]
-        vals = {n: self.get_parameter(n).value for n in names}
-        vals.update(overrides or {})
-        return vals
-
-    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {p.name: p.value for p in params if p.name in RUNTIME}
-        if not changes:
-            return SetParametersResult(successful=True)
-        for p in params:
-            if p.name in ('K', 'E', 'F', 'Delta') and p.type_ != Parameter.Type.DOUBLE_ARRAY:
-                reason = (f'{p.name} must be a DOUBLE_ARRAY (write 1.0, not 1), got '
-                          f'{p.type_.name}; keeping the old value')
-                self.get_logger().error(f'rejected parameter set: {reason}')
-                return SetParametersResult(successful=False, reason=reason)
-        try:
-            cfg = tracker_config(self._values(changes))
-        except LoopConfigError as exc:
-            reason = f'{exc}; keeping the old value'
-            self.get_logger().error(f'rejected parameter set: {reason}')
-            return SetParametersResult(successful=False, reason=reason)
-        self.tracker.config = cfg
-        self.get_logger().info(f'accepted parameter set: {sorted(changes)}')
-        return SetParametersResult(successful=True)
+    def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
+        """An accepted runtime set (post-set callback): the law uses the new gains/limits."""
+        self.tracker.config = new.tracker
 
     # ------------------------------------------------------------------ inputs
     def _reject(self, what: str) -> None:
@@ -167,7 +148,7 @@ class TrackerNode(Node):
                 self._reject(f'odom stamp going backwards ({s} < {self.last_odom_stamp} ns)')
             return                         # repeat of the current step: already handled
         jump = s - self.last_odom_stamp
-        if self.last_odom_stamp >= 0 and jump > get(self, 'max_stamp_jump') * 1e9:
+        if self.last_odom_stamp >= 0 and jump > self.config.max_stamp_jump * 1e9:
             self.jumps += 1
             self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
@@ -234,14 +215,14 @@ class TrackerNode(Node):
         if self._last_odom_wall is None or self._last_ref_wall is None:
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
-        limit = get(self, 'input_timeout') * 1e9
+        limit = self.config.input_timeout * 1e9
         stale = [name for name, t in (('odom', self._last_odom_wall),
                                       ('reference', self._last_ref_wall))
                  if now - t > limit]
         if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
-                                       f'{get(self, "input_timeout")} s: publishing stop')
+                                       f'{self.config.input_timeout} s: publishing stop')
                 self._stopped = True
                 self.tracker.reset()
             self._publish(0.0, 0.0)
