@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG, ROOT, unique_domain_id
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag
 from nonfragile_tracker.runner import scenario_parameters, write_parameter_file
 
@@ -189,3 +189,26 @@ def test_sigkill_recorder_mid_run_then_repair(tmp_path, ros_env):
     data = read_bag(repaired)
     assert data.counts['/odom'] > 10 and data.counts['/cmd_vel'] > 10, data.counts
     assert mcap_is_complete(next(repaired.glob('*.mcap')))
+
+
+@pytest.mark.ros
+def test_callback_running_into_a_shutdown_ends_quietly():
+    """rclpy's signal thread may shut the context down while a callback publishes: the
+    node's guarded callbacks end quietly (no exception out of the executor)."""
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.impl.implementation_singleton import rclpy_implementation as impl
+
+    from nonfragile_tracker.nodes.common import overrides
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=unique_domain_id("quietly"))
+    node = ReferenceNode(context=ctx, parameter_overrides=overrides(mode='realtime'))
+    try:
+        node.timer.callback()                       # publishes three messages: fine
+        ctx.try_shutdown()                          # what SIGINT/SIGTERM do, from a thread
+        with pytest.raises(impl.RCLError, match='context is invalid'):
+            node.pub_pose.publish(PoseStamped())    # a bare publish raises now ...
+        assert node.timer.callback() is None        # ... the guarded callback does not
+    finally:
+        node.destroy_node()
