@@ -111,7 +111,8 @@ def test_link_cut_stops_and_resumes(tmp_path, ros_env):
         procs['tracker'] = hosts.start('b', 'tracker', env, logs['tracker'], '-p',
                                        f'input_timeout:={INPUT_TIMEOUT}')
         deadline = time.monotonic() + 60
-        while 'first message on /cmd_vel' not in logs['recorder'].read_text():
+        while not all(f'first message on /{t}' in logs['recorder'].read_text()
+                      for t in ('odom', 'cmd_vel')):
             dead = {n: p.returncode for n, p in procs.items() if p.poll() is not None}
             assert not dead and time.monotonic() < deadline, \
                 (dead, {n: f.read_text()[-800:] for n, f in logs.items()})

@@ -76,6 +76,9 @@ def plant_settings(values: dict) -> PlantSettings:
     pose0 = list(values['initial_pose'])
     if len(pose0) != 3:
         raise StartupError(f'initial_pose needs [x, y, yaw], got {pose0}')
+    if values['lockstep_subscribers'] < 1:
+        raise StartupError(f'lockstep_subscribers must be at least 1, got '
+                           f'{values["lockstep_subscribers"]}')
     cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
                       A_tau=matrix_param(values['A_tau'], 4, 4, 'A_tau'),
                       x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'])
