@@ -175,7 +175,7 @@ def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
 
 
 def overrides(**values: Any) -> list[Parameter]:
-    """Parameter overrides from keyword values: ``XNode(parameter_overrides=overrides(dt=0.02))``."""
+    """Parameter overrides from values: ``XNode(parameter_overrides=overrides(dt=0.02))``."""
     return [Parameter(k, value=v) for k, v in values.items()]
 
 

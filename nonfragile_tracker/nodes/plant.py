@@ -173,8 +173,8 @@ class PlantNode(AdapterNode):
 
     def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
         self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
-                                f'{getattr(self.config, limit)} s ({limit}); is the tracker running '
-                                'on the same ROS_DOMAIN_ID and namespace?')
+                                f'{getattr(self.config, limit)} s ({limit}); is the tracker '
+                                'running on the same ROS_DOMAIN_ID and namespace?')
         self.exit_code = 5
         self._finish()
 
