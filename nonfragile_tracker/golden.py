@@ -49,10 +49,10 @@ def golden_bag(name: str) -> Path:
 
 
 def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
-    from .cli import config_dir
-    from .runner import _merge, scenario_parameters
+    from .resources import config_dir
+    from .runner import merge, scenario_parameters
     ov = {'plant': {'ros__parameters': {'duration': duration}}}
-    _merge(ov, scenario.overrides)
+    merge(ov, scenario.overrides)
     return scenario_parameters(config_dir() / 'paper_scenario.yaml',
                                config_dir() / 'tracker_gains.yaml', ov)
 
@@ -75,7 +75,19 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
     return res.bag
 
 
-def cmd_golden(args) -> int:
+def check_golden(write: bool = False) -> int:
+    """Re-run every scenario, print what changed against its golden bag; 1 if any differs.
+
+    Parameters
+    ----------
+    write : bool
+        Replace the golden bags that changed (the differences are printed first).
+
+    Returns
+    -------
+    int
+        0 when every bag is unchanged (or was written), 1 otherwise.
+    """
     from .bag.compare import compare_bags, format_differences
     changed = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -91,20 +103,14 @@ def cmd_golden(args) -> int:
             else:
                 print(f'{name}: new golden bag')
             changed += 1
-            if args.write:
+            if write:
                 if old.exists():
                     shutil.rmtree(old)
                 old.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copytree(new, old)
                 print(f'  wrote {old}')
-    if changed and not args.write:
+    if changed and not write:
         print('golden bags differ; re-run with --write to replace them', file=sys.stderr)
         return 1
     return 0
 
-
-def add_subcommand(sub) -> None:
-    g = sub.add_parser('golden', help='re-run the golden scenarios, print what changed '
-                       '(--write replaces test/data/golden_*)')
-    g.add_argument('--write', action='store_true', help='replace the golden bags')
-    g.set_defaults(func=cmd_golden)
