@@ -44,13 +44,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Parse ``argv``, run the command, map its errors to an exit code (no traceback)."""
+    """Parse ``argv``, run the command, map its errors to an exit code (no traceback).
+
+    ``NonfragileError`` and ``OSError`` print ``error: <message>`` and exit with
+    :func:`errors.exit_code` (2 for bad input); anything else is a bug: one
+    ``internal error`` line with the exception type, exit 1, and the traceback only
+    when ``NONFRAGILE_DEBUG=1``.  Usage errors exit 2 from argparse.
+    """
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (NonfragileError, OSError, KeyboardInterrupt) as exc:
         if not isinstance(exc, KeyboardInterrupt):
             print(f'error: {exc}', file=sys.stderr)
+        return exit_code(exc)
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback only on request
+        if os.environ.get('NONFRAGILE_DEBUG') == '1':
+            raise
+        print(f'internal error: {type(exc).__name__}: {exc} (this is a bug; re-run with '
+              'NONFRAGILE_DEBUG=1 for the traceback and report it)', file=sys.stderr)
         return exit_code(exc)
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import topics
+from .errors import RunError
 
 #: Tolerance of the regression comparison.  Lockstep runs are deterministic and
 #: bit-identical to the in-process simulation on one machine; 1e-9 leaves room
@@ -70,7 +71,7 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
                             recorder_topics=TOPICS)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None)}
     if bad:
-        raise RuntimeError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
+        raise RunError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
                            f'{run_dir}')
     return res.bag
 

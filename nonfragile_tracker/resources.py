@@ -61,9 +61,8 @@ def load_paper_gains(path: Path | None = None) -> dict[str, np.ndarray]:
     dict of str to numpy.ndarray
         ``{'K_nf': ..., 'K_normal': ...}`` for the shipped file.
     """
-    import yaml
-
     from .control.validate import as_matrix
+    from .files import read_yaml
     path = Path(path) if path is not None else config_dir() / 'paper_gains.yaml'
-    data = yaml.safe_load(path.read_text())
+    data = read_yaml(path, 'gain table', mapping=True)
     return {k: as_matrix(v, f'{path.name}: {k}') for k, v in data.items()}

@@ -20,6 +20,9 @@ from pathlib import Path
 
 import yaml
 
+from .errors import InputError
+from .files import read_yaml
+
 NODES = ('tracker', 'reference', 'plant')
 
 
@@ -64,8 +67,13 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
     for path in (scenario, gains):
         if path is None:
             continue
-        data = yaml.safe_load(Path(path).read_text()) or {}
-        merge(params, {node_key(k): v for k, v in data.items()})
+        data = read_yaml(path, 'ROS 2 parameter file') or {}
+        if not isinstance(data, dict) or not all(
+                isinstance(v, dict) and isinstance(v.get('ros__parameters', {}), dict)
+                for v in data.values()):
+            raise InputError(f'{path}: expected a ROS 2 parameter file '
+                             '({node: {ros__parameters: {name: value}}})')
+        merge(params, {node_key(str(k)): v for k, v in data.items()})
     merge(params, overrides or {})
     return params
 

@@ -5,6 +5,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
+from .argtypes import positive_float
 
 
 def docs_dir(value: str | None) -> Path:
@@ -54,6 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument('--docs', nargs='?', const='', default=None, metavar='DIR',
                    help='also refresh DIR/paper_reproduction.* (default DIR: docs/ of the '
                    'source checkout; required when the package is installed)')
-    r.add_argument('--duration', type=float, default=60.0, help='simulated s of the ROS run')
+    r.add_argument('--duration', type=positive_float, default=60.0,
+                   help='simulated s of the ROS run')
     r.add_argument('--no-ros', action='store_true', help='skip the ROS run (no Fig. 6)')
     r.set_defaults(func=cmd_reproduce)

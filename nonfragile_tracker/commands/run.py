@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from ..errors import EXIT_RUN
+from .argtypes import positive_float
 
 #: ``--delta`` choices: the paper's constant perturbations, row-major 2x2 (as the
 #: tracker's ``Delta`` parameter takes them).
@@ -61,7 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        'bag, report and plots')
     r.add_argument('--scenario', help='node parameter file (default config/paper_scenario.yaml)')
     r.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml)')
-    r.add_argument('--duration', type=float, help='simulated seconds (default: scenario, 60)')
+    r.add_argument('--duration', type=positive_float,
+                   help='simulated seconds (default: scenario, 60)')
     r.add_argument('--delta', choices=sorted(DELTAS),
                    help="inject the paper's gain perturbation (E Delta F) into the tracker")
     r.add_argument('--delay-compensation', action='store_true',

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .argtypes import positive_float
 
 
 def gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
@@ -164,7 +165,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    'without --force)')
     s.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     s.add_argument('--nominal', action='store_true', help='nominal design (no E, F terms)')
-    s.add_argument('--gain-bound', type=float, help='impose ||K||_2 <= this bound '
+    s.add_argument('--gain-bound', type=positive_float, help='impose ||K||_2 <= this bound '
                    '(default: options.gain_bound of the problem, if any)')
     s.add_argument('--json', help='also write the certificate as JSON')
     s.set_defaults(func=cmd_synthesize)
@@ -173,7 +174,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        'scale, smallest norm)')
     d.add_argument('problem')
     d.add_argument('--objective', choices=['decay', 'scale', 'min-norm'], required=True)
-    d.add_argument('--norm', type=float, help='||K||_2 budget (default options.gain_bound)')
+    d.add_argument('--norm', type=positive_float,
+                   help='||K||_2 budget (default options.gain_bound)')
     d.add_argument('--nominal', action='store_true', help='nominal condition (no E, F)')
     d.add_argument('-o', '--output', help='tracker gain file to write')
     d.add_argument('--force', action='store_true')
@@ -183,9 +185,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         'descriptor method) and the largest certified delay')
     dd.add_argument('problem')
     g = dd.add_mutually_exclusive_group()
-    g.add_argument('--delay', type=float, help='delay to certify (default: problem tau)')
+    g.add_argument('--delay', type=positive_float,
+                   help='delay to certify (default: problem tau)')
     g.add_argument('--max-delay', action='store_true', help='bisect for h_max')
-    dd.add_argument('--gain-bound', type=float, help='||K||_2 bound (default options.gain_bound)')
+    dd.add_argument('--gain-bound', type=positive_float,
+                    help='||K||_2 bound (default options.gain_bound)')
     dd.add_argument('--nominal', action='store_true')
     dd.add_argument('-o', '--output', help='tracker gain file to write')
     dd.add_argument('--force', action='store_true')

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from ..files import read_yaml
 
 from .loop import LoopConfigError, validate_gain
 
@@ -79,14 +80,11 @@ def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite:
 def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndarray:
     """Read ``K`` from a tracker parameter file (``node`` or ``/**`` section)."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise GainFileError(f'{path}: cannot read gain file ({exc.strerror})') from None
-    except yaml.YAMLError as exc:
-        raise GainFileError(f'{path}: not valid YAML ({exc})') from None
+    data = read_yaml(path, 'gain file', error=GainFileError)
     if not isinstance(data, dict):
-        raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section')
+        got = 'an empty file' if data is None else f'a {type(data).__name__}'
+        raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section, '
+                            f'got {got}')
     for key in (f'/**/{node}', node, f'/{node}', '/**'):
         section = data.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict) \
