@@ -19,9 +19,7 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
-from ..errors import InputError
 from ..files import read_yaml
-
 from .loop import LoopConfigError, validate_gain
 
 __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
@@ -30,8 +28,13 @@ __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_ga
 TRACKER_NODE = 'tracker'
 
 
-class GainFileError(InputError):
-    """A gain file or gain parameter is malformed; the message says which and why."""
+class GainFileError(LoopConfigError):
+    """A gain file or gain parameter is malformed; the message says which and why.
+
+    A bad gain is a bad tracker configuration: :func:`validate_gain`'s
+    ``LoopConfigError`` passes through :func:`gain_from_parameters` unchanged and the
+    tracker node catches ``LoopConfigError`` for both.
+    """
 
 
 def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> np.ndarray:
@@ -47,10 +50,7 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
     for i, val in enumerate(flat):
         if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)):
             raise GainFileError(f'K[{i}] is {val!r}; every entry must be a number')
-    try:
-        return validate_gain(list(flat), shape=shp)
-    except LoopConfigError as exc:
-        raise GainFileError(str(exc)) from None
+    return validate_gain(list(flat), shape=shp)
 
 
 def gain_parameters(K) -> dict[str, list]:
@@ -92,6 +92,6 @@ def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndar
             params = section['ros__parameters']
             try:
                 return gain_from_parameters(params['K'], params.get('K_shape', (2, 4)))
-            except GainFileError as exc:
+            except LoopConfigError as exc:        # add the file's name
                 raise GainFileError(f'{path}: {exc}') from None
     raise GainFileError(f'{path}: no {node}.ros__parameters.K found')

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import InputError
 from .model import xi_from_state
 from .reference import RefSample
+from .validate import as_matrix
 
 __all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', 'Tracker',
            'Command', 'delay_steps', 'step_time', 'step_time_ns', 'yaw_to_quaternion',
@@ -67,13 +68,6 @@ def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
     return math.atan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
 
 
-def _matrix4(name: str, value) -> tuple[tuple[float, ...], ...]:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
-        raise LoopConfigError(f'{name} must be a finite 4x4 matrix, got {np.asarray(value)!r}')
-    return tuple(tuple(float(v) for v in row) for row in arr)
-
-
 # ---------------------------------------------------------------------------------------------
 # Plant
 
@@ -90,7 +84,8 @@ class PlantConfig:
     v0: float = 0.05
 
     def __post_init__(self):
-        object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+        object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
+            self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
         delay_steps(self.tau, self.dt)
         for name in ('x0', 'y0', 'th0', 'v0'):
             if not math.isfinite(getattr(self, name)):
@@ -242,7 +237,8 @@ class TrackerConfig:
         if self.delay_compensation:
             if self.A_tau is None:
                 raise LoopConfigError('delay_compensation needs A_tau')
-            object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+            object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
+                self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
             delay_steps(self.tau, self.dt)
 
         K = self.K if self.perturbation is None else tuple(

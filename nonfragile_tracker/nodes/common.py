@@ -17,11 +17,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .. import topics
-import numpy as np
-
-from ..errors import InputError
-from ..control.loop import LoopConfigError, quaternion_to_yaw, yaw_to_quaternion
+from ..control.loop import quaternion_to_yaw, yaw_to_quaternion
 from ..control.reference import RefSample
+from ..errors import InputError
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
            'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
@@ -78,18 +76,6 @@ def declare(node: Node, params: Iterable[Param]) -> None:
                 from_value=float(p.low), to_value=float(p.high if p.high is not None else 1e300),
                 step=0.0)]
         node.declare_parameter(p.name, p.default, desc)
-
-
-def matrix_param(values, rows: int, cols: int, name: str) -> np.ndarray:
-    """A flat row-major double-array parameter as a finite ``rows x cols`` matrix."""
-    vals = list(values)
-    if len(vals) != rows * cols:
-        raise LoopConfigError(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
-                              f'got {len(vals)}')
-    arr = np.array(vals, dtype=float).reshape(rows, cols)
-    if not np.all(np.isfinite(arr)):
-        raise LoopConfigError(f'{name} has non-finite entries: {vals}')
-    return arr
 
 
 def get(node: Node, name: str) -> Any:

@@ -27,8 +27,9 @@ from std_msgs.msg import UInt64
 
 from .. import topics
 from ..control.loop import LoopConfigError, PlantConfig, UnicyclePlant, step_time_ns
+from ..control.validate import as_matrix
 from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
-                     declare, fill_pose, get, matrix_param, ns_to_stamp, run)
+                     declare, fill_pose, get, ns_to_stamp, run)
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
@@ -68,7 +69,8 @@ class PlantNode(Node):
             raise StartupError(f'plant: initial_pose needs [x, y, yaw], got {pose0}')
         try:
             cfg = PlantConfig(dt=get(self, 'dt'), tau=get(self, 'tau'),
-                              A_tau=matrix_param(get(self, 'A_tau'), 4, 4, 'A_tau'),
+                              A_tau=as_matrix(get(self, 'A_tau'), 'A_tau', (4, 4), flat=True,
+                                              error=LoopConfigError),
                               x0=pose0[0], y0=pose0[1], th0=pose0[2],
                               v0=get(self, 'initial_speed'))
         except LoopConfigError as exc:

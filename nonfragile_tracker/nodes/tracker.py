@@ -27,10 +27,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .. import topics
-from ..control.gains import GainFileError, gain_from_parameters
+from ..control.gains import gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
+from ..control.validate import as_matrix
 from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
-                     matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
+                     pose_from_odom, reference_from_msgs, run, stamp_ns)
 
 PAPER_F = [0.5] * 8
 PARAMS = [
@@ -63,15 +64,12 @@ RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 
 
 def tracker_config(values: dict) -> TrackerConfig:
     """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
-    try:
-        K = gain_from_parameters(values['K'], values['K_shape'])
-    except GainFileError as exc:
-        raise LoopConfigError(str(exc)) from None
-    E = matrix_param(values['E'], 2, 2, 'E')
-    F = matrix_param(values['F'], 2, 4, 'F')
-    D = matrix_param(values['Delta'], 2, 2, 'Delta')
+    K = gain_from_parameters(values['K'], values['K_shape'])
+    E = as_matrix(values['E'], 'E', (2, 2), flat=True, error=LoopConfigError)
+    F = as_matrix(values['F'], 'F', (2, 4), flat=True, error=LoopConfigError)
+    D = as_matrix(values['Delta'], 'Delta', (2, 2), flat=True, error=LoopConfigError)
     pert = E @ D @ F
-    a_tau = matrix_param(values['A_tau'], 4, 4, 'A_tau')
+    a_tau = as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True, error=LoopConfigError)
     return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
                          max_angular_speed=values['max_angular_speed'],
                          min_speed=values['min_speed'],
