@@ -624,13 +624,14 @@ def bench_delay(cfg, table: Table, raw: dict) -> None:
 
 def bench_simulation(cfg, table: Table, raw: dict) -> None:
     from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.loop import TrackerConfig
+    from nonfragile_tracker.scenario import paper_plant_config
     from nonfragile_tracker.control.reference import circle
     from nonfragile_tracker.control.simulate import simulate_tracking
 
     log(f'simulation: {cfg.sim_steps} steps x {cfg.sim_reps}')
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    pc, tc = PlantConfig(), TrackerConfig(K=K)
+    pc, tc = paper_plant_config(), TrackerConfig(K=K)
     simulate_tracking(pc, tc, circle(), 1000)            # warm-up
     s, runs = timeit(lambda: simulate_tracking(pc, tc, circle(), cfg.sim_steps), cfg.sim_reps)
     sim_s = cfg.sim_steps * pc.dt
@@ -917,10 +918,11 @@ def bench_recorder(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None
 
 def _quality_job(job: dict) -> dict:
     """One simulation (runs in a worker process)."""
-    from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.loop import TrackerConfig
+    from nonfragile_tracker.scenario import paper_plant_config
     from nonfragile_tracker.control.reference import circle, figure_eight
     from nonfragile_tracker.control.simulate import simulate_tracking
-    pc = PlantConfig()
+    pc = paper_plant_config()
     kw = {}
     if job['comp']:
         kw = dict(delay_compensation=True, A_tau=pc.A_tau, tau=pc.tau)

@@ -23,7 +23,7 @@ from .errors import RunError
 ATOL = 1e-9
 #: Recorded topics (``/clock`` and ``pose`` repeat ``odom``'s stamps and pose: left out
 #: to keep the golden bags small).
-TOPICS = [topics.ODOM, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL, topics.CMD_VEL]
+TOPICS = list(topics.RUN_TOPICS)
 DURATION = 2.5
 
 

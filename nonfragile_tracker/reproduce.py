@@ -21,32 +21,38 @@ import numpy as np
 from .control.analysis import analyse_gain
 from .control.design import at_gain_norm, max_decay_rate, max_perturbation_scale, min_gain_norm
 from .control.lmi import synthesize
-from .control.loop import PlantConfig, TrackerConfig
+from .control.loop import TrackerConfig
 from .control.problem import Problem, load_problem
 from .control.reference import circle
 from .control.simulate import simulate_delay_loop, simulate_tracking
+from .scenario import paper_plant_config
 
 #: Initial condition of Figs. 2-5 (the paper does not state one).
 FIG_XI0 = (0.5, 0.0, -0.5, 0.0)
 FIG_DURATION = 10.0
-#: Initial pose of the tracking runs (x, y, yaw, v): as in the issue tracker's measurements.
-TRACK_POSE = (0.7, 0.1, math.pi / 2, 0.05)
 TRACK_STEPS = 62832                      # one period of the circle at dt = 0.01 s
-PAPER_NORM = 8.67
+
+
+def track_pose() -> tuple[float, float, float, float]:
+    """Initial (x, y, yaw, v) of the tracking runs: the paper scenario's (``config/``)."""
+    pc = paper_plant_config()
+    return (pc.x0, pc.y0, pc.th0, pc.v0)
 
 
 def _gains(problem: Problem, paper: dict) -> dict[str, np.ndarray]:
+    # the bound of the comparison: the norm of the paper's K_nf, options.gain_bound of the file
+    norm = float(problem.options['gain_bound'])
     out = {'paper K_nf': paper['K_nf'], 'paper K_normal': paper['K_normal']}
-    out['Theorem 1 K_nf'] = synthesize(problem, gain_bound=PAPER_NORM).K
-    out['Theorem 1 K_normal'] = synthesize(problem, nominal=True, gain_bound=PAPER_NORM).K
-    out['max decay rate'] = at_gain_norm(max_decay_rate, problem, PAPER_NORM).K
-    out['max perturbation scale'] = max_perturbation_scale(problem, gain_bound=PAPER_NORM).K
+    out['Theorem 1 K_nf'] = synthesize(problem, gain_bound=norm).K
+    out['Theorem 1 K_normal'] = synthesize(problem, nominal=True, gain_bound=norm).K
+    out['max decay rate'] = at_gain_norm(max_decay_rate, problem, norm).K
+    out['max perturbation scale'] = max_perturbation_scale(problem, gain_bound=norm).K
     out['min gain norm'] = min_gain_norm(problem).K
     return out
 
 
 def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
-    """Tracking figures of gain ``K`` on the paper circle from :data:`TRACK_POSE`.
+    """Tracking figures of gain ``K`` on the paper circle from :func:`track_pose`.
 
     Parameters
     ----------
@@ -61,7 +67,7 @@ def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
         ``first_within_1cm``, ``settling_1cm`` (s), ``steady_max_error`` (m, after
         20 s), ``final_error`` (m), ``peak_abs_w`` (rad/s).
     """
-    pc = PlantConfig(x0=TRACK_POSE[0], y0=TRACK_POSE[1], th0=TRACK_POSE[2], v0=TRACK_POSE[3])
+    pc = paper_plant_config()
     tc = TrackerConfig(K=K, max_angular_speed=2.0, delay_compensation=compensation,
                        A_tau=pc.A_tau, tau=pc.tau)
     run = simulate_tracking(pc, tc, circle(), TRACK_STEPS)
@@ -204,7 +210,7 @@ def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = 
             rows = {name: f.result() for name, f in futures.items()}
         figures = _figures(problem, paper, out)
         result = {'problem': 'config/paper_problem.yaml', 'tau': problem.tau,
-                  'fig_xi0': list(FIG_XI0), 'track_pose': list(TRACK_POSE),
+                  'fig_xi0': list(FIG_XI0), 'track_pose': list(track_pose()),
                   'track_steps': TRACK_STEPS, 'gains': rows, 'figures': figures,
                   'harder': harder}
         if fig6 is not None:

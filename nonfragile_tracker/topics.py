@@ -26,6 +26,12 @@ TYPES: dict[str, str] = {
     RUN_DONE: 'std_msgs/msg/UInt64',
 }
 
+#: The topics a tracking run's analysis reads (bag reader, golden bags): pose, reference,
+#: command.  ``/clock`` and ``pose`` repeat ``odom``'s stamps and pose.
+RUN_TOPICS: tuple[str, ...] = (ODOM, REF_POSE, REF_TWIST, REF_ACCEL, CMD_VEL)
+#: Topics whose S+1 samples the recorder waits for after ``run_done`` = S (lockstep).
+LOCKSTEP_TOPICS: tuple[str, ...] = (ODOM, POSE, REF_POSE, REF_TWIST, REF_ACCEL, CMD_VEL)
+
 #: QoS of the data topics: reliable, volatile, keep last DEPTH.
 DEPTH = 100
 #: Frames (REP-105): poses and references in ``odom``; the robot body is ``base_link``.

@@ -152,10 +152,14 @@ def test_outputs_that_cannot_be_written_exit_2(capsys, bad, tmp_path):
     assert code == EXIT_BAD_INPUT and bad['a_directory'] in err and 'Traceback' not in err
     code, _, err = run_main(['analyse', PAPER, '--no-margins'], capsys)
     assert code == EXIT_BAD_INPUT and '--gains FILE' in err
+    code, _, err = run_main(['run', '--no-record', '--delta', 'Delta_9', '--out',
+                             str(tmp_path / 'runs')], capsys)
+    assert code == EXIT_BAD_INPUT and 'Delta_1, Delta_2' in err and 'Delta_9' in err
+    assert not (tmp_path / 'runs').exists()
 
 
 def test_unknown_commands_and_options_are_usage_errors(capsys):
-    for argv in ([], ['nope'], ['golden', '--bogus'], ['bag'], ['run', '--delta', 'Delta_9'],
+    for argv in ([], ['nope'], ['golden', '--bogus'], ['bag'],
                  ['design', PAPER, '--objective', 'fastest']):
         code, _, err = run_main(argv, capsys)
         assert code == EXIT_BAD_INPUT and 'usage:' in err and 'Traceback' not in err

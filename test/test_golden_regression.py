@@ -15,6 +15,7 @@ from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.gains import read_gain_file
 from nonfragile_tracker.nodes.common import DATA_QOS
 from nonfragile_tracker.nodes.tracker import TrackerNode
+from nonfragile_tracker.scenario import node_parameters
 
 from conftest import CONFIG, unique_domain_id
 
@@ -53,7 +54,8 @@ def test_replay_inputs_into_a_fresh_tracker(name, delta):
     rclpy.init(context=ctx, domain_id=unique_domain_id('replay' + name))
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     tracker = TrackerNode(context=ctx, parameter_overrides=[
-        Parameter('K', value=[float(v) for v in K.ravel()]), Parameter('Delta', value=delta)])
+        Parameter('K', value=[float(v) for v in K.ravel()]), Parameter('Delta', value=delta),
+        Parameter('F', value=node_parameters('tracker')['F'])])   # the scenario's F
     player = rclpy.create_node('player', context=ctx)
     types = {'reference/pose': PoseStamped, 'reference/twist': TwistStamped,
              'reference/accel': AccelStamped, 'odom': Odometry}

@@ -7,10 +7,11 @@ import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.reference import circle
 from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.runner import run_composed, run_processes, scenario_parameters
+from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG
 
@@ -25,7 +26,7 @@ def params(duration=DURATION, **tracker):
 
 def simulation(steps, **tracker):
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    pc = PlantConfig()
+    pc = paper_plant_config()
     return simulate_tracking(pc, TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau, **tracker),
                              circle(), steps)
 

@@ -40,7 +40,7 @@ __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
-RUN_TOPICS = (topics.ODOM, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL, topics.CMD_VEL)
+RUN_TOPICS = topics.RUN_TOPICS
 
 
 class BagNotFoundError(BagError, FileNotFoundError):

@@ -5,12 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import EXIT_RUN
+from ..errors import EXIT_RUN, InputError
 from .argtypes import positive_float
-
-#: ``--delta`` choices: the paper's constant perturbations, row-major 2x2 (as the
-#: tracker's ``Delta`` parameter takes them).
-DELTAS = {'Delta_1': [-1.0, 0.0, 0.0, -1.0], 'Delta_2': [1.0, 0.0, 0.0, 1.0]}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -25,7 +21,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.duration is not None:
         ov['plant']['ros__parameters']['duration'] = float(args.duration)
     if args.delta:
-        ov['tracker']['ros__parameters']['Delta'] = DELTAS[args.delta]
+        from ..scenario import paper_perturbations
+        deltas = paper_perturbations()          # config/paper_problem.yaml perturbations
+        if args.delta not in deltas:
+            raise InputError(f'--delta {args.delta}: not a perturbation of the paper problem; '
+                             f'choose one of {", ".join(sorted(deltas))}')
+        ov['tracker']['ros__parameters']['Delta'] = deltas[args.delta]
     if args.delay_compensation:
         ov['tracker']['ros__parameters']['delay_compensation'] = True
     if args.path:
@@ -64,8 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml)')
     r.add_argument('--duration', type=positive_float,
                    help='simulated seconds (default: scenario, 60)')
-    r.add_argument('--delta', choices=sorted(DELTAS),
-                   help="inject the paper's gain perturbation (E Delta F) into the tracker")
+    r.add_argument('--delta', metavar='NAME',
+                   help="inject a perturbation of config/paper_problem.yaml (Delta_1, Delta_2) "
+                   'into the tracker as E Delta F')
     r.add_argument('--delay-compensation', action='store_true',
                    help='zero steady-state error law (delay-consistent reference)')
     r.add_argument('--path', choices=['circle', 'figure_eight'], help='reference path')

@@ -141,9 +141,9 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
     else:
         print(format_analysis(rows))
     if getattr(args, 'tracking', False):
-        from ..reproduce import TRACK_POSE, TRACK_STEPS, paper_circle_tracking
+        from ..reproduce import TRACK_STEPS, paper_circle_tracking, track_pose
         print(f'\ntracking on the paper circle, {TRACK_STEPS} steps of 0.01 s from (x, y, yaw, v) '
-              f'= {tuple(round(v, 4) for v in TRACK_POSE)}, |w| <= 2 rad/s:')
+              f'= {tuple(round(v, 4) for v in track_pose())}, |w| <= 2 rad/s:')
         print(f'{"gain":<24} {"compensation":>12} {"first 1 cm (s)":>15} {"stays (s)":>10} '
               f'{"max err >20 s (m)":>18} {"peak |w|":>9}')
         for r in rows:

@@ -73,15 +73,19 @@ def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
 
 @dataclass(frozen=True)
 class PlantConfig:
-    """Unicycle plant settings (SI units).  ``A_tau`` acts on ``xi = [x, x', y, y']``."""
+    """Unicycle plant settings (SI units).  ``A_tau`` acts on ``xi = [x, x', y, y']``.
+
+    Defaults are neutral (no delay term, at rest at the origin); the paper's scenario
+    is ``nonfragile_tracker.scenario.paper_plant_config()`` (``config/``).
+    """
 
     dt: float = 0.01
-    tau: float = 0.2
-    A_tau: tuple = ((0.01, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0.02, 0), (0, 0, 0, 0))
-    x0: float = 0.7
-    y0: float = 0.1
-    th0: float = math.pi / 2
-    v0: float = 0.05
+    tau: float = 0.0
+    A_tau: tuple = ((0.0,) * 4,) * 4
+    x0: float = 0.0
+    y0: float = 0.0
+    th0: float = 0.0
+    v0: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(

@@ -33,8 +33,6 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 MODES = ('lockstep', 'realtime')
-#: The paper's delay matrix, 16 doubles row-major on xi = [x, vx, y, vy] (default of the nodes).
-PAPER_A_TAU = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
 class StartupError(InputError):

@@ -28,20 +28,20 @@ from std_msgs.msg import UInt64
 from .. import topics
 from ..control.loop import LoopConfigError, PlantConfig, UnicyclePlant, step_time_ns
 from ..control.validate import as_matrix
-from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
+from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode,
                      declare, fill_pose, get, ns_to_stamp, run)
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
           read_only=True),
     Param('dt', 0.01, 'integration step (s)', low=1e-6, high=10.0, read_only=True),
-    Param('tau', 0.2, 'state delay (s); rounded to a whole number of steps', low=0.0,
+    Param('tau', 0.0, 'state delay (s); rounded to a whole number of steps', low=0.0,
           high=1e3, read_only=True),
-    Param('A_tau', PAPER_A_TAU, 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles '
+    Param('A_tau', [0.0] * 16, 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles '
           'row-major', read_only=True),
-    Param('initial_pose', [0.7, 0.1, math.pi / 2], 'initial [x (m), y (m), yaw (rad)] in odom',
+    Param('initial_pose', [0.0, 0.0, 0.0], 'initial [x (m), y (m), yaw (rad)] in odom',
           read_only=True),
-    Param('initial_speed', 0.05, 'speed in force before the first command (m/s)',
+    Param('initial_speed', 0.0, 'speed in force before the first command (m/s)',
           read_only=True),
     Param('duration', 60.0, 'run length (s); lockstep stops after it, realtime: 0 = forever',
           low=0.0, high=1e9, read_only=True),

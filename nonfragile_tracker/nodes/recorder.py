@@ -59,8 +59,7 @@ from .common import DATA_QOS, LATCHED_QOS, Param, StartupError, declare, get, ru
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
 #: Topics whose S+1 samples the recorder waits for after ``run_done`` = S.
-LOCKSTEP_TOPICS = (topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST,
-                   topics.REF_ACCEL, topics.CMD_VEL)
+LOCKSTEP_TOPICS = topics.LOCKSTEP_TOPICS
 _STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
 _RUNS_ROOT = 'runs'
 

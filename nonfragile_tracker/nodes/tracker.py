@@ -30,10 +30,9 @@ from .. import topics
 from ..control.gains import gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
 from ..control.validate import as_matrix
-from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
+from .common import (DATA_QOS, Param, StartupError, check_mode, declare, get,
                      pose_from_odom, reference_from_msgs, run, stamp_ns)
 
-PAPER_F = [0.5] * 8
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
           read_only=True),
@@ -45,14 +44,14 @@ PARAMS = [
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),
-    Param('F', PAPER_F, 'perturbation matrix F (2x4 row-major)'),
+    Param('F', [0.0] * 8, 'perturbation matrix F (2x4 row-major)'),
     Param('Delta', [0.0, 0.0, 0.0, 0.0], 'injected gain perturbation Delta (2x2 row-major); '
           'the applied gain is K + E Delta F'),
     Param('delay_compensation', False, 'follow the delay-consistent reference (zero '
           'steady-state error); needs A_tau and tau', read_only=True),
-    Param('A_tau', PAPER_A_TAU, 'delay matrix for delay_compensation (16 doubles)',
+    Param('A_tau', [0.0] * 16, 'delay matrix for delay_compensation (16 doubles)',
           read_only=True),
-    Param('tau', 0.2, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
+    Param('tau', 0.0, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
     Param('input_timeout', 0.5, 'realtime: stop if pose or reference is older than this (s)',
           low=1e-6, high=1e6),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
