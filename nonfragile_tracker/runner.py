@@ -49,7 +49,7 @@ def merge(dst: dict, src: dict) -> dict:
 
 
 def node_key(key: str) -> str:
-    """Node name of a parameter-file key: ``tracker``, ``/tracker`` and ``/**/tracker`` -> tracker."""
+    """Node name of a parameter-file key: ``tracker``, ``/tracker``, ``/**/tracker`` -> tracker."""
     for prefix in ('/**/', '/'):
         if key.startswith(prefix):
             return key[len(prefix):]
@@ -87,6 +87,8 @@ def write_parameter_file(params: dict, path: Path) -> Path:
 
 @dataclass
 class RunResult:
+    """Outcome of a run: its directory, bag (if recorded), exit code per node, wall time, steps."""
+
     run_dir: Path
     bag: Path | None
     exit_codes: dict
@@ -95,6 +97,7 @@ class RunResult:
 
 
 def new_run_dir(root: Path, name: str | None) -> Path:
+    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``)."""
     from .bag.writer import new_run_dir as _new
     return _new(root, name)
 

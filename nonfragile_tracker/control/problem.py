@@ -71,10 +71,12 @@ class Problem:
 
     @property
     def n(self) -> int:
+        """Number of states."""
         return self.A.shape[0]
 
     @property
     def m(self) -> int:
+        """Number of inputs."""
         return self.B.shape[1]
 
     def replace(self, **changes: Any) -> 'Problem':
@@ -141,7 +143,8 @@ def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
                 f'{", ".join(f"{z.real:.4g}{z.imag:+.4g}j" for z in bad)} of A are not reached '
                 'by B; no state feedback can stabilize this model')
     return Problem(A=A, B=B, A_tau=A_tau, tau=float(tau), E=E, F=F,
-                   name=str(data.get('name', Path(source).stem if source != 'problem' else 'problem')),
+                   name=str(data.get('name', Path(source).stem if source != 'problem'
+                                     else 'problem')),
                    perturbations=perts, options=dict(options))
 
 
