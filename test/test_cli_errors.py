@@ -219,3 +219,20 @@ def test_debug_switch_shows_the_traceback_of_a_bug(tmp_path):
     loud = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           cwd=ROOT, timeout=60, env=env)
     assert loud.returncode == 1 and 'Traceback' in loud.stderr and 'ZeroDivisionError' in loud.stderr
+
+
+@pytest.mark.ros
+def test_run_with_a_parameter_a_node_refuses_exits_2_naming_node_and_parameter(tmp_path, capsys,
+                                                                                monkeypatch):
+    """The nodes validate their parameters: a refused one is bad input (2), not a run failure."""
+    from conftest import unique_domain_id
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(unique_domain_id('cli_errors')))
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text((CONFIG / 'paper_scenario.yaml').read_text().replace(
+        '    dt: 0.01\n    tau: 0.2', '    dt: -1.0\n    tau: 0.2', 1))
+    assert 'dt: -1.0' in scenario.read_text()
+    code, out, err = run_main(['run', '--scenario', str(scenario), '--no-record',
+                               '--out', str(tmp_path / 'runs')], capsys)
+    assert code == EXIT_BAD_INPUT, (out, err)
+    assert err.startswith('error: plant:') and 'dt' in err and '-1.0' in err
+    assert 'Traceback' not in err + out

@@ -5,8 +5,20 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import EXIT_RUN, InputError
+from ..errors import EXIT_BAD_INPUT, EXIT_RUN, InputError
 from .argtypes import positive_float
+
+
+def last_error(log: Path) -> str:
+    """The last FATAL/ERROR line of a node's log (without the logger prefix), or a pointer."""
+    try:
+        lines = log.read_text(errors='replace').splitlines()
+    except OSError:
+        return f'no log ({log})'
+    for line in reversed(lines):
+        if 'FATAL' in line or 'ERROR' in line:
+            return line.split('] ', 1)[-1].strip() if '] ' in line else line.strip()
+    return f'exited with bad input; see {log}'
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -37,13 +49,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     record = not args.no_record
     dur = params['plant']['ros__parameters'].get('duration')
     print(f'run directory: {run_dir}')
-    print(f'scenario {scenario.name}, gains {gains.name}, {dur} s simulated, '
+    length = f'{dur:g} s simulated' if dur is not None else "the plant's default duration"
+    print(f'scenario {scenario.name}, gains {gains.name}, {length}, '
           f'{"composed" if args.composed else "one process per node"}, lockstep')
     if args.composed:
         res = runner.run_composed(params, run_dir, record=record)
     else:
         res = runner.run_processes(params, run_dir, record=record)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None, -2)}
+    if bad and all(code == EXIT_BAD_INPUT for code in bad.values()):
+        # every failed node refused its parameters: bad input, say which and why
+        for node in bad:
+            print(f'error: {node}: {last_error(run_dir / f"{node}.log")}', file=sys.stderr)
+        return EXIT_BAD_INPUT
     print(f'wall time {res.wall_time:.1f} s ({res.steps / max(res.wall_time, 1e-9):.0f} steps/s '
           'including start-up)')
     if bad:
