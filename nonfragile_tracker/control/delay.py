@@ -34,6 +34,8 @@ from typing import Any, Callable
 import numpy as np
 import scipy.linalg as sla
 
+from .validate import as_matrix, as_square
+
 __all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
            'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',
            'fragility_margin']
@@ -46,43 +48,6 @@ STABLE_TOL = 1e-10  # is_stable: abscissa < -STABLE_TOL
 
 # ----------------------------------------------------------------------------- validation
 
-def _matrix(value: Any, name: str, rows: int | None = None, cols: int | None = None
-            ) -> np.ndarray:
-    """Finite real 2-D float array (a scalar becomes 1x1); ValueError naming ``name``."""
-    if value is None or isinstance(value, (str, bytes)):
-        raise ValueError(f'{name}: expected a real matrix, got {value!r}')
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name}: expected a real matrix ({exc})') from None
-    if np.iscomplexobj(arr):
-        raise ValueError(f'{name}: expected a real matrix, got complex entries')
-    try:
-        arr = np.array(arr, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name}: expected a matrix of numbers ({exc})') from None
-    if arr.ndim == 0:
-        arr = arr.reshape(1, 1)
-    if arr.ndim != 2:
-        raise ValueError(f'{name}: expected a 2-D matrix, got an array of shape {arr.shape}')
-    want = (rows if rows is not None else arr.shape[0], cols if cols is not None else arr.shape[1])
-    if arr.shape != want:
-        exp = f"({'n' if rows is None else rows}, {'*' if cols is None else cols})"
-        raise ValueError(f'{name}: expected shape {exp}, got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name}: all entries must be finite')
-    return arr
-
-
-def _square(value: Any, name: str, n: int | None = None) -> np.ndarray:
-    arr = _matrix(value, name)
-    if arr.shape[0] != arr.shape[1]:
-        raise ValueError(f'{name}: expected a square matrix, got shape {arr.shape}')
-    if n is not None and arr.shape != (n, n):
-        raise ValueError(f'{name}: expected shape ({n}, {n}), got {arr.shape}')
-    return arr
-
-
 def _delay(tau: Any, name: str = 'tau') -> float:
     try:
         t = float(tau)
@@ -94,19 +59,19 @@ def _delay(tau: Any, name: str = 'tau') -> float:
 
 
 def _pair(A0: Any, A1: Any, tau: Any) -> tuple[np.ndarray, np.ndarray, float]:
-    a0 = _square(A0, 'A0')
-    return a0, _square(A1, 'A1', a0.shape[0]), _delay(tau)
+    a0 = as_square(A0, 'A0')
+    return a0, as_square(A1, 'A1', a0.shape[0]), _delay(tau)
 
 
 def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any):
-    a = _square(A, 'A')
+    a = as_square(A, 'A')
     n = a.shape[0]
-    b = _matrix(B, 'B', n, None)
+    b = as_matrix(B, 'B', (n, None))
     m = b.shape[1]
-    k = _matrix(K, 'K', m, n)
-    a1 = _square(A_tau, 'A_tau', n)
-    e = _matrix(E, 'E', m, None)
-    f = _matrix(F, 'F', None, n)
+    k = as_matrix(K, 'K', (m, n))
+    a1 = as_square(A_tau, 'A_tau', n)
+    e = as_matrix(E, 'E', (m, None))
+    f = as_matrix(F, 'F', (None, n))
     return a, b, k, a1, _delay(tau), e, f
 
 
@@ -138,16 +103,16 @@ def closed_loop_matrix(A: Any, B: Any, K: Any, E: Any = None, F: Any = None,
     ValueError
         If a matrix is not finite or has the wrong shape (the message names it).
     """
-    a = _square(A, 'A')
+    a = as_square(A, 'A')
     n = a.shape[0]
-    b = _matrix(B, 'B', n, None)
+    b = as_matrix(B, 'B', (n, None))
     m = b.shape[1]
-    k = _matrix(K, 'K', m, n)
-    e = np.eye(m) if E is None else _matrix(E, 'E', m, None)
-    f = np.eye(n) if F is None else _matrix(F, 'F', None, n)
+    k = as_matrix(K, 'K', (m, n))
+    e = np.eye(m) if E is None else as_matrix(E, 'E', (m, None))
+    f = np.eye(n) if F is None else as_matrix(F, 'F', (None, n))
     if Delta is None:
         return a + b @ k
-    d = _matrix(Delta, 'Delta', e.shape[1], f.shape[0])
+    d = as_matrix(Delta, 'Delta', (e.shape[1], f.shape[0]))
     return a + b @ (k + e @ d @ f)
 
 
@@ -652,8 +617,8 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
        margins for stability of linear delay systems", Systems & Control
        Letters 26(2):107-117, 1995.
     """
-    a0 = _square(A0, 'A0')
-    a1 = _square(A1, 'A1', a0.shape[0])
+    a0 = as_square(A0, 'A0')
+    a1 = as_square(A1, 'A1', a0.shape[0])
     try:
         tmax = float(tau_max)
     except (TypeError, ValueError):
