@@ -162,8 +162,11 @@ def _cheb(N: int) -> np.ndarray:
 
 @lru_cache(maxsize=64)
 def _cheb_resolvent(N: int, tau: float, sigma: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """``G = (Dt[1:, 1:] - sigma I)^-1``, ``d0 = Dt[1:, 0]`` and ``c = G[-1] @ d0``,
-    ``Dt = (2 / tau) D_N`` (see :class:`_ShiftInvert`); cached, read-only."""
+    """Shift-invert pieces of the Chebyshev differentiation matrix (cached, read-only).
+
+    ``G = (Dt[1:, 1:] - sigma I)^-1``, ``d0 = Dt[1:, 0]`` and ``c = G[-1] @ d0``, with
+    ``Dt = (2 / tau) D_N`` (see :class:`_ShiftInvert`).
+    """
     Dt = _cheb(N) * (2.0 / tau)
     G = np.linalg.inv(Dt[1:, 1:] - sigma * np.eye(N))
     d0 = np.ascontiguousarray(Dt[1:, 0])

@@ -444,8 +444,10 @@ def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
 
 
 def _verified(problem: Problem, **kw) -> SynthesisResult:
-    """:func:`_synthesize_once`, and when its point fails verification: the balanced
-    problem, a 100x higher margin, then the second solver, before giving up."""
+    """Synthesize once; if the point fails verification, retry before giving up.
+
+    The retries are the balanced problem, a 100x higher margin, then the second solver.
+    """
     try:
         return _synthesize_once(problem, **kw)
     except CertificateError as first:
