@@ -132,6 +132,7 @@ import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, SolverFailure
 from .problem import Problem
+from .search import golden_section_max
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
                   cached_program, solve)
 from .sdp import sym as _sym
@@ -464,22 +465,6 @@ def _describe(problem: Problem, h: float, nominal: bool, gain_bound) -> str:
     return f'delay-dependent design ({kind}{bound}) for problem {problem.name!r} at h = {h:g}'
 
 
-def _golden(f, a: float, b: float, steps: int) -> None:
-    """Golden-section maximization of f on [a, b] (values are recorded by f itself)."""
-    g = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = f(c), f(d)
-    for _ in range(max(0, steps - 2)):
-        if fc >= fd:
-            b, d, fd = d, c, fc
-            c = b - g * (b - a)
-            fc = f(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + g * (b - a)
-            fd = f(d)
-
-
 def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
                                eps: float | None = None,
                                eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
@@ -535,7 +520,7 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         lo = math.log(grid[order[max(k - 1, 0)]])
         hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
         if hi > lo:
-            _golden(lambda u: run(math.exp(u)), lo, hi, refine)
+            golden_section_max(lambda u: run(math.exp(u)), lo, hi, refine)
     solve_time = sum(s.solve_time for s in sols)
     scan = tuple((float(s.eps), _t_of(s)) for s in sols)
     best = max(sols, key=_t_of)
@@ -611,7 +596,7 @@ def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gai
         if refine > 0 and len(grid) > 1 and tried[grid[k]] > -math.inf:
             lo = math.log(grid[max(k - 1, 0)])
             hi = math.log(grid[min(k + 1, len(grid) - 1)])
-            _golden(lambda u: attempt(math.exp(u)), lo, hi, refine)
+            golden_section_max(lambda u: attempt(math.exp(u)), lo, hi, refine)
     except _Found as found:
         return float(found.args[0])
     return None
