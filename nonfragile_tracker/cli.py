@@ -5,6 +5,7 @@ Sub-commands::
     synthesize PROBLEM [-o GAINS] [--nominal] [--gain-bound K]   Theorem 1 -> tracker gain file
     design PROBLEM --objective decay|scale|min-norm [--norm N]    optimized Theorem 1 gains
     delay-dependent PROBLEM [--delay H | --max-delay]             descriptor-method design
+    latency-design PROBLEM --delay-interval H_MIN H_MAX [--lag T]  gain certified for a latency
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
     run [options]                                                 the main job (see --help)
@@ -245,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     runner.add_subcommands(sub)
     reproduce.add_subcommand(sub)
     golden.add_subcommand(sub)
+    from .commands import latency_design; latency_design.register(sub)  # noqa: E702  commands hook (latdesign)
     return p
 
 
