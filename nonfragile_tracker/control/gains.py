@@ -114,11 +114,12 @@ def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite:
     params = gain_parameters(K)
     params.update(extra or {})
     text = ''.join(f'# {line}\n' for line in comment.splitlines())
-    data: dict[str, Any] = {f'/**/{TRACKER_NODE}': {'ros__parameters': params}}
+    text += yaml.safe_dump({f'/**/{TRACKER_NODE}': {'ros__parameters': params}},
+                           default_flow_style=None, sort_keys=False)
     if design:
-        data[DESIGN_SECTION] = {'ros__parameters': {str(k): _design_value(str(k), v)
-                                                    for k, v in design.items()}}
-    text += yaml.safe_dump(data, default_flow_style=None, sort_keys=False)
+        record = {str(k): _design_value(str(k), v) for k, v in design.items()}
+        text += yaml.safe_dump({DESIGN_SECTION: {'ros__parameters': record}},
+                               default_flow_style=False, sort_keys=False, width=100)
     mode = 'w' if overwrite else 'x'
     try:
         with open(path, mode) as fh:

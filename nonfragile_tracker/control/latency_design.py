@@ -34,7 +34,7 @@ from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certi
 from .problem import Problem
 
 __all__ = ['OBJECTIVES', 'LatencyDesign', 'lagged_problem', 'perturbation_set',
-           'design_for_latency']
+           'design_for_latency', 'latency_figures']
 
 OBJECTIVES = ('decay', 'max-delay')
 
@@ -234,3 +234,19 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
                          decay_rate=float(decay), lag_certified_h_max=lag_h,
                          true_delay_margin=margin, abscissa_at_h_max=absc,
                          state_delay=res.state_delay, synthesis=res)
+
+
+def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
+                    ) -> dict[str, float]:
+    """Command-latency figures of any gain ``K`` (e.g. a Theorem 1 design).
+
+    ``certified_latency``: largest ``h_max`` with ``[0, h_max]`` certified by
+    :func:`.input_delay.certify_input_delay` (non-fragile, state delay included when
+    ``A_tau != 0``); ``true_latency_margin``: exact delay margin of the input-delay loop,
+    minimum over :func:`perturbation_set` (constant delay and ``D``, ``A_tau`` left out).
+    """
+    K = np.asarray(K, float)
+    margin = min(delay_margin(problem.A, problem.B @ (K + problem.E @ D @ problem.F))
+                 for D in perturbation_set(problem))
+    cert = certified_input_delay_of_gain(problem, K, 0.0, tol=tol, h_hi=h_hi)
+    return {'certified_latency': float(cert), 'true_latency_margin': float(margin)}
