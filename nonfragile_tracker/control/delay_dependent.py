@@ -137,7 +137,8 @@ from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUS
                   cached_program, solve)
 from .sdp import sym as _sym
 
-__all__ = ['DEFAULT_EPS_GRID', 'DescriptorSolution', 'DelayDependentVerification', 'DelayDependentCertificate',
+__all__ = ['DEFAULT_EPS_GRID', 'DescriptorSolution',
+           'DelayDependentVerification', 'DelayDependentCertificate',
            'DelayDependentResult', 'descriptor_verification_matrix', 'verify_delay_dependent',
            'synthesize_delay_dependent', 'max_certified_delay']
 
