@@ -87,10 +87,11 @@ With ``w0 = e^{-2 a h0}``, ``w1 = e^{-2 a h1}``, ``wt = e^{-2 a tau}`` and
 
    plus ``[[R1b, S12b], [S12b^T, R1b]] >= t I``.  Back: ``K = Y X^{-1}``,
    ``P2 = X^{-1}``, ``P3 = eps P2``, ``M = X^{-T} Mb X^{-1}``.
-7. Monotone in ``h_max``: ``h1`` enters through ``+h10^2 R1b`` (``R1b > 0``) and the
-   weight ``w1`` of negative semidefinite terms (``Phi33..Phi55``'s ``w1`` part is
-   ``-w1 [a; b]``-form ``<= 0`` plus ``-w1 S1``), so a point feasible for ``h1`` is
-   feasible for any ``h1' in [h0, h1]``: bisection on ``h_max`` is sound.  The decay
+7. Monotone in ``h_max``: the ``w1`` terms of ``Phi33..Phi55`` are
+   ``-w1 ([a; b]^T [[R1, S12], [S12^T, R1]] [a; b] + x1^T S1 x1) <= 0`` and ``h1`` enters
+   only through them and ``+h10^2 R1``.  For ``h0 <= h1' < h1``, ``w1' >= w1`` and
+   ``h10'^2 <= h10^2``, so ``Phi(h1') <= Phi(h1)``: a point feasible for ``h1`` is
+   feasible for ``h1'`` (same matrices), and bisection on ``h_max`` is sound.  The decay
    rate is searched by bisection too, but feasibility is not proven monotone in
    ``alpha``: the returned rate is a verified lower bound, not the optimum.
 
