@@ -5,6 +5,7 @@ Sub-commands::
     synthesize PROBLEM [-o GAINS] [--nominal] [--gain-bound K]   Theorem 1 -> tracker gain file
     design PROBLEM --objective decay|scale|min-norm [--norm N]    optimized Theorem 1 gains
     delay-dependent PROBLEM [--delay H | --max-delay]             descriptor-method design
+    latency-design PROBLEM --delay-interval H_MIN H_MAX [--lag T]  gain certified for a latency
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
     run [options]                                                 the main job (see --help)
@@ -26,11 +27,11 @@ import sys
 # numpy is imported; an explicit OPENBLAS_NUM_THREADS from the caller wins.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-from .commands import bag, golden, reproduce, run, synthesis  # noqa: E402
+from .commands import bag, golden, latency_design, reproduce, run, synthesis  # noqa: E402
 from .errors import NonfragileError, exit_code  # noqa: E402
 
 #: The command modules, in ``--help`` order; each exposes ``register(subparsers)``.
-COMMANDS = (synthesis, run, bag, reproduce, golden)
+COMMANDS = (synthesis, latency_design, run, bag, reproduce, golden)
 
 
 def build_parser() -> argparse.ArgumentParser:

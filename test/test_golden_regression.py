@@ -52,7 +52,7 @@ def test_replay_inputs_into_a_fresh_tracker(name, delta):
     expected = [(m.linear.x, m.angular.z) for _, m in read_messages(bag, 'cmd_vel')]
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=unique_domain_id('replay' + name))
-    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    K = read_gain_file(golden.golden_gains())
     tracker = TrackerNode(context=ctx, parameter_overrides=[
         Parameter('K', value=[float(v) for v in K.ravel()]), Parameter('Delta', value=delta),
         Parameter('F', value=node_parameters('tracker')['F'])])   # the scenario's F

@@ -48,11 +48,11 @@ def worker_growth(n: int, solver: str, reps: int) -> None:
     """Child of the growth measurement: after a warm-up solve of the paper's problem (cvxpy's
     first-use cost), build + solve the stacked problem once, then warm re-solves."""
     import numpy as np
-    from nonfragile_tracker.control import lmi
+    from nonfragile_tracker.control import lmi, sdp
     from nonfragile_tracker.control.problem import load_problem
     p0 = load_problem(CONFIG / 'paper_problem.yaml')
     lmi.synthesize(p0, gain_bound=p0.options.get('gain_bound'), solver=solver)
-    lmi._PROGRAMS.clear()
+    sdp.clear_cache()
     p = stacked_problem(n // 4)
     gb = p.options.get('gain_bound')
     out = {'n': n, 'solver': solver, 'first_s': None, 'first_solver_s': None,
@@ -74,7 +74,7 @@ def worker_growth(n: int, solver: str, reps: int) -> None:
 
 def bench_synthesis(cfg, table: Table, raw: dict) -> None:
     import numpy as np
-    from nonfragile_tracker.control import delay, lmi
+    from nonfragile_tracker.control import delay, lmi, sdp
     from nonfragile_tracker.control.problem import load_problem
 
     p = load_problem(CONFIG / 'paper_problem.yaml')
@@ -99,7 +99,7 @@ def bench_synthesis(cfg, table: Table, raw: dict) -> None:
     res['first_call_in_process_s'] = time.perf_counter() - t
 
     def rebuild():
-        lmi._PROGRAMS.clear()           # drop the cached DPP problem: compile again
+        sdp.clear_cache()           # drop the cached DPP problem: compile again
         return lmi.synthesize(p, gain_bound=gb)
     rebuild_s, _ = timeit(rebuild, cfg.rebuild_reps)
     lmi.synthesize(p, gain_bound=gb)
@@ -107,7 +107,7 @@ def bench_synthesis(cfg, table: Table, raw: dict) -> None:
     solver_s = summary([r.solve_time for r in warm_res])
     iters = None
     try:
-        prog = next(iter(v for k, v in lmi._PROGRAMS.items() if not k[4]))
+        prog = next(iter(v for k, v in sdp.cached_programs() if k[0] == 'theorem1' and not k[5]))
         iters = prog.problem.solver_stats.num_iters
     except Exception:                    # noqa: BLE001 - diagnostics only
         pass
@@ -115,16 +115,16 @@ def bench_synthesis(cfg, table: Table, raw: dict) -> None:
                clarabel_iterations=iters, K=r0.K.tolist())
 
     log('synthesis: SCS')
-    lmi._PROGRAMS.clear()
+    sdp.clear_cache()
     scs_first = []
     for _ in range(cfg.rebuild_reps):
-        lmi._PROGRAMS.clear()
+        sdp.clear_cache()
         t = time.perf_counter()
         rs = lmi.synthesize(p, gain_bound=gb, solver='SCS')
         scs_first.append((time.perf_counter() - t, rs.solve_time))
     scs_warm, scs_res = timeit(lambda: lmi.synthesize(p, gain_bound=gb, solver='SCS'),
                                cfg.warm_reps)
-    lmi._PROGRAMS.clear()
+    sdp.clear_cache()
     res['scs'] = {'rebuild_s': summary([a for a, _ in scs_first]),
                   'rebuild_solver_s': summary([b for _, b in scs_first]),
                   'warm_s': scs_warm, 'warm_solver_s': summary([r.solve_time for r in scs_res]),

@@ -46,14 +46,14 @@ import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .problem import Problem
+from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
+                  solve)
+from .sdp import sym as _sym
 
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
            'Verification', 'SynthesisResult', 'CertifyResult', 'verify_certificate',
            'synthesize', 'certify_gain', 'certified_perturbation_scale',
            'UntrustedGainWarning', 'gain_trust_message']
-
-DEFAULT_MARGIN = 1e-6
-DEFAULT_SOLVER = 'CLARABEL'
 
 
 @dataclass(frozen=True)
@@ -122,10 +122,6 @@ class CertifyResult:
     margin_achieved: float   # best t in normalized units (> 0 iff certified)
     certificate: Certificate | None
     status: str
-
-
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
 
 
 def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
@@ -237,27 +233,14 @@ class _Theorem1Program:
             self.F.value = problem.F
         if self.kappa2 is not None:
             self.kappa2.value = float(kappa) ** 2
-        try:
-            self.problem.solve(solver=solver)
-        except self.cp.error.SolverError as exc:
-            raise SolverFailure(f'solver {solver} failed on problem {problem.name!r}: {exc}. '
-                                'Check that the solver is installed (pip install clarabel).') \
-                from None
-        stats = self.problem.solver_stats
-        return (self.problem.status, self.t.value, self.X.value, self.W.value, self.R.value,
-                None if self.eps is None else self.eps.value,
-                float(stats.solve_time or 0.0) if stats is not None else 0.0)
-
-
-_PROGRAMS: dict[tuple, _Theorem1Program] = {}
+        out = solve(self.problem, solver, what=f'problem {problem.name!r}')
+        return (out.status, self.t.value, self.X.value, self.W.value, self.R.value,
+                None if self.eps is None else self.eps.value, out.solve_time)
 
 
 def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
-    prog = _PROGRAMS.get(key)
-    if prog is None:
-        prog = _PROGRAMS[key] = _Theorem1Program(*key)
-    return prog
+    shape = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    return cached_program(('theorem1',) + shape, lambda: _Theorem1Program(*shape))
 
 
 def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
@@ -297,15 +280,15 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
     prog = _program(problem, nominal, gain_bound is not None)
     status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
     kind = 'nominal' if nominal else 'non-fragile'
-    if status in ('infeasible', 'infeasible_inaccurate') or (
-            status in ('optimal', 'optimal_inaccurate') and (t is None or t < margin)):
+    verdict = classify(status, t, margin)
+    if verdict == 'infeasible':
         best = 'no feasible point' if t is None else f'best margin t = {t:.3g}'
         bound = '' if gain_bound is None else f' with ||K||_2 <= {gain_bound:g}'
         raise InfeasibleError(
             f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
             f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
             'nominal design, or the delay-dependent design.')
-    if status not in ('optimal', 'optimal_inaccurate') or X is None:
+    if verdict == 'failed' or X is None:
         raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
                             f'{problem.name!r}; no gain was produced')
     P = np.linalg.inv(_sym(X))
@@ -633,11 +616,8 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     V = 0.5 * (V + V.T)
     cons += [V << -t * np.eye(V.shape[0]), P >> t * np.eye(n), Q >> t * np.eye(n), norm <= 1]
     prob = cp.Problem(cp.Maximize(t), cons)
-    try:
-        prob.solve(solver=solver)
-    except cp.error.SolverError as exc:
-        raise SolverFailure(f'solver {solver} failed while certifying K: {exc}') from None
-    if prob.status not in ('optimal', 'optimal_inaccurate') or t.value is None:
+    solve(prob, solver, what='the certification LMI for K')
+    if prob.status not in OK_STATUSES or t.value is None:
         return CertifyResult(False, float('-inf'), None, prob.status)
     tv = float(t.value)
     if tv < margin:
