@@ -11,6 +11,16 @@ time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
 
+Trajectories (:mod:`control.trajectory`): a nav_msgs/Path on ``trajectory``
+(transient-local; stamps give the times, all zero: a trapezoidal time law with
+``cruise_speed``/``max_accel``) or a trajectory_msgs/MultiDOFJointTrajectory on
+``trajectory_multidof`` is turned into a trajectory that the tracker samples itself at
+each odometry stamp (:class:`control.follow.Follower`): no reference samples are needed
+then.  Each new valid trajectory starts a new run; an invalid one is refused with the
+reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
+trajectory's end the robot is brought to rest and the tracker says so.  Without a
+trajectory the three reference topics are followed (the built-in analytic paths).
+
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
 go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
 ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``).
@@ -22,15 +32,21 @@ import math
 import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from trajectory_msgs.msg import MultiDOFJointTrajectory
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .. import topics
 from ..control.gains import GainFileError, gain_from_parameters
+from ..control.follow import REST_SPEED, Follower
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
-from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
-                     matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
+from ..control.trajectory import TrajectoryError
+from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
+                     declare, get, matrix_param, pose_from_odom, reference_from_msgs, run,
+                     stamp_ns)
+from .trajectory_io import multidof_to_trajectory, path_to_trajectory
 
 PAPER_F = [0.5] * 8
 PARAMS = [
@@ -56,6 +72,17 @@ PARAMS = [
           low=1e-6, high=1e6),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
+          read_only=True),
+    Param('cruise_speed', 0.5, 'time law for a Path with zero stamps: cruise speed (m/s)',
+          low=1e-6, high=1e3),
+    Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
+          '(m/s^2)', low=1e-6, high=1e3),
+    Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
+          'trajectory topics (ignore the per-step reference samples); set it when the '
+          'reference publishes a file or relayed trajectory', read_only=True),
+    Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
+          'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
            'input_timeout', 'max_stamp_jump'}
@@ -108,6 +135,13 @@ class TrackerNode(Node):
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
         self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
         self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel, DATA_QOS)
+        self.frame = get(self, 'odom_frame')
+        self.wait_for_trajectory = get(self, 'wait_for_trajectory')
+        self.follower: Follower | None = None
+        self.origin_ns = 0
+        self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
+        self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
+                                 self._on_multidof, LATCHED_QOS)
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
         self._odom: Odometry | None = None
@@ -157,10 +191,39 @@ class TrackerNode(Node):
         if self.rejected <= 10 or self.rejected % 1000 == 0:
             self.get_logger().warn(f'ignored {what} (rejected so far: {self.rejected})')
 
+    def _new_trajectory(self, build, source: str) -> None:
+        try:
+            traj, origin = build()
+        except TrajectoryError as exc:
+            self.rejected += 1
+            keep = 'the previous trajectory' if self.follower else 'the reference topics'
+            self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
+            return
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, get(self, 'rest_speed'))
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        self.get_logger().info(f'new trajectory from {source}: {len(traj.knots)} points '
+                               f'({traj.kind}), {traj.duration:.3f} s from stamp '
+                               f'{origin * 1e-9:.3f} s: starting a new run')
+        self._try_compute()                # a pose not yet answered gets its command now
+
+    def _on_path(self, msg: PathMsg) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
+        self._new_trajectory(lambda: path_to_trajectory(
+            msg, frame=self.frame, source=source, cruise_speed=get(self, 'cruise_speed'),
+            max_accel=get(self, 'max_accel')), source)
+
+    def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'
+        self._new_trajectory(lambda: multidof_to_trajectory(msg, frame=self.frame,
+                                                            source=source), source)
+
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'odom in frame {msg.header.frame_id!r} (expected '
-                                f'{topics.ODOM_FRAME!r})')
+                                f'{self.frame!r})')
         s = stamp_ns(msg.header.stamp)
         if s <= self.last_odom_stamp:
             if s < self.last_odom_stamp:
@@ -179,12 +242,12 @@ class TrackerNode(Node):
         self._try_compute()
 
     def _on_ref(self, i: int, msg) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'reference in frame {msg.header.frame_id!r}')
         self._ref[i] = msg
         if self.mode == 'realtime':
             self._last_ref_wall = self.get_clock().now().nanoseconds
-        else:
+        elif self.follower is None and not self.wait_for_trajectory:
             self._try_compute()
 
     def _on_ref_pose(self, msg):
@@ -198,6 +261,10 @@ class TrackerNode(Node):
 
     # ------------------------------------------------------------------ law
     def _try_compute(self) -> None:
+        if self.follower is not None:
+            return self._follow()
+        if self.wait_for_trajectory:
+            return
         odom = self._odom
         if odom is None or any(r is None for r in self._ref):
             return
@@ -221,6 +288,32 @@ class TrackerNode(Node):
                                 measured_speed=speed if math.isfinite(speed) else 0.0)
         self._publish(cmd.v, cmd.w)
 
+    def _follow(self) -> None:
+        """One command from the own trajectory, sampled at the odometry stamp."""
+        odom = self._odom
+        if odom is None or (self.mode == 'realtime' and self._stopped):
+            return
+        s = stamp_ns(odom.header.stamp)
+        if s <= self.last_stamp:
+            return
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            return self._reject(f'odom: {pose}')
+        self.last_stamp = s
+        f = self.follower
+        speed = odom.twist.twist.linear.x
+        was_finished = f.finished
+        cmd = f.step(pose[0], pose[1], pose[2], (s - self.origin_ns) * 1e-9,
+                     measured_speed=speed if math.isfinite(speed) else 0.0)
+        if f.finished and not was_finished:
+            e = math.hypot(cmd.error[0], cmd.error[2])
+            self.get_logger().info(
+                f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
+                f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
+                'a new trajectory')
+        self._publish(cmd.v, cmd.w)
+
     def _publish(self, v: float, w: float) -> None:
         c = self.tracker.config
         if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
@@ -231,13 +324,15 @@ class TrackerNode(Node):
         self.commands += 1
 
     def _watchdog(self) -> None:
-        if self._last_odom_wall is None or self._last_ref_wall is None:
+        own = self.follower is not None      # own trajectory: reference samples not needed
+        if self._last_odom_wall is None or (self._last_ref_wall is None and not own):
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
         limit = get(self, 'input_timeout') * 1e9
-        stale = [name for name, t in (('odom', self._last_odom_wall),
-                                      ('reference', self._last_ref_wall))
-                 if now - t > limit]
+        inputs = [('odom', self._last_odom_wall)]
+        if not own:
+            inputs.append(('reference', self._last_ref_wall))
+        stale = [name for name, t in inputs if now - t > limit]
         if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '

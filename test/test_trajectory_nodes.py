@@ -1,0 +1,188 @@
+"""Trajectories through the nodes: a CSV lap and a nav_msgs/Path from the test are
+tracked in lockstep equal to the in-process simulation; bad trajectories are refused
+and the previous one stays."""
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from nonfragile_tracker.control.follow import simulate_following
+from nonfragile_tracker.control.gains import read_gain_file
+from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.trajectory import load_waypoints
+
+from conftest import CONFIG, ROOT, unique_domain_id
+
+pytestmark = pytest.mark.ros
+
+LAP = CONFIG / 'trajectories' / 'lap.csv'
+DURATION = 16.0
+POSE0 = [0.0, -0.02, 0.0]
+
+
+def scenario(**reference):
+    from nonfragile_tracker.runner import scenario_parameters
+    ov = {'plant': {'ros__parameters': {'duration': DURATION, 'initial_pose': POSE0,
+                                        'initial_speed': 0.0}},
+          'reference': {'ros__parameters': reference},
+          'tracker': {'ros__parameters': {'wait_for_trajectory': True}}}
+    return scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov)
+
+
+def simulation(traj, origin_ns=0):
+    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    pc = PlantConfig(x0=POSE0[0], y0=POSE0[1], th0=POSE0[2], v0=0.0)
+    tc = TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau)
+    return simulate_following(pc, tc, traj, int(round(DURATION / pc.dt)), origin_ns=origin_ns)
+
+
+def as_sent(traj, origin_ns=0):
+    """The trajectory the tracker builds from the Path the reference publishes."""
+    from nonfragile_tracker.nodes.trajectory_io import path_to_trajectory, trajectory_to_path
+    msg = trajectory_to_path(traj, origin_ns, 'odom')
+    return path_to_trajectory(msg, frame='odom', source='test')[0], msg
+
+
+def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path):
+    from nonfragile_tracker.bag.reader import read_bag
+    from nonfragile_tracker.runner import run_composed
+    res = run_composed(scenario(trajectory_file=str(LAP)), tmp_path)
+    assert all(c == 0 for c in res.exit_codes.values()), res.exit_codes
+    run = read_bag(res.bag).run
+    traj, _ = as_sent(load_waypoints(LAP))
+    sim = simulation(traj)
+    steps = int(round(DURATION / 0.01))
+    assert len(run.pose) == steps + 1 and len(run.commands) == steps + 1
+    np.testing.assert_allclose(run.pose.x, sim.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.pose.y, sim.y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.commands.v, sim.cmd_v, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.commands.w, sim.cmd_w, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.reference.x, sim.xd, rtol=0, atol=1e-12)
+    # the lap is followed (A_tau's bias stays in mm) and the robot ends at rest
+    err = np.hypot(run.pose.x - run.reference.x, run.pose.y - run.reference.y)
+    assert err[run.pose.t > 5.0].max() < 0.03
+    assert run.commands.v[-1] == 0.0 and run.commands.w[-1] == 0.0
+    assert 0.45 < np.max(np.abs(run.commands.v)) < 0.6
+
+
+def spin_nodes(nodes, done, ctx, timeout=60.0):
+    import time
+    from nonfragile_tracker.nodes.common import make_executor
+    ex = make_executor(ctx)
+    for n in nodes:
+        ex.add_node(n)
+    deadline = time.monotonic() + timeout
+    while ctx.ok() and not done() and time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.02)
+    for n in nodes:
+        ex.remove_node(n)
+
+
+def param_list(params, node, **extra):
+    from rclpy.parameter import Parameter
+    vals = dict(params[node]['ros__parameters'])
+    vals.update(extra)
+    return [Parameter(k, value=v) for k, v in vals.items()]
+
+
+@pytest.fixture
+def ros_context():
+    import rclpy
+    ctx = rclpy.Context()
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    rclpy.init(context=ctx, domain_id=unique_domain_id('trajnodes'))
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def test_path_from_a_topic_is_tracked_and_bad_ones_are_refused(ros_context):
+    """A Path published by the test: tracker (lockstep) follows it; a bad Path later is
+    refused with the reason and the run goes on with the previous trajectory."""
+    from nav_msgs.msg import Odometry, Path as PathMsg
+    from geometry_msgs.msg import Twist
+    from rclpy.node import Node
+    from nonfragile_tracker.nodes.common import DATA_QOS, LATCHED_QOS
+    from nonfragile_tracker.nodes.plant import PlantNode
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+    from nonfragile_tracker.control.trajectory import from_waypoints
+
+    ctx = ros_context
+    # an S-curve with stamps from 1.0 s (origin): 4 s of motion, rest at both ends
+    t = np.linspace(0.0, 8.0, 17)
+    traj0 = from_waypoints(t, 0.05 * t * t * (3 - t / 4) / 4, 0.3 * np.sin(t / 8 * math.pi),
+                           source='test')
+    origin = 1_000_000_000
+    traj, msg = as_sent(traj0, origin)
+
+    params = scenario()
+    test = Node('test_publisher', context=ctx)
+    pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
+    odoms, cmds = [], []
+    test.create_subscription(Odometry, 'odom', lambda m: odoms.append(
+        (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.pose.pose.position.x,
+         m.pose.pose.position.y)), DATA_QOS)
+    test.create_subscription(Twist, 'cmd_vel', lambda m: cmds.append((m.linear.x, m.angular.z)),
+                             DATA_QOS)
+    pub.publish(msg)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
+    reference = ReferenceNode(context=ctx, parameter_overrides=param_list(params, 'reference'))
+    spin_nodes([test, tracker, reference], lambda: tracker.follower is not None, ctx)
+    assert tracker.follower is not None and tracker.origin_ns == origin
+    plant = PlantNode(context=ctx, parameter_overrides=param_list(
+        params, 'plant', lockstep_subscribers=2))
+    nodes = [test, tracker, reference, plant]
+    sent_bad = []
+
+    def done():
+        if len(odoms) > 500 and not sent_bad:       # mid-run: a Path in the wrong frame
+            bad = PathMsg()
+            bad.header = msg.header
+            bad.header.frame_id = 'map'
+            bad.poses = list(msg.poses)
+            pub.publish(bad)
+            sent_bad.append(True)
+        return plant.finished
+
+    spin_nodes(nodes, done, ctx)
+    try:
+        assert plant.finished and plant.exit_code == 0
+        steps = int(round(DURATION / 0.01))
+        sim = simulation(traj, origin)
+        x = np.array([o[1] for o in odoms])
+        y = np.array([o[2] for o in odoms])
+        assert len(x) == steps + 1 and len(cmds) == steps + 1
+        np.testing.assert_allclose(x, sim.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(y, sim.y, rtol=0, atol=1e-9)
+        np.testing.assert_allclose([c[0] for c in cmds], sim.cmd_v, rtol=0, atol=1e-9)
+        np.testing.assert_allclose([c[1] for c in cmds], sim.cmd_w, rtol=0, atol=1e-9)
+        assert tracker.rejected >= 1                 # the wrong-frame Path was refused
+        assert tracker.follower.trajectory is not None and tracker.follower.finished
+        # at rest after the end: zero commands from the step it stopped (the paper's
+        # A_tau xi(t - tau) term then lets the plant drift; no command can hold it there)
+        f = tracker.follower
+        k_end = int(round(f.finished_at / 0.01)) + origin // 10_000_000
+        end = traj.sample(traj.t_end)
+        assert f.finished_at - traj.t_end < 0.5
+        assert math.hypot(x[k_end] - end.x, y[k_end] - end.y) < 0.02
+        assert all(c == (0.0, 0.0) for c in cmds[k_end:])
+        assert np.all(np.abs(sim.cmd_v[k_end:]) == 0.0)
+    finally:
+        for n in nodes:
+            n.destroy_node()
+
+
+def test_bad_trajectory_file_refused_by_the_node(tmp_path):
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('t,x,y\n0,0,0\n1,1,0\n0.5,2,0\n')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('trajbad')),
+               PYTHONPATH=str(ROOT))
+    p = subprocess.run([sys.executable, '-m', 'nonfragile_tracker.nodes.reference', '--ros-args',
+                        '-p', f'trajectory_file:={bad}'], capture_output=True, text=True,
+                       env=env, timeout=60)
+    assert p.returncode == 2
+    assert f'{bad}: point 2: time t = 0.5 s is not after' in p.stderr
+    assert 'Traceback' not in p.stderr
