@@ -245,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
     runner.add_subcommands(sub)
     reproduce.add_subcommand(sub)
     golden.add_subcommand(sub)
+    # --- commands/ modules (one line per command; the integrator wires these) ---
+    from .commands import trajectory as trajectory_command
+    trajectory_command.register(sub)
     return p
 
 

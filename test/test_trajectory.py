@@ -223,3 +223,29 @@ def test_bad_arrays_and_frames():
         check_frame('map', 'odom', 'topic /plan')
     with pytest.raises(TrajectoryError, match='smoothing'):
         from_waypoints([0, 1, 2], [0, 1, 2], [0, 0, 0], smoothing=-1.0)
+
+
+# ------------------------------------------------------------------------- CLI
+
+def test_cli_trajectory_check_prints_the_summary(capsys):
+    from nonfragile_tracker.cli import main
+    assert main(['trajectory', 'check', str(LAP)]) == 0
+    out = capsys.readouterr().out
+    assert '61 points, cubic spline' in out and 'peak speed 0.505 m/s' in out
+
+
+@pytest.mark.parametrize('text,needle', [
+    ('t,x,y\n0,0,0\n', 'at least 2 points'),
+    ('t,x,y\n0,0,0\n2,1,0\n1,2,0\n', 'point 2: time t = 1.0 s is not after'),
+    ('t,x,y\n0,0,0\n1,inf,0\n', "point 1: x = 'inf' is not finite"),
+    ('t;x;y\n0;0;0\n', "missing column 't'"),
+])
+def test_cli_refuses_bad_trajectories_with_exit_2(tmp_path, capsys, text, needle):
+    from nonfragile_tracker.cli import main
+    p = write(tmp_path, 'plan.csv', text)
+    for argv in (['trajectory', 'check', str(p)],
+                 ['run', '--trajectory', str(p), '--out', str(tmp_path / 'runs')]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f'error: {p}: ') and needle in err and 'Traceback' not in err
+    assert not (tmp_path / 'runs').exists()             # nothing started

@@ -59,7 +59,7 @@ from .reference import Path, RefSample
 
 __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
            'from_waypoints', 'from_states', 'from_poses', 'load_waypoints',
-           'read_waypoint_file', 'time_law', 'check_frame', 'Waypoints']
+           'read_waypoint_file', 'time_law', 'check_frame', 'describe', 'Waypoints']
 
 #: Points a curve needs: the spline's order and clamped ends need at least 2 distinct times.
 MIN_POINTS = 2
@@ -604,3 +604,30 @@ def check_frame(frame_id: str, expected: str, source: str) -> None:
     if frame_id != expected:
         raise TrajectoryError(f'{source}: frame_id {frame_id!r}; the trajectory must be in the '
                               f'odometry frame {expected!r} (no tf here)')
+
+
+def describe(traj: Trajectory, samples: int = 2001) -> dict:
+    """Summary of a bounded trajectory: points, duration, peaks and direction.
+
+    Returns a dict with ``points``, ``kind``, ``t_start``, ``t_end``, ``duration`` (s),
+    ``length`` (m, path length), ``peak_speed`` (m/s), ``peak_accel`` (m/s^2),
+    ``peak_turn_rate`` (rad/s, heading rate while moving faster than 1 cm/s),
+    ``backwards`` (fraction of the time driven in reverse), start and end pose.
+    """
+    if traj.is_analytic:
+        raise TrajectoryError(f'{traj.source}: analytic paths are unbounded; nothing to '
+                              'summarise')
+    ts = np.linspace(traj.t_start, traj.t_end, samples)
+    s = traj.evaluate(ts)
+    speed = np.hypot(s.vx, s.vy)
+    moving = speed[1:] > 0.01
+    rate = np.abs(np.diff(np.unwrap(s.heading)) / np.diff(ts))
+    seg = np.clip(np.searchsorted(traj.knots, ts, side='right') - 1, 0, len(traj.knots) - 2)
+    back = float(np.mean(traj._dir[seg] < 0))
+    return dict(points=len(traj.knots), kind=traj.kind, t_start=traj.t_start,
+                t_end=traj.t_end, duration=traj.duration,
+                length=float(np.sum(np.hypot(np.diff(s.x), np.diff(s.y)))),
+                peak_speed=float(speed.max()), peak_accel=float(np.hypot(s.ax, s.ay).max()),
+                peak_turn_rate=float(rate[moving].max()) if moving.any() else 0.0,
+                backwards=back, start=(float(s.x[0]), float(s.y[0]), float(s.heading[0])),
+                end=(float(s.x[-1]), float(s.y[-1]), float(s.heading[-1])))
