@@ -186,3 +186,84 @@ def test_bad_trajectory_file_refused_by_the_node(tmp_path):
     assert p.returncode == 2
     assert f'{bad}: point 2: time t = 0.5 s is not after' in p.stderr
     assert 'Traceback' not in p.stderr
+
+
+
+@pytest.mark.parametrize('stamped', [True, False])
+def test_twist_and_twist_stamped_both_move_the_plant(ros_context, stamped):
+    """cmd_vel as TwistStamped (diff_drive_controller since Jazzy) or Twist: the same run;
+    the stamped header carries the command time (the odom stamp it answers) and the body
+    frame.  Tracking error, travelled path, marker and diagnostics are published."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Twist, TwistStamped, Vector3Stamped
+    from nav_msgs.msg import Odometry, Path as PathMsg
+    from rclpy.node import Node
+    from visualization_msgs.msg import Marker
+    from nonfragile_tracker.control.follow import path_errors
+    from nonfragile_tracker.control.reference import circle
+    from nonfragile_tracker.control.simulate import simulate_tracking
+    from nonfragile_tracker.nodes.common import DATA_QOS
+    from nonfragile_tracker.nodes.plant import PlantNode
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+    from nonfragile_tracker.runner import scenario_parameters
+
+    ctx = ros_context
+    duration = 3.0
+    params = scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml',
+                                 {'plant': {'ros__parameters': {'duration': duration}}})
+    flag = {'enable_stamped_cmd_vel': stamped}
+    got = {'cmd': [], 'odom': [], 'err': [], 'path': [], 'marker': [], 'diag': []}
+    test = Node('test_listener', context=ctx)
+    ctype = TwistStamped if stamped else Twist
+    test.create_subscription(ctype, 'cmd_vel', got['cmd'].append, DATA_QOS)
+    test.create_subscription(Odometry, 'odom', got['odom'].append, DATA_QOS)
+    test.create_subscription(Vector3Stamped, 'tracker/error', got['err'].append, DATA_QOS)
+    test.create_subscription(PathMsg, 'tracker/path', got['path'].append, DATA_QOS)
+    test.create_subscription(Marker, 'tracker/reference_marker', got['marker'].append, DATA_QOS)
+    test.create_subscription(DiagnosticArray, '/diagnostics', got['diag'].append, DATA_QOS)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(
+        params, 'tracker', diagnostics_period=0.5, **flag))
+    reference = ReferenceNode(context=ctx, parameter_overrides=param_list(params, 'reference'))
+    plant = PlantNode(context=ctx, parameter_overrides=param_list(
+        params, 'plant', lockstep_subscribers=2, **flag))
+    nodes = [test, tracker, reference, plant]
+    steps = int(round(duration / 0.01))
+    spin_nodes(nodes, lambda: plant.finished and len(got['err']) > steps
+               and len(got['cmd']) > steps and got['path']
+               and len(got['path'][-1].poses) == 16, ctx, timeout=30.0)
+    try:
+        assert plant.finished and plant.exit_code == 0
+        steps = int(round(duration / 0.01))
+        K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+        pc = PlantConfig()
+        sim = simulate_tracking(pc, TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau), circle(),
+                                steps)
+        odom_x = np.array([m.pose.pose.position.x for m in got['odom']])
+        np.testing.assert_allclose(odom_x, sim.x, rtol=0, atol=1e-9)    # the plant moved so
+        assert abs(sim.x[-1] - sim.x[0]) > 0.1
+        twists = [m.twist if stamped else m for m in got['cmd']]
+        np.testing.assert_allclose([t.angular.z for t in twists], sim.cmd_w, rtol=0, atol=1e-9)
+        if stamped:
+            assert all(m.header.frame_id == 'base_link' for m in got['cmd'])
+            stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in got['cmd']]
+            assert stamps == [k * 10_000_000 for k in range(steps + 1)]   # command time
+        # tracking error: along/cross-track and heading against the reference point
+        assert len(got['err']) == steps + 1
+        ref = circle().sample(1.5)
+        e = got['err'][150].vector
+        assert (e.x, e.y, e.z) == pytest.approx(path_errors(sim.x[150], sim.y[150],
+                                                            sim.th[150], ref), abs=1e-9)
+        assert got['err'][0].vector.y == pytest.approx(path_errors(
+            0.7, 0.1, math.pi / 2, circle().sample(0.0))[1], abs=1e-12)
+        assert len(got['path'][-1].poses) == 16 and got['path'][-1].header.frame_id == 'odom'
+        assert got['marker'] and got['marker'][-1].type == Marker.ARROW
+        status = got['diag'][-1].status[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert 100 < int(values['commands']) <= steps + 1      # sent every 0.5 s (sim time)
+        assert values['rejected inputs'] == '0' and values['deadline misses'] == '0'
+        assert float(values['loop period (s)']) == pytest.approx(0.01)
+        assert 'following the reference topics' in status.message
+    finally:
+        for n in nodes:
+            n.destroy_node()

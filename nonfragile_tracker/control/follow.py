@@ -22,10 +22,22 @@ from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
 from .simulate import TrackingRun
 from .trajectory import Trajectory
 
-__all__ = ['Follower', 'simulate_following', 'REST_SPEED']
+__all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors']
 
 #: Default speed (m/s) below which, after the trajectory's end, the robot is at rest.
 REST_SPEED = 0.01
+
+
+def path_errors(x: float, y: float, th: float, ref) -> tuple[float, float, float]:
+    """Along-track, cross-track (m) and heading error (rad) of a pose against a reference.
+
+    In the reference point's frame (x along its heading, y to its left, REP-103):
+    along-track ``> 0`` means the robot is ahead, cross-track ``> 0`` that it is to the
+    left; the heading error is ``th - heading`` wrapped to ``[-pi, pi]``.
+    """
+    dx, dy = x - ref.x, y - ref.y
+    c, s = math.cos(ref.heading), math.sin(ref.heading)
+    return (c * dx + s * dy, -s * dx + c * dy, math.remainder(th - ref.heading, math.tau))
 
 
 class Follower:
@@ -54,14 +66,16 @@ class Follower:
         self.finished = False
         self.ended = False          # past t_end (still settling until finished)
         self.finished_at: float | None = None
+        self.last_ref = None
         self.tracker.reset()
 
     def step(self, x: float, y: float, th: float, t: float,
              measured_speed: float | None = None) -> Command:
         """Command for the pose ``(x, y, th)`` at trajectory time ``t``."""
+        ref = self.trajectory.sample(t)
+        self.last_ref = ref
         if self.finished:
             return Command(v=0.0, w=0.0)
-        ref = self.trajectory.sample(t)
         cmd = self.tracker.step(x, y, th, ref, measured_speed)
         if t > self.trajectory.t_end:
             self.ended = True

@@ -2,7 +2,15 @@
 
 Subscribes ``odom`` (nav_msgs/Odometry; its twist.linear.x initialises the
 compensator speed), ``reference/pose``, ``reference/twist``, ``reference/accel``;
-publishes ``cmd_vel`` (geometry_msgs/Twist).  The law is
+publishes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
+``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
+``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
+z heading error in rad, in the reference point's frame; every step, when subscribed),
+``tracker/path`` (nav_msgs/Path, the travelled path) and ``tracker/reference_marker``
+(visualization_msgs/Marker, arrow at the current reference) every ``viz_period`` s of
+stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
+loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
+commands, trajectory state and end) every ``diagnostics_period`` s.  The law is
 :class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
 
 Lockstep: a command is computed once per stamp, when the pose and the three
@@ -30,22 +38,24 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import Marker
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .. import topics
 from ..control.gains import GainFileError, gain_from_parameters
-from ..control.follow import REST_SPEED, Follower
+from ..control.follow import REST_SPEED, Follower, path_errors
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
 from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, Param, StartupError, check_mode,
-                     declare, get, matrix_param, pose_from_odom, reference_from_msgs, run,
-                     stamp_ns)
+                     declare, fill_pose, get, matrix_param, ns_to_stamp, pose_from_odom,
+                     reference_from_msgs, run, stamp_ns)
 from .trajectory_io import multidof_to_trajectory, path_to_trajectory
 
 PAPER_F = [0.5] * 8
@@ -81,6 +91,16 @@ PARAMS = [
     Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
           'trajectory topics (ignore the per-step reference samples); set it when the '
           'reference publishes a file or relayed trajectory', read_only=True),
+    Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
+          '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
+          'instead of Twist', read_only=True),
+    Param('base_frame', topics.BASE_FRAME, 'robot body frame (frame_id of TwistStamped)',
+          read_only=True),
+    Param('viz_period', 0.2, 'period (s, stamp time) of the travelled path and the reference '
+          'marker', low=1e-3, high=1e6, read_only=True),
+    Param('max_path_poses', 5000, 'travelled path: keep the last this many poses'),
+    Param('diagnostics_period', 1.0, 'period (s, node clock) of the status on /diagnostics',
+          low=1e-3, high=1e6, read_only=True),
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
@@ -130,7 +150,6 @@ class TrackerNode(Node):
         except LoopConfigError as exc:
             raise StartupError(f'tracker: {exc}') from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.pub_cmd = self.create_publisher(Twist, topics.CMD_VEL, DATA_QOS)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
         self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
@@ -152,8 +171,36 @@ class TrackerNode(Node):
         self.jumps = 0
         self.commands = 0
         self.finished = False
-        self._cmd = Twist()
         self._stopped = False
+        self.saturated = self.stale_stops = self.deadline_misses = 0
+        self._rejected_reported = 0
+        self._odom_intervals, self._odom_interval_sum = 0, 0.0
+        self._last_odom_rx = 0
+        self.base_frame = get(self, 'base_frame')
+        if get(self, 'enable_stamped_cmd_vel'):
+            self._cmd_msg = TwistStamped()
+            self._cmd_msg.header.frame_id = self.base_frame
+            self._cmd = self._cmd_msg.twist
+        else:
+            self._cmd = self._cmd_msg = Twist()
+        self.pub_cmd = self.create_publisher(type(self._cmd_msg), topics.CMD_VEL, DATA_QOS)
+        self.pub_error = self.create_publisher(Vector3Stamped, topics.TRACKING_ERROR, DATA_QOS)
+        self.pub_path = self.create_publisher(PathMsg, topics.TRAVELLED_PATH, DATA_QOS)
+        self.pub_marker = self.create_publisher(Marker, topics.REF_MARKER, DATA_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, DATA_QOS)
+        self._err_msg = Vector3Stamped()
+        self._err_msg.header.frame_id = self.frame
+        self._travelled = PathMsg()
+        self._travelled.header.frame_id = self.frame
+        self.viz_period_ns = int(get(self, 'viz_period') * 1e9)
+        self.max_path_poses = int(get(self, 'max_path_poses'))
+        self._last_viz = -(1 << 62)
+        mk = self._marker = Marker()
+        mk.header.frame_id = self.frame
+        mk.ns, mk.id, mk.type, mk.action = 'reference', 0, Marker.ARROW, Marker.ADD
+        mk.scale.x, mk.scale.y, mk.scale.z = 0.25, 0.04, 0.04
+        mk.color.r, mk.color.g, mk.color.b, mk.color.a = 1.0, 0.3, 0.0, 1.0
+        self.create_timer(get(self, 'diagnostics_period'), self._diagnostics)
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
@@ -235,6 +282,13 @@ class TrackerNode(Node):
             self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
+        if self.last_odom_stamp >= 0:
+            gap = (s - self.last_odom_stamp) * 1e-9
+            self._odom_intervals += 1
+            self._odom_interval_sum += gap
+            if gap > 1.5 * self.tracker.config.dt:
+                self.deadline_misses += 1
+        self._last_odom_rx = self.get_clock().now().nanoseconds
         self._odom = msg
         self.last_odom_stamp = s
         if self.mode == 'realtime':
@@ -286,7 +340,8 @@ class TrackerNode(Node):
         speed = odom.twist.twist.linear.x
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
                                 measured_speed=speed if math.isfinite(speed) else 0.0)
-        self._publish(cmd.v, cmd.w)
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, ref, cmd)
 
     def _follow(self) -> None:
         """One command from the own trajectory, sampled at the odometry stamp."""
@@ -312,16 +367,100 @@ class TrackerNode(Node):
                 f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
                 f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
                 'a new trajectory')
-        self._publish(cmd.v, cmd.w)
+            self._diagnostics()
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, f.last_ref, cmd)
 
-    def _publish(self, v: float, w: float) -> None:
+    def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
+        """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
+
+        The stamped header carries the command time - the odometry stamp it answers in
+        lockstep, the node clock's now in real time (what diff_drive_controller checks
+        against its cmd_vel_timeout) - and the body frame.
+        """
         c = self.tracker.config
         if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
             v = w = 0.0
         self._cmd.linear.x = max(-c.max_linear_speed, min(c.max_linear_speed, v))
         self._cmd.angular.z = max(-c.max_angular_speed, min(c.max_angular_speed, w))
-        self.pub_cmd.publish(self._cmd)
+        if self._cmd_msg is not self._cmd:
+            if stamp is None or self.mode == 'realtime':
+                stamp = self.get_clock().now().nanoseconds
+            ns_to_stamp(stamp, self._cmd_msg.header.stamp)
+        self.pub_cmd.publish(self._cmd_msg)
         self.commands += 1
+
+    # ------------------------------------------------------------------ outputs
+    def _outputs(self, stamp: int, pose, ref, cmd) -> None:
+        """Tracking error every step, travelled path and reference marker at viz_period."""
+        if cmd.saturated:
+            self.saturated += 1
+        if ref is None:
+            return
+        if self.pub_error.get_subscription_count():
+            along, cross, head = path_errors(pose[0], pose[1], pose[2], ref)
+            m = self._err_msg
+            ns_to_stamp(stamp, m.header.stamp)
+            m.vector.x, m.vector.y, m.vector.z = along, cross, head
+            self.pub_error.publish(m)
+        if stamp - self._last_viz < self.viz_period_ns:
+            return
+        self._last_viz = stamp
+        ps = PoseStamped()
+        ps.header.frame_id = self.frame
+        ns_to_stamp(stamp, ps.header.stamp)
+        fill_pose(ps.pose, pose[0], pose[1], pose[2])
+        self._travelled.poses.append(ps)
+        if len(self._travelled.poses) > self.max_path_poses:
+            del self._travelled.poses[:len(self._travelled.poses) - self.max_path_poses]
+        self._travelled.header.stamp = ps.header.stamp
+        if self.pub_path.get_subscription_count():
+            self.pub_path.publish(self._travelled)
+        if self.pub_marker.get_subscription_count():
+            mk = self._marker
+            mk.header.stamp = ps.header.stamp
+            fill_pose(mk.pose, ref.x, ref.y, ref.heading)
+            self.pub_marker.publish(mk)
+
+    def _diagnostics(self) -> None:
+        """tracker status on /diagnostics (diagnostic_msgs/DiagnosticArray)."""
+        now = self.get_clock().now().nanoseconds
+        f = self.follower
+        if f is None:
+            state = 'waiting for a trajectory' if self.wait_for_trajectory else \
+                'following the reference topics'
+        elif f.finished:
+            state = f'trajectory finished, at rest since t = {f.finished_at:.3f} s'
+        elif f.ended:
+            state = 'trajectory ended, coming to rest'
+        else:
+            state = 'following the trajectory'
+        n = self._odom_intervals
+        period = self._odom_interval_sum / n if n else 0.0
+        odom_age = (now - self._last_odom_rx) * 1e-9 if self._last_odom_rx else math.inf
+        level = DiagnosticStatus.OK
+        msgs = [state]
+        if self._stopped:
+            level = DiagnosticStatus.WARN
+            msgs.append('inputs stale: stopped')
+        if self.rejected > self._rejected_reported:
+            level = max(level, DiagnosticStatus.WARN)
+            msgs.append(f'{self.rejected - self._rejected_reported} input(s) rejected')
+        self._rejected_reported = self.rejected
+        st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
+                              message='; '.join(msgs),
+                              hardware_id=self.get_fully_qualified_name())
+        vals = {'loop period (s)': f'{period:.6f}', 'deadline misses': self.deadline_misses,
+                'odom age (s)': f'{odom_age:.3f}', 'commands': self.commands,
+                'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
+                'saturated commands': self.saturated, 'stamp jumps': self.jumps,
+                'trajectory': state,
+                'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none'}
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self.pub_diag.publish(arr)
 
     def _watchdog(self) -> None:
         own = self.follower is not None      # own trajectory: reference samples not needed
@@ -338,6 +477,7 @@ class TrackerNode(Node):
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
                                        f'{get(self, "input_timeout")} s: publishing stop')
                 self._stopped = True
+                self.stale_stops += 1
                 self.tracker.reset()
             self._publish(0.0, 0.0)
         elif not stale and self._stopped:
