@@ -267,3 +267,148 @@ def test_twist_and_twist_stamped_both_move_the_plant(ros_context, stamped):
     finally:
         for n in nodes:
             n.destroy_node()
+
+
+def bad_paths(good):
+    """One bad nav_msgs/Path per class, with the text the refusal must contain."""
+    from copy import deepcopy
+    out = []
+    few = deepcopy(good)
+    few.poses = few.poses[1:2]
+    out.append((few, '1 point(s); a trajectory needs at least 2'))
+    order = deepcopy(good)
+    order.poses[3].header.stamp = deepcopy(order.poses[1].header.stamp)
+    out.append((order, 'point 3: time t = 0.5 s is not after'))
+    nan = deepcopy(good)
+    nan.poses[2].pose.position.y = math.nan
+    out.append((nan, 'point 2: y = nan is not finite'))
+    frame = deepcopy(good)
+    frame.header.frame_id = 'map'
+    out.append((frame, "frame_id 'map'"))
+    pose_frame = deepcopy(good)
+    pose_frame.poses[4].header.frame_id = 'base_link'
+    out.append((pose_frame, "point 4: frame_id 'base_link'"))
+    quat = deepcopy(good)
+    quat.poses[5].pose.orientation.w = 3.0
+    out.append((quat, 'point 5: orientation'))
+    return out
+
+
+def test_bad_paths_and_multidof_through_the_tracker(ros_context):
+    """Every bad class is refused with its reason naming the topic, the point and the
+    value; the tracker keeps its trajectory; a MultiDOFJointTrajectory with velocities
+    and accelerations replaces it (a new run)."""
+    from geometry_msgs.msg import Transform, Twist as TwistMsg
+    from nav_msgs.msg import Path as PathMsg
+    from rclpy.node import Node
+    from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+    from nonfragile_tracker.control.trajectory import from_waypoints
+    from nonfragile_tracker.nodes.common import LATCHED_QOS
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    t = np.linspace(0.0, 4.0, 9)
+    traj0 = from_waypoints(t, 0.1 * t, 0.0 * t)
+    _, good = as_sent(traj0)
+    params = scenario()
+    test = Node('test_bad_paths', context=ctx)
+    pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
+    pub_m = test.create_publisher(MultiDOFJointTrajectory, 'trajectory_multidof', LATCHED_QOS)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
+    try:
+        pub.publish(good)
+        spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx, timeout=20)
+        kept = tracker.follower.trajectory
+        for msg, needle in bad_paths(good):
+            before = tracker.rejected
+            pub.publish(msg)
+            spin_nodes([test, tracker], lambda: tracker.rejected > before, ctx, timeout=10)
+            assert tracker.rejected == before + 1, needle
+            assert tracker.last_refusal.startswith('topic /trajectory: ')
+            assert needle in tracker.last_refusal
+            assert tracker.follower.trajectory is kept
+        m = MultiDOFJointTrajectory()
+        m.header.frame_id = 'odom'
+        m.joint_names = ['base_link']
+        for k, tk in enumerate([0.0, 1.0, 2.0]):
+            p = MultiDOFJointTrajectoryPoint()
+            tr = Transform()
+            tr.translation.x, tr.rotation.w = 0.5 * tk * tk, 1.0
+            v, a = TwistMsg(), TwistMsg()
+            v.linear.x, a.linear.x = 1.0 * tk, 1.0
+            p.transforms, p.velocities, p.accelerations = [tr], [v], [a]
+            p.time_from_start.sec = int(tk)
+            m.points.append(p)
+        pub_m.publish(m)
+        spin_nodes([test, tracker], lambda: tracker.follower.trajectory is not kept, ctx,
+                   timeout=10)
+        new = tracker.follower.trajectory
+        assert new.kind == 'quintic Hermite'
+        s = new.sample(1.5)                          # x = t^2 / 2 exactly
+        assert (s.x, s.vx, s.ax) == pytest.approx((1.125, 1.5, 1.0), abs=1e-12)
+        m.points[2].transforms[0].translation.y = math.inf
+        before = tracker.rejected
+        pub_m.publish(m)
+        spin_nodes([test, tracker], lambda: tracker.rejected > before, ctx, timeout=10)
+        assert 'topic /trajectory_multidof: point 2: y = inf' in tracker.last_refusal
+        assert tracker.follower.trajectory is new
+    finally:
+        tracker.destroy_node()
+        test.destroy_node()
+
+
+def test_path_tracked_in_real_time(ros_context):
+    """Real time (wall clock, timers): the tracker samples the Path at each odom stamp
+    without reference samples; the errors stay within those of the simulation of the
+    same trajectory (timer jitter under load allowed for)."""
+    import time
+    from nav_msgs.msg import Odometry, Path as PathMsg
+    from rclpy.node import Node
+    from nonfragile_tracker.control.trajectory import from_waypoints
+    from nonfragile_tracker.nodes.common import DATA_QOS, LATCHED_QOS
+    from nonfragile_tracker.nodes.plant import PlantNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    t = np.linspace(0.0, 4.0, 9)
+    traj0 = from_waypoints(t, 0.1 * t * t * (3 - t / 2) / 4, 0.2 * np.sin(t / 4 * math.pi))
+    params = scenario()
+    rt = {'mode': 'realtime'}
+    test = Node('test_rt', context=ctx)
+    pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
+    odoms = []
+    test.create_subscription(Odometry, 'odom', lambda m: odoms.append(
+        (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.pose.pose.position.x,
+         m.pose.pose.position.y)), DATA_QOS)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker', **rt))
+    origin = time.time_ns() + 1_000_000_000             # starts in 1 s (wall clock)
+    traj, msg = as_sent(traj0, origin)
+    pub.publish(msg)
+    spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx, timeout=20)
+    plant = PlantNode(context=ctx, parameter_overrides=param_list(
+        params, 'plant', duration=6.5, tau=0.0, **rt))
+    nodes = [test, tracker, plant]
+    try:
+        spin_nodes(nodes, lambda: plant.finished, ctx, timeout=30)
+        assert plant.finished and tracker.follower.finished
+        st = np.array([o[0] for o in odoms], dtype=np.int64)
+        tt = (st - origin) * 1e-9
+        ref = traj.evaluate(tt)
+        err = np.hypot(np.array([o[1] for o in odoms]) - ref.x,
+                       np.array([o[2] for o in odoms]) - ref.y)
+        moving = (tt > 0.0) & (tt < traj.t_end)
+        assert moving.sum() > 200                      # the run covered the trajectory
+        K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+        pc = PlantConfig(x0=POSE0[0], y0=POSE0[1], th0=POSE0[2], v0=0.0, tau=0.0)
+        sim = simulate_following(pc, TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau), traj,
+                                 650, origin_ns=1_000_000_000)   # starts at t = 1 s
+        sim_err = sim.error[(sim.t > 1.0) & (sim.t < 1.0 + traj.t_end)]
+        rms = math.sqrt(np.mean(err[moving] ** 2))
+        print(f'real time: RMS {rms:.5f} m, max {err[moving].max():.5f} m, final {err[-1]:.5f} m; '
+              f'simulation: RMS {math.sqrt(np.mean(sim_err ** 2)):.5f} m, max {sim_err.max():.5f} m')
+        assert rms < math.sqrt(np.mean(sim_err ** 2)) + 0.005
+        assert err[moving].max() < sim_err.max() + 0.015
+        assert err[-1] < 0.02
+    finally:
+        for n in nodes:
+            n.destroy_node()

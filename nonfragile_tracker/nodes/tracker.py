@@ -157,6 +157,7 @@ class TrackerNode(Node):
         self.frame = get(self, 'odom_frame')
         self.wait_for_trajectory = get(self, 'wait_for_trajectory')
         self.follower: Follower | None = None
+        self.last_refusal = ''
         self.origin_ns = 0
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
@@ -243,6 +244,7 @@ class TrackerNode(Node):
             traj, origin = build()
         except TrajectoryError as exc:
             self.rejected += 1
+            self.last_refusal = str(exc)
             keep = 'the previous trajectory' if self.follower else 'the reference topics'
             self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
             return
@@ -455,7 +457,8 @@ class TrackerNode(Node):
                 'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
                 'saturated commands': self.saturated, 'stamp jumps': self.jumps,
                 'trajectory': state,
-                'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none'}
+                'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
+                'last refused trajectory': self.last_refusal or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

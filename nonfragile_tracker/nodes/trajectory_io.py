@@ -58,15 +58,12 @@ def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | No
         stamps[i] = stamp_ns(ps.header.stamp)
         x[i], y[i] = ps.pose.position.x, ps.pose.position.y
         yaw[i] = _yaw(ps.pose.orientation, source, i)
-    if n and np.all(stamps == 0):
-        origin = stamp_ns(msg.header.stamp)
-        t = np.zeros(n)
-    else:
-        origin = int(stamps[0]) if n else 0
-        t = (stamps - origin) * 1e-9
-    traj = from_poses(t, x, y, yaw, cruise_speed=cruise_speed, max_accel=max_accel,
-                      source=source)
-    return traj, origin
+    if n and np.all(stamps == 0):            # untimed: the time law along the path
+        traj = from_poses(np.zeros(n), x, y, yaw, cruise_speed=cruise_speed,
+                          max_accel=max_accel, source=source)
+        return traj, stamp_ns(msg.header.stamp)
+    origin = int(stamps[0]) if n else 0
+    return from_waypoints((stamps - origin) * 1e-9, x, y, yaw=yaw, source=source), origin
 
 
 def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str, times=None,
