@@ -412,3 +412,55 @@ def test_path_tracked_in_real_time(ros_context):
     finally:
         for n in nodes:
             n.destroy_node()
+
+
+def test_reference_relays_an_untimed_plan(ros_context):
+    """A planner's Path without stamps, relayed by the reference: the tracker gets it
+    with the time law (cruise speed, acceleration limit) and the reference's start time;
+    a bad plan is refused by the reference and nothing changes downstream."""
+    from nav_msgs.msg import Path as PathMsg
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.node import Node
+    from nonfragile_tracker.control.trajectory import time_law
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    params = scenario(trajectory_topic='plan', cruise_speed=0.4, max_accel=0.2)
+    test = Node('test_planner', context=ctx)
+    pub = test.create_publisher(PathMsg, 'plan', 10)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
+    reference = ReferenceNode(context=ctx, parameter_overrides=param_list(params, 'reference'))
+    nodes = [test, tracker, reference]
+    try:
+        spin_nodes(nodes, lambda: pub.get_subscription_count() >= 1, ctx, timeout=20)
+        plan = PathMsg()
+        plan.header.frame_id = 'odom'
+        xs = [0.0, 1.0, 2.0, 2.0]
+        ys = [0.0, 0.0, 0.5, 1.5]
+        for x, y in zip(xs, ys):
+            ps = PoseStamped()
+            ps.pose.position.x, ps.pose.position.y, ps.pose.orientation.w = x, y, 1.0
+            plan.poses.append(ps)
+        pub.publish(plan)
+        spin_nodes(nodes, lambda: tracker.follower is not None, ctx, timeout=20)
+        traj = tracker.follower.trajectory
+        assert traj.t_end == pytest.approx(time_law(xs, ys, 0.4, 0.2)[-1], abs=1e-9)
+        assert tracker.origin_ns == reference.origin_ns
+        s = traj.sample(traj.t_end / 2)
+        assert 0.2 < math.hypot(s.vx, s.vy) < 0.5
+        bad = PathMsg()
+        bad.header.frame_id = 'odom'
+        bad.poses = list(plan.poses)
+        bad.poses[1] = PoseStamped()
+        bad.poses[1].pose.position.x = math.nan
+        bad.poses[1].pose.orientation.w = 1.0
+        pub.publish(bad)
+        spin_nodes(nodes, lambda: reference.last_refusal, ctx, timeout=10)
+        assert reference.last_refusal == 'topic plan: point 1: x = nan is not finite; every ' \
+            'value must be a finite number'
+        spin_nodes(nodes, lambda: False, ctx, timeout=0.3)
+        assert tracker.follower.trajectory is traj and tracker.rejected == 0
+    finally:
+        for n in nodes:
+            n.destroy_node()

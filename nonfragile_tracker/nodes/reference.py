@@ -94,6 +94,7 @@ class ReferenceNode(Node):
         self.finished = False
         self.traj: Trajectory = Trajectory.analytic(self.path)
         self.origin_ns = 0
+        self.last_refusal = ''
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
             self.sub_clock = self.create_subscription(Clock, topics.CLOCK, self._on_clock,
@@ -126,25 +127,32 @@ class ReferenceNode(Node):
         self.pub_display.publish(trajectory_to_path(traj, origin_ns, self.frame, times))
 
     def _follow(self, msg: PathMsg, source: str) -> None:
-        """Adopt the trajectory of ``msg`` (raises TrajectoryError) and publish it."""
-        traj, origin = path_to_trajectory(msg, frame=self.frame, source=source,
-                                          cruise_speed=get(self, 'cruise_speed'),
-                                          max_accel=get(self, 'max_accel'))
-        if origin == 0 and self.mode == 'realtime' and any(
-                p.header.stamp.sec == 0 and p.header.stamp.nanosec == 0 for p in msg.poses):
-            origin = self.get_clock().now().nanoseconds
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(origin, 1_000_000_000)
+        """Adopt the trajectory of a timed Path that this node built, and publish it.
+
+        The per-step samples come from the trajectory rebuilt from ``msg`` exactly as
+        the tracker rebuilds it, so the recorded reference is what the tracker follows.
+        """
+        traj, origin = path_to_trajectory(msg, frame=self.frame, source=source)
         self.traj, self.origin_ns = traj, origin
         self.pub_traj.publish(msg)
         self._display(traj, origin)
         self.get_logger().info(f'trajectory from {source}: {len(traj.knots)} points, '
                                f'{traj.duration:.3f} s')
 
+    def _relay(self, msg: PathMsg, source: str) -> None:
+        """Validate a Path (time law if untimed) and follow its timed form."""
+        traj, origin = path_to_trajectory(msg, frame=self.frame, source=source,
+                                          cruise_speed=get(self, 'cruise_speed'),
+                                          max_accel=get(self, 'max_accel'),
+                                          now_ns=self.get_clock().now().nanoseconds)
+        self._follow(trajectory_to_path(traj, origin, self.frame), source)
+
     def _on_relay(self, msg: PathMsg) -> None:
         source = f'topic {get(self, "trajectory_topic")}'
         try:
-            self._follow(msg, source)
+            self._relay(msg, source)
         except TrajectoryError as exc:
+            self.last_refusal = str(exc)
             self.get_logger().error(f'refused trajectory: {exc}; keeping the previous one')
 
     def publish_sample(self, t_ns: int, t: float) -> None:

@@ -262,7 +262,8 @@ class TrackerNode(Node):
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
         self._new_trajectory(lambda: path_to_trajectory(
             msg, frame=self.frame, source=source, cruise_speed=get(self, 'cruise_speed'),
-            max_accel=get(self, 'max_accel')), source)
+            max_accel=get(self, 'max_accel'), now_ns=self.get_clock().now().nanoseconds),
+            source)
 
     def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'

@@ -45,8 +45,13 @@ def _yaw(q, source: str, i: int) -> float:
 
 
 def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | None = None,
-                       max_accel: float | None = None) -> tuple[Trajectory, int]:
-    """Trajectory and origin stamp (ns) of a nav_msgs/Path; :class:`TrajectoryError` if bad."""
+                       max_accel: float | None = None,
+                       now_ns: int | None = None) -> tuple[Trajectory, int]:
+    """Trajectory and origin stamp (ns) of a nav_msgs/Path; :class:`TrajectoryError` if bad.
+
+    An untimed Path (all pose stamps zero) starts at its header stamp, or at ``now_ns``
+    (the receiver's clock) when that is zero too.
+    """
     check_frame(msg.header.frame_id, frame, source)
     n = len(msg.poses)
     stamps = np.zeros(n, dtype=np.int64)
@@ -61,7 +66,8 @@ def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | No
     if n and np.all(stamps == 0):            # untimed: the time law along the path
         traj = from_poses(np.zeros(n), x, y, yaw, cruise_speed=cruise_speed,
                           max_accel=max_accel, source=source)
-        return traj, stamp_ns(msg.header.stamp)
+        origin = stamp_ns(msg.header.stamp)
+        return traj, origin if origin or now_ns is None else int(now_ns)
     origin = int(stamps[0]) if n else 0
     return from_waypoints((stamps - origin) * 1e-9, x, y, yaw=yaw, source=source), origin
 
