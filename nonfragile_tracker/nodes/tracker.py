@@ -176,7 +176,7 @@ class TrackerNode(Node):
         self.saturated = self.stale_stops = self.deadline_misses = 0
         self._rejected_reported = 0
         self._odom_intervals, self._odom_interval_sum = 0, 0.0
-        self._last_odom_rx = 0
+        self._last_odom_rx = self._last_ref_rx = 0
         self.base_frame = get(self, 'base_frame')
         if get(self, 'enable_stamped_cmd_vel'):
             self._cmd_msg = TwistStamped()
@@ -302,6 +302,7 @@ class TrackerNode(Node):
         if msg.header.frame_id != self.frame:
             return self._reject(f'reference in frame {msg.header.frame_id!r}')
         self._ref[i] = msg
+        self._last_ref_rx = self.get_clock().now().nanoseconds
         if self.mode == 'realtime':
             self._last_ref_wall = self.get_clock().now().nanoseconds
         elif self.follower is None and not self.wait_for_trajectory:
@@ -441,6 +442,7 @@ class TrackerNode(Node):
         n = self._odom_intervals
         period = self._odom_interval_sum / n if n else 0.0
         odom_age = (now - self._last_odom_rx) * 1e-9 if self._last_odom_rx else math.inf
+        ref_age = (now - self._last_ref_rx) * 1e-9 if self._last_ref_rx else math.inf
         level = DiagnosticStatus.OK
         msgs = [state]
         if self._stopped:
@@ -454,7 +456,9 @@ class TrackerNode(Node):
                               message='; '.join(msgs),
                               hardware_id=self.get_fully_qualified_name())
         vals = {'loop period (s)': f'{period:.6f}', 'deadline misses': self.deadline_misses,
-                'odom age (s)': f'{odom_age:.3f}', 'commands': self.commands,
+                'odom age (s)': f'{odom_age:.3f}',
+                'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
+                'commands': self.commands,
                 'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
                 'saturated commands': self.saturated, 'stamp jumps': self.jumps,
                 'trajectory': state,
