@@ -207,6 +207,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
             rec_params = {'output': str(bag), 'use_sim_time': True, 'lockstep_gate': True}
+            rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
             nodes.append(Recorder(context=ctx, **rec_params))
@@ -252,6 +253,9 @@ def add_subcommands(sub) -> None:
     r.add_argument('--trajectory', metavar='FILE',
                    help='follow a waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) instead of '
                    'the path; the robot starts at its first pose, duration = its end + 3 s')
+    r.add_argument('--stamped-cmd-vel', action='store_true',
+                   help='cmd_vel as TwistStamped (enable_stamped_cmd_vel in tracker, plant, '
+                   'recorder)')
     r.add_argument('--composed', action='store_true',
                    help='all nodes in this process (default: one process per node)')
     r.add_argument('--out', default='runs', help='directory for run directories (default runs/)')
@@ -289,6 +293,10 @@ def cmd_run(args) -> int:
         ov['tracker']['ros__parameters']['delay_compensation'] = True
     if args.path:
         ov['reference']['ros__parameters']['path'] = args.path
+    if args.stamped_cmd_vel:
+        for node in ('tracker', 'plant', 'recorder'):
+            ov.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
+                'enable_stamped_cmd_vel'] = True
     if args.trajectory:
         from .control.trajectory import load_waypoints
         traj = load_waypoints(args.trajectory)      # refuse a bad file before starting (2)

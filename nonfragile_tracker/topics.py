@@ -39,6 +39,9 @@ TYPES: dict[str, str] = {
     REF_PATH: 'nav_msgs/msg/Path',
 }
 
+#: cmd_vel's type with ``enable_stamped_cmd_vel`` (Nav2 name; Jazzy diff_drive_controller).
+CMD_VEL_STAMPED_TYPE = 'geometry_msgs/msg/TwistStamped'
+
 #: QoS of the data topics: reliable, volatile, keep last DEPTH.
 DEPTH = 100
 #: Frames (REP-105): poses and references in ``odom``; the robot body is ``base_link``.

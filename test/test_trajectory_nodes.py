@@ -46,12 +46,23 @@ def as_sent(traj, origin_ns=0):
     return path_to_trajectory(msg, frame='odom', source='test')[0], msg
 
 
-def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path):
+@pytest.mark.parametrize('stamped', [False, True])
+def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path, stamped):
+    """The lap through the nodes (recorded; with TwistStamped commands too)."""
     from nonfragile_tracker.bag.reader import read_bag
     from nonfragile_tracker.runner import run_composed
-    res = run_composed(scenario(trajectory_file=str(LAP)), tmp_path)
+    params = scenario(trajectory_file=str(LAP))
+    if stamped:
+        for node in ('tracker', 'plant', 'recorder'):
+            params.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
+                'enable_stamped_cmd_vel'] = True
+    res = run_composed(params, tmp_path)
     assert all(c == 0 for c in res.exit_codes.values()), res.exit_codes
-    run = read_bag(res.bag).run
+    bag = read_bag(res.bag)
+    assert bag.msgtypes['/cmd_vel'] == ('geometry_msgs/msg/TwistStamped' if stamped
+                                        else 'geometry_msgs/msg/Twist')
+    assert bag.counts['/trajectory'] == 1 and bag.counts['/reference/path'] == 1
+    run = bag.run
     traj, _ = as_sent(load_waypoints(LAP))
     sim = simulation(traj)
     steps = int(round(DURATION / 0.01))
