@@ -3,7 +3,8 @@
 :class:`Follower` is the one step function of a tracker that samples its trajectory
 itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
 :class:`~control.trajectory.Trajectory` at ``t`` and calls :meth:`control.loop.Tracker.step`.
-After the trajectory's last time the sample holds the end point at rest; once the
+Before the trajectory's first time the robot waits at rest (zero command).  After
+the trajectory's last time the sample holds the end point at rest; once the
 commanded speed has fallen below ``rest_speed`` the follower commands zero and stays
 at rest (``finished``) until it is given a new trajectory - near ``v = 0`` the
 linearizing law's ``w = (...)/v`` would otherwise keep turning the robot on the spot.
@@ -75,6 +76,11 @@ class Follower:
         ref = self.trajectory.sample(t)
         self.last_ref = ref
         if self.finished:
+            return Command(v=0.0, w=0.0)
+        if t < self.trajectory.t_start:
+            # not started: wait at rest (holding a point with v = 0 would turn the robot
+            # on the spot); the compensator starts from the measured speed at t_start
+            self.tracker.reset()
             return Command(v=0.0, w=0.0)
         cmd = self.tracker.step(x, y, th, ref, measured_speed)
         if t > self.trajectory.t_end:
