@@ -27,11 +27,11 @@ import sys
 # numpy is imported; an explicit OPENBLAS_NUM_THREADS from the caller wins.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-from .commands import bag, golden, latency_design, reproduce, run, synthesis  # noqa: E402
+from .commands import bag, golden, latency_design, reproduce, run, synthesis, trajectory  # noqa: E402
 from .errors import NonfragileError, exit_code  # noqa: E402
 
 #: The command modules, in ``--help`` order; each exposes ``register(subparsers)``.
-COMMANDS = (synthesis, latency_design, run, bag, reproduce, golden)
+COMMANDS = (synthesis, latency_design, run, trajectory, bag, reproduce, golden)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -219,6 +219,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
             rec_params = {'output': str(bag), 'use_sim_time': True, 'lockstep_gate': True}
+            rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
             nodes.append(Recorder(context=ctx, **rec_params))

@@ -329,6 +329,9 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 '`topics`) or pass strict=False.', missing)
         for name, expected in _EXPECTED_TYPES.items():
             topic = topic_map.get(name)
+            if name == topics.CMD_VEL and topic is not None and \
+                    by_topic[topic].msgtype == topics.CMD_VEL_STAMPED_TYPE:
+                continue                      # enable_stamped_cmd_vel: TwistStamped
             if topic is not None and by_topic[topic].msgtype != expected:
                 raise NotABagError(f'topic {topic} in {path} has type '
                                    f'{by_topic[topic].msgtype}, expected {expected}')
@@ -350,7 +353,8 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                     continue
                 msg = ts.deserialize_cdr(raw, conn.msgtype)
                 if name == topics.CMD_VEL:
-                    cmds.append((timestamp, float(msg.linear.x), float(msg.angular.z)))
+                    tw = msg.twist if conn.msgtype == topics.CMD_VEL_STAMPED_TYPE else msg
+                    cmds.append((timestamp, float(tw.linear.x), float(tw.angular.z)))
                     continue
                 stamp = _stamp_ns(msg.header)
                 if name == pose_name:

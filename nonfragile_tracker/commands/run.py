@@ -43,6 +43,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         ov['tracker']['ros__parameters']['delay_compensation'] = True
     if args.path:
         ov['reference']['ros__parameters']['path'] = args.path
+    if args.stamped_cmd_vel:
+        for node in ('tracker', 'plant', 'recorder'):
+            ov.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
+                'enable_stamped_cmd_vel'] = True
+    if args.trajectory:
+        from ..control.trajectory import load_waypoints
+        traj = load_waypoints(args.trajectory)      # refuse a bad file before starting (2)
+        start = traj.sample(traj.t_start)
+        ov['reference']['ros__parameters']['trajectory_file'] = str(Path(args.trajectory)
+                                                                    .resolve())
+        ov['tracker']['ros__parameters']['wait_for_trajectory'] = True
+        ov['plant']['ros__parameters'].update(initial_pose=[start.x, start.y, start.heading],
+                                              initial_speed=0.0)
+        if args.duration is None:
+            ov['plant']['ros__parameters']['duration'] = round(traj.t_end + 3.0, 2)
     params = runner.scenario_parameters(scenario, gains, ov)
     read_gain_file(gains)           # refuse a bad gain before starting anything (exit 2)
     run_dir = runner.new_run_dir(Path(args.out), args.name)
@@ -89,6 +104,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument('--delay-compensation', action='store_true',
                    help='zero steady-state error law (delay-consistent reference)')
     r.add_argument('--path', choices=['circle', 'figure_eight'], help='reference path')
+    r.add_argument('--trajectory', metavar='FILE',
+                   help='follow a waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) instead of '
+                   'the path; the robot starts at its first pose, duration = its end + 3 s')
+    r.add_argument('--stamped-cmd-vel', action='store_true',
+                   help='cmd_vel as TwistStamped (enable_stamped_cmd_vel in tracker, plant, '
+                   'recorder)')
     r.add_argument('--composed', action='store_true',
                    help='all nodes in this process (default: one process per node)')
     r.add_argument('--out', default='runs', help='directory for run directories (default runs/)')

@@ -1,6 +1,7 @@
 """``plant``: kinematic unicycle with the paper's delayed-state term; the run's clock.
 
-Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w).
+Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w; or
+TwistStamped with ``enable_stamped_cmd_vel``, as a Jazzy diff_drive_controller).
 Publishes ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``,
 twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
 and, in lockstep mode, ``/clock`` and ``run_done``.
@@ -17,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -52,6 +53,11 @@ PARAMS = [
     Param('lockstep_retry', 0.25, 'lockstep: republish the current step after this long (s, wall)',
           low=0.001, high=1e6),
     Param('lockstep_subscribers', 1, 'lockstep: wait until odom has this many subscribers'),
+    Param('enable_stamped_cmd_vel', False, 'subscribe cmd_vel as geometry_msgs/TwistStamped '
+          '(Nav2 name) instead of Twist', read_only=True),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of odom and pose (REP-105)', read_only=True),
+    Param('base_frame', topics.BASE_FRAME, 'robot body frame (odom child_frame_id)',
+          read_only=True),
     Param('cmd_timeout', 0.5, 'realtime: command older than this (s) is replaced by a stop',
           low=0.0, high=1e6),
 ]
@@ -88,10 +94,14 @@ class PlantNode(Node):
 
         self.pub_odom = self.create_publisher(Odometry, topics.ODOM, DATA_QOS)
         self.pub_pose = self.create_publisher(PoseStamped, topics.POSE, DATA_QOS)
-        self.sub_cmd = self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd, DATA_QOS)
+        self.stamped = get(self, 'enable_stamped_cmd_vel')
+        self.last_cmd_header = None
+        self.sub_cmd = self.create_subscription(
+            TwistStamped if self.stamped else Twist, topics.CMD_VEL,
+            self._on_stamped_cmd if self.stamped else self._on_cmd, DATA_QOS)
         self._odom, self._pose = Odometry(), PoseStamped()
-        self._odom.header.frame_id = self._pose.header.frame_id = topics.ODOM_FRAME
-        self._odom.child_frame_id = topics.BASE_FRAME
+        self._odom.header.frame_id = self._pose.header.frame_id = get(self, 'odom_frame')
+        self._odom.child_frame_id = get(self, 'base_frame')
         self.cmd = (cfg.v0, 0.0)
         self.commands = 0
         if self.mode == 'lockstep':
@@ -161,6 +171,10 @@ class PlantNode(Node):
             self.pub_done.publish(UInt64(data=self.plant.k))
             self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
         self.finished = True
+
+    def _on_stamped_cmd(self, msg: TwistStamped) -> None:
+        self.last_cmd_header = msg.header
+        self._on_cmd(msg.twist)
 
     def _on_cmd(self, msg: Twist) -> None:
         v, w = msg.linear.x, msg.angular.z

@@ -67,6 +67,8 @@ PARAMS = [
     Param('output', '', 'bag directory to create (never overwritten; relative to the working '
           'directory); empty: a new run directory runs/run_YYYYmmdd_HHMMSS[_N] with the bag in '
           'its subdirectory "bag"', read_only=True),
+    Param('enable_stamped_cmd_vel', False, 'cmd_vel is geometry_msgs/TwistStamped (as the '
+          'tracker publishes it with the same parameter)', read_only=True),
     Param('topics', list(topics.TYPES), 'topics to record (names of nonfragile_tracker.topics; '
           'relative names resolve in the node namespace)', read_only=True),
     Param('drain_timeout', 5.0, 'after run_done: longest wait (wall s) for the last messages',
@@ -158,7 +160,10 @@ class Recorder(Node):
         if not 1 <= chunk <= 2 ** 20:
             raise StartupError(f'recorder: chunk_size must be 1 .. 1048576 bytes, got {chunk}')
         self.bag_path = self._output_path(get(self, 'output'))
-        self._types = {n: import_message(topics.TYPES[n]) for n in names}
+        self._msgtypes = dict(topics.TYPES)
+        if get(self, 'enable_stamped_cmd_vel'):
+            self._msgtypes[topics.CMD_VEL] = topics.CMD_VEL_STAMPED_TYPE
+        self._types = {n: import_message(self._msgtypes[n]) for n in names}
         try:
             self.writer = BagWriter(self.bag_path, chunk_size=chunk,
                                     flush_period=get(self, 'flush_period'),
@@ -191,7 +196,8 @@ class Recorder(Node):
 
     # ------------------------------------------------------------------ setup
     def _subscribe(self, name: str) -> None:
-        qos = _LATCHED_QOS if name == topics.RUN_DONE else _DATA_QOS
+        qos = _LATCHED_QOS if name in (topics.RUN_DONE, topics.TRAJECTORY, topics.REF_PATH) \
+            else _DATA_QOS
         sub = self.create_subscription(self._types[name], name, self._make_callback(name),
                                        qos, raw=True)
         self._subs[name] = sub
@@ -247,7 +253,7 @@ class Recorder(Node):
                 return
             topic = self._resolved[name]
             if not writer.has_connection(topic):
-                writer.add_connection(topic, topics.TYPES[name], self._offered_qos(name))
+                writer.add_connection(topic, self._msgtypes[name], self._offered_qos(name))
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
             if topic_stamps is not None:

@@ -2,7 +2,15 @@
 
 Subscribes ``odom`` (nav_msgs/Odometry; its twist.linear.x initialises the
 compensator speed), ``reference/pose``, ``reference/twist``, ``reference/accel``;
-publishes ``cmd_vel`` (geometry_msgs/Twist).  The law is
+publishes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
+``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
+``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
+z heading error in rad, in the reference point's frame; every step, when subscribed),
+``tracker/path`` (nav_msgs/Path, the travelled path) and ``tracker/reference_marker``
+(visualization_msgs/Marker, arrow at the current reference) every ``viz_period`` s of
+stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
+loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
+commands, trajectory state and end) every ``diagnostics_period`` s.  The law is
 :class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
 
 Lockstep: a command is computed once per stamp, when the pose and the three
@@ -10,6 +18,16 @@ reference parts with that stamp have all arrived (repeats are ignored).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
+
+Trajectories (:mod:`control.trajectory`): a nav_msgs/Path on ``trajectory``
+(transient-local; stamps give the times, all zero: a trapezoidal time law with
+``cruise_speed``/``max_accel``) or a trajectory_msgs/MultiDOFJointTrajectory on
+``trajectory_multidof`` is turned into a trajectory that the tracker samples itself at
+each odometry stamp (:class:`control.follow.Follower`): no reference samples are needed
+then.  Each new valid trajectory starts a new run; an invalid one is refused with the
+reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
+trajectory's end the robot is brought to rest and the tracker says so.  Without a
+trajectory the three reference topics are followed (the built-in analytic paths).
 
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
 go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
@@ -20,18 +38,26 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import Marker
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .. import topics
+from ..control.follow import REST_SPEED, Follower, path_errors
 from ..control.gains import gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
+from ..control.trajectory import TrajectoryError
 from ..control.validate import as_matrix
-from .common import (DATA_QOS, Param, StartupError, check_mode, declare, get,
-                     pose_from_odom, reference_from_msgs, run, stamp_ns)
+from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare,
+                     fill_pose, get, ns_to_stamp, pose_from_odom, reference_from_msgs, run,
+                     stamp_ns)
+from .trajectory_io import multidof_to_trajectory, path_to_trajectory
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
@@ -56,6 +82,27 @@ PARAMS = [
           low=1e-6, high=1e6),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
+          read_only=True),
+    Param('cruise_speed', 0.5, 'time law for a Path with zero stamps: cruise speed (m/s)',
+          low=1e-6, high=1e3),
+    Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
+          '(m/s^2)', low=1e-6, high=1e3),
+    Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
+          'trajectory topics (ignore the per-step reference samples); set it when the '
+          'reference publishes a file or relayed trajectory', read_only=True),
+    Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
+          '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
+          'instead of Twist', read_only=True),
+    Param('base_frame', topics.BASE_FRAME, 'robot body frame (frame_id of TwistStamped)',
+          read_only=True),
+    Param('viz_period', 0.2, 'period (s, stamp time) of the travelled path and the reference '
+          'marker', low=1e-3, high=1e6, read_only=True),
+    Param('max_path_poses', 5000, 'travelled path: keep the last this many poses'),
+    Param('diagnostics_period', 1.0, 'period (s, node clock) of the status on /diagnostics',
+          low=1e-3, high=1e6, read_only=True),
+    Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
+          'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
            'input_timeout', 'max_stamp_jump'}
@@ -100,11 +147,18 @@ class TrackerNode(Node):
         except LoopConfigError as exc:
             raise StartupError(f'tracker: {exc}') from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.pub_cmd = self.create_publisher(Twist, topics.CMD_VEL, DATA_QOS)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
         self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
         self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel, DATA_QOS)
+        self.frame = get(self, 'odom_frame')
+        self.wait_for_trajectory = get(self, 'wait_for_trajectory')
+        self.follower: Follower | None = None
+        self.last_refusal = ''
+        self.origin_ns = 0
+        self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
+        self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
+                                 self._on_multidof, LATCHED_QOS)
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
         self._odom: Odometry | None = None
@@ -115,8 +169,36 @@ class TrackerNode(Node):
         self.jumps = 0
         self.commands = 0
         self.finished = False
-        self._cmd = Twist()
         self._stopped = False
+        self.saturated = self.stale_stops = self.deadline_misses = 0
+        self._rejected_reported = 0
+        self._odom_intervals, self._odom_interval_sum = 0, 0.0
+        self._last_odom_rx = self._last_ref_rx = 0
+        self.base_frame = get(self, 'base_frame')
+        if get(self, 'enable_stamped_cmd_vel'):
+            self._cmd_msg = TwistStamped()
+            self._cmd_msg.header.frame_id = self.base_frame
+            self._cmd = self._cmd_msg.twist
+        else:
+            self._cmd = self._cmd_msg = Twist()
+        self.pub_cmd = self.create_publisher(type(self._cmd_msg), topics.CMD_VEL, DATA_QOS)
+        self.pub_error = self.create_publisher(Vector3Stamped, topics.TRACKING_ERROR, DATA_QOS)
+        self.pub_path = self.create_publisher(PathMsg, topics.TRAVELLED_PATH, DATA_QOS)
+        self.pub_marker = self.create_publisher(Marker, topics.REF_MARKER, DATA_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, DATA_QOS)
+        self._err_msg = Vector3Stamped()
+        self._err_msg.header.frame_id = self.frame
+        self._travelled = PathMsg()
+        self._travelled.header.frame_id = self.frame
+        self.viz_period_ns = int(get(self, 'viz_period') * 1e9)
+        self.max_path_poses = int(get(self, 'max_path_poses'))
+        self._last_viz = -(1 << 62)
+        mk = self._marker = Marker()
+        mk.header.frame_id = self.frame
+        mk.ns, mk.id, mk.type, mk.action = 'reference', 0, Marker.ARROW, Marker.ADD
+        mk.scale.x, mk.scale.y, mk.scale.z = 0.25, 0.04, 0.04
+        mk.color.r, mk.color.g, mk.color.b, mk.color.a = 1.0, 0.3, 0.0, 1.0
+        self.create_timer(get(self, 'diagnostics_period'), self._diagnostics)
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
@@ -154,10 +236,41 @@ class TrackerNode(Node):
         if self.rejected <= 10 or self.rejected % 1000 == 0:
             self.get_logger().warn(f'ignored {what} (rejected so far: {self.rejected})')
 
+    def _new_trajectory(self, build, source: str) -> None:
+        try:
+            traj, origin = build()
+        except TrajectoryError as exc:
+            self.rejected += 1
+            self.last_refusal = str(exc)
+            keep = 'the previous trajectory' if self.follower else 'the reference topics'
+            self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
+            return
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, get(self, 'rest_speed'))
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        self.get_logger().info(f'new trajectory from {source}: {len(traj.knots)} points '
+                               f'({traj.kind}), {traj.duration:.3f} s from stamp '
+                               f'{origin * 1e-9:.3f} s: starting a new run')
+        self._try_compute()                # a pose not yet answered gets its command now
+
+    def _on_path(self, msg: PathMsg) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
+        self._new_trajectory(lambda: path_to_trajectory(
+            msg, frame=self.frame, source=source, cruise_speed=get(self, 'cruise_speed'),
+            max_accel=get(self, 'max_accel'), now_ns=self.get_clock().now().nanoseconds),
+            source)
+
+    def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'
+        self._new_trajectory(lambda: multidof_to_trajectory(msg, frame=self.frame,
+                                                            source=source), source)
+
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'odom in frame {msg.header.frame_id!r} (expected '
-                                f'{topics.ODOM_FRAME!r})')
+                                f'{self.frame!r})')
         s = stamp_ns(msg.header.stamp)
         if s <= self.last_odom_stamp:
             if s < self.last_odom_stamp:
@@ -169,6 +282,13 @@ class TrackerNode(Node):
             self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
+        if self.last_odom_stamp >= 0:
+            gap = (s - self.last_odom_stamp) * 1e-9
+            self._odom_intervals += 1
+            self._odom_interval_sum += gap
+            if gap > 1.5 * self.tracker.config.dt:
+                self.deadline_misses += 1
+        self._last_odom_rx = self.get_clock().now().nanoseconds
         self._odom = msg
         self.last_odom_stamp = s
         if self.mode == 'realtime':
@@ -176,12 +296,13 @@ class TrackerNode(Node):
         self._try_compute()
 
     def _on_ref(self, i: int, msg) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'reference in frame {msg.header.frame_id!r}')
         self._ref[i] = msg
+        self._last_ref_rx = self.get_clock().now().nanoseconds
         if self.mode == 'realtime':
             self._last_ref_wall = self.get_clock().now().nanoseconds
-        else:
+        elif self.follower is None and not self.wait_for_trajectory:
             self._try_compute()
 
     def _on_ref_pose(self, msg):
@@ -195,6 +316,10 @@ class TrackerNode(Node):
 
     # ------------------------------------------------------------------ law
     def _try_compute(self) -> None:
+        if self.follower is not None:
+            return self._follow()
+        if self.wait_for_trajectory:
+            return
         odom = self._odom
         if odom is None or any(r is None for r in self._ref):
             return
@@ -216,30 +341,148 @@ class TrackerNode(Node):
         speed = odom.twist.twist.linear.x
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
                                 measured_speed=speed if math.isfinite(speed) else 0.0)
-        self._publish(cmd.v, cmd.w)
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, ref, cmd)
 
-    def _publish(self, v: float, w: float) -> None:
+    def _follow(self) -> None:
+        """One command from the own trajectory, sampled at the odometry stamp."""
+        odom = self._odom
+        if odom is None or (self.mode == 'realtime' and self._stopped):
+            return
+        s = stamp_ns(odom.header.stamp)
+        if s <= self.last_stamp:
+            return
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            return self._reject(f'odom: {pose}')
+        self.last_stamp = s
+        f = self.follower
+        speed = odom.twist.twist.linear.x
+        was_finished = f.finished
+        cmd = f.step(pose[0], pose[1], pose[2], (s - self.origin_ns) * 1e-9,
+                     measured_speed=speed if math.isfinite(speed) else 0.0)
+        if f.finished and not was_finished:
+            e = math.hypot(cmd.error[0], cmd.error[2])
+            self.get_logger().info(
+                f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
+                f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
+                'a new trajectory')
+            self._diagnostics()
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, f.last_ref, cmd)
+
+    def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
+        """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
+
+        The stamped header carries the command time - the odometry stamp it answers in
+        lockstep, the node clock's now in real time (what diff_drive_controller checks
+        against its cmd_vel_timeout) - and the body frame.
+        """
         c = self.tracker.config
         if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
             v = w = 0.0
         self._cmd.linear.x = max(-c.max_linear_speed, min(c.max_linear_speed, v))
         self._cmd.angular.z = max(-c.max_angular_speed, min(c.max_angular_speed, w))
-        self.pub_cmd.publish(self._cmd)
+        if self._cmd_msg is not self._cmd:
+            if stamp is None or self.mode == 'realtime':
+                stamp = self.get_clock().now().nanoseconds
+            ns_to_stamp(stamp, self._cmd_msg.header.stamp)
+        self.pub_cmd.publish(self._cmd_msg)
         self.commands += 1
 
+    # ------------------------------------------------------------------ outputs
+    def _outputs(self, stamp: int, pose, ref, cmd) -> None:
+        """Tracking error every step, travelled path and reference marker at viz_period."""
+        if cmd.saturated:
+            self.saturated += 1
+        if ref is None:
+            return
+        if self.pub_error.get_subscription_count():
+            along, cross, head = path_errors(pose[0], pose[1], pose[2], ref)
+            m = self._err_msg
+            ns_to_stamp(stamp, m.header.stamp)
+            m.vector.x, m.vector.y, m.vector.z = along, cross, head
+            self.pub_error.publish(m)
+        if stamp - self._last_viz < self.viz_period_ns:
+            return
+        self._last_viz = stamp
+        ps = PoseStamped()
+        ps.header.frame_id = self.frame
+        ns_to_stamp(stamp, ps.header.stamp)
+        fill_pose(ps.pose, pose[0], pose[1], pose[2])
+        self._travelled.poses.append(ps)
+        if len(self._travelled.poses) > self.max_path_poses:
+            del self._travelled.poses[:len(self._travelled.poses) - self.max_path_poses]
+        self._travelled.header.stamp = ps.header.stamp
+        if self.pub_path.get_subscription_count():
+            self.pub_path.publish(self._travelled)
+        if self.pub_marker.get_subscription_count():
+            mk = self._marker
+            mk.header.stamp = ps.header.stamp
+            fill_pose(mk.pose, ref.x, ref.y, ref.heading)
+            self.pub_marker.publish(mk)
+
+    def _diagnostics(self) -> None:
+        """Tracker status on /diagnostics (diagnostic_msgs/DiagnosticArray)."""
+        now = self.get_clock().now().nanoseconds
+        f = self.follower
+        if f is None:
+            state = 'waiting for a trajectory' if self.wait_for_trajectory else \
+                'following the reference topics'
+        elif f.finished:
+            state = f'trajectory finished, at rest since t = {f.finished_at:.3f} s'
+        elif f.ended:
+            state = 'trajectory ended, coming to rest'
+        else:
+            state = 'following the trajectory'
+        n = self._odom_intervals
+        period = self._odom_interval_sum / n if n else 0.0
+        odom_age = (now - self._last_odom_rx) * 1e-9 if self._last_odom_rx else math.inf
+        ref_age = (now - self._last_ref_rx) * 1e-9 if self._last_ref_rx else math.inf
+        level = DiagnosticStatus.OK
+        msgs = [state]
+        if self._stopped:
+            level = DiagnosticStatus.WARN
+            msgs.append('inputs stale: stopped')
+        if self.rejected > self._rejected_reported:
+            level = max(level, DiagnosticStatus.WARN)
+            msgs.append(f'{self.rejected - self._rejected_reported} input(s) rejected')
+        self._rejected_reported = self.rejected
+        st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
+                              message='; '.join(msgs),
+                              hardware_id=self.get_fully_qualified_name())
+        vals = {'loop period (s)': f'{period:.6f}', 'deadline misses': self.deadline_misses,
+                'odom age (s)': f'{odom_age:.3f}',
+                'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
+                'commands': self.commands,
+                'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
+                'saturated commands': self.saturated, 'stamp jumps': self.jumps,
+                'trajectory': state,
+                'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
+                'last refused trajectory': self.last_refusal or 'none'}
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self.pub_diag.publish(arr)
+
     def _watchdog(self) -> None:
-        if self._last_odom_wall is None or self._last_ref_wall is None:
+        own = self.follower is not None      # own trajectory: reference samples not needed
+        if self._last_odom_wall is None or (self._last_ref_wall is None and not own):
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
         limit = get(self, 'input_timeout') * 1e9
-        stale = [name for name, t in (('odom', self._last_odom_wall),
-                                      ('reference', self._last_ref_wall))
-                 if now - t > limit]
+        inputs = [('odom', self._last_odom_wall)]
+        if not own:
+            inputs.append(('reference', self._last_ref_wall))
+        stale = [name for name, t in inputs if now - t > limit]
         if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
                                        f'{get(self, "input_timeout")} s: publishing stop')
                 self._stopped = True
+                self.stale_stops += 1
                 self.tracker.reset()
             self._publish(0.0, 0.0)
         elif not stale and self._stopped:
