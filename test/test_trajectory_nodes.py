@@ -11,8 +11,9 @@ import pytest
 
 from nonfragile_tracker.control.follow import simulate_following
 from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.trajectory import load_waypoints
+from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
 
@@ -34,7 +35,7 @@ def scenario(**reference):
 
 def simulation(traj, origin_ns=0):
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    pc = PlantConfig(x0=POSE0[0], y0=POSE0[1], th0=POSE0[2], v0=0.0)
+    pc = paper_plant_config(x0=POSE0[0], y0=POSE0[1], th0=POSE0[2], v0=0.0)
     tc = TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau)
     return simulate_following(pc, tc, traj, int(round(DURATION / pc.dt)), origin_ns=origin_ns)
 
@@ -247,7 +248,7 @@ def test_twist_and_twist_stamped_both_move_the_plant(ros_context, stamped):
         assert plant.finished and plant.exit_code == 0
         steps = int(round(duration / 0.01))
         K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-        pc = PlantConfig()
+        pc = paper_plant_config()
         sim = simulate_tracking(pc, TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau), circle(),
                                 steps)
         odom_x = np.array([m.pose.pose.position.x for m in got['odom']])
@@ -415,7 +416,7 @@ def test_path_tracked_in_real_time(ros_context):
         moving = (tt > 0.0) & (tt < traj.t_end)
         assert moving.sum() > 200                      # the run covered the trajectory
         K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-        pc = PlantConfig(x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=0.0, tau=0.0)
+        pc = paper_plant_config(x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=0.0, tau=0.0)
         sim = simulate_following(pc, TrackerConfig(K=K, A_tau=pc.A_tau, tau=pc.tau), traj,
                                  650, origin_ns=1_000_000_000)   # starts at t = 1 s
         print(f'{moving.sum()} odom samples during the trajectory')
