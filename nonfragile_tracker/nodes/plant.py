@@ -123,7 +123,8 @@ class PlantNode(Node):
                 f'plant: odom_latency ({odo.latency_steps} steps) and the odometry period '
                 f'({odo.period_steps} steps) must each be at most {MAX_FREE_STEPS} plant steps '
                 'in lockstep (the plant steps on without waiting in between and the topics '
-                'keep the last 100 messages); use a larger dt or a higher odom_rate')
+                'keep the last 100 messages); use a larger dt, a smaller odom_latency or a higher '
+                'odom_rate')
         self.plant = UnicyclePlant(cfg)
         self.dt = cfg.dt
         self.dt_ns = step_time_ns(1, cfg.dt)
