@@ -243,3 +243,27 @@ def test_simulation_rejects_a_tracker_step_that_is_not_the_odometry_period():
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     with pytest.raises(ValueError, match='must equal the odometry period'):
         simulate_tracking(PlantConfig(odom_rate=50.0), TrackerConfig(K=K, dt=0.01), circle(), 10)
+
+
+def test_predicting_tracker_survives_garbage_and_stays_bounded():
+    """Random and malformed samples into a tracker with the predictor: every command is
+    finite and within its limits, and the command buffer stays bounded."""
+    rng = np.random.default_rng(5)
+    tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'), dt=0.02,
+                       predict_latency=0.2, predict_odom_latency=0.04, predict_lag_v=0.05,
+                       predict_lag_w=0.05)
+    tracker = Tracker(tc)
+    path = figure_eight(radius=1.0, rate=0.2)
+    bad = [math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0]
+    for k in range(3000):
+        t = 0.02 * k
+        x, y, th = rng.normal(0, 3, size=3)
+        if k % 7 == 0:
+            x = bad[k % len(bad)]
+        stamp = bad[(k // 11) % len(bad)] if k % 11 == 0 else t
+        ref = path.sample(t)
+        cmd = tracker.step(float(x), float(y), float(th), ref, float(rng.normal(0, 0.5)),
+                           stamp=stamp)
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.w)
+        assert abs(cmd.v) <= tc.max_linear_speed and abs(cmd.w) <= tc.max_angular_speed
+    assert len(tracker.predictor._segs) < 20

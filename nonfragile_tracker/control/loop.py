@@ -462,7 +462,10 @@ class Tracker:
         v = self.v
         pred = self.predictor
         if pred is not None:
-            p = pred.predict(x, y, th, ref.t if stamp is None else float(stamp), v)
+            t_meas = ref.t if stamp is None else float(stamp)
+            if not math.isfinite(t_meas):          # no time, no prediction: stop
+                return Command(v=0.0, w=0.0, saturated=True)
+            p = pred.predict(x, y, th, t_meas, v)
             x, y, th = p.x, p.y, p.th
             ref = pred.reference(ref, p.t)
         cth, sth = math.cos(th), math.sin(th)

@@ -100,10 +100,14 @@ class LatencyPredictor:
         Assumed actuator (time constants; acceleration limits if known).
     dt : float
         Longest integration sub-step (s): the plant's step.
+    max_gap : float
+        A stamp more than this (s) away from the previous one restarts the model from the
+        measured speed (the commands sent before the gap are forgotten).
     """
 
     def __init__(self, cmd_latency: float, odom_latency: float, actuator: ActuatorModel,
-                 dt: float):
+                 dt: float, max_gap: float = 1.0):
+        self.max_gap = float(max_gap)
         self.cmd_latency = float(cmd_latency)
         self.odom_latency = float(odom_latency)
         self.actuator = actuator
@@ -146,9 +150,12 @@ class LatencyPredictor:
         """State at ``stamp + horizon`` from the pose measured at ``stamp``.
 
         ``speed`` (the measured speed) initialises the model on the first call.
-        Stamps must not decrease (a smaller stamp is treated as the last one).
+        A stamp slightly before the last is treated as the last one; a gap of more
+        than ``max_gap`` either way restarts the model.
         """
         segs = self._segs
+        if self._anchor is not None and abs(stamp - self._anchor[0]) > self.max_gap:
+            self._anchor = None                  # odometry gap: restart from the measurement
         if self._anchor is None:
             segs.clear()
             segs.append((stamp, speed, 0.0))
