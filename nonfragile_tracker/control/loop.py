@@ -215,7 +215,8 @@ class UnicyclePlant:
         self.cmd_delay = config.cmd_latency_steps
         actuator = config.actuator
         self.actuator = None if actuator.ideal else actuator
-        self.odometer = Odometer(config.odometry)
+        odometry = config.odometry
+        self.odometer = None if odometry.ideal else Odometer(odometry)
         self.reset()
 
     def reset(self) -> None:
@@ -229,8 +230,9 @@ class UnicyclePlant:
         self._hist: deque = deque([xi0] * (self.N + 1), maxlen=self.N + 1)
         self._queue: deque = deque()    # (first step it acts, v, w)
         self.cmd = (self.v, 0.0)        # command in force
-        self.odometer.reset()
-        self.odometer.measure(0, self.x, self.y, self.th, self.v, self.w)
+        if self.odometer is not None:
+            self.odometer.reset()
+            self.odometer.measure(0, self.x, self.y, self.th, self.v, self.w)
 
     @property
     def t(self) -> float:
@@ -251,6 +253,8 @@ class UnicyclePlant:
 
     def odometry(self) -> OdometrySample | None:
         """The odometry sample to publish at the current step (measured earlier), if any."""
+        if self.odometer is None:               # ideal: the current state, every step
+            return OdometrySample(self.k, self.x, self.y, self.th, self.v, self.w)
         return self.odometer.due(self.k)
 
     def step(self, v: float, w: float) -> None:
@@ -291,7 +295,8 @@ class UnicyclePlant:
         else:
             self.v, self.w = float(v), float(w)
         self.k += 1
-        self.odometer.measure(self.k, self.x, self.y, self.th, self.v, self.w)
+        if self.odometer is not None:
+            self.odometer.measure(self.k, self.x, self.y, self.th, self.v, self.w)
 
 
 # ---------------------------------------------------------------------------------------------
