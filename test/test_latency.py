@@ -13,6 +13,8 @@ from nonfragile_tracker.control.predictor import LatencyPredictor, extrapolate_r
 from nonfragile_tracker.control.reference import circle, figure_eight
 from nonfragile_tracker.control.simulate import simulate_tracking
 
+from nonfragile_tracker.scenario import paper_plant_config
+
 from conftest import CONFIG
 
 NO_DELAY = dict(A_tau=np.zeros((4, 4)), tau=0.0)
@@ -195,7 +197,7 @@ def test_reference_extrapolation_error_is_fourth_order():
 
 def test_zero_assumed_latency_is_todays_law_bit_for_bit():
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    pc = PlantConfig()
+    pc = paper_plant_config()
     plain = TrackerConfig(K=K)
     zero = TrackerConfig(K=K, predict_latency=0.0, predict_odom_latency=0.0,
                          predict_lag_v=0.0, predict_lag_w=0.0)

@@ -10,13 +10,15 @@ from rclpy.parameter import Parameter
 
 from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.reference import circle
 from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.nodes.common import StartupError
 from nonfragile_tracker.nodes.plant import PlantNode
 from nonfragile_tracker.nodes.tracker import TrackerNode
 from nonfragile_tracker.runner import run_composed, run_processes, scenario_parameters
+
+from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, unique_domain_id
 
@@ -40,7 +42,7 @@ def parameters():
 
 
 def simulation():
-    pc = PlantConfig(**dict(PLANT, odom_noise=tuple(PLANT['odom_noise'])))
+    pc = paper_plant_config(**dict(PLANT, odom_noise=tuple(PLANT['odom_noise'])))
     tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'), A_tau=pc.A_tau,
                        tau=pc.tau, **TRACKER)
     return simulate_tracking(pc, tc, circle(), STEPS)

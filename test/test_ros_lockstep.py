@@ -82,7 +82,7 @@ def test_error_converges_into_the_steady_band(two_runs):
     err = np.hypot(run.pose.x - run.reference.x, run.pose.y - run.reference.y)
     assert err[0] > 0.2                              # starts 0.22 m away
     late = run.pose.t > 8.0
-    pc = PlantConfig()
+    pc = paper_plant_config()
     A = np.kron(np.eye(2), [[0.0, 1.0], [0.0, 0.0]])
     B = np.kron(np.eye(2), [[0.0], [1.0]])
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')

@@ -16,11 +16,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
-from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
-                   quaternion_to_yaw, step_time, step_time_ns, yaw_to_quaternion)
-from .simulate import TrackingRun
+from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
+                   step_time_ns)
+from .simulate import TrackingRun, run_loop
 from .trajectory import Trajectory
 
 __all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors']
@@ -101,21 +100,17 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
     ``(t_k - origin_ns) * 1e-9`` as the tracker node does.
     """
-    if tracker_config.dt != plant_config.dt:
-        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal plant dt '
-                         f'({plant_config.dt}) in lockstep')
-    plant = UnicyclePlant(plant_config)
+    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
+    if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
+        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
+                         f'({period} x plant dt {plant_config.dt}) in lockstep')
     follower = Follower(Tracker(tracker_config), trajectory, rest_speed)
-    rows = []
     dt = plant_config.dt
-    for k in range(steps + 1):
-        t = step_time(k, dt)
-        tt = (step_time_ns(k, dt) - origin_ns) * 1e-9
-        th = quaternion_to_yaw(*yaw_to_quaternion(plant.th))
-        cmd = follower.step(plant.x, plant.y, th, tt, plant.v)
-        ref = trajectory.sample(tt)
-        rows.append((t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
-                     cmd.v, cmd.w))
-        if k < steps:
-            plant.step(cmd.v, cmd.w)
-    return TrackingRun(*np.array(rows).T.copy())
+
+    def traj_time(k: int) -> float:
+        return (step_time_ns(k, dt) - origin_ns) * 1e-9
+
+    def command(meas, th: float, k: int, ref) -> Command:
+        return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v)
+
+    return run_loop(plant_config, steps, command, lambda k: trajectory.sample(traj_time(k)))

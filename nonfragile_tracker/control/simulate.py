@@ -10,15 +10,17 @@ the command in force (held at steps without odometry).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
-from .loop import (PlantConfig, Tracker, TrackerConfig, UnicyclePlant, odometry_period_steps,
-                   quaternion_to_yaw, step_time, yaw_to_quaternion)
+from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
+                   odometry_period_steps, quaternion_to_yaw, step_time, yaw_to_quaternion)
 from .metrics import TrackingMetrics, tracking_metrics
-from .reference import Path
+from .reference import Path, RefSample
+from .sensors import OdometrySample
 
-__all__ = ['TrackingRun', 'simulate_tracking', 'DelayRun', 'simulate_delay_loop',
+__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'DelayRun', 'simulate_delay_loop',
            'steps_for_duration']
 
 
@@ -72,23 +74,41 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
     if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
         raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
                          f'({period} x plant dt {plant_config.dt}) in lockstep')
-    plant = UnicyclePlant(plant_config)
     tracker = Tracker(tracker_config)
+    dt = plant_config.dt
+
+    def command(meas: OdometrySample, th: float, k: int, ref: RefSample) -> Command:
+        if meas.step == k:
+            return tracker.step(meas.x, meas.y, th, ref, meas.v)
+        ts = step_time(meas.step, dt)
+        return tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
+
+    return run_loop(plant_config, steps, command, lambda k: path.sample(step_time(k, dt)))
+
+
+def run_loop(plant_config: PlantConfig, steps: int,
+             command: Callable[[OdometrySample, float, int, RefSample], Command],
+             reference: Callable[[int], RefSample]) -> TrackingRun:
+    """The lockstep sequence of the ROS nodes, in process: the one simulation loop.
+
+    For each step ``k``: the plant's odometry due at ``k`` (if any; yaw through a
+    quaternion, as in the message) goes to ``command(measurement, yaw, k, reference(k))``, whose
+    command the plant takes (after its command latency); otherwise the command in force
+    is held.  ``reference(k)`` is logged with step ``k``.  Used by
+    :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
+    """
+    plant = UnicyclePlant(plant_config)
     rows = []
     append = rows.append
     dt = plant_config.dt
     cmd_v, cmd_w = plant.cmd
     for k in range(steps + 1):
         t = step_time(k, dt)
-        ref = path.sample(t)
+        ref = reference(k)
         meas = plant.odometry()
         if meas is not None:
             th = quaternion_to_yaw(*yaw_to_quaternion(meas.th))   # as through a message
-            if meas.step == k:
-                cmd = tracker.step(meas.x, meas.y, th, ref, meas.v)
-            else:
-                ts = step_time(meas.step, dt)
-                cmd = tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
+            cmd = command(meas, th, k, ref)
             cmd_v, cmd_w = cmd.v, cmd.w
             plant.command(cmd_v, cmd_w)
         append((t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
