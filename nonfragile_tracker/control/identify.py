@@ -26,7 +26,7 @@ per time constant); a delay is a shift of that response, so the residual of the
 linear least-squares fit of ``(g_c, initial state)`` is evaluated for all delays at
 once.  ``L`` minimizes the sum of the two channels' residuals, each normalized by
 its own noise variance (the channels have different units), first on a coarse
-grid (5 ms x 25 time constants), then at the grid resolution with a parabolic
+grid (10 ms x 17 time constants), then at the grid resolution with a parabolic
 sub-grid refinement; each ``tau_c`` is then refined by a bounded Brent search at
 that ``L``.
 
@@ -259,15 +259,38 @@ def _held_integral(tc: np.ndarray, u: np.ndarray, s: np.ndarray,
 
 
 class _Channel:
-    """One channel: cell-averaged input on the grid and its measurements."""
+    """One channel: cell-averaged input on the grid and its measurements.
 
-    def __init__(self, name: str, source: str, u_avg: np.ndarray, h: float,
-                 z: np.ndarray, pa: np.ndarray, pb: np.ndarray | None, width: np.ndarray | None,
-                 t_mid: np.ndarray):
+    ``pos`` are the grid positions (fractional steps) of the odometry times
+    used; a point measurement ``i`` reads position ``ia[i]``, a window
+    measurement the difference of the integral between ``ia[i]`` and ``ib[i]``
+    divided by ``width[i]`` (s).
+    """
+
+    def __init__(self, name: str, source: str, u_avg: np.ndarray, h: float, z: np.ndarray,
+                 pos: np.ndarray, ia: np.ndarray, ib: np.ndarray | None,
+                 width: np.ndarray | None, t_mid: np.ndarray):
         self.name, self.source = name, source
         self.u_avg, self.h = u_avg, h
-        self.z, self.pa, self.pb, self.width, self.t_mid = z, pa, pb, width, t_mid
+        self.z, self.pos, self.ia, self.ib = z, pos, ia, ib
+        self.width, self.t_mid = width, t_mid
         self.sigma2 = 1.0
+
+    @classmethod
+    def build(cls, name, source, u_avg, h, z, pos_all, ia, ib, width, t_mid) -> '_Channel':
+        """Keep only the positions the measurements use."""
+        need = ia if ib is None else np.concatenate([ia, ib])
+        keep, inv = np.unique(need, return_inverse=True)
+        ja = inv[:ia.size]
+        jb = None if ib is None else inv[ia.size:]
+        return cls(name, source, u_avg, h, z, pos_all[keep], ja, jb, width, t_mid)
+
+    def subset(self, stride: int) -> '_Channel':
+        """Every ``stride``-th measurement (for the coarse search)."""
+        sl = slice(None, None, stride)
+        return _Channel.build(self.name, self.source, self.u_avg, self.h, self.z[sl], self.pos,
+                              self.ia[sl], None if self.ib is None else self.ib[sl],
+                              None if self.width is None else self.width[sl], self.t_mid[sl])
 
     def signals(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
         """Forced (zero initial state) and free (unit initial state) responses on the grid."""
@@ -283,17 +306,17 @@ class _Channel:
         else:
             free = np.zeros(n)
             free[0] = 1.0
-        if self.pb is not None:                 # window measurements: integrate on the grid
+        if self.ib is not None:                 # window measurements: integrate on the grid
             forced = _cumtrapz(forced, self.h)
             free = _cumtrapz(free, self.h)
         return forced, free
 
     def regressors(self, sig: np.ndarray, shifts: np.ndarray) -> np.ndarray:
         """The measurement functional of ``sig`` delayed by ``shifts`` (grid steps), (nd, ns)."""
-        out = _interp(sig, self.pa[None, :] - shifts[:, None])
-        if self.pb is not None:
-            out = (_interp(sig, self.pb[None, :] - shifts[:, None]) - out) / self.width
-        return out
+        vals = _interp_shifted(sig, self.pos, shifts)
+        if self.ib is None:
+            return vals[:, self.ia]
+        return (vals[:, self.ib] - vals[:, self.ia]) / self.width
 
 
 def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
@@ -303,11 +326,21 @@ def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
     return out
 
 
-def _interp(sig: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    i0 = np.floor(pos).astype(np.int64)
+def _interp_shifted(sig: np.ndarray, pos: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """``sig`` linearly interpolated at ``pos - shift`` for every shift: (nd, ns)."""
+    whole = np.floor(shifts)
+    if np.all(whole == shifts):                      # integer shifts: one fraction per sample
+        base = np.floor(pos)
+        f = (pos - base)[None, :]
+        i0 = base.astype(np.int64)[None, :] - whole.astype(np.int64)[:, None]
+    else:
+        p = pos[None, :] - shifts[:, None]
+        i0 = np.floor(p)
+        f = p - i0
+        i0 = i0.astype(np.int64)
     np.clip(i0, 0, sig.size - 2, out=i0)
-    f = pos - i0
-    return sig[i0] * (1.0 - f) + sig[i0 + 1] * f
+    lo = sig[i0]
+    return lo + (sig[i0 + 1] - lo) * f
 
 
 def _stats(ch: _Channel, tau: float, shifts: np.ndarray, blocks: np.ndarray | None,
@@ -494,12 +527,13 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     wa, wb, width, zv_pose, zw_pose = _window_measurements(to, x, y, yaw, span)
 
     def measurement(c: str):
+        """(index a, index b or None, width or None, z, mid time) into the odometry."""
         if use[c] == 'twist':
-            sel = (to >= t_first) & (to <= t_last)
-            return to[sel], None, None, twist[c][sel], to[sel]
+            ia = np.flatnonzero((to >= t_first) & (to <= t_last))
+            return ia, None, None, twist[c][ia], to[ia]
         sel = (to[wa] >= t_first) & (to[wb] <= t_last)
         z = (zv_pose if c == 'v' else zw_pose)[sel]
-        return to[wa][sel], to[wb][sel], width[sel], z, 0.5 * (to[wa][sel] + to[wb][sel])
+        return wa[sel], wb[sel], width[sel], z, 0.5 * (to[wa[sel]] + to[wb[sel]])
 
     meas = {c: measurement(c) for c in _CHANNELS}
     n_used = {c: meas[c][3].size for c in _CHANNELS}
@@ -509,8 +543,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             f'after the first command and the last command (t = {tc[0]:.3f} ... {tc[-1]:.3f} '
             f's; odometry {to[0]:.3f} ... {to[-1]:.3f} s); at least {MIN_ODOM_SAMPLES} are '
             'needed: record a longer run, or lower max_latency_s (--max-latency)')
-    t_end = max(float(np.max(m[1] if m[1] is not None else m[0])) for m in meas.values())
-    t_begin = min(float(np.min(m[0])) for m in meas.values())
+    t_end = max(float(to[np.max(m[1] if m[1] is not None else m[0])]) for m in meas.values())
+    t_begin = min(float(to[np.min(m[0])]) for m in meas.values())
     duration = t_end - t_begin
     block_len = float(np.clip(duration / 20.0, 0.25, 2.0))
     n_blocks = int(duration // block_len) + 1
@@ -538,23 +572,19 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     s = tc[0] + h * np.arange(n_cells + 1)
     chans: dict[str, _Channel] = {}
     for c in _CHANNELS:
-        ta, tb, wd, z, tm = meas[c]
+        ia, ib, wd, z, tm = meas[c]
         u_avg = np.diff(_held_integral(tc, cmd[c], s, command_timeout_s)) / h
-        pa = (ta - tc[0]) / h
-        pb = None if tb is None else (tb - tc[0]) / h
-        chans[c] = _Channel(c, use[c], u_avg, h, z, pa, pb, wd, tm)
+        chans[c] = _Channel.build(c, use[c], u_avg, h, z, (to - tc[0]) / h, ia, ib, wd, tm)
 
     d_max = int(round(max_latency_s / h))
-    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
-    # coarse: 5 ms steps, at most ~3000 samples per channel
-    step = max(1, int(round(0.005 / h)))
+    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 16)])
+    # coarse: 10 ms steps, at most ~1500 samples per channel
+    step = max(1, int(round(0.01 / h)))
     coarse = np.arange(0, d_max + 1, step, dtype=float)
     sse_c = {}
     for c, ch in chans.items():
-        stride = max(1, ch.z.size // 3000)
-        sub = _Channel(c, ch.source, ch.u_avg, h, ch.z[::stride], ch.pa[::stride],
-                       None if ch.pb is None else ch.pb[::stride],
-                       None if ch.width is None else ch.width[::stride], ch.t_mid[::stride])
+        stride = max(1, ch.z.size // 1500)
+        sub = ch.subset(stride)
         zz = float(sub.z @ sub.z)
         sse_c[c] = np.stack([_sse(_stats(sub, tau, coarse, None, 0), zz)[0] for tau in taus],
                             axis=1) * stride                        # (nd, ntau)
@@ -656,7 +686,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     # -- block bootstrap on a local grid (widened while estimates pile at an edge)
     rng = np.random.default_rng(seed)
-    half = max(10, 2 * step)
+    half = max(10, step)
     spread = 1.6
     for attempt in range(3):
         centre = int(round(pos))
