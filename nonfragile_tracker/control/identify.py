@@ -375,6 +375,20 @@ def _sse(st: np.ndarray, zz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray
     return np.maximum(sse, 0.0), g2
 
 
+def _profile(sse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimum over the last axis of ``sse`` (nd, ntau) refined by a parabola through the
+    three grid values around it: (min value, fractional index) per row."""
+    k = np.argmin(sse, axis=1)
+    kc = np.clip(k, 1, sse.shape[1] - 2)
+    rows = np.arange(sse.shape[0])
+    a, b, c = sse[rows, kc - 1], sse[rows, kc], sse[rows, kc + 1]
+    den = a - 2 * b + c
+    inner = (k == kc) & (den > 0)
+    off = np.where(inner, np.clip(0.5 * (a - c) / np.where(inner, den, 1.0), -0.5, 0.5), 0.0)
+    val = np.where(inner, b - 0.25 * (a - c) * off, sse[rows, k])
+    return np.maximum(val, 0.0), k + off
+
+
 def _parabola_min(values: np.ndarray, i: int) -> float:
     """Sub-grid offset (in grid steps, within +-0.5) of the minimum at index ``i``."""
     if i <= 0 or i >= values.size - 1:
@@ -588,9 +602,19 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         zz = float(sub.z @ sub.z)
         sse_c[c] = np.stack([_sse(_stats(sub, tau, coarse, None, 0), zz)[0] for tau in taus],
                             axis=1) * stride                        # (nd, ntau)
+    # each channel's noise variance: its own best fit at the grid resolution (a coarse
+    # grid would inflate a noise-free channel's and let a noisy one dominate)
+    prof_c = {c: _profile(sse_c[c]) for c in _CHANNELS}
     for c, ch in chans.items():
-        ch.sigma2 = max(float(sse_c[c].min()) / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
-    j_coarse = sum(sse_c[c].min(axis=1) / chans[c].sigma2 for c in _CHANNELS)
+        i = int(np.argmin(prof_c[c][0]))
+        k = int(round(prof_c[c][1][i]))
+        own = np.arange(max(0, coarse[i] - 2 * step), min(d_max, coarse[i] + 2 * step) + 1,
+                        dtype=float)
+        zz = float(ch.z @ ch.z)
+        best = min(float(_sse(_stats(ch, tau, own, None, 0), zz)[0].min()) for tau in
+                   np.linspace(taus[max(0, k - 1)], taus[min(taus.size - 1, k + 1)], 13))
+        ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
+    j_coarse = sum(prof_c[c][0] / chans[c].sigma2 for c in _CHANNELS)
     i_c = int(np.argmin(j_coarse))
 
     # -- fine: grid resolution around the coarse minimum, local time-constant grids
@@ -601,7 +625,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     tau_grid = {}
     for c in _CHANNELS:
-        k = int(np.argmin(sse_c[c][i_c]))
+        k = int(round(prof_c[c][1][i_c]))
         tau_grid[c] = np.linspace(taus[max(0, k - 1)], taus[min(taus.size - 1, k + 1)], 25)
     fine = np.arange(max(0, coarse[i_c] - 2 * step), min(d_max, coarse[i_c] + 2 * step) + 1,
                      dtype=float)
