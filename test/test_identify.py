@@ -418,3 +418,16 @@ def test_our_plant_latency_and_lag_recovered(latency):
     assert res_pose.source_w == 'pose'
     assert abs(res_pose.latency_s - latency) < STEP
     assert abs(res_pose.tau_w_s - 0.05) < 0.2 * 0.05
+
+
+def test_golden_lockstep_bag_of_our_plant_has_no_latency():
+    """The golden bag (three node processes, lockstep, the paper's plant: no command
+    latency, no lag, twist = speeds in force): zero latency and lag within a step."""
+    bag = Path(__file__).resolve().parent / 'data' / 'golden_paper'
+    data = read_motion(bag)
+    assert data.cmd_time == 'receive time' and data.odom_delay_s == 0.0
+    res = identify_latency(data.commands, data.odometry, max_latency_s=0.2, bootstrap=100)
+    assert res.latency_s < STEP and res.latency_low_s == 0.0
+    assert res.tau_v_s < STEP and res.tau_w_s < STEP
+    assert res.odom_rate_hz == pytest.approx(100.0)
+    assert res.gain_v == pytest.approx(1.0, abs=0.01) and res.gain_w == pytest.approx(1.0, abs=0.01)

@@ -619,8 +619,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     # -- fine: grid resolution around the coarse minimum, local time-constant grids
     def local_taus(c: str, centre: float, spread: float) -> np.ndarray:
-        lo = max(0.0, centre / spread - 2 * h)
-        hi = min(max_tau_s, centre * spread + 2 * h)
+        lo = max(0.0, centre / spread - 2 * h * spread)
+        hi = min(max_tau_s, centre * spread + 2 * h * spread)
         return np.linspace(lo, hi, 25)
 
     tau_grid = {}
