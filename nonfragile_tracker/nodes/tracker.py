@@ -5,8 +5,14 @@ compensator speed), ``reference/pose``, ``reference/twist``, ``reference/accel``
 publishes ``cmd_vel`` (geometry_msgs/Twist).  The law is
 :class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
 
-Lockstep: a command is computed once per stamp, when the pose and the three
-reference parts with that stamp have all arrived (repeats are ignored).  Real
+Lockstep: a command is computed once per odom stamp, when the pose and the three
+reference parts with that stamp have all arrived (repeats are ignored; reference
+samples are kept by stamp until the odometry measured at that time arrives, so a
+plant with odometry latency pairs each measurement with the reference of its
+measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
+``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
+the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
+stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
@@ -54,9 +60,21 @@ PARAMS = [
     Param('tau', 0.2, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
     Param('input_timeout', 0.5, 'realtime: stop if pose or reference is older than this (s)',
           low=1e-6, high=1e6),
+    Param('predict_latency', 0.0, 'assumed command-to-motion latency (s): the law is evaluated '
+          'on the state predicted at the time the command acts; 0 = no prediction',
+          low=0.0, high=10.0, read_only=True),
+    Param('predict_odom_latency', 0.0, 'assumed odometry latency (s): now = odom stamp + this',
+          low=0.0, high=10.0, read_only=True),
+    Param('predict_lag_v', 0.0, 'assumed time constant of the base\'s linear speed (s); '
+          '0 = none', low=0.0, high=10.0, read_only=True),
+    Param('predict_lag_w', 0.0, 'assumed time constant of the base\'s angular speed (s); '
+          '0 = none', low=0.0, high=10.0, read_only=True),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
 ]
+PREDICT_PARAMS = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'predict_lag_w')
+#: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
+REF_BUFFER = 1000
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
            'input_timeout', 'max_stamp_jump'}
 
@@ -77,7 +95,8 @@ def tracker_config(values: dict) -> TrackerConfig:
                          min_speed=values['min_speed'],
                          perturbation=pert if np.any(pert) else None,
                          delay_compensation=values['delay_compensation'], A_tau=a_tau,
-                         tau=values['tau'])
+                         tau=values['tau'],
+                         **{n: values[n] for n in PREDICT_PARAMS})
 
 
 class TrackerNode(Node):
@@ -112,6 +131,7 @@ class TrackerNode(Node):
             self.set_parameters([Parameter('use_sim_time', value=True)])
         self._odom: Odometry | None = None
         self._ref = [None, None, None]
+        self._refs: dict[int, list] = {}      # lockstep: stamp -> [pose, twist, accel]
         self.last_stamp = -1
         self.last_odom_stamp = -1
         self.rejected = 0
@@ -185,6 +205,15 @@ class TrackerNode(Node):
         if self.mode == 'realtime':
             self._last_ref_wall = self.get_clock().now().nanoseconds
         else:
+            s = stamp_ns(msg.header.stamp)
+            if s < self.last_stamp:
+                return                     # older than the last odometry used: never needed
+            parts = self._refs.get(s)
+            if parts is None:
+                if len(self._refs) >= REF_BUFFER:
+                    del self._refs[min(self._refs)]
+                parts = self._refs[s] = [None, None, None]
+            parts[i] = msg
             self._try_compute()
 
     def _on_ref_pose(self, msg):
@@ -204,21 +233,27 @@ class TrackerNode(Node):
         if self.mode == 'realtime' and self._stopped:
             return                         # the watchdog publishes the stop
         s = stamp_ns(odom.header.stamp)
+        parts = self._ref
         if self.mode == 'lockstep':
-            if s <= self.last_stamp or any(stamp_ns(r.header.stamp) != s for r in self._ref):
+            parts = self._refs.get(s)
+            if s <= self.last_stamp or parts is None or any(r is None for r in parts):
                 return
         pose = pose_from_odom(odom.pose.pose)
         if isinstance(pose, str):
             self._odom = None
             return self._reject(f'odom: {pose}')
-        t_ref = stamp_ns(self._ref[0].header.stamp) * 1e-9
-        ref = reference_from_msgs(t_ref, *self._ref)
+        t_ref = stamp_ns(parts[0].header.stamp) * 1e-9
+        ref = reference_from_msgs(t_ref, *parts)
         if isinstance(ref, str):
             return self._reject(ref)
         self.last_stamp = s
+        if self.mode == 'lockstep':
+            for old in [k for k in self._refs if k <= s]:
+                del self._refs[old]
         speed = odom.twist.twist.linear.x
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                measured_speed=speed if math.isfinite(speed) else 0.0)
+                                measured_speed=speed if math.isfinite(speed) else 0.0,
+                                stamp=s * 1e-9)
         self._publish(cmd.v, cmd.w)
 
     def _publish(self, v: float, w: float) -> None:
