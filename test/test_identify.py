@@ -444,3 +444,30 @@ def test_golden_lockstep_bag_of_our_plant_has_no_latency():
     assert res.tau_v_s < STEP and res.tau_w_s < STEP
     assert res.odom_rate_hz == pytest.approx(100.0)
     assert res.gain_v == pytest.approx(1.0, abs=0.01) and res.gain_w == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.ros
+def test_lockstep_ros_run_of_our_plant_identified(tmp_path):
+    """One lockstep run of the nodes (composed) with 100 ms command latency, 50 ms lag on v
+    and w, odometry at 50 Hz with 1 mm noise, figure eight; the recorded bag through the CLI."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from conftest import CONFIG
+
+    from nonfragile_tracker.runner import run_composed, scenario_parameters
+    ov = {'plant': {'ros__parameters': dict(
+              cmd_latency=0.1, lag_v=0.05, lag_w=0.05, odom_rate=50.0,
+              odom_noise=[0.001, 0.001, 0.001], noise_seed=3, duration=8.0)},
+          'reference': {'ros__parameters': dict(path='figure_eight', radius=1.0, rate=0.2)},
+          'tracker': {'ros__parameters': dict(dt=0.02)},
+          'recorder': {'ros__parameters': {'drain_timeout': 1.0}}}
+    params = scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml',
+                                 ov)
+    res = run_composed(params, tmp_path)
+    assert all(c == 0 for c in res.exit_codes.values()), res.exit_codes
+    out = tmp_path / 'latency.yaml'
+    assert main(['identify', str(res.bag), '-o', str(out), '--bootstrap', '100']) == 0
+    ident = read_identification(out)
+    assert abs(ident.latency_s - 0.1) < STEP
+    assert abs(ident.tau_v_s - 0.05) < 0.2 * 0.05 and abs(ident.tau_w_s - 0.05) < 0.2 * 0.05
+    assert ident.odom_rate_hz == pytest.approx(50.0) and ident.samples > 300
