@@ -373,7 +373,8 @@ def test_cli_identify(run20, tmp_path, capsys):
     assert 'exists; pass --force' in capsys.readouterr().err
     assert main(['identify', str(bag), '--cmd-topic', 'nope']) == 2
     err = capsys.readouterr().err
-    assert err.startswith('error: velocity commands: the bag has no topic') and 'Traceback' not in err
+    assert err.startswith('error: velocity commands: the bag has no topic')
+    assert 'Traceback' not in err
     assert main(['identify', str(tmp_path / 'missing')]) == 2
     assert 'does not exist' in capsys.readouterr().err
 
