@@ -472,3 +472,18 @@ def test_lockstep_ros_run_of_our_plant_identified(tmp_path):
     assert abs(ident.latency_s - 0.1) < STEP
     assert abs(ident.tau_v_s - 0.05) < 0.2 * 0.05 and abs(ident.tau_w_s - 0.05) < 0.2 * 0.05
     assert ident.odom_rate_hz == pytest.approx(50.0) and ident.samples > 300
+
+
+def test_cli_cross_check_flags_a_twist_that_echoes_the_command(run20, tmp_path, capsys):
+    """A base whose odometry twist is the last command (no latency, no lag) while the poses
+    move 100 ms late: the twist fit says ~0 s, the poses say 0.1 s, and the CLI warns."""
+    (tc, v, w), (to, x, y, yaw, _, _) = run20
+    j = np.searchsorted(tc, to, side='right') - 1
+    echo = ((tc, v, w), (to, x, y, yaw, v[np.maximum(j, 0)], w[np.maximum(j, 0)]))
+    bag = tmp_path / 'echo'
+    write_motion_bag(bag, echo)
+    assert main(['identify', str(bag), '--bootstrap', '60']) == 0
+    text = capsys.readouterr().out
+    assert 'latency  L     = 0.00' in text
+    assert 'cross-check from the poses alone: latency 0.1' in text
+    assert 'warning: the poses give a latency' in text and '--source pose' in text

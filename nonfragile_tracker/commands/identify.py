@@ -56,6 +56,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
                          'not synchronized, the latency includes their offset')
     for note in res.notes:
         lines.append(f'note: {note}')
+    if args.cross_check and 'twist' in (res.source_v, res.source_w):
+        lines += _cross_check(args, data, res)
     print('\n'.join(lines))
     if args.output:
         write_identification(args.output, res, overwrite=True)
@@ -68,6 +70,29 @@ def cmd_identify(args: argparse.Namespace) -> int:
           f'  nonfragile_tracker latency-design PROBLEM --delay-interval '
           f'{res.latency_low_s:.4f} {h_max:.4f}')
     return 0
+
+
+def _cross_check(args: argparse.Namespace, data, res) -> list[str]:
+    """The latency from the poses alone, against the twist-based one.
+
+    A base whose twist echoes the command, or is stamped differently from the pose,
+    shows here: the poses are what the robot actually did.
+    """
+    from ..control.identify import IdentificationError, identify_latency
+    try:
+        pose = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
+                                max_tau_s=args.max_tau, source='pose', bootstrap=50,
+                                command_timeout_s=args.command_timeout, seed=args.seed)
+    except IdentificationError as exc:
+        return [f'cross-check from the poses alone: not possible ({exc})']
+    out = [f'cross-check from the poses alone: latency {pose.latency_s:.4f} s '
+           f'{_fmt_interval(pose.latency_low_s, pose.latency_high_s)}']
+    gap = max(pose.latency_low_s - res.latency_high_s, res.latency_low_s - pose.latency_high_s)
+    if gap > 0.01:
+        out.append(f'warning: the poses give a latency {gap:.3f} s outside the twist-based '
+                   'interval: does the odometry twist echo the command, or carry another '
+                   'stamp? Consider --source pose')
+    return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -92,6 +117,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument('--source', choices=['auto', 'twist', 'pose'], default='auto',
                    help='measure v, w from the odometry twist (auto: when not all zero) or '
                    'from differenced poses')
+    p.add_argument('--no-cross-check', dest='cross_check', action='store_false',
+                   help='skip the check of a twist-based estimate against the poses alone')
     p.add_argument('--max-latency', type=float, default=1.0, help='latency search limit (s)')
     p.add_argument('--max-tau', type=float, default=1.0, help='time constant search limit (s)')
     p.add_argument('--command-timeout', type=float, default=None,
