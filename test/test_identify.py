@@ -487,3 +487,22 @@ def test_cli_cross_check_flags_a_twist_that_echoes_the_command(run20, tmp_path, 
     assert 'latency  L     = 0.00' in text
     assert 'cross-check from the poses alone: latency 0.1' in text
     assert 'warning: the poses give a latency' in text and '--source pose' in text
+
+
+def test_measurement_to_command_delay():
+    """Age of the newest odometry when each command is sent: 3 ms after a 50 Hz odometry
+    sample for an odometry-triggered tracker; commands before any odometry skipped."""
+    from nonfragile_tracker.control.identify import measurement_to_command_delay
+    to = np.arange(0.0, 10.0, 0.02)
+    odom = OdometrySamples(to, to, to, to)
+    cmd = CommandSamples(np.concatenate([[-1.0], to + 0.003]), np.zeros(to.size + 1),
+                         np.zeros(to.size + 1))
+    lo, med, hi = measurement_to_command_delay(cmd, odom)
+    assert lo == pytest.approx(0.003) and med == pytest.approx(0.003)
+    assert hi == pytest.approx(0.003)
+    # a 100 Hz timer-driven tracker: ages 0 and 10 ms alternate
+    timer = CommandSamples(np.arange(0.0, 10.0, 0.01) + 1e-4, np.zeros(1000), np.zeros(1000))
+    lo, med, hi = measurement_to_command_delay(timer, odom)
+    assert lo == pytest.approx(1e-4) and hi == pytest.approx(0.0101)
+    assert all(math.isnan(x) for x in measurement_to_command_delay(
+        CommandSamples([-2.0, -1.0], [0.0, 0.0], [0.0, 0.0]), odom))

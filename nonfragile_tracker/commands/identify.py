@@ -15,7 +15,8 @@ def _fmt_interval(lo: float, hi: float) -> str:
 def cmd_identify(args: argparse.Namespace) -> int:
     """Read the bag, identify, print the estimates and the next step, optionally write -o."""
     from ..bag.motion import read_motion
-    from ..control.identify import identify_latency, with_source, write_identification
+    from ..control.identify import (identify_latency, measurement_to_command_delay,
+                                    with_source, write_identification)
     from ..errors import InputError
     if args.output and Path(args.output).exists() and not args.force:
         raise InputError(f'{args.output} exists; pass --force to overwrite it')
@@ -47,6 +48,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f'explains {100 * res.r2_w:.1f} %)',
         f'each channel alone: latency {res.latency_v_s:.4f} s (v), {res.latency_w_s:.4f} s (w)',
     ]
+    mc_delay = measurement_to_command_delay(data.commands, data.odometry)
+    if math.isfinite(mc_delay[1]):
+        lines.append(f'age of the newest odometry when a command is sent: median '
+                     f'{mc_delay[1]:.4f} s (1-99 %: {mc_delay[0]:.4f} ... {mc_delay[2]:.4f} s)')
     if math.isfinite(data.odom_delay_s):
         lines.append(f'odometry transport delay (bag receive time - header stamp): median '
                      f'{data.odom_delay_s:.4f} s')
@@ -63,12 +68,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
     step = cmd_period if math.isfinite(cmd_period) else 0.0
-    h_max = res.latency_high_s + max(res.tau_v_high_s, res.tau_w_high_s) + step
-    print('next: gains certified for an input delay h in [h_min, h_max] with h_min = latency '
-          'low, h_max = latency high + the larger lag (high) + one command period '
-          '(README "Identify the latency"):\n'
+    lag = max(res.tau_v_s, res.tau_w_s)
+    d_lo, _, d_hi = (0.0 if not math.isfinite(d) else d for d in mc_delay)
+    print('next: gains certified for the delay from measurement to motion and the lag '
+          '(h_min = latency low + command age low, h_max = latency high + command age high '
+          '+ one command period; README "Identify the latency"):\n'
           f'  nonfragile_tracker latency-design PROBLEM --delay-interval '
-          f'{res.latency_low_s:.4f} {h_max:.4f}')
+          f'{res.latency_low_s + d_lo:.4f} {res.latency_high_s + d_hi + step:.4f} '
+          f'--lag {lag:.4f}')
     return 0
 
 

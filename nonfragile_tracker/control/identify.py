@@ -79,8 +79,8 @@ from ..errors import InputError
 __all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
            'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',
            'Identification', 'identify_latency', 'write_identification', 'read_identification',
-           'read_identification_text', 'with_source', 'FILE_KEY', 'MIN_ODOM_SAMPLES',
-           'MIN_R2']
+           'read_identification_text', 'with_source', 'measurement_to_command_delay',
+           'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
 
 #: Top-level key of the identification file.
 FILE_KEY = 'identification'
@@ -765,6 +765,32 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         confidence=float(confidence), resolution_s=h, duration_s=duration,
         commands=int(np.count_nonzero((tc >= t_begin - max_latency_s) & (tc <= t_end))),
         bootstrap=int(bootstrap), notes=tuple(notes))
+
+
+def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySamples
+                                 ) -> tuple[float, float, float]:
+    """How old the newest odometry sample is when each command is sent: (low, median, high).
+
+    For each command, ``t_cmd - t_odom`` with ``t_odom`` the newest odometry stamp not
+    after it (commands before the first odometry are skipped); low and high are the 1st
+    and 99th percentiles.  A tracker triggered by odometry shows its transport and
+    computation time here; a timer-driven one up to an odometry period.  With the
+    latency ``L`` (from the command) the loop's delay from measurement to motion is
+    this plus ``L``, plus up to one command period while a command is held.
+
+    Returns
+    -------
+    (float, float, float)
+        Seconds; NaN if no command follows an odometry sample.
+    """
+    to = np.sort(odometry.t)
+    tc = np.asarray(commands.t, dtype=float)
+    j = np.searchsorted(to, tc, side='right') - 1
+    d = tc[j >= 0] - to[j[j >= 0]]
+    if d.size == 0:
+        return (math.nan, math.nan, math.nan)
+    lo, med, hi = np.percentile(d, [1, 50, 99])
+    return (float(lo), float(med), float(hi))
 
 
 # ---------------------------------------------------------------------------------------------
