@@ -25,10 +25,10 @@ the held commands is computed exactly for a cell-averaged input (one ``lfilter``
 per time constant); a delay is a shift of that response, so the residual of the
 linear least-squares fit of ``(g_c, initial state)`` is evaluated for all delays at
 once.  ``L`` minimizes the sum of the two channels' residuals, each normalized by
-its own noise variance (the channels have different units), first on a coarse
-grid (10 ms x 17 time constants), then at the grid resolution with a parabolic
-sub-grid refinement; each ``tau_c`` is then refined by a bounded Brent search at
-that ``L``.
+its own noise variance (from the channel's own best fit at the grid resolution; the
+channels have different units), first on a coarse grid (10 ms x 25 time constants),
+then at the grid resolution around it, and finally ``(L, tau_v, tau_w)`` are polished
+together by a bounded Nelder-Mead search (sub-step latency).
 
 Uncertainty: a non-overlapping block bootstrap over time (blocks of
 ``clip(T / 20, 0.25 s, 2 s)``, both channels resampled with the same blocks) redoes
@@ -71,7 +71,7 @@ from typing import Any
 
 import numpy as np
 import yaml
-from scipy.optimize import minimize_scalar
+from scipy.optimize import minimize
 from scipy.signal import lfilter
 
 from ..errors import InputError
@@ -375,20 +375,6 @@ def _sse(st: np.ndarray, zz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray
     return np.maximum(sse, 0.0), g2
 
 
-def _profile(sse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Minimum over the last axis of ``sse`` (nd, ntau) refined by a parabola through the
-    three grid values around it: (min value, fractional index) per row."""
-    k = np.argmin(sse, axis=1)
-    kc = np.clip(k, 1, sse.shape[1] - 2)
-    rows = np.arange(sse.shape[0])
-    a, b, c = sse[rows, kc - 1], sse[rows, kc], sse[rows, kc + 1]
-    den = a - 2 * b + c
-    inner = (k == kc) & (den > 0)
-    off = np.where(inner, np.clip(0.5 * (a - c) / np.where(inner, den, 1.0), -0.5, 0.5), 0.0)
-    val = np.where(inner, b - 0.25 * (a - c) * off, sse[rows, k])
-    return np.maximum(val, 0.0), k + off
-
-
 def _parabola_min(values: np.ndarray, i: int) -> float:
     """Sub-grid offset (in grid steps, within +-0.5) of the minimum at index ``i``."""
     if i <= 0 or i >= values.size - 1:
@@ -591,7 +577,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         chans[c] = _Channel.build(c, use[c], u_avg, h, z, (to - tc[0]) / h, ia, ib, wd, tm)
 
     d_max = int(round(max_latency_s / h))
-    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 16)])
+    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
     # coarse: 10 ms steps, at most ~1500 samples per channel
     step = max(1, int(round(0.01 / h)))
     coarse = np.arange(0, d_max + 1, step, dtype=float)
@@ -604,17 +590,23 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                             axis=1) * stride                        # (nd, ntau)
     # each channel's noise variance: its own best fit at the grid resolution (a coarse
     # grid would inflate a noise-free channel's and let a noisy one dominate)
-    prof_c = {c: _profile(sse_c[c]) for c in _CHANNELS}
+    prof_c = {c: sse_c[c].min(axis=1) for c in _CHANNELS}
+    kbest = {c: np.argmin(sse_c[c], axis=1) for c in _CHANNELS}
+
+    def around(i: int) -> np.ndarray:
+        return np.arange(max(0, coarse[i] - 3 * step), min(d_max, coarse[i] + 3 * step) + 1,
+                         dtype=float)
+
+    def tau_range(k: int, n: int) -> np.ndarray:
+        return np.linspace(taus[max(0, k - 2)], taus[min(taus.size - 1, k + 2)], n)
+
     for c, ch in chans.items():
-        i = int(np.argmin(prof_c[c][0]))
-        k = int(round(prof_c[c][1][i]))
-        own = np.arange(max(0, coarse[i] - 2 * step), min(d_max, coarse[i] + 2 * step) + 1,
-                        dtype=float)
+        i = int(np.argmin(prof_c[c]))
         zz = float(ch.z @ ch.z)
-        best = min(float(_sse(_stats(ch, tau, own, None, 0), zz)[0].min()) for tau in
-                   np.linspace(taus[max(0, k - 1)], taus[min(taus.size - 1, k + 1)], 13))
+        best = min(float(_sse(_stats(ch, tau, around(i), None, 0), zz)[0].min())
+                   for tau in tau_range(int(kbest[c][i]), 17))
         ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
-    j_coarse = sum(prof_c[c][0] / chans[c].sigma2 for c in _CHANNELS)
+    j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
     i_c = int(np.argmin(j_coarse))
 
     # -- fine: grid resolution around the coarse minimum, local time-constant grids
@@ -623,12 +615,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         hi = min(max_tau_s, centre * spread + 2 * h * spread)
         return np.linspace(lo, hi, 25)
 
-    tau_grid = {}
-    for c in _CHANNELS:
-        k = int(round(prof_c[c][1][i_c]))
-        tau_grid[c] = np.linspace(taus[max(0, k - 1)], taus[min(taus.size - 1, k + 1)], 25)
-    fine = np.arange(max(0, coarse[i_c] - 2 * step), min(d_max, coarse[i_c] + 2 * step) + 1,
-                     dtype=float)
+    tau_grid = {c: tau_range(int(kbest[c][i_c]), 25) for c in _CHANNELS}
+    fine = around(i_c)
 
     def grid_fit(shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool):
         """Block statistics (nd, ntau, 5, nb) per channel and zz per block."""
@@ -668,26 +656,35 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     fit = grid_fit(fine, tau_grid, False)
     pos, tau0, lat_c, _ = estimate(fit, None, fine, tau_grid)
+
+    # -- polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps), then the
+    #    fit figures at the result
+    zzs = {c: float(ch.z @ ch.z) for c, ch in chans.items()}
+
+    def channel_sse(c: str, p: float, tau: float) -> np.ndarray:
+        return _sse(_stats(chans[c], tau, np.array([p]), None, 0), zzs[c])
+
+    def objective(x: np.ndarray) -> float:
+        p, tv, tw = (float(v) for v in x)
+        return sum(float(channel_sse(c, p, t * h)[0][0]) / chans[c].sigma2
+                   for c, t in (('v', tv), ('w', tw)))
+
+    x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
+    j0 = objective(x0)
+    simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
+    polish = minimize(objective, x0, method='Nelder-Mead',
+                      bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h), (0.0, max_tau_s / h)],
+                      options={'initial_simplex': simplex, 'xatol': 0.01,
+                               'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
+    if polish.fun <= j0:
+        pos, tau_hat = float(polish.x[0]), {'v': float(polish.x[1]) * h,
+                                            'w': float(polish.x[2]) * h}
+    else:
+        tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
     latency = pos * h
-
-    # -- refine each time constant at the latency (bounded Brent) and final fit figures
-    tau_hat, gains, resid, r2 = {}, {}, {}, {}
+    gains, resid, r2 = {}, {}, {}
     for c, ch in chans.items():
-        zz = float(ch.z @ ch.z)
-        shift = np.array([pos])
-
-        def cost(tau, ch=ch, zz=zz, shift=shift):
-            return float(_sse(_stats(ch, max(tau, 0.0), shift, None, 0), zz)[0][0])
-
-        g = tau_grid[c]
-        lo, hi = float(g[0]), float(g[-1])
-        if hi - lo > 1e-9:
-            res = minimize_scalar(cost, bounds=(lo, hi), method='bounded',
-                                  options={'xatol': 1e-5})
-            tau_hat[c] = float(res.x) if res.fun <= cost(tau0[c]) else max(tau0[c], 0.0)
-        else:
-            tau_hat[c] = max(tau0[c], 0.0)
-        sse, g2 = _sse(_stats(ch, tau_hat[c], shift, None, 0), zz)
+        sse, g2 = channel_sse(c, pos, tau_hat[c])
         gains[c] = float(g2[0])
         resid[c] = math.sqrt(float(sse[0]) / ch.z.size)
         var = float(np.var(ch.z))
