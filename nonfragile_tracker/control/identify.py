@@ -311,12 +311,20 @@ class _Channel:
             free = _cumtrapz(free, self.h)
         return forced, free
 
-    def regressors(self, sig: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-        """The measurement functional of ``sig`` delayed by ``shifts`` (grid steps), (nd, ns)."""
-        vals = _interp_shifted(sig, self.pos, shifts)
-        if self.ib is None:
-            return vals[:, self.ia]
-        return (vals[:, self.ib] - vals[:, self.ia]) / self.width
+    def regressors(self, sig: np.ndarray, shifts: np.ndarray, n: int | None = None
+                   ) -> np.ndarray:
+        """The measurement functional of ``sig`` delayed by ``shifts`` (grid steps), (nd, ns).
+
+        With ``n``, only for the first ``n`` measurements.
+        """
+        ia = self.ia if n is None else self.ia[:n]
+        ib = None if self.ib is None else (self.ib if n is None else self.ib[:n])
+        last = int(max(ia.max(initial=-1), -1 if ib is None else ib.max(initial=-1))) + 1
+        vals = _interp_shifted(sig, self.pos[:last], shifts)
+        if ib is None:
+            return vals[:, ia]
+        width = self.width if n is None else self.width[:n]
+        return (vals[:, ib] - vals[:, ia]) / width
 
 
 def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
@@ -348,18 +356,30 @@ def _stats(ch: _Channel, tau: float, shifts: np.ndarray, blocks: np.ndarray | No
     """Least-squares sufficient statistics per shift: (nd, 5[, n_blocks]).
 
     Entries: S11, S12, S22, S1z, S2z (regressor 1 = forced, 2 = free response).
-    With ``blocks`` they are summed per bootstrap block (last axis).
+    With ``blocks`` (block index per measurement, non-decreasing) they are summed per
+    bootstrap block (last axis).  The free response decays as exp(-t / tau): it is
+    evaluated only for the leading measurements where it is not yet below 1e-17.
     """
     forced, free = ch.signals(tau)
     m1 = ch.regressors(forced, shifts)
-    m2 = ch.regressors(free, shifts)
+    k_cut = 1.0 if tau <= 0 else 40.0 * tau / ch.h        # exp(-40) ~ 4e-18
+    n_free = int(np.searchsorted(ch.pos[ch.ia], k_cut + float(np.max(shifts)), side='right'))
+    m2 = ch.regressors(free, shifts, n_free)
     z = ch.z[None, :]
-    prods = (m1 * m1, m1 * m2, m2 * m2, m1 * z, m2 * z)
+    z2 = z[:, :n_free]
+    m1f = m1[:, :n_free]
+    prods = (m1 * m1, m1f * m2, m2 * m2, m1 * z, m2 * z2)
     if blocks is None:
         return np.stack([p.sum(axis=1) for p in prods], axis=1)
-    onehot = np.zeros((ch.z.size, n_blocks))
-    onehot[np.arange(ch.z.size), blocks] = 1.0
-    return np.stack([p @ onehot for p in prods], axis=1)
+    bounds = np.searchsorted(blocks, np.arange(n_blocks + 1), side='left')
+    return np.stack([_block_sums(p, np.minimum(bounds, p.shape[1])) for p in prods], axis=1)
+
+
+def _block_sums(p: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Sums of the columns of ``p`` between consecutive ``bounds``: (rows, len(bounds) - 1)."""
+    cs = np.zeros((p.shape[0], p.shape[1] + 1))
+    np.cumsum(p, axis=1, out=cs[:, 1:])
+    return cs[:, bounds[1:]] - cs[:, bounds[:-1]]
 
 
 def _sse(st: np.ndarray, zz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
