@@ -5,6 +5,7 @@ Sub-commands::
     synthesize PROBLEM [-o GAINS] [--nominal] [--gain-bound K]   Theorem 1 -> tracker gain file
     design PROBLEM --objective decay|scale|min-norm [--norm N]    optimized Theorem 1 gains
     delay-dependent PROBLEM [--delay H | --max-delay]             descriptor-method design
+    identify BAG [-o latency.yaml]                                command latency and actuator lag
     latency-design PROBLEM --delay-interval H_MIN H_MAX [--lag T]  gain certified for a latency
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
@@ -27,11 +28,12 @@ import sys
 # numpy is imported; an explicit OPENBLAS_NUM_THREADS from the caller wins.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-from .commands import bag, golden, latency_design, reproduce, run, synthesis, trajectory  # noqa: E402
+from .commands import (bag, golden, identify, latency_design, reproduce, run,  # noqa: E402
+                       synthesis, trajectory)
 from .errors import NonfragileError, exit_code  # noqa: E402
 
 #: The command modules, in ``--help`` order; each exposes ``register(subparsers)``.
-COMMANDS = (synthesis, latency_design, run, trajectory, bag, reproduce, golden)
+COMMANDS = (synthesis, identify, latency_design, run, trajectory, bag, reproduce, golden)
 
 
 def build_parser() -> argparse.ArgumentParser:
