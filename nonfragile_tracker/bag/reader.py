@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -80,6 +81,9 @@ class PoseSeries:
     th: np.ndarray
     v: np.ndarray
     topic: str = ''
+    receive_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    frame_id: str = ''
+    child_frame_id: str = ''
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -97,6 +101,7 @@ class ReferenceSeries:
     vy: np.ndarray
     ax: np.ndarray
     ay: np.ndarray
+    source: str = ''           # where it came from: the reference topics or a Path topic
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -104,12 +109,18 @@ class ReferenceSeries:
 
 @dataclass(frozen=True)
 class CommandSeries:
-    """Commands by receive time: ``t`` (s), v = linear.x (m/s), w = angular.z (rad/s)."""
+    """Commands by receive time: ``t`` (s), v = linear.x (m/s), w = angular.z (rad/s).
+
+    ``stamp_ns`` is the header stamp of a TwistStamped command, else the receive time.
+    """
 
     receive_ns: np.ndarray
     t: np.ndarray
     v: np.ndarray
     w: np.ndarray
+    stamp_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    stamped: bool = False
+    topic: str = ''
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -297,7 +308,39 @@ _EXPECTED_TYPES = {topics.ODOM: 'nav_msgs/msg/Odometry',
                    topics.REF_POSE: 'geometry_msgs/msg/PoseStamped',
                    topics.REF_TWIST: 'geometry_msgs/msg/TwistStamped',
                    topics.REF_ACCEL: 'geometry_msgs/msg/AccelStamped',
-                   topics.CMD_VEL: 'geometry_msgs/msg/Twist'}
+                   topics.CMD_VEL: ('geometry_msgs/msg/Twist', 'geometry_msgs/msg/TwistStamped')}
+#: Message types accepted for the path (trajectory) topic, when the bag has one.
+PATH_TYPE = 'nav_msgs/msg/Path'
+
+
+def _by_type(by_topic: dict[str, Connection], types: tuple[str, ...], taken: set[str]
+             ) -> str | None:
+    """The one topic of one of ``types`` not already taken (None if zero or several)."""
+    found = [t for t, c in by_topic.items() if c.msgtype in types and t not in taken]
+    return found[0] if len(found) == 1 else None
+
+
+def _complete_topic_map(by_topic: dict[str, Connection], topic_map: dict[str, str],
+                        overrides: dict[str, str] | None) -> dict[str, str]:
+    """Stored names for the logical ones: ``overrides`` first, then by name, then by type.
+
+    A bag from another system may name its odometry ``/wheel/odometry`` or its commands
+    ``/robot/cmd_vel_stamped``: when the logical name is not found and exactly one topic
+    of the right type is left, that topic is used.
+    """
+    out = dict(topic_map)
+    for name, topic in (overrides or {}).items():
+        if topic not in by_topic:
+            raise MissingTopicsError(f'topic {topic!r} (given for {name}) is not in the bag; it '
+                                     f'has {sorted(by_topic)}', [topic])
+        out[name] = topic
+    for name, types in ((topics.ODOM, ('nav_msgs/msg/Odometry',)),
+                        (topics.CMD_VEL, _EXPECTED_TYPES[topics.CMD_VEL])):
+        if name not in out:
+            found = _by_type(by_topic, types, set(out.values()))
+            if found is not None:
+                out[name] = found
+    return out
 
 
 def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
@@ -308,20 +351,56 @@ def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
     return missing
 
 
-def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None
-             ) -> BagData:
+def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
+    """A reference from a nav_msgs/Path: positions at the poses' stamps, velocities and
+    accelerations by finite differences (numpy.gradient, second order inside)."""
+    stamps, xs, ys = [], [], []
+    for ps in msg.poses:
+        s = _stamp_ns(ps.header)
+        if stamps and s <= stamps[-1]:
+            continue                       # poses must advance in time
+        stamps.append(s)
+        xs.append(float(ps.pose.position.x))
+        ys.append(float(ps.pose.position.y))
+    st = np.array(stamps, dtype=np.int64)
+    t = st * 1e-9
+    x, y = np.array(xs), np.array(ys)
+    if t.size >= 3:
+        vx, vy = np.gradient(x, t), np.gradient(y, t)
+        ax, ay = np.gradient(vx, t), np.gradient(vy, t)
+    else:
+        vx = vy = ax = ay = np.zeros_like(t)
+    return ReferenceSeries(st, t, x, y, vx, vy, ax, ay, source=topic)
+
+
+def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None,
+             topic_overrides: dict[str, str] | None = None) -> BagData:
     """Read a run: counts and receive times of every topic, and the run arrays.
 
     With ``strict`` (default) a bag without a pose (``odom`` or ``pose``), the
     three reference topics or ``cmd_vel`` raises :class:`MissingTopicsError`
     naming the missing ones; otherwise the missing arrays are empty and
     listed in ``BagData.missing``.
+
+    Bags from other systems: ``cmd_vel`` may be Twist or TwistStamped; odometry and
+    commands under other names are found by type when unique, or named with
+    ``topic_overrides`` (``{'odom': '/wheel/odometry', 'cmd_vel': '/cmd'}``).  When
+    the reference topics are absent but a nav_msgs/Path topic exists, the reference
+    is its last message (positions at the poses' stamps, velocities by differences).
     """
     reader = open_reader(path)
     try:
         by_topic = _connections_by_topic(reader)
         topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
+        topic_map = _complete_topic_map(by_topic, topic_map, topic_overrides)
+        path_topic = None
+        if any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
+                                            topics.REF_ACCEL)):
+            paths = [t for t, c in by_topic.items() if c.msgtype == PATH_TYPE]
+            path_topic = paths[0] if len(paths) == 1 else None
         missing = _missing_run_topics(topic_map)
+        if path_topic is not None:
+            missing = [m for m in missing if not m.startswith('reference/')]
         if missing and strict:
             raise MissingTopicsError(
                 f'bag {path} lacks topic(s) {", ".join(missing)} needed for a tracking run; '
@@ -329,18 +408,25 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 '`topics`) or pass strict=False.', missing)
         for name, expected in _EXPECTED_TYPES.items():
             topic = topic_map.get(name)
-            if topic is not None and by_topic[topic].msgtype != expected:
+            ok = (expected,) if isinstance(expected, str) else expected
+            if topic is not None and by_topic[topic].msgtype not in ok:
                 raise NotABagError(f'topic {topic} in {path} has type '
-                                   f'{by_topic[topic].msgtype}, expected {expected}')
+                                   f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
         pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
         role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
                                           topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
+        if path_topic is not None:
+            role[path_topic] = PATH_TYPE
         ts = jazzy_typestore()
         receive: dict[str, list[int]] = {t: [] for t in by_topic}
         pose_rows: dict[int, tuple] = {}
+        pose_recv: dict[int, int] = {}
+        frames = ['', '']
         ref_parts: dict[str, dict[int, tuple]] = {topics.REF_POSE: {}, topics.REF_TWIST: {},
                                                    topics.REF_ACCEL: {}}
-        cmds: list[tuple[int, float, float]] = []
+        cmds: list[tuple[int, float, float, int]] = []
+        cmd_stamped = False
+        last_path = None
         dup: dict[str, int] = {}
         try:
             for conn, timestamp, raw in reader.messages():
@@ -349,8 +435,17 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
                     continue
                 msg = ts.deserialize_cdr(raw, conn.msgtype)
+                if name == PATH_TYPE:
+                    last_path = msg
+                    continue
                 if name == topics.CMD_VEL:
-                    cmds.append((timestamp, float(msg.linear.x), float(msg.angular.z)))
+                    if hasattr(msg, 'header'):
+                        cmd_stamped = True
+                        stamp = _stamp_ns(msg.header)
+                        msg = msg.twist
+                    else:
+                        stamp = timestamp
+                    cmds.append((timestamp, float(msg.linear.x), float(msg.angular.z), stamp))
                     continue
                 stamp = _stamp_ns(msg.header)
                 if name == pose_name:
@@ -360,6 +455,11 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                     v = float(msg.twist.twist.linear.x) if name == topics.ODOM else math.nan
                     row = (float(p.position.x), float(p.position.y),
                            quaternion_to_yaw(q.x, q.y, q.z, q.w), v)
+                    if not frames[0]:
+                        frames[0] = str(msg.header.frame_id)
+                        frames[1] = str(getattr(msg, 'child_frame_id', ''))
+                    if stamp not in pose_recv:
+                        pose_recv[stamp] = timestamp
                 elif name == topics.REF_POSE:
                     target = ref_parts[name]
                     row = (float(msg.pose.position.x), float(msg.pose.position.y))
@@ -373,9 +473,11 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                     dup[conn.topic] = dup.get(conn.topic, 0) + 1
                 else:
                     target[stamp] = row
-        except (ReaderError, ValueError, IndexError, KeyError) as exc:
-            raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
-                               'damaged - try `nonfragile_tracker bag repair`') from None
+        except (ReaderError, ValueError, IndexError, KeyError, AssertionError,
+                struct.error, UnicodeDecodeError) as exc:
+            raise NotABagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
+                               f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
+                               'repair`') from None
         msgtypes = {t: c.msgtype for t, c in by_topic.items()}
         offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
                    if hasattr(c.ext, 'offered_qos_profiles')}
@@ -384,18 +486,28 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
 
     stamps = np.array(sorted(pose_rows), dtype=np.int64)
     rows = np.array([pose_rows[s] for s in stamps], dtype=float).reshape(-1, 4)
+    precv = np.array([pose_recv[s] for s in stamps], dtype=np.int64)
     pose = PoseSeries(stamps, stamps * 1e-9, rows[:, 0].copy(), rows[:, 1].copy(),
-                      rows[:, 2].copy(), rows[:, 3].copy(), topic_map.get(pose_name, ''))
+                      rows[:, 2].copy(), rows[:, 3].copy(), topic_map.get(pose_name, ''),
+                      receive_ns=precv, frame_id=frames[0], child_frame_id=frames[1])
     common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
         & set(ref_parts[topics.REF_ACCEL])
-    rstamps = np.array(sorted(common), dtype=np.int64)
-    rrows = np.array([ref_parts[topics.REF_POSE][s] + ref_parts[topics.REF_TWIST][s]
-                      + ref_parts[topics.REF_ACCEL][s] for s in rstamps],
-                     dtype=float).reshape(-1, 6)
-    reference = ReferenceSeries(rstamps, rstamps * 1e-9, *(rrows[:, i].copy() for i in range(6)))
-    crow = np.array(cmds, dtype=float).reshape(-1, 3)
+    if not common and last_path is not None:
+        reference = _path_reference(last_path, path_topic)
+    else:
+        rstamps = np.array(sorted(common), dtype=np.int64)
+        rrows = np.array([ref_parts[topics.REF_POSE][s] + ref_parts[topics.REF_TWIST][s]
+                          + ref_parts[topics.REF_ACCEL][s] for s in rstamps],
+                         dtype=float).reshape(-1, 6)
+        reference = ReferenceSeries(rstamps, rstamps * 1e-9,
+                                    *(rrows[:, i].copy() for i in range(6)),
+                                    source=topic_map.get(topics.REF_POSE, ''))
+    crow = np.array(cmds, dtype=float).reshape(-1, 4)
     cns = np.array([c[0] for c in cmds], dtype=np.int64)
-    commands = CommandSeries(cns, cns * 1e-9, crow[:, 1].copy(), crow[:, 2].copy())
+    cst = np.array([c[3] for c in cmds], dtype=np.int64)
+    commands = CommandSeries(cns, cns * 1e-9, crow[:, 1].copy(), crow[:, 2].copy(),
+                             stamp_ns=cst, stamped=cmd_stamped,
+                             topic=topic_map.get(topics.CMD_VEL, ''))
     return BagData(path=Path(path), msgtypes=msgtypes,
                    counts={t: len(v) for t, v in receive.items()},
                    receive_ns={t: np.array(v, dtype=np.int64) for t, v in receive.items()},
