@@ -8,7 +8,7 @@ Sub-commands::
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
     run [options]                                                 the main job (see --help)
-    bag report|repair DIR                                         bag tools
+    bag report|compare|replay|repair ...                          bag tools (see README)
 
 Exit codes: 0 ok, 2 bad input, 3 infeasible LMI, 4 solver or verification failure,
 5 run failure.
@@ -243,6 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from . import golden, reproduce, runner
     runner.add_subcommands(sub)
+    # --- commands/ hook (one line per commands module; the integrator may fold this) ---
+    from .commands import bag as bag_commands
+    bag_commands.register(sub)
     reproduce.add_subcommand(sub)
     golden.add_subcommand(sub)
     return p

@@ -238,7 +238,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
 
 
 def add_subcommands(sub) -> None:
-    """Add ``run`` and ``bag`` to the CLI."""
+    """Add ``run`` to the CLI (``bag`` is :mod:`nonfragile_tracker.commands.bag`)."""
     r = sub.add_parser('run', help='the main job: paper scenario through the ROS nodes, '
                        'bag, report and plots')
     r.add_argument('--scenario', help='node parameter file (default config/paper_scenario.yaml)')
@@ -256,17 +256,6 @@ def add_subcommands(sub) -> None:
     r.add_argument('--no-record', action='store_true', help='do not record a bag')
     r.set_defaults(func=cmd_run)
 
-    b = sub.add_parser('bag', help='bag tools: report, repair')
-    bs = b.add_subparsers(dest='bag_command', required=True)
-    rep = bs.add_parser('report', help='metrics and PNG plots of a recorded run')
-    rep.add_argument('bag')
-    rep.add_argument('--out', help='directory for the plots (default: <bag>_report)')
-    rep.add_argument('--force', action='store_true', help='replace existing plots')
-    rep.set_defaults(func=cmd_bag_report)
-    rp = bs.add_parser('repair', help='recover a bag whose recorder died without closing it')
-    rp.add_argument('bag')
-    rp.add_argument('--out', help='repaired bag directory (default <bag>_repaired)')
-    rp.set_defaults(func=cmd_bag_repair)
 
 
 DELTAS = {'Delta_1': [-1.0, 0.0, 0.0, -1.0], 'Delta_2': [1.0, 0.0, 0.0, 1.0]}
@@ -310,29 +299,4 @@ def cmd_run(args) -> int:
         rep = bag_report(res.bag, run_dir)
         print(format_report(rep))
         print(f'bag: {res.bag}\nplots and summary: {run_dir}')
-    return 0
-
-
-def cmd_bag_report(args) -> int:
-    from .bag.report import bag_report, format_report
-    from .bag.reader import BagError
-    try:
-        rep = bag_report(Path(args.bag), Path(args.out) if args.out else None,
-                         overwrite=args.force)
-    except BagError as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return 2
-    print(format_report(rep))
-    return 0
-
-
-def cmd_bag_repair(args) -> int:
-    from .bag.reader import BagError
-    from .bag.repair import repair_bag
-    try:
-        res = repair_bag(Path(args.bag), Path(args.out) if args.out else None)
-    except BagError as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return 2
-    print(res.summary())
     return 0

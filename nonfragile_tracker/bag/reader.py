@@ -37,7 +37,7 @@ from .writer import BagError, jazzy_typestore
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
            'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag',
-           'mcap_is_complete', 'resolve_topics', 'RUN_TOPICS', 'MCAP_MAGIC']
+           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'RUN_TOPICS', 'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
@@ -219,6 +219,28 @@ def open_reader(path: str | os.PathLike) -> Reader:
     except (ReaderError, KeyError, ValueError, OSError) as exc:
         raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {exc}') from None
     return reader
+
+
+def typestore_for(reader: Reader):
+    """The Jazzy typestore, plus the bag's own definitions of types it does not know.
+
+    A bag from another system may carry custom messages; their ros2msg definitions are
+    stored in the bag, so they are registered in a private copy of the typestore.
+    """
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    ts = jazzy_typestore()
+    unknown = {c.msgtype: c.msgdef for c in reader.connections if c.msgtype not in ts.types}
+    if not unknown:
+        return ts
+    own = get_typestore(Stores.ROS2_JAZZY)
+    for msgtype, msgdef in unknown.items():
+        text = getattr(msgdef, 'data', msgdef)
+        try:
+            own.register(get_types_from_msg(text, msgtype))
+        except Exception as exc:  # noqa: BLE001 - rosbags raises several parser errors
+            raise NotABagError(f'message type {msgtype} is not a ROS 2 Jazzy type and its '
+                               f'definition stored in the bag cannot be parsed ({exc})') from None
+    return own
 
 
 # ---------------------------------------------------------------------------------------------
