@@ -27,10 +27,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .. import topics
-from ..control.gains import GainFileError, gain_from_parameters
-from ..control.loop import LoopConfigError, Tracker, TrackerConfig
+from ..control.loop import LoopConfigError, Tracker
+from ..msgconv import tracker_config
 from .common import (DATA_QOS, PAPER_A_TAU, Param, StartupError, check_mode, declare, get,
-                     matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
+                     pose_from_odom, reference_from_msgs, run, stamp_ns)
 
 PAPER_F = [0.5] * 8
 PARAMS = [
@@ -59,25 +59,6 @@ PARAMS = [
 ]
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
            'input_timeout', 'max_stamp_jump'}
-
-
-def tracker_config(values: dict) -> TrackerConfig:
-    """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
-    try:
-        K = gain_from_parameters(values['K'], values['K_shape'])
-    except GainFileError as exc:
-        raise LoopConfigError(str(exc)) from None
-    E = matrix_param(values['E'], 2, 2, 'E')
-    F = matrix_param(values['F'], 2, 4, 'F')
-    D = matrix_param(values['Delta'], 2, 2, 'Delta')
-    pert = E @ D @ F
-    a_tau = matrix_param(values['A_tau'], 4, 4, 'A_tau')
-    return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
-                         max_angular_speed=values['max_angular_speed'],
-                         min_speed=values['min_speed'],
-                         perturbation=pert if np.any(pert) else None,
-                         delay_compensation=values['delay_compensation'], A_tau=a_tau,
-                         tau=values['tau'])
 
 
 class TrackerNode(Node):
