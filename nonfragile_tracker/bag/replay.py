@@ -44,7 +44,7 @@ from .writer import BagError, jazzy_typestore
 
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
-           'bag_mode', 'compare_commands']
+           'bag_mode', 'compare_commands', 'REF_INDEX']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
@@ -57,7 +57,7 @@ TRACKER_DEFAULTS: dict[str, Any] = {
 }
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
-_REF_INDEX = {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}
+REF_INDEX = {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}
 
 
 @dataclass(frozen=True)
@@ -287,7 +287,7 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
             recorded.append((e.receive_ns, e.msg))
             continue
         cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.reference(
-            _REF_INDEX[e.kind], e.msg)
+            REF_INDEX[e.kind], e.msg)
         if cmd is not None:
             commands.append((e.receive_ns, Twist(Vector3(float(cmd.v), 0.0, 0.0),
                                                  Vector3(0.0, 0.0, float(cmd.w)))))
