@@ -22,6 +22,7 @@ The DDS variant (through a real tracker node) is
 """
 from __future__ import annotations
 
+import copy
 import math
 import os
 from collections.abc import Iterable
@@ -44,7 +45,8 @@ from .writer import BagError, jazzy_typestore
 
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
-           'bag_mode', 'compare_commands', 'REF_INDEX']
+           'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
+           'finish_replay', 'ORDER_WINDOW']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
@@ -85,6 +87,7 @@ class ReplayResult:
     ignored: dict[str, int] = field(default_factory=dict)  # why inputs were ignored
     reference: str = 'recorded'                # or the expected bag's path
     via: str = 'in process'
+    plan: Any = None                           # the ReplayPlan behind it
 
     @property
     def max_abs_error(self) -> float:
@@ -252,6 +255,187 @@ def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, 
                             max_differences=max_differences)
 
 
+@dataclass
+class ReplayPlan:
+    """What to feed the tracker, in which order, and what it should answer.
+
+    ``events`` are the inputs in the order the tracker saw them (bag order, with any
+    swap the recorded commands showed); ``commands`` the in-process answers, with the
+    time of the triggering input; ``initial_speed`` the compensator speed recovered
+    from the first recorded command (real-time bags), also written into the first
+    odometry event's twist so a tracker node starts from it.
+    """
+
+    mode: str
+    events: list[ReplayEvent]
+    commands: list[tuple[int, Any]]
+    recorded: list[tuple[int, Any]]
+    fed: dict[str, int]
+    ignored: dict[str, int]
+    initial_speed: float | None = None
+    skipped_inputs: int = 0          # inputs before the tracker's first recorded command
+    swaps: int = 0                   # odometry/reference pairs taken in the other order
+
+
+#: Receive-time window (s) within which the recorder and the tracker may have received an
+#: odometry and a reference message in different orders.
+ORDER_WINDOW = 0.002
+
+
+def _with_speed(e: ReplayEvent, v: float) -> ReplayEvent:
+    msg = copy.deepcopy(e.msg)
+    msg.twist.twist.linear.x = float(v)
+    raw = bytes(jazzy_typestore().serialize_cdr(msg, e.msgtype))
+    return ReplayEvent(e.kind, e.receive_ns, e.topic, e.msgtype, raw, msg)
+
+
+def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) -> float | None:
+    """The compensator speed v at which the tracker's command speed is ``target_v``.
+
+    The command speed ``(v + v_next) / 2`` is affine in v (``v_next = v + a dt`` with
+    ``a`` affine in v) unless saturated: two trials give the line, a third checks it.
+    """
+    def f(v):
+        trial = copy.deepcopy(inputs)
+        trial.tracker.reset(v)
+        cmd = trial.odom(odom.msg)
+        return None if cmd is None else cmd.v
+    f0, f1 = f(0.0), f(1.0)
+    if f0 is None or f1 is None or f1 == f0:
+        return None
+    v = (target_v - f0) / (f1 - f0)
+    got = f(v)
+    return v if got is not None and abs(got - target_v) <= 1e-12 * max(1.0, abs(v)) else None
+
+
+def _twist_msg(cmd: Command) -> Any:
+    ts = jazzy_typestore()
+    Twist, Vector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
+    return Twist(Vector3(float(cmd.v), 0.0, 0.0), Vector3(0.0, 0.0, float(cmd.w)))
+
+
+def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
+    tw = _twist(rec)
+    return abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol
+
+
+def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
+                max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump'],
+                use_recorded: bool = True, atol: float = 1e-9) -> ReplayPlan:
+    """Run the tracker over the events in process and fix what the recorder cannot tell.
+
+    Real-time bags only, and only with ``use_recorded`` (commands of this bag): the
+    replay starts at the odometry that triggered the first recorded command (the
+    recorder may have joined after the tracker) with the compensator speed recovered
+    from that command; and where an odometry and a reference message were received
+    within :data:`ORDER_WINDOW` of each other, the order that reproduces the recorded
+    command is taken (the recorder and the tracker are two readers and may see two
+    near-simultaneous messages in different orders).
+    """
+    mode = bag_mode(events)
+    inputs = TrackerInputs(config, mode, max_stamp_jump)
+    recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
+    fed: dict[str, int] = {}
+    for e in events:
+        fed[e.kind] = fed.get(e.kind, 0) + 1
+    data = [e for e in events if e.kind != 'cmd']
+    resync = use_recorded and mode == 'realtime' and recorded
+    start, v0, skipped = 0, None, 0
+    if resync:
+        first_cmd = next(i for i, e in enumerate(events) if e.kind == 'cmd')
+        odoms = [e for e in events[:first_cmd] if e.kind == 'odom']
+        if odoms:
+            start_event = odoms[-1]
+            start = data.index(start_event)
+            # the reference parts the tracker held: the latest of each before the start
+            latest: dict[str, ReplayEvent] = {}
+            for e in data[:start]:
+                if e.kind in REF_INDEX:
+                    latest[e.kind] = e
+            skipped = start - len(latest)
+            for e in sorted(latest.values(), key=lambda e: e.receive_ns):
+                inputs.reference(REF_INDEX[e.kind], e.msg)
+            v0 = _recover_speed(inputs, start_event, float(_twist(recorded[0][1]).linear.x))
+            if v0 is not None:
+                data[start] = _with_speed(start_event, v0)
+            data = sorted(latest.values(), key=lambda e: e.receive_ns) + data[start:]
+            start = len(latest)
+    else:
+        start = 0
+    order: list[ReplayEvent] = data[:start]
+    commands: list[tuple[int, Any]] = []
+    swaps = 0
+    window = int(ORDER_WINDOW * 1e9)
+    i = start
+    while i < len(data):
+        e = data[i]
+        if e.kind != 'odom':
+            order.append(e)
+            cmd = inputs.reference(REF_INDEX[e.kind], e.msg)
+            if cmd is not None:
+                commands.append((e.receive_ns, _twist_msg(cmd)))
+            i += 1
+            continue
+        k = len(commands)
+        trial = copy.deepcopy(inputs) if resync and k < len(recorded) else None
+        cmd = inputs.odom(e.msg)
+        if trial is not None and cmd is not None and not _agrees(cmd, recorded[k][1], atol):
+            # (a) reference parts received just before the odometry reached the tracker after
+            before = []
+            j = len(order) - 1
+            while j >= 0 and order[j].kind in REF_INDEX and e.receive_ns - order[j].receive_ns \
+                    <= window:
+                before.append(j)
+                j -= 1
+            # (b) reference parts received just after it reached the tracker before
+            after = []
+            j = i + 1
+            while j < len(data) and data[j].kind in REF_INDEX and data[j].receive_ns - \
+                    e.receive_ns <= window:
+                after.append(j)
+                j += 1
+            alt = None
+            if before:
+                t2 = copy.deepcopy(trial)
+                prev = {}
+                for jj in range(0, min(before)):
+                    if order[jj].kind in REF_INDEX:
+                        prev[order[jj].kind] = order[jj].msg
+                for kind, idx in REF_INDEX.items():
+                    t2._ref[idx] = prev.get(kind, t2._ref[idx]) if any(
+                        order[jj].kind == kind for jj in before) else t2._ref[idx]
+                c2 = t2.odom(e.msg)
+                if c2 is not None and _agrees(c2, recorded[k][1], atol):
+                    moved = [order[jj] for jj in sorted(before)]
+                    del order[min(before):]
+                    order.append(e)
+                    for m in moved:
+                        t2.reference(REF_INDEX[m.kind], m.msg)
+                        order.append(m)
+                    alt = (t2, c2, i + 1)
+            if alt is None and after:
+                t3 = copy.deepcopy(trial)
+                for jj in after:
+                    t3.reference(REF_INDEX[data[jj].kind], data[jj].msg)
+                c3 = t3.odom(e.msg)
+                if c3 is not None and _agrees(c3, recorded[k][1], atol):
+                    order.extend(data[jj] for jj in after)
+                    order.append(e)
+                    alt = (t3, c3, max(after) + 1)
+            if alt is not None:
+                inputs, cmd, nxt = alt
+                swaps += 1
+                commands.append((e.receive_ns, _twist_msg(cmd)))
+                i = nxt
+                continue
+        order.append(e)
+        if cmd is not None:
+            commands.append((e.receive_ns, _twist_msg(cmd)))
+        i += 1
+    return ReplayPlan(mode, order, commands, recorded, fed, dict(inputs.ignored), v0, skipped,
+                      swaps)
+
+
 def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
            params: str | os.PathLike | None = None, expected: str | os.PathLike | None = None,
            atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
@@ -272,26 +456,22 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
     Returns
     -------
     ReplayResult
-        ``comparison.equal`` tells whether the commands are reproduced.
+        ``comparison.equal`` tells whether the commands are reproduced; ``plan`` what
+        was fed (see :func:`plan_replay`).
     """
     config, values = load_tracker_parameters(gains, params)
     events = read_replay_events(bag, namespace=namespace)
-    mode = bag_mode(events)
-    inputs = TrackerInputs(config, mode, float(values['max_stamp_jump']))
-    ts = jazzy_typestore()
-    Twist, Vector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
-    commands, recorded, fed = [], [], {}
-    for e in events:
-        fed[e.kind] = fed.get(e.kind, 0) + 1
-        if e.kind == 'cmd':
-            recorded.append((e.receive_ns, e.msg))
-            continue
-        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.reference(
-            REF_INDEX[e.kind], e.msg)
-        if cmd is not None:
-            commands.append((e.receive_ns, Twist(Vector3(float(cmd.v), 0.0, 0.0),
-                                                 Vector3(0.0, 0.0, float(cmd.w)))))
-    source = 'recorded'
+    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
+                       use_recorded=expected is None, atol=max(atol, 1e-9))
+    return finish_replay(bag, plan, plan.commands, expected=expected, atol=atol, rtol=rtol,
+                         max_differences=max_differences)
+
+
+def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, expected=None,
+                  atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+                  via: str = 'in process') -> ReplayResult:
+    """Compare replayed ``commands`` with the recorded (or ``expected``) ones."""
+    recorded, source = plan.recorded, 'recorded'
     if expected is not None:
         recorded = [(e.receive_ns, e.msg) for e in read_replay_events(expected)
                     if e.kind == 'cmd']
@@ -301,8 +481,8 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
                                  'replayed commands with', [topics.CMD_VEL])
     cmp = compare_commands(commands, recorded, atol=atol, rtol=rtol,
                            max_differences=max_differences)
-    return ReplayResult(Path(bag), mode, commands, recorded, cmp, fed, dict(inputs.ignored),
-                        source)
+    return ReplayResult(Path(bag), plan.mode, commands, recorded, cmp, plan.fed,
+                        plan.ignored, source, via, plan)
 
 
 def format_replay(res: ReplayResult) -> str:
@@ -312,6 +492,14 @@ def format_replay(res: ReplayResult) -> str:
              f'commands: {len(res.commands)} replayed, {len(res.recorded)} '
              f'{"recorded" if res.reference == "recorded" else "in " + res.reference}']
     lines += [f'ignored: {why} ({n})' for why, n in res.ignored.items()]
+    plan = res.plan
+    if plan is not None and plan.skipped_inputs:
+        lines.append(f'started at the input of the first recorded command ({plan.skipped_inputs} '
+                     'earlier inputs skipped), compensator speed recovered from it: '
+                     f'{plan.initial_speed!r} m/s')
+    if plan is not None and plan.swaps:
+        lines.append(f'{plan.swaps} odometry/reference pair(s) received within '
+                     f'{ORDER_WINDOW * 1e3:g} ms taken in the order the commands show')
     if res.comparison.equal:
         lines.append(f'commands reproduced: max |diff| {res.max_abs_error:.3g} '
                      f'({res.comparison.summary[topics.CMD_VEL].align} alignment)')

@@ -25,8 +25,8 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 
 from .. import topics
-from ..bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, bag_mode, compare_commands,
-                          load_tracker_parameters, read_replay_events)
+from ..bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
+                          load_tracker_parameters, plan_replay, read_replay_events)
 from ..bag.writer import jazzy_typestore
 from ..errors import RunError
 from ..resources import config_dir
@@ -47,6 +47,9 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
                     env: dict | None = None, timeout: float = 10.0) -> ReplayResult:
     """Like :func:`nonfragile_tracker.bag.replay.replay`, through a tracker node over DDS.
 
+    The inputs are those of :func:`~nonfragile_tracker.bag.replay.plan_replay` (same start,
+    recovered initial speed and order as the in-process replay).
+
     ``timeout`` bounds the wait for the node (start-up, discovery, each command).
     Raises :class:`~nonfragile_tracker.errors.RunError` if the node dies or stays silent.
     """
@@ -54,7 +57,9 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
     config, values = load_tracker_parameters(gains, params)     # bad files: exit 2 first
     events = read_replay_events(bag, namespace=namespace)
-    mode = bag_mode(events)
+    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
+                       use_recorded=expected is None)
+    mode = plan.mode
     predict = TrackerInputs(config, mode, float(values['max_stamp_jump']))
     env = isolated_env(env)
     ts = jazzy_typestore()
@@ -86,15 +91,11 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
                     raise RunError(f'replay over DDS: no {what} within {timeout} s')
                 ex.spin_once(timeout_sec=0.005)
 
-        commands, recorded, fed = [], [], {}
+        commands = []
         try:
             wait(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
                  and node.count_publishers(topics.CMD_VEL) >= 1, 'tracker node in the graph')
-            for e in events:
-                fed[e.kind] = fed.get(e.kind, 0) + 1
-                if e.kind == 'cmd':
-                    recorded.append((e.receive_ns, e.msg))
-                    continue
+            for e in plan.events:
                 before = len(got)
                 out = predict.odom(e.msg) if e.kind == 'odom' else predict.reference(
                     REF_INDEX[e.kind], e.msg)
@@ -124,13 +125,5 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
                     proc.kill()
                     proc.wait()
             log.close()
-    source = 'recorded'
-    if expected is not None:
-        recorded = [(e.receive_ns, e.msg) for e in read_replay_events(expected)
-                    if e.kind == 'cmd']
-        source = str(expected)
-    cmp = compare_commands(commands, recorded, atol=atol, rtol=rtol,
-                           max_differences=max_differences)
-    return ReplayResult(Path(bag), mode, commands, recorded, cmp, fed, dict(predict.ignored),
-                        source, via='over DDS (tracker node)')
-
+    return finish_replay(bag, plan, commands, expected=expected, atol=atol, rtol=rtol,
+                         max_differences=max_differences, via='over DDS (tracker node)')
