@@ -188,9 +188,15 @@ def check_bag(path: str | os.PathLike) -> Path:
     if not p.exists():
         raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
                                'recorder created (it holds metadata.yaml and a .mcap file)')
-    if not p.is_dir():
-        raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that holds '
-                           'metadata.yaml and the .mcap file')
+    if p.is_file():
+        if p.suffix != '.mcap':
+            raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that '
+                               'holds metadata.yaml and the .mcap file (or a .mcap file)')
+        if not mcap_is_complete(p):
+            raise BagTruncatedError(
+                f'{p} is not a complete MCAP file (no MCAP magic at both ends: truncated or not '
+                f'MCAP). Run `nonfragile_tracker bag repair {p}` to recover what it holds.')
+        return p
     meta = p / 'metadata.yaml'
     mcaps = sorted(p.glob('*.mcap'))
     if not meta.exists() and not mcaps:
@@ -216,8 +222,15 @@ def open_reader(path: str | os.PathLike) -> Reader:
     try:
         reader = Reader(target)
         reader.open()
-    except (ReaderError, KeyError, ValueError, OSError) as exc:
-        raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {exc}') from None
+    except Exception as exc:  # noqa: BLE001 - rosbags/yaml/mcap raise many kinds
+        hint = ''
+        if target.is_file() or not (target / 'metadata.yaml').exists():
+            hint = (f'; if it is an MCAP from another recorder, `nonfragile_tracker bag repair '
+                    f'{path}` rewrites it as a rosbag2 bag')
+        elif 'missing' in str(exc):
+            hint = '; metadata.yaml names storage files that are not there'
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {msg}{hint}') from None
     return reader
 
 
