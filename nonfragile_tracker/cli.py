@@ -241,13 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
         a.add_argument('--json', help='also write the results as JSON')
         a.set_defaults(func=lambda args, m=margins_only: cmd_analyse(args, m))
 
-    from . import golden, reproduce, runner
+    from . import reproduce, runner
     runner.add_subcommands(sub)
     # --- commands/ hook (one line per commands module; the integrator may fold this) ---
-    from .commands import bag as bag_commands
+    from .commands import bag as bag_commands, golden as golden_commands
     bag_commands.register(sub)
+    golden_commands.register(sub)
     reproduce.add_subcommand(sub)
-    golden.add_subcommand(sub)
     return p
 
 
