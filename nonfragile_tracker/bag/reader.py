@@ -37,7 +37,7 @@ from .writer import BagError, jazzy_typestore
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
            'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag',
-           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'RUN_TOPICS', 'MCAP_MAGIC']
+           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS', 'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
@@ -303,6 +303,63 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
 # ---------------------------------------------------------------------------------------------
 # Reading
 
+# Fast path: the fields a report needs, read straight from little-endian CDR (about 10x
+# faster than deserializing the message; the same numbers - test_bag_fast_cdr checks).
+_U32 = struct.Struct('<I')
+_STAMP = struct.Struct('<iI')
+_D2 = struct.Struct('<2d')
+_D7 = struct.Struct('<7d')
+
+
+_FAST_TYPES = frozenset(('geometry_msgs/msg/Twist', 'nav_msgs/msg/Odometry',
+                         'geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/TwistStamped',
+                         'geometry_msgs/msg/AccelStamped'))
+
+
+def _align8(pos: int) -> int:
+    return 4 + ((pos - 4 + 7) & ~7)          # CDR alignment counts from after the 4-byte header
+
+
+def _string_end(raw, pos: int) -> int:
+    pos = 4 + ((pos - 4 + 3) & ~3)
+    return pos + 4 + _U32.unpack_from(raw, pos)[0]
+
+
+def _fast_header(raw) -> tuple[int, int]:
+    """(stamp ns, position after the header) of a message that starts with a Header."""
+    sec, nsec = _STAMP.unpack_from(raw, 4)
+    return sec * 1_000_000_000 + nsec, _string_end(raw, 12)
+
+
+def fast_fields(raw, msgtype: str, command: bool = False) -> tuple | None:
+    """The report's fields of a CDR message, or None when the fast path does not apply.
+
+    Odometry -> (stamp, x, y, qx, qy, qz, qw, twist.linear.x); PoseStamped -> (stamp, x, y,
+    qx, qy, qz, qw); TwistStamped / AccelStamped -> (stamp, linear.x, linear.y), or with
+    ``command`` a TwistStamped -> (stamp, linear.x, angular.z); Twist -> (linear.x, angular.z).
+    """
+    if msgtype not in _FAST_TYPES or len(raw) < 16 or raw[1] != 1:    # CDR_LE only
+        return None
+    if msgtype == 'geometry_msgs/msg/Twist':
+        return struct.unpack_from('<d', raw, 4)[0], struct.unpack_from('<d', raw, 44)[0]
+    stamp, pos = _fast_header(raw)
+    if msgtype == 'nav_msgs/msg/Odometry':
+        pos = _align8(_string_end(raw, pos))          # child_frame_id
+        x, y, _, qx, qy, qz, qw = _D7.unpack_from(raw, pos)
+        v = struct.unpack_from('<d', raw, pos + (7 + 36) * 8)[0]
+        return stamp, x, y, qx, qy, qz, qw, v
+    if msgtype == 'geometry_msgs/msg/PoseStamped':
+        x, y, _, qx, qy, qz, qw = _D7.unpack_from(raw, _align8(pos))
+        return stamp, x, y, qx, qy, qz, qw
+    if command and msgtype == 'geometry_msgs/msg/TwistStamped':
+        pos = _align8(pos)
+        return (stamp, struct.unpack_from('<d', raw, pos)[0],
+                struct.unpack_from('<d', raw, pos + 40)[0])
+    if msgtype in ('geometry_msgs/msg/TwistStamped', 'geometry_msgs/msg/AccelStamped'):
+        return (stamp, *_D2.unpack_from(raw, _align8(pos)))
+    return None
+
+
 def _stamp_ns(header: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
@@ -384,6 +441,32 @@ def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
         missing.append(f'{topics.ODOM} (or {topics.POSE})')
     missing += [n for n in RUN_TOPICS[1:] if n not in topic_map]
     return missing
+
+
+def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
+    """Like :func:`fast_fields` from a deserialized message: (fields, frames).
+
+    A TwistStamped command gives (stamp, v, w) - its angular.z, not linear.y.
+    """
+    frames = (str(getattr(getattr(msg, 'header', None), 'frame_id', '')),
+              str(getattr(msg, 'child_frame_id', '')))
+    if name == PATH_TYPE:
+        return msg
+    if name == topics.CMD_VEL:
+        if hasattr(msg, 'header'):
+            t = msg.twist
+            return (_stamp_ns(msg.header), float(t.linear.x), float(t.angular.z)), frames
+        return (float(msg.linear.x), float(msg.angular.z)), frames
+    stamp = _stamp_ns(msg.header)
+    if hasattr(msg, 'pose'):
+        p = msg.pose.pose if hasattr(msg.pose, 'pose') else msg.pose
+        q = p.orientation
+        out = (stamp, float(p.position.x), float(p.position.y), q.x, q.y, q.z, q.w)
+        if hasattr(msg, 'twist'):
+            out += (float(msg.twist.twist.linear.x),)
+        return out, frames
+    vec = msg.twist.linear if hasattr(msg, 'twist') else msg.accel.linear
+    return (stamp, float(vec.x), float(vec.y)), frames
 
 
 def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
@@ -469,41 +552,36 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 name = role.get(conn.topic)
                 if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
                     continue
-                msg = ts.deserialize_cdr(raw, conn.msgtype)
-                if name == PATH_TYPE:
-                    last_path = msg
-                    continue
+                fast = fast_fields(raw, conn.msgtype, name == topics.CMD_VEL) \
+                    if name != PATH_TYPE else None
+                if fast is None:
+                    fast = _slow_fields(ts.deserialize_cdr(raw, conn.msgtype), name, timestamp)
+                    if name == PATH_TYPE:
+                        last_path = fast
+                        continue
+                    if name == pose_name and not frames[0]:
+                        frames[:] = list(fast[1])
+                    fast = fast[0]
+                elif name == pose_name and not frames[0]:
+                    m = ts.deserialize_cdr(raw, conn.msgtype)
+                    frames[:] = [str(m.header.frame_id), str(getattr(m, 'child_frame_id', ''))]
                 if name == topics.CMD_VEL:
-                    if hasattr(msg, 'header'):
+                    if len(fast) == 3:                  # TwistStamped: (stamp, v, w)
                         cmd_stamped = True
-                        stamp = _stamp_ns(msg.header)
-                        msg = msg.twist
+                        cmds.append((timestamp, fast[1], fast[2], fast[0]))
                     else:
-                        stamp = timestamp
-                    cmds.append((timestamp, float(msg.linear.x), float(msg.angular.z), stamp))
+                        cmds.append((timestamp, fast[0], fast[1], timestamp))
                     continue
-                stamp = _stamp_ns(msg.header)
+                stamp = fast[0]
                 if name == pose_name:
                     target = pose_rows
-                    p = msg.pose.pose if name == topics.ODOM else msg.pose
-                    q = p.orientation
-                    v = float(msg.twist.twist.linear.x) if name == topics.ODOM else math.nan
-                    row = (float(p.position.x), float(p.position.y),
-                           quaternion_to_yaw(q.x, q.y, q.z, q.w), v)
-                    if not frames[0]:
-                        frames[0] = str(msg.header.frame_id)
-                        frames[1] = str(getattr(msg, 'child_frame_id', ''))
+                    row = (fast[1], fast[2], quaternion_to_yaw(*fast[3:7]),
+                           fast[7] if len(fast) > 7 else math.nan)
                     if stamp not in pose_recv:
                         pose_recv[stamp] = timestamp
-                elif name == topics.REF_POSE:
-                    target = ref_parts[name]
-                    row = (float(msg.pose.position.x), float(msg.pose.position.y))
-                elif name == topics.REF_TWIST:
-                    target = ref_parts[name]
-                    row = (float(msg.twist.linear.x), float(msg.twist.linear.y))
                 else:
                     target = ref_parts[name]
-                    row = (float(msg.accel.linear.x), float(msg.accel.linear.y))
+                    row = (fast[1], fast[2])
                 if stamp in target:
                     dup[conn.topic] = dup.get(conn.topic, 0) + 1
                 else:

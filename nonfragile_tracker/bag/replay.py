@@ -296,7 +296,7 @@ def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) ->
     ``a`` affine in v) unless saturated: two trials give the line, a third checks it.
     """
     def f(v):
-        trial = copy.deepcopy(inputs)
+        trial = _snapshot(inputs)
         trial.tracker.reset(v)
         cmd = trial.odom(odom.msg)
         return None if cmd is None else cmd.v
@@ -306,6 +306,15 @@ def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) ->
     v = (target_v - f0) / (f1 - f0)
     got = f(v)
     return v if got is not None and abs(got - target_v) <= 1e-12 * max(1.0, abs(v)) else None
+
+
+def _snapshot(inputs: TrackerInputs) -> TrackerInputs:
+    """A copy whose tracker state can diverge (messages are shared, never mutated)."""
+    trial = copy.copy(inputs)
+    trial.tracker = copy.deepcopy(inputs.tracker)
+    trial._ref = list(inputs._ref)
+    trial.ignored = dict(inputs.ignored)
+    return trial
 
 
 def _twist_msg(cmd: Command) -> Any:
@@ -365,6 +374,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     order: list[ReplayEvent] = data[:start]
     commands: list[tuple[int, Any]] = []
     swaps = 0
+    matching = True                  # look for swaps only while the replay follows the record
     window = int(ORDER_WINDOW * 1e9)
     i = start
     while i < len(data):
@@ -377,9 +387,10 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
             i += 1
             continue
         k = len(commands)
-        trial = copy.deepcopy(inputs) if resync and k < len(recorded) else None
+        trial = _snapshot(inputs) if resync and matching and k < len(recorded) else None
         cmd = inputs.odom(e.msg)
         if trial is not None and cmd is not None and not _agrees(cmd, recorded[k][1], atol):
+            matching = False         # unless a swap explains it
             # (a) reference parts received just before the odometry reached the tracker after
             before = []
             j = len(order) - 1
@@ -396,7 +407,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
                 j += 1
             alt = None
             if before:
-                t2 = copy.deepcopy(trial)
+                t2 = _snapshot(trial)
                 prev = {}
                 for jj in range(0, min(before)):
                     if order[jj].kind in REF_INDEX:
@@ -414,7 +425,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
                         order.append(m)
                     alt = (t2, c2, i + 1)
             if alt is None and after:
-                t3 = copy.deepcopy(trial)
+                t3 = _snapshot(trial)
                 for jj in after:
                     t3.reference(REF_INDEX[data[jj].kind], data[jj].msg)
                 c3 = t3.odom(e.msg)
@@ -425,6 +436,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
             if alt is not None:
                 inputs, cmd, nxt = alt
                 swaps += 1
+                matching = True
                 commands.append((e.receive_ns, _twist_msg(cmd)))
                 i = nxt
                 continue
