@@ -547,8 +547,13 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
         last_path = None
         dup: dict[str, int] = {}
         try:
+            appenders: dict[int, Any] = {}
             for conn, timestamp, raw in reader.messages():
-                receive.setdefault(conn.topic, []).append(timestamp)
+                key = id(conn)
+                add = appenders.get(key)
+                if add is None:
+                    add = appenders[key] = receive.setdefault(conn.topic, []).append
+                add(timestamp)
                 name = role.get(conn.topic)
                 if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
                     continue

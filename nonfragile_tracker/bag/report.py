@@ -311,7 +311,8 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
 # Figures
 
 def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
-    fig = Figure(figsize=(6.4, 6.0), layout='constrained')
+    fig = Figure(figsize=(6.4, 6.0))
+    fig.subplots_adjust(left=0.13, right=0.97, top=0.93, bottom=0.09)
     ax = fig.add_subplot()
     if len(rx):
         ax.plot(rx, ry, 'k--', lw=1.2, label='reference $(x_d, y_d)$')
@@ -329,7 +330,8 @@ def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
 
 
 def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
-    fig = Figure(figsize=(7.5, 7.0), layout='constrained')
+    fig = Figure(figsize=(7.5, 7.0))
+    fig.subplots_adjust(left=0.12, right=0.97, top=0.94, bottom=0.08, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     err = np.hypot(ex, ey)
     for ax, val, lab, col in ((axes[0], ex, '$x - x_d$ (m)', 'C0'),
@@ -348,7 +350,8 @@ def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
 
 
 def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
-    fig = Figure(figsize=(8.0, 8.0), layout='constrained')
+    fig = Figure(figsize=(8.0, 8.0))
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.07, hspace=0.12)
     axes = fig.subplots(4, 1, sharex=True)
     have_v = bool(np.isfinite(v).any())
     xi = (x, v * np.cos(th), y, v * np.sin(th))
@@ -373,7 +376,8 @@ def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
 
 
 def _plot_commands(t, v, w, note: str) -> Figure:
-    fig = Figure(figsize=(7.5, 5.5), layout='constrained')
+    fig = Figure(figsize=(7.5, 5.5))
+    fig.subplots_adjust(left=0.12, right=0.97, top=0.93, bottom=0.1, hspace=0.12)
     axes = fig.subplots(2, 1, sharex=True)
     axes[0].plot(t, v, 'C0-', lw=1.2, label='v = cmd_vel.linear.x')
     axes[0].set_ylabel('v (m/s)')
