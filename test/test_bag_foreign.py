@@ -245,3 +245,31 @@ def test_parse_tolerance():
     for bad in ('odom', 'odom.x=', 'odom.x=-1', 'odom.x=1,2,3', '=1'):
         with pytest.raises(ValueError, match='tolerance'):
             parse_tolerance(bad)
+
+
+def test_reference_from_a_path_topic(tmp_path):
+    """No reference topics but a nav_msgs/Path (a planner's trajectory with stamped poses):
+    the reference is interpolated from it, velocities by differences."""
+    made = write_foreign_bag(tmp_path / 'p', reference=False)
+    from rosbags.rosbag2 import Reader
+    with Reader(tmp_path / 'p') as r:
+        conns = [(c.topic, c.msgtype) for c in r.connections]
+        msgs = [(c.topic, t, bytes(raw)) for c, t, raw in r.messages()]
+    poses = []
+    for j in range(-5, N // 5 + 5):                       # 20 Hz trajectory samples
+        ns, t = T0 + j * 50_000_000, j * 0.05
+        poses.append(T['geometry_msgs/msg/PoseStamped'](
+            header=_header(ns, 'odom'), pose=_pose(R * math.cos(W * t), R * math.sin(W * t),
+                                                   W * t + math.pi / 2)))
+    path_msg = T['nav_msgs/msg/Path'](header=_header(T0, 'odom'), poses=poses)
+    with Writer(tmp_path / 'withpath', version=9) as w:
+        cs = {name: w.add_connection(name, typ, typestore=TS) for name, typ in conns}
+        cp = w.add_connection('/plan', 'nav_msgs/msg/Path', typestore=TS)
+        w.write(cp, int(made['recv'][0]) - 1, TS.serialize_cdr(path_msg, 'nav_msgs/msg/Path'))
+        for topic, t, raw in msgs:
+            w.write(cs[topic], t, raw)
+    rep = bag_report(tmp_path / 'withpath', plots=False)
+    assert rep.metrics is not None and rep.matched == N
+    # chord error of a 20 Hz circle: R (W 0.05)^2 / 8 = 3.9e-5 m at most
+    assert rep.metrics.rms_error == pytest.approx(DR, abs=5e-5)
+    assert not any('no reference' in n for n in rep.notes)
