@@ -22,6 +22,7 @@ The DDS variant (through a real tracker node) is
 """
 from __future__ import annotations
 
+import bisect
 import copy
 import math
 import os
@@ -46,7 +47,7 @@ from .writer import BagError, jazzy_typestore
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
            'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
-           'finish_replay', 'ORDER_WINDOW']
+           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
@@ -328,124 +329,173 @@ def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
     return abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol
 
 
+#: How far back (s) before the first recorded command the tracker's first input may lie
+#: (a tracker may process a burst of queued inputs when it starts).
+START_SEARCH = 1.0
+#: Recorded commands that must be reproduced to accept a starting point.
+START_CHECK = 10
+
+
 def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump'],
                 use_recorded: bool = True, atol: float = 1e-9) -> ReplayPlan:
     """Run the tracker over the events in process and fix what the recorder cannot tell.
 
-    Real-time bags only, and only with ``use_recorded`` (commands of this bag): the
-    replay starts at the odometry that triggered the first recorded command (the
-    recorder may have joined after the tracker) with the compensator speed recovered
-    from that command; and where an odometry and a reference message were received
-    within :data:`ORDER_WINDOW` of each other, the order that reproduces the recorded
-    command is taken (the recorder and the tracker are two readers and may see two
-    near-simultaneous messages in different orders).
+    Lockstep bags, and any bag when comparing with another bag (``use_recorded``
+    False), are fed in bag order.  A real-time bag compared with its own commands is
+    fed as the tracker saw it, which the recorder (another reader, with its own timing)
+    shows only approximately:
+
+    * the start: the tracker may have started, or the recorder may have joined, after
+      the first inputs; the replay starts at the odometry (within :data:`START_SEARCH`
+      s before the first recorded command) from which :data:`START_CHECK` recorded
+      commands are reproduced, with the compensator speed recovered from the first;
+    * the reference at each odometry: the tracker uses the latest reference parts it
+      has; when the bag order's choice does not reproduce the recorded command, the
+      reference states received from :data:`ORDER_WINDOW` s before the odometry up to
+      the command are tried (a near-simultaneous pair seen in the other order, or a burst
+      of queued odometry processed late).
+
+    Every odometry after the start is paired with the next recorded command; once a
+    command cannot be reproduced this way, the rest is fed in bag order (and the
+    comparison shows the difference).
     """
     mode = bag_mode(events)
-    inputs = TrackerInputs(config, mode, max_stamp_jump)
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}
     for e in events:
         fed[e.kind] = fed.get(e.kind, 0) + 1
     data = [e for e in events if e.kind != 'cmd']
-    resync = use_recorded and mode == 'realtime' and recorded
-    start, v0, skipped = 0, None, 0
-    if resync:
-        first_cmd = next(i for i, e in enumerate(events) if e.kind == 'cmd')
-        odoms = [e for e in events[:first_cmd] if e.kind == 'odom']
-        if odoms:
-            start_event = odoms[-1]
-            start = data.index(start_event)
-            # the reference parts the tracker held: the latest of each before the start
-            latest: dict[str, ReplayEvent] = {}
-            for e in data[:start]:
-                if e.kind in REF_INDEX:
-                    latest[e.kind] = e
-            skipped = start - len(latest)
-            for e in sorted(latest.values(), key=lambda e: e.receive_ns):
-                inputs.reference(REF_INDEX[e.kind], e.msg)
-            v0 = _recover_speed(inputs, start_event, float(_twist(recorded[0][1]).linear.x))
-            if v0 is not None:
-                data[start] = _with_speed(start_event, v0)
-            data = sorted(latest.values(), key=lambda e: e.receive_ns) + data[start:]
-            start = len(latest)
-    else:
-        start = 0
-    order: list[ReplayEvent] = data[:start]
-    commands: list[tuple[int, Any]] = []
-    swaps = 0
-    matching = True                  # look for swaps only while the replay follows the record
-    window = int(ORDER_WINDOW * 1e9)
-    i = start
-    while i < len(data):
-        e = data[i]
-        if e.kind != 'odom':
-            order.append(e)
-            cmd = inputs.reference(REF_INDEX[e.kind], e.msg)
-            if cmd is not None:
-                commands.append((e.receive_ns, _twist_msg(cmd)))
-            i += 1
-            continue
-        k = len(commands)
-        trial = _snapshot(inputs) if resync and matching and k < len(recorded) else None
-        cmd = inputs.odom(e.msg)
-        if trial is not None and cmd is not None and not _agrees(cmd, recorded[k][1], atol):
-            matching = False         # unless a swap explains it
-            # (a) reference parts received just before the odometry reached the tracker after
-            before = []
-            j = len(order) - 1
-            while j >= 0 and order[j].kind in REF_INDEX and e.receive_ns - order[j].receive_ns \
-                    <= window:
-                before.append(j)
-                j -= 1
-            # (b) reference parts received just after it reached the tracker before
-            after = []
-            j = i + 1
-            while j < len(data) and data[j].kind in REF_INDEX and data[j].receive_ns - \
-                    e.receive_ns <= window:
-                after.append(j)
-                j += 1
-            alt = None
-            if before:
-                t2 = _snapshot(trial)
-                prev = {}
-                for jj in range(0, min(before)):
-                    if order[jj].kind in REF_INDEX:
-                        prev[order[jj].kind] = order[jj].msg
-                for kind, idx in REF_INDEX.items():
-                    t2._ref[idx] = prev.get(kind, t2._ref[idx]) if any(
-                        order[jj].kind == kind for jj in before) else t2._ref[idx]
-                c2 = t2.odom(e.msg)
-                if c2 is not None and _agrees(c2, recorded[k][1], atol):
-                    moved = [order[jj] for jj in sorted(before)]
-                    del order[min(before):]
-                    order.append(e)
-                    for m in moved:
-                        t2.reference(REF_INDEX[m.kind], m.msg)
-                        order.append(m)
-                    alt = (t2, c2, i + 1)
-            if alt is None and after:
-                t3 = _snapshot(trial)
-                for jj in after:
-                    t3.reference(REF_INDEX[data[jj].kind], data[jj].msg)
-                c3 = t3.odom(e.msg)
-                if c3 is not None and _agrees(c3, recorded[k][1], atol):
-                    order.extend(data[jj] for jj in after)
-                    order.append(e)
-                    alt = (t3, c3, max(after) + 1)
-            if alt is not None:
-                inputs, cmd, nxt = alt
-                swaps += 1
-                matching = True
-                commands.append((e.receive_ns, _twist_msg(cmd)))
-                i = nxt
-                continue
-        order.append(e)
+    if use_recorded and mode == 'realtime' and recorded:
+        plan = _plan_realtime(events, data, recorded, config, max_stamp_jump, atol)
+        if plan is not None:
+            plan.fed = fed
+            return plan
+    inputs = TrackerInputs(config, mode, max_stamp_jump)
+    commands = []
+    for e in data:
+        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.reference(
+            REF_INDEX[e.kind], e.msg)
         if cmd is not None:
             commands.append((e.receive_ns, _twist_msg(cmd)))
-        i += 1
-    return ReplayPlan(mode, order, commands, recorded, fed, dict(inputs.ignored), v0, skipped,
-                      swaps)
+    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
+
+
+class _RefTimeline:
+    """Reference states: state ``s`` holds the latest parts after the first ``s`` ref events."""
+
+    def __init__(self, data: list[ReplayEvent]):
+        self.events = [e for e in data if e.kind in REF_INDEX]
+        self.times = [e.receive_ns for e in self.events]
+        self.before: dict[int, int] = {}         # id(odom event) -> state in bag order
+        n = 0
+        for e in data:
+            if e.kind in REF_INDEX:
+                n += 1
+            else:
+                self.before[id(e)] = n
+
+    def parts(self, s: int) -> list:
+        out: list = [None, None, None]
+        i = s - 1
+        while i >= 0 and any(p is None for p in out):
+            e = self.events[i]
+            if out[REF_INDEX[e.kind]] is None:
+                out[REF_INDEX[e.kind]] = e.msg
+            i -= 1
+        return out
+
+    def window(self, t_from: int, t_to: int) -> tuple[int, int]:
+        return bisect.bisect_left(self.times, t_from), bisect.bisect_right(self.times, t_to)
+
+
+def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerInputs,
+         applied: int, atol: float, limit: int | None = None):
+    """Pair odometry j with recorded command j, choosing the reference state that
+    reproduces it.  Returns (inputs, feed order, commands, swaps, reproduced)."""
+    window = int(ORDER_WINDOW * 1e9)
+    order: list[ReplayEvent] = []
+    commands: list[tuple[int, Any]] = []
+    swaps, matching, k = 0, True, 0
+    for od in odoms:
+        if limit is not None and k >= limit:
+            break
+        default = max(tl.before[id(od)], applied)
+        chosen = None
+        if matching and k < len(recorded):
+            t_o, t_c = od.receive_ns, recorded[k][0]
+            lo, hi = tl.window(t_o - window, max(t_c, t_o + window))
+            lo = max(lo, applied)
+            cands = [default] + list(range(default - 1, lo - 1, -1)) \
+                + list(range(default + 1, max(hi, default) + 1))
+            for s in cands[:64]:
+                trial = _snapshot(inputs)
+                for e in tl.events[applied:s]:
+                    trial.reference(REF_INDEX[e.kind], e.msg)
+                cmd = trial.odom(od.msg)
+                if cmd is None and s == default:
+                    chosen = (s, trial, None)        # an input the tracker ignores
+                    break
+                if cmd is not None and _agrees(cmd, recorded[k][1], atol):
+                    chosen = (s, trial, cmd)
+                    swaps += s != default
+                    break
+            if chosen is None:
+                matching = False
+        if chosen is None:
+            trial = _snapshot(inputs)
+            for e in tl.events[applied:default]:
+                trial.reference(REF_INDEX[e.kind], e.msg)
+            chosen = (default, trial, trial.odom(od.msg))
+        s, inputs, cmd = chosen
+        order.extend(tl.events[applied:s])
+        applied = s
+        order.append(od)
+        if cmd is not None:
+            commands.append((od.receive_ns, _twist_msg(cmd)))
+            k += 1
+    return inputs, order, commands, swaps, matching
+
+
+def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> ReplayPlan | None:
+    tl = _RefTimeline(data)
+    odoms = [e for e in data if e.kind == 'odom']
+    t_first = recorded[0][0]
+    first = bisect.bisect_right([e.receive_ns for e in odoms], t_first)
+    starts = [j for j in range(first - 1, -1, -1)
+              if t_first - odoms[j].receive_ns <= START_SEARCH * 1e9][:200]
+    v_target = float(_twist(recorded[0][1]).linear.x)
+    for j in starts:
+        od = odoms[j]
+        lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
+        default = tl.before[id(od)]
+        for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
+            base = TrackerInputs(config, 'realtime', max_stamp_jump)
+            base._ref = tl.parts(s)
+            if any(p is None for p in base._ref):
+                continue
+            v0 = _recover_speed(base, od, v_target)
+            if v0 is None:
+                continue
+            start = _with_speed(od, v0)
+            tl.before[id(start)] = tl.before[id(od)]
+            check = _run(tl, [start] + odoms[j + 1:], recorded, _snapshot(base), s, atol,
+                         limit=START_CHECK)
+            if not check[4]:
+                continue
+            inputs, order, commands, swaps, _ = _run(tl, [start] + odoms[j + 1:], recorded,
+                                                     _snapshot(base), s, atol)
+            head, seen = [], set()
+            for e in reversed(tl.events[:s]):
+                if e.kind not in seen:
+                    seen.add(e.kind)
+                    head.insert(0, e)
+                if len(seen) == 3:
+                    break
+            skipped = sum(1 for e in data if e.receive_ns < od.receive_ns) - len(head)
+            return ReplayPlan('realtime', head + order, commands, recorded, {},
+                              dict(inputs.ignored), v0, skipped, swaps)
+    return None
 
 
 def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
@@ -506,12 +556,12 @@ def format_replay(res: ReplayResult) -> str:
     lines += [f'ignored: {why} ({n})' for why, n in res.ignored.items()]
     plan = res.plan
     if plan is not None and plan.skipped_inputs:
-        lines.append(f'started at the input of the first recorded command ({plan.skipped_inputs} '
+        lines.append(f'started at the tracker\'s first recorded command ({plan.skipped_inputs} '
                      'earlier inputs skipped), compensator speed recovered from it: '
                      f'{plan.initial_speed!r} m/s')
     if plan is not None and plan.swaps:
-        lines.append(f'{plan.swaps} odometry/reference pair(s) received within '
-                     f'{ORDER_WINDOW * 1e3:g} ms taken in the order the commands show')
+        lines.append(f'{plan.swaps} odometry message(s) paired with another reference state '
+                     'than the bag order gives (the one the recorded command shows)')
     if res.comparison.equal:
         lines.append(f'commands reproduced: max |diff| {res.max_abs_error:.3g} '
                      f'({res.comparison.summary[topics.CMD_VEL].align} alignment)')
