@@ -127,7 +127,8 @@ def test_replay_in_process_reproduces_recorded_commands(realtime_bag):
     res = replay(realtime_bag)
     assert res.mode == 'realtime'
     assert res.comparison.equal, res.comparison.differences[:5]
-    assert len(res.commands) == len(res.recorded) > 250
+    # (the recorder may match the tracker's writer after its first commands: > 100, not all)
+    assert len(res.commands) == len(res.recorded) > 100
     assert res.max_abs_error <= 1e-9
 
 
@@ -137,6 +138,6 @@ def test_replay_over_dds_reproduces_recorded_commands(realtime_bag, tmp_path):
     t0 = time.monotonic()
     res = replay_over_dds(realtime_bag, env=env)
     assert res.comparison.equal, res.comparison.differences[:5]
-    assert len(res.commands) == len(res.recorded) > 250
+    assert len(res.commands) == len(res.recorded) > 100
     assert res.max_abs_error <= 1e-9
     assert time.monotonic() - t0 < 60

@@ -40,6 +40,8 @@ _TYPES = {'odom': (Odometry, topics.ODOM), 'ref_pose': (PoseStamped, topics.REF_
           'ref_accel': (AccelStamped, topics.REF_ACCEL)}
 #: input_timeout given to the node: replay pacing must not trigger its watchdog.
 NO_WATCHDOG = 1e5
+#: Seconds to let discovery settle after the node is matched, and after the first inputs.
+SETTLE = 1.0
 
 
 def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float = 1e-9,
@@ -75,7 +77,7 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
         rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
         node = rclpy.create_node('bag_replayer', context=ctx)
         got: list[Twist] = []
-        node.create_subscription(Twist, topics.CMD_VEL, got.append, DATA_QOS)
+        sub = node.create_subscription(Twist, topics.CMD_VEL, got.append, DATA_QOS)
         pubs = {k: node.create_publisher(t, name, DATA_QOS) for k, (t, name) in _TYPES.items()}
         ex = rclpy.executors.SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
@@ -93,9 +95,22 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
 
         commands = []
         try:
+            # matched both ways (our writers -> its readers, its writer -> our reader): a
+            # command published before the match would be lost
             wait(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
-                 and node.count_publishers(topics.CMD_VEL) >= 1, 'tracker node in the graph')
+                 and sub.get_publisher_count() >= 1, 'tracker node matched on every topic')
+            # a reliable reader may take a moment to accept a newly matched writer (its first
+            # samples then come late, after a repair): let discovery settle both ways
+            settle = time.monotonic() + SETTLE
+            while time.monotonic() < settle:
+                ex.spin_once(timeout_sec=0.01)
+            first_odom = True
             for e in plan.events:
+                if e.kind == 'odom' and first_odom:
+                    first_odom = False
+                    settle = time.monotonic() + 0.2 * SETTLE    # the state before the start
+                    while time.monotonic() < settle:
+                        ex.spin_once(timeout_sec=0.01)
                 before = len(got)
                 out = predict.odom(e.msg) if e.kind == 'odom' else predict.reference(
                     REF_INDEX[e.kind], e.msg)
