@@ -33,11 +33,10 @@ def test_golden_on_a_user_scenario(tmp_path, capsys):
     scen.write_text(yaml.safe_dump(data))
     out = tmp_path / 'goldens'
     args = ['golden', '--scenario', str(scen), '--out', str(out), '--duration', '0.5']
-    assert cli.main(args) == 1                                  # new: nothing written
-    assert 'my_robot: new golden bag' in capsys.readouterr().out and not out.exists()
     assert cli.main(args + ['--write']) == 0
+    assert 'my_robot: new golden bag' in capsys.readouterr().out
     assert (out / 'golden_my_robot' / 'metadata.yaml').exists()
-    capsys.readouterr()
+    written = (out / 'golden_my_robot' / 'metadata.yaml').read_bytes()
     assert cli.main(args) == 0
     assert 'my_robot: unchanged (255 messages' in capsys.readouterr().out   # 51 steps x 5
     data['/**/tracker']['ros__parameters']['Delta'] = [1.0, 0.0, 0.0, 1.0]
@@ -45,3 +44,4 @@ def test_golden_on_a_user_scenario(tmp_path, capsys):
     assert cli.main(args) == 1
     text = capsys.readouterr().out
     assert 'my_robot: CHANGED' in text and '/cmd_vel[0] linear.x: expected' in text
+    assert (out / 'golden_my_robot' / 'metadata.yaml').read_bytes() == written  # no --write
