@@ -29,7 +29,7 @@ from matplotlib.figure import Figure
 
 from .. import topics
 from ..control.metrics import TrackingMetrics, tracking_metrics
-from .reader import BagData, MissingTopicsError, read_bag
+from .reader import MissingTopicsError, read_bag
 from .writer import BagError
 
 __all__ = ['Gap', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'find_gaps',

@@ -2,7 +2,6 @@
 spinning and the Jazzy shutdown pattern.  No control math lives here."""
 from __future__ import annotations
 
-import math
 import os
 import signal
 import sys
@@ -17,11 +16,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .. import topics
-import numpy as np
 
 from ..errors import InputError
-from ..control.loop import LoopConfigError, quaternion_to_yaw, yaw_to_quaternion
-from ..control.reference import RefSample
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
 from ..msgconv import (fill_pose, fill_reference, matrix_param, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
