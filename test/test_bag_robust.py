@@ -145,3 +145,25 @@ def test_empty_bag_reports_nothing_to_report(tmp_path, capsys):
         bag_report(tmp_path / 'empty')
     code, err = _cli_error(['bag', 'report', str(tmp_path / 'empty')], capsys)
     assert code == 2 and 'no odometry' in err
+
+
+def test_custom_message_types_are_compared_from_the_bags_definitions(tmp_path):
+    """A robot's own message type (not in the Jazzy typestore) is read with the definition
+    stored in the bag, and compared field by field."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from nonfragile_tracker.bag.writer import BagWriter
+    msgdef = 'float64 battery\nstring mode\n'
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    ts.register(get_types_from_msg(msgdef, 'my_msgs/msg/Status'))
+    Status = ts.types['my_msgs/msg/Status']
+    for name, last in (('a', 0.5), ('b', 0.5 + 1e-3)):
+        with BagWriter(tmp_path / name) as w:
+            w.add_connection('/status', 'my_msgs/msg/Status', msgdef=msgdef)
+            for i, bat in enumerate((0.9, 0.8, last)):
+                w.write('/status', i * 10 ** 8, bytes(ts.serialize_cdr(
+                    Status(battery=bat, mode='auto'), 'my_msgs/msg/Status')))
+    cmp = compare_bags(tmp_path / 'a', tmp_path / 'b')
+    assert cmp.total_differences == 1
+    d = cmp.differences[0]
+    assert (d.topic, d.index, d.field, d.expected) == ('/status', 2, 'battery', 0.5)
+    assert compare_bags(tmp_path / 'a', tmp_path / 'b', tolerances=['status.battery=2e-3']).equal
