@@ -403,6 +403,9 @@ _EXPECTED_TYPES = {topics.ODOM: 'nav_msgs/msg/Odometry',
                    topics.CMD_VEL: ('geometry_msgs/msg/Twist', 'geometry_msgs/msg/TwistStamped')}
 #: Message types accepted for the path (trajectory) topic, when the bag has one.
 PATH_TYPE = 'nav_msgs/msg/Path'
+#: Path topics used as the reference, in this order (the trajectory the tracker follows, then
+#: the displayed reference); otherwise the bag's only Path topic.
+PATH_TOPICS = ('trajectory', 'reference/path')
 
 
 def _by_type(by_topic: dict[str, Connection], types: tuple[str, ...], taken: set[str]
@@ -515,7 +518,9 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
         if any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
                                             topics.REF_ACCEL)):
             paths = [t for t, c in by_topic.items() if c.msgtype == PATH_TYPE]
-            path_topic = paths[0] if len(paths) == 1 else None
+            named = resolve_topics(paths, PATH_TOPICS, namespace)
+            preferred = [named[n] for n in PATH_TOPICS if n in named]
+            path_topic = preferred[0] if preferred else (paths[0] if len(paths) == 1 else None)
         missing = _missing_run_topics(topic_map)
         if path_topic is not None:
             missing = [m for m in missing if not m.startswith('reference/')]
