@@ -1,6 +1,6 @@
-"""CLI sub-commands by area: each module exposes ``register(subparsers) -> None``.
+"""The CLI's sub-commands, one module per area; each exposes ``register(subparsers)``.
 
-Layering: :mod:`nonfragile_tracker.cli` (argparse only) -> these modules (parse
-arguments, call the library, print, return an exit code) -> the library.  Library
-code never imports this package.
+A command function takes the parsed ``args`` and returns an exit code; it calls
+library functions (``control``, ``runner``, ``reproduce``, ``golden``, ``bag``) and
+only formats their results.  Library modules never import this package.
 """
