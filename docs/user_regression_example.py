@@ -22,12 +22,12 @@ import pytest
 
 from nonfragile_tracker.bag import (bag_report, compare_bags, format_differences,
                                     format_replay, replay)
-from nonfragile_tracker.golden import run_scenario, scenario_from_file
+from nonfragile_tracker.golden import golden_gains, run_scenario, scenario_from_file
 from nonfragile_tracker.resources import config_dir
 
 _DATA = Path(__file__).resolve().parent.parent / 'test' / 'data'
 MY_ROBOT_BAG = Path(os.environ.get('MY_ROBOT_BAG', _DATA / 'golden_paper'))
-MY_GAINS = Path(os.environ.get('MY_GAINS', config_dir() / 'tracker_gains.yaml'))
+MY_GAINS = Path(os.environ.get('MY_GAINS', golden_gains()))   # the package's: the pinned gain
 MY_SCENARIO = Path(os.environ.get('MY_SCENARIO', config_dir() / 'paper_scenario.yaml'))
 MY_GOLDEN = Path(os.environ.get('MY_GOLDEN', _DATA / 'golden_paper'))
 

@@ -60,6 +60,15 @@ def data_dir() -> Path | None:
     return None if root is None else root / 'test' / 'data'
 
 
+def golden_gains() -> Path:
+    """The gain file of the package's golden scenarios: ``test/data/golden_gains.yaml`` when
+    the checkout pins one next to the golden bags, else ``config/tracker_gains.yaml``."""
+    base = data_dir()
+    pinned = base / 'golden_gains.yaml' if base is not None else None
+    return pinned if pinned is not None and pinned.is_file() \
+        else config_dir() / 'tracker_gains.yaml'
+
+
 def golden_bag(name: str, out: Path | None = None) -> Path:
     """Where the golden bag of scenario ``name`` lives (``out`` or the source tree)."""
     base = Path(out) if out is not None else data_dir()
@@ -83,8 +92,7 @@ def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
     """Node parameters of a scenario (its file, its gains, lockstep, ``duration`` s)."""
     from .runner import scenario_parameters
     path = scenario.path if scenario.path is not None else config_dir() / 'paper_scenario.yaml'
-    gains = scenario.gains if scenario.gains is not None \
-        else config_dir() / 'tracker_gains.yaml'
+    gains = scenario.gains if scenario.gains is not None else golden_gains()
     for f in (path, gains):
         if not Path(f).is_file():
             raise GoldenError(f'scenario {scenario.name!r}: file {f} does not exist')

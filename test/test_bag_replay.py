@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from nonfragile_tracker import cli
+from nonfragile_tracker import cli, golden
 from nonfragile_tracker.bag.replay import (TRACKER_DEFAULTS, TrackerInputs,
                                            load_tracker_parameters, replay)
 from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
@@ -17,6 +17,7 @@ from nonfragile_tracker.control.loop import PlantConfig, UnicyclePlant
 from nonfragile_tracker.control.reference import make_path
 
 GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'
+GAINS = ['--gains', str(golden.golden_gains())]      # the gain the golden bags were made with
 TS = jazzy_typestore()
 T = TS.types
 T0 = 1_800_000_000 * 10 ** 9
@@ -122,11 +123,11 @@ def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
 
 
 def test_replay_cli(tmp_path, capsys):
-    assert cli.main(['bag', 'replay', str(GOLDEN)]) == 0
+    assert cli.main(['bag', 'replay', str(GOLDEN), *GAINS]) == 0
     out = capsys.readouterr().out
     assert 'commands reproduced: max |diff| 0' in out and '(lockstep)' in out
     delta2 = ROOT / 'test' / 'data' / 'golden_delta2'
-    assert cli.main(['bag', 'replay', str(GOLDEN), '--expected', str(delta2),
+    assert cli.main(['bag', 'replay', str(GOLDEN), *GAINS, '--expected', str(delta2),
                      '--max-diffs', '2']) == 1
     out = capsys.readouterr().out
     assert 'cmd_vel[0] linear.x: expected' in out and '... and' in out
