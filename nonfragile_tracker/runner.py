@@ -155,8 +155,11 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         with open(run_dir / 'plant.log') as reader:
             while plant.poll() is None:
                 report_plant(reader)
+                # the recorder closes its bag and exits 0 right after run_done, which can be
+                # before the plant's last poll here: that is the end of the run, not a death
                 dead = {n: p.returncode for n, p in procs.items()
-                        if n != 'plant' and p.poll() is not None}
+                        if n != 'plant' and p.poll() is not None
+                        and not (n == 'recorder' and p.returncode == 0)}
                 if dead:
                     progress(f'[runner] node(s) exited early: {dead}; stopping the run '
                              f'(logs in {run_dir})')

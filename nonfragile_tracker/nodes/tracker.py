@@ -59,7 +59,7 @@ from ..control.follow import REST_SPEED, Follower, path_errors
 from ..control.gains import gain_from_parameters
 from ..control.loop import LoopConfigError, Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
-from ..control.validate import as_matrix
+from ..msgconv import PREDICT_PARAMS, tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare,
                      fill_pose, get, ns_to_stamp, pose_from_odom, reference_from_msgs, run,
                      stamp_ns)
@@ -119,28 +119,10 @@ PARAMS = [
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
-PREDICT_PARAMS = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'predict_lag_w')
 #: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
 REF_BUFFER = 1000
 RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
            'input_timeout', 'max_stamp_jump'}
-
-
-def tracker_config(values: dict) -> TrackerConfig:
-    """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
-    K = gain_from_parameters(values['K'], values['K_shape'])
-    E = as_matrix(values['E'], 'E', (2, 2), flat=True, error=LoopConfigError)
-    F = as_matrix(values['F'], 'F', (2, 4), flat=True, error=LoopConfigError)
-    D = as_matrix(values['Delta'], 'Delta', (2, 2), flat=True, error=LoopConfigError)
-    pert = E @ D @ F
-    a_tau = as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True, error=LoopConfigError)
-    return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
-                         max_angular_speed=values['max_angular_speed'],
-                         min_speed=values['min_speed'],
-                         perturbation=pert if np.any(pert) else None,
-                         delay_compensation=values['delay_compensation'], A_tau=a_tau,
-                         tau=values['tau'],
-                         **{n: values[n] for n in PREDICT_PARAMS})
 
 
 class TrackerNode(Node):
