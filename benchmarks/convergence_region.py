@@ -18,7 +18,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from nonfragile_tracker.control.gains import read_gain_file  # noqa: E402
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.loop import TrackerConfig  # noqa: E402
+from nonfragile_tracker.scenario import paper_plant_config  # noqa: E402
 from nonfragile_tracker.control.reference import circle  # noqa: E402
 from nonfragile_tracker.control.simulate import simulate_tracking  # noqa: E402
 
@@ -36,7 +37,7 @@ def main() -> int:
             for v0 in (0.0, 0.05):
                 bad, worst = 0, 0.0
                 for ang in np.linspace(0, 2 * math.pi, 8, endpoint=False):
-                    pc = PlantConfig(x0=0.5 + dist * math.cos(ang), y0=dist * math.sin(ang),
+                    pc = paper_plant_config(x0=0.5 + dist * math.cos(ang), y0=dist * math.sin(ang),
                                      th0=math.pi / 2 + head, v0=v0)
                     tc = TrackerConfig(K=K, delay_compensation=not args.no_compensation,
                                        A_tau=pc.A_tau, tau=pc.tau)

@@ -56,6 +56,7 @@ def cmd_probe(args) -> int:
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
+    from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     namespaces = [n for n in args.namespaces.split(',')] if args.namespaces else ['']
     pids = [int(p) for p in args.pids.split(',') if p] if args.pids else []
@@ -87,10 +88,10 @@ def cmd_probe(args) -> int:
         odom = {'stamp': [], 'src': [], 'rcv': []}
         cmd = {'src': [], 'rcv': []}
         data[ns or '/'] = {'odom': odom, 'cmd': cmd}
-        node.create_subscription(Odometry, prefix + 'odom', odom_cb(odom, ns or '/'), qos,
+        node.create_subscription(Odometry, prefix + topics.ODOM, odom_cb(odom, ns or '/'), qos,
                                  raw=True)
         if not args.no_cmd:
-            node.create_subscription(Twist, prefix + 'cmd_vel', cmd_cb(cmd), qos, raw=True)
+            node.create_subscription(Twist, prefix + topics.CMD_VEL, cmd_cb(cmd), qos, raw=True)
     if args.executor == 'events':
         from rclpy.experimental import EventsExecutor
         ex = EventsExecutor()
@@ -135,6 +136,7 @@ def cmd_probe(args) -> int:
 def cmd_publish(args) -> int:
     import rclpy
     from nav_msgs.msg import Odometry
+    from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
@@ -184,17 +186,18 @@ def cmd_echo(args) -> int:
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from rclpy.experimental import EventsExecutor
+    from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     rclpy.init()
     node = rclpy.create_node('bench_echo')
-    pub = node.create_publisher(Twist, 'cmd_vel', qos)
+    pub = node.create_publisher(Twist, topics.CMD_VEL, qos)
     out = Twist()
 
     def cb(msg):
         out.linear.x = msg.twist.twist.linear.x
         pub.publish(out)
 
-    node.create_subscription(Odometry, 'odom', cb, qos)
+    node.create_subscription(Odometry, topics.ODOM, cb, qos)
     ex = EventsExecutor()
     ex.add_node(node)
     try:
@@ -234,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--out', required=True)
     p.set_defaults(func=cmd_probe)
     q = sub.add_parser('publish')
-    q.add_argument('--topic', default='odom')
+    q.add_argument('--topic', default='odom', help='topic name (topics.ODOM of the package)')
     q.add_argument('--rate', type=float, required=True)
     q.add_argument('--count', type=int, required=True)
     q.add_argument('--wait', type=float, default=20.0)

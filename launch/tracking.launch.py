@@ -1,30 +1,85 @@
-"""Launch the paper's tracking scenario: reference, plant and tracker (lockstep, sim time).
+"""Launch the tracking scenario: reference, plant and tracker (+ recorder, RViz optional).
 
     ros2 launch nonfragile_tracker tracking.launch.py
-    ros2 launch nonfragile_tracker tracking.launch.py gains:=/path/to/gains.yaml
+    ros2 launch nonfragile_tracker tracking.launch.py mode:=realtime record:=true bag:=runs/rt
+    ros2 launch nonfragile_tracker tracking.launch.py trajectory:=/path/lap.csv \\
+        namespace:=robot1 enable_stamped_cmd_vel:=true gains:=/path/to/gains.yaml
+
+Arguments: mode (lockstep|realtime), record (true|false) and bag (directory to create),
+namespace, gains, scenario, trajectory (waypoint file; "" = the scenario's path),
+enable_stamped_cmd_vel (true|false), rviz (true|false).  Standard launch/launch_ros API
+(Jazzy).  In lockstep the plant publishes the global /clock: one lockstep system per
+ROS domain (namespaces separate real-time systems).
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch.actions import DeclareLaunchArgument, GroupAction
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch_ros.actions import Node, PushRosNamespace
+from launch_ros.parameter_descriptions import ParameterValue
 
 
 def generate_launch_description():
-    config = os.path.join(get_package_share_directory('nonfragile_tracker'), 'config')
+    share = get_package_share_directory('nonfragile_tracker')
+    config = os.path.join(share, 'config')
+    mode = LaunchConfiguration('mode')
+    record = LaunchConfiguration('record')
     scenario = LaunchConfiguration('scenario')
     gains = LaunchConfiguration('gains')
+    trajectory = LaunchConfiguration('trajectory')
+    stamped = LaunchConfiguration('enable_stamped_cmd_vel')
+    lockstep = PythonExpression(["'", mode, "' == 'lockstep'"])
+    has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
+    common = {'mode': ParameterValue(mode, value_type=str)}
+    cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
     return LaunchDescription([
+        DeclareLaunchArgument('mode', default_value='lockstep', choices=['lockstep', 'realtime'],
+                              description='lockstep (deterministic, sim time) or realtime'),
+        DeclareLaunchArgument('record', default_value='false', choices=['true', 'false'],
+                              description='record a rosbag2 (MCAP) bag with the recorder node'),
+        DeclareLaunchArgument('bag', default_value='nonfragile_bag',
+                              description='bag directory to create when record:=true'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of all nodes and topics'),
         DeclareLaunchArgument('scenario', default_value=os.path.join(config, 'paper_scenario.yaml'),
                               description='parameter file of the three nodes'),
         DeclareLaunchArgument('gains', default_value=os.path.join(config, 'tracker_gains.yaml'),
                               description='tracker gain file (nonfragile_tracker synthesize)'),
-        Node(package='nonfragile_tracker', executable='reference', name='reference',
-             parameters=[scenario], output='screen'),
-        Node(package='nonfragile_tracker', executable='tracker', name='tracker',
-             parameters=[scenario, gains], output='screen'),
-        Node(package='nonfragile_tracker', executable='plant', name='plant',
-             parameters=[scenario], output='screen'),
+        DeclareLaunchArgument('trajectory', default_value='',
+                              description='waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) '
+                              'to follow; "" = the path of the scenario'),
+        DeclareLaunchArgument('enable_stamped_cmd_vel', default_value='false',
+                              choices=['true', 'false'],
+                              description='cmd_vel as TwistStamped (Nav2 name) instead of Twist'),
+        DeclareLaunchArgument('rviz', default_value='false', choices=['true', 'false'],
+                              description='start RViz2 with the package configuration'),
+        GroupAction([
+            PushRosNamespace(LaunchConfiguration('namespace')),
+            Node(package='nonfragile_tracker', executable='reference', name='reference',
+                 parameters=[scenario, common, {
+                     'trajectory_file': ParameterValue(trajectory, value_type=str)}],
+                 output='screen'),
+            Node(package='nonfragile_tracker', executable='tracker', name='tracker',
+                 parameters=[scenario, gains, common, cmd, {
+                     'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool)}],
+                 output='screen'),
+            Node(package='nonfragile_tracker', executable='plant', name='plant',
+                 parameters=[scenario, common, cmd, {
+                     'lockstep_subscribers': ParameterValue(PythonExpression(
+                         ["2 if '", record, "' == 'true' else 1"]), value_type=int)}],
+                 output='screen'),
+            Node(package='nonfragile_tracker', executable='recorder', name='recorder',
+                 condition=IfCondition(record),
+                 parameters=[cmd, {'output': ParameterValue(LaunchConfiguration('bag'),
+                                                            value_type=str),
+                              'use_sim_time': ParameterValue(lockstep, value_type=bool),
+                              'lockstep_gate': ParameterValue(lockstep, value_type=bool)}],
+                 output='screen'),
+            Node(package='rviz2', executable='rviz2', name='rviz2',
+                 condition=IfCondition(LaunchConfiguration('rviz')),
+                 arguments=['-d', os.path.join(share, 'rviz', 'tracking.rviz')]),
+        ]),
     ])

@@ -1,0 +1,1 @@
+"""Non-fragile LMI trajectory tracking of delayed wheeled mobile robots (ROS 2 Jazzy)."""

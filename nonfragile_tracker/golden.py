@@ -1,20 +1,26 @@
-"""Golden bags: the scenarios that pin the package's behaviour, and their regeneration.
+"""Golden bags: scenarios that pin a tracker's behaviour, their runs and their comparison.
 
-``nonfragile_tracker golden`` re-runs every scenario through the three ROS nodes
-(separate processes, lockstep), compares each new bag with the committed one in
-``test/data/`` and prints what changed; ``--write`` replaces the golden bags
-(never silently: the diff is printed first).  The tests re-run the same
-scenarios and require agreement within :data:`ATOL`.
+``nonfragile_tracker golden`` re-runs scenarios through the three ROS nodes (separate
+processes, lockstep), compares each new bag with its golden bag and prints what
+changed; ``--write`` replaces the golden bags (never silently: the diff is printed
+first).  The package's own scenarios (:data:`SCENARIOS`) keep their golden bags in the
+source tree's ``test/data``; a user names any scenario file (``--scenario FILE``,
+a ROS 2 parameter file for plant, reference and tracker) and where its golden bag
+lives (``--out DIR``).  An installed package never writes into itself.
+The tests re-run the same scenarios and require agreement within :data:`ATOL`.
 """
 from __future__ import annotations
 
 import shutil
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import yaml
+
 from . import topics
+from .errors import InputError, RunError
+from .resources import config_dir, source_root
 
 #: Tolerance of the regression comparison.  Lockstep runs are deterministic and
 #: bit-identical to the in-process simulation on one machine; 1e-9 leaves room
@@ -22,46 +28,109 @@ from . import topics
 ATOL = 1e-9
 #: Recorded topics (``/clock`` and ``pose`` repeat ``odom``'s stamps and pose: left out
 #: to keep the golden bags small).
-TOPICS = [topics.ODOM, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL, topics.CMD_VEL]
+TOPICS = list(topics.RUN_TOPICS)
 DURATION = 2.5
 
 
 @dataclass(frozen=True)
 class Scenario:
+    """A golden scenario: a parameter file (default the paper's), gains and overrides."""
+
     name: str
     description: str
     overrides: dict = field(default_factory=dict)
+    path: Path | None = None           # scenario parameter file (None: config/paper_scenario)
+    gains: Path | None = None          # gain file (None: config/tracker_gains.yaml)
 
 
 SCENARIOS = {
-    'paper': Scenario('paper', "paper's circle with the shipped synthesized non-fragile K"),
+    'paper': Scenario('paper', "paper's circle with the pinned synthesized non-fragile K "
+                      '(test/data/golden_gains.yaml)'),
     'delta2': Scenario('delta2', 'same, with the perturbation E Delta_2 F injected in the tracker',
                        {'tracker': {'ros__parameters': {'Delta': [1.0, 0.0, 0.0, 1.0]}}}),
 }
 
 
-def data_dir() -> Path:
-    return Path(__file__).resolve().parent.parent / 'test' / 'data'
+class GoldenError(InputError):
+    """A golden run cannot be set up (no place for its bags, a bad scenario file)."""
 
 
-def golden_bag(name: str) -> Path:
-    return data_dir() / f'golden_{name}'
+def data_dir() -> Path | None:
+    """``test/data`` of the source checkout, or None when the package is installed."""
+    root = source_root()
+    return None if root is None else root / 'test' / 'data'
+
+
+def golden_gains() -> Path:
+    """The gain file of the package's golden scenarios: ``test/data/golden_gains.yaml`` when
+    the checkout pins one next to the golden bags, else ``config/tracker_gains.yaml``."""
+    base = data_dir()
+    pinned = base / 'golden_gains.yaml' if base is not None else None
+    return pinned if pinned is not None and pinned.is_file() \
+        else config_dir() / 'tracker_gains.yaml'
+
+
+def golden_bag(name: str, out: Path | None = None) -> Path:
+    """Where the golden bag of scenario ``name`` lives (``out`` or the source tree)."""
+    base = Path(out) if out is not None else data_dir()
+    if base is None:
+        raise GoldenError(f'no place for the golden bag of {name!r}: the package is installed, '
+                          'so pass --out DIR (it never writes into an installed package)')
+    return base / f'golden_{name}'
+
+
+def _overrides(scenario: Scenario, duration: float) -> dict:
+    ov: dict = {node: {'ros__parameters': {'mode': 'lockstep'}}
+                for node in ('plant', 'reference', 'tracker')}
+    ov['plant']['ros__parameters']['duration'] = float(duration)
+    for node, section in scenario.overrides.items():
+        ov.setdefault(node, {}).setdefault('ros__parameters', {}).update(
+            section.get('ros__parameters', {}))
+    return ov
+
+
+def golden_gains() -> Path:
+    """The gain file the golden scenarios run with, pinned next to the golden bags.
+
+    The golden bags pin behaviour, not the shipped default: ``config/tracker_gains.yaml``
+    may change (a better certified design) without touching them.
+    """
+    return data_dir() / 'golden_gains.yaml'
 
 
 def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
-    from .cli import config_dir
-    from .runner import _merge, scenario_parameters
-    ov = {'plant': {'ros__parameters': {'duration': duration}}}
-    _merge(ov, scenario.overrides)
-    return scenario_parameters(config_dir() / 'paper_scenario.yaml',
-                               config_dir() / 'tracker_gains.yaml', ov)
+    """Node parameters of a scenario (its file, its gains, lockstep, ``duration`` s)."""
+    from .runner import scenario_parameters
+    path = scenario.path if scenario.path is not None else config_dir() / 'paper_scenario.yaml'
+    gains = scenario.gains if scenario.gains is not None else golden_gains()
+    for f in (path, gains):
+        if not Path(f).is_file():
+            raise GoldenError(f'scenario {scenario.name!r}: file {f} does not exist')
+    try:
+        return scenario_parameters(Path(path), Path(gains), _overrides(scenario, duration))
+    except (yaml.YAMLError, AttributeError, TypeError) as exc:
+        raise GoldenError(f'scenario {scenario.name!r}: {path} or {gains} is not a ROS 2 '
+                          f'parameter file ({exc})') from None
+
+
+def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Scenario:
+    """A user's scenario: a parameter file (plant, reference, tracker sections) and gains."""
+    p = Path(path)
+    if not p.is_file():
+        raise GoldenError(f'scenario file {p} does not exist')
+    name = p.stem
+    if not name.replace('_', '').replace('-', '').isalnum():
+        raise GoldenError(f'scenario file name {p.name!r}: use letters, digits, - and _ '
+                          '(the golden bag is named golden_<stem>)')
+    return Scenario(name, f'scenario file {p}', path=p,
+                    gains=Path(gains) if gains is not None else None)
 
 
 def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
-                 env: dict | None = None) -> Path:
+                 env: dict | None = None, duration: float = DURATION) -> Path:
     """Run a scenario in lockstep and return its bag directory."""
     from .runner import run_composed, run_processes
-    params = scenario_params(scenario)
+    params = scenario_params(scenario, duration)
     run_dir.mkdir(parents=True, exist_ok=True)
     if composed:
         res = run_composed(params, run_dir, record=True, recorder_topics=TOPICS)
@@ -70,41 +139,41 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
                             recorder_topics=TOPICS)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None)}
     if bad:
-        raise RuntimeError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
-                           f'{run_dir}')
+        raise RunError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
+                       f'{run_dir}')
     return res.bag
 
 
-def cmd_golden(args) -> int:
+def check_golden(scenarios: list[Scenario], *, out: Path | None = None, write: bool = False,
+                 duration: float = DURATION, atol: float = ATOL, echo=print) -> int:
+    """Re-run ``scenarios``, compare with their golden bags, optionally replace them.
+
+    Returns the number of scenarios whose golden bag is new or changed.
+    """
     from .bag.compare import compare_bags, format_differences
+    own = [sc.name for sc in scenarios if sc.path is not None]
+    if own and out is None:
+        raise GoldenError(f'scenario(s) {", ".join(own)} come from your files: say where their '
+                          'golden bags live with --out DIR (only the package\'s own scenarios '
+                          'default to its source tree)')
+    targets = [(sc, golden_bag(sc.name, out)) for sc in scenarios]   # fail early: no place
     changed = 0
     with tempfile.TemporaryDirectory() as tmp:
-        for name, sc in SCENARIOS.items():
-            new = run_scenario(sc, Path(tmp) / name)
-            old = golden_bag(name)
+        for sc, old in targets:
+            new = run_scenario(sc, Path(tmp) / sc.name, duration=duration)
             if old.exists():
-                cmp = compare_bags(old, new, atol=ATOL)
+                cmp = compare_bags(old, new, atol=atol)
                 if cmp.equal:
-                    print(f'{name}: unchanged ({sum(cmp.messages.values())} messages)')
+                    echo(f'{sc.name}: unchanged ({sum(cmp.messages.values())} messages, {old})')
                     continue
-                print(f'{name}: CHANGED\n{format_differences(cmp)}')
+                echo(f'{sc.name}: CHANGED ({old})\n{format_differences(cmp)}')
             else:
-                print(f'{name}: new golden bag')
+                echo(f'{sc.name}: new golden bag ({old})')
             changed += 1
-            if args.write:
+            if write:
                 if old.exists():
                     shutil.rmtree(old)
                 old.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copytree(new, old)
-                print(f'  wrote {old}')
-    if changed and not args.write:
-        print('golden bags differ; re-run with --write to replace them', file=sys.stderr)
-        return 1
-    return 0
-
-
-def add_subcommand(sub) -> None:
-    g = sub.add_parser('golden', help='re-run the golden scenarios, print what changed '
-                       '(--write replaces test/data/golden_*)')
-    g.add_argument('--write', action='store_true', help='replace the golden bags')
-    g.set_defaults(func=cmd_golden)
+                echo(f'  wrote {old}')
+    return changed

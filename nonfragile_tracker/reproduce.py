@@ -2,8 +2,10 @@
 
 ``nonfragile_tracker reproduce --out DIR`` computes every number and figure of
 the report into ``DIR`` (``reproduction.json``, ``paper_reproduction.md``, PNGs);
-``--docs`` also refreshes ``docs/paper_reproduction.md`` and its JSON, which are
-committed and checked against a fresh computation by the tests.
+``--docs [DIR]`` also refreshes ``DIR/paper_reproduction.md`` and its JSON (default
+``docs/`` of a source checkout), which are committed and checked against a fresh
+computation by the tests.  This module is library code: it writes only into the
+directories its caller names.
 """
 from __future__ import annotations
 
@@ -19,32 +21,53 @@ import numpy as np
 from .control.analysis import analyse_gain
 from .control.design import at_gain_norm, max_decay_rate, max_perturbation_scale, min_gain_norm
 from .control.lmi import synthesize
-from .control.loop import PlantConfig, TrackerConfig
+from .control.loop import TrackerConfig
 from .control.problem import Problem, load_problem
 from .control.reference import circle
 from .control.simulate import simulate_delay_loop, simulate_tracking
+from .scenario import paper_plant_config
 
 #: Initial condition of Figs. 2-5 (the paper does not state one).
 FIG_XI0 = (0.5, 0.0, -0.5, 0.0)
 FIG_DURATION = 10.0
-#: Initial pose of the tracking runs (x, y, yaw, v): as in the issue tracker's measurements.
-TRACK_POSE = (0.7, 0.1, math.pi / 2, 0.05)
 TRACK_STEPS = 62832                      # one period of the circle at dt = 0.01 s
-PAPER_NORM = 8.67
+
+
+def track_pose() -> tuple[float, float, float, float]:
+    """Initial (x, y, yaw, v) of the tracking runs: the paper scenario's (``config/``)."""
+    pc = paper_plant_config()
+    return (pc.x0, pc.y0, pc.th0, pc.v0)
 
 
 def _gains(problem: Problem, paper: dict) -> dict[str, np.ndarray]:
+    # the bound of the comparison: the norm of the paper's K_nf, options.gain_bound of the file
+    norm = float(problem.options['gain_bound'])
     out = {'paper K_nf': paper['K_nf'], 'paper K_normal': paper['K_normal']}
-    out['Theorem 1 K_nf'] = synthesize(problem, gain_bound=PAPER_NORM).K
-    out['Theorem 1 K_normal'] = synthesize(problem, nominal=True, gain_bound=PAPER_NORM).K
-    out['max decay rate'] = at_gain_norm(max_decay_rate, problem, PAPER_NORM).K
-    out['max perturbation scale'] = max_perturbation_scale(problem, gain_bound=PAPER_NORM).K
+    out['Theorem 1 K_nf'] = synthesize(problem, gain_bound=norm).K
+    out['Theorem 1 K_normal'] = synthesize(problem, nominal=True, gain_bound=norm).K
+    out['max decay rate'] = at_gain_norm(max_decay_rate, problem, norm).K
+    out['max perturbation scale'] = max_perturbation_scale(problem, gain_bound=norm).K
     out['min gain norm'] = min_gain_norm(problem).K
     return out
 
 
-def _tracking(K, compensation: bool) -> dict:
-    pc = PlantConfig(x0=TRACK_POSE[0], y0=TRACK_POSE[1], th0=TRACK_POSE[2], v0=TRACK_POSE[3])
+def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
+    """Tracking figures of gain ``K`` on the paper circle from :func:`track_pose`.
+
+    Parameters
+    ----------
+    K : numpy.ndarray
+        The 2x4 state-feedback gain.
+    compensation : bool
+        Follow the delay-consistent reference (``delay_compensation``).
+
+    Returns
+    -------
+    dict
+        ``first_within_1cm``, ``settling_1cm`` (s), ``steady_max_error`` (m, after
+        20 s), ``final_error`` (m), ``peak_abs_w`` (rad/s).
+    """
+    pc = paper_plant_config()
     tc = TrackerConfig(K=K, max_angular_speed=2.0, delay_compensation=compensation,
                        A_tau=pc.A_tau, tau=pc.tau)
     run = simulate_tracking(pc, tc, circle(), TRACK_STEPS)
@@ -107,7 +130,8 @@ def _gain_row(config: str, name: str, K) -> dict:
             'certified_margin': a.certified_margin, 'certified_decay': a.certified_decay,
             'delay_margin': a.delay_margin,
             'certified_delay': a.certified_delay,
-            'tracking': _tracking(K, False), 'tracking_compensated': _tracking(K, True)}
+            'tracking': paper_circle_tracking(K, False),
+            'tracking_compensated': paper_circle_tracking(K, True)}
 
 
 def _figures(problem: Problem, paper: dict, out: Path) -> list[str]:
@@ -145,8 +169,8 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
     import tempfile
 
     from .bag.report import bag_report
-    from .cli import config_dir
     from .control.gains import write_gain_file
+    from .resources import config_dir
     from .runner import run_processes, scenario_parameters
     with tempfile.TemporaryDirectory() as tmp:
         gains = write_gain_file(Path(tmp) / 'paper_knf.yaml', paper_knf)
@@ -186,7 +210,7 @@ def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = 
             rows = {name: f.result() for name, f in futures.items()}
         figures = _figures(problem, paper, out)
         result = {'problem': 'config/paper_problem.yaml', 'tau': problem.tau,
-                  'fig_xi0': list(FIG_XI0), 'track_pose': list(TRACK_POSE),
+                  'fig_xi0': list(FIG_XI0), 'track_pose': list(track_pose()),
                   'track_steps': TRACK_STEPS, 'gains': rows, 'figures': figures,
                   'harder': harder}
         if fig6 is not None:
@@ -325,32 +349,30 @@ error {_f(f6['final_error'])} m, first within 1 cm at {_f(f6['first_within_1cm']
     return text
 
 
-def main_reproduce(args) -> int:
-    from .cli import config_dir
-    out = Path(args.out)
-    if out.exists() and any(out.iterdir()) and not args.force:
-        raise FileExistsError(f'{out} exists and is not empty; pass --force or another --out')
-    res = compute(config_dir(), out, ros_duration=args.duration, ros=not args.no_ros)
+def write_report(res: dict, out: Path) -> str:
+    """Write ``paper_reproduction.md`` and ``reproduction.json`` of ``res`` into ``out``.
+
+    Returns
+    -------
+    str
+        The markdown text.
+    """
     md = render_markdown(res)
     (out / 'paper_reproduction.md').write_text(md)
     (out / 'reproduction.json').write_text(json.dumps(res, indent=2))
-    if args.docs:
-        docs = config_dir().parent / 'docs'
-        docs.mkdir(exist_ok=True)
-        for name in res['figures']:
-            shutil.copy(out / name, docs / name)
-        (docs / 'paper_reproduction.md').write_text(md)
-        (docs / 'paper_reproduction.json').write_text(json.dumps(res, indent=2))
-    print(md)
-    print(f'wrote {out} in {res["wall_time"]:.1f} s')
-    return 0
+    return md
 
 
-def add_subcommand(sub) -> None:
-    r = sub.add_parser('reproduce', help="the paper's Section IV: gains, Figs. 2-6, report")
-    r.add_argument('--out', default='runs/reproduction', help='output directory')
-    r.add_argument('--force', action='store_true', help='write into a non-empty --out')
-    r.add_argument('--docs', action='store_true', help='also refresh docs/paper_reproduction.*')
-    r.add_argument('--duration', type=float, default=60.0, help='simulated s of the ROS run')
-    r.add_argument('--no-ros', action='store_true', help='skip the ROS run (no Fig. 6)')
-    r.set_defaults(func=main_reproduce)
+def write_docs(res: dict, out: Path, docs: Path) -> Path:
+    """Copy the report of ``res`` (figures from ``out``) into the explicit directory ``docs``.
+
+    ``docs/paper_reproduction.md`` and ``docs/paper_reproduction.json`` are the
+    committed copies the tests check; the caller chooses ``docs`` (the command
+    defaults to ``docs/`` of a source checkout and requires it when installed).
+    """
+    docs.mkdir(parents=True, exist_ok=True)
+    for name in res['figures']:
+        shutil.copy(out / name, docs / name)
+    (docs / 'paper_reproduction.md').write_text(render_markdown(res))
+    (docs / 'paper_reproduction.json').write_text(json.dumps(res, indent=2))
+    return docs

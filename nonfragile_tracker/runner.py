@@ -20,6 +20,9 @@ from pathlib import Path
 
 import yaml
 
+from .errors import InputError
+from .files import read_yaml
+
 NODES = ('tracker', 'reference', 'plant')
 
 
@@ -35,17 +38,18 @@ def isolated_env(base: dict | None = None) -> dict:
     return env
 
 
-def _merge(dst: dict, src: dict) -> dict:
+def merge(dst: dict, src: dict) -> dict:
+    """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced)."""
     for k, v in src.items():
         if isinstance(v, dict) and isinstance(dst.get(k), dict):
-            _merge(dst[k], v)
+            merge(dst[k], v)
         else:
             dst[k] = v
     return dst
 
 
 def node_key(key: str) -> str:
-    """Node name of a parameter-file key: ``tracker``, ``/tracker`` and ``/**/tracker`` -> tracker."""
+    """Node name of a parameter-file key: ``tracker``, ``/tracker``, ``/**/tracker`` -> tracker."""
     for prefix in ('/**/', '/'):
         if key.startswith(prefix):
             return key[len(prefix):]
@@ -63,9 +67,14 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
     for path in (scenario, gains):
         if path is None:
             continue
-        data = yaml.safe_load(Path(path).read_text()) or {}
-        _merge(params, {node_key(k): v for k, v in data.items()})
-    _merge(params, overrides or {})
+        data = read_yaml(path, 'ROS 2 parameter file') or {}
+        if not isinstance(data, dict) or not all(
+                isinstance(v, dict) and isinstance(v.get('ros__parameters', {}), dict)
+                for v in data.values()):
+            raise InputError(f'{path}: expected a ROS 2 parameter file '
+                             '({node: {ros__parameters: {name: value}}})')
+        merge(params, {node_key(str(k)): v for k, v in data.items()})
+    merge(params, overrides or {})
     return params
 
 
@@ -78,6 +87,8 @@ def write_parameter_file(params: dict, path: Path) -> Path:
 
 @dataclass
 class RunResult:
+    """Outcome of a run: its directory, bag (if recorded), exit code per node, wall time, steps."""
+
     run_dir: Path
     bag: Path | None
     exit_codes: dict
@@ -86,6 +97,7 @@ class RunResult:
 
 
 def new_run_dir(root: Path, name: str | None) -> Path:
+    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``)."""
     from .bag.writer import new_run_dir as _new
     return _new(root, name)
 
@@ -143,8 +155,11 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         with open(run_dir / 'plant.log') as reader:
             while plant.poll() is None:
                 report_plant(reader)
+                # the recorder closes its bag and exits 0 right after run_done, which can be
+                # before the plant's last poll here: that is the end of the run, not a death
                 dead = {n: p.returncode for n, p in procs.items()
-                        if n != 'plant' and p.poll() is not None}
+                        if n != 'plant' and p.poll() is not None
+                        and not (n == 'recorder' and p.returncode == 0)}
                 if dead:
                     progress(f'[runner] node(s) exited early: {dead}; stopping the run '
                              f'(logs in {run_dir})')
@@ -206,6 +221,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
             rec_params = {'output': str(bag), 'use_sim_time': True, 'lockstep_gate': True}
+            rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
             nodes.append(Recorder(context=ctx, parameter_overrides=overrides(**rec_params)))
@@ -235,103 +251,3 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
 
-
-def add_subcommands(sub) -> None:
-    """Add ``run`` and ``bag`` to the CLI."""
-    r = sub.add_parser('run', help='the main job: paper scenario through the ROS nodes, '
-                       'bag, report and plots')
-    r.add_argument('--scenario', help='node parameter file (default config/paper_scenario.yaml)')
-    r.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml)')
-    r.add_argument('--duration', type=float, help='simulated seconds (default: scenario, 60)')
-    r.add_argument('--delta', choices=['Delta_1', 'Delta_2'],
-                   help="inject the paper's gain perturbation (E Delta F) into the tracker")
-    r.add_argument('--delay-compensation', action='store_true',
-                   help='zero steady-state error law (delay-consistent reference)')
-    r.add_argument('--path', choices=['circle', 'figure_eight'], help='reference path')
-    r.add_argument('--composed', action='store_true',
-                   help='all nodes in this process (default: one process per node)')
-    r.add_argument('--out', default='runs', help='directory for run directories (default runs/)')
-    r.add_argument('--name', help='run directory name (default run_<date>_<time>)')
-    r.add_argument('--no-record', action='store_true', help='do not record a bag')
-    r.set_defaults(func=cmd_run)
-
-    b = sub.add_parser('bag', help='bag tools: report, repair')
-    bs = b.add_subparsers(dest='bag_command', required=True)
-    rep = bs.add_parser('report', help='metrics and PNG plots of a recorded run')
-    rep.add_argument('bag')
-    rep.add_argument('--out', help='directory for the plots (default: <bag>_report)')
-    rep.add_argument('--force', action='store_true', help='replace existing plots')
-    rep.set_defaults(func=cmd_bag_report)
-    rp = bs.add_parser('repair', help='recover a bag whose recorder died without closing it')
-    rp.add_argument('bag')
-    rp.add_argument('--out', help='repaired bag directory (default <bag>_repaired)')
-    rp.set_defaults(func=cmd_bag_repair)
-
-
-DELTAS = {'Delta_1': [-1.0, 0.0, 0.0, -1.0], 'Delta_2': [1.0, 0.0, 0.0, 1.0]}
-
-
-def cmd_run(args) -> int:
-    from .cli import config_dir
-    scenario = Path(args.scenario) if args.scenario else config_dir() / 'paper_scenario.yaml'
-    gains = Path(args.gains) if args.gains else config_dir() / 'tracker_gains.yaml'
-    ov: dict = {'plant': {'ros__parameters': {}}, 'tracker': {'ros__parameters': {}},
-                'reference': {'ros__parameters': {}}}
-    if args.duration is not None:
-        ov['plant']['ros__parameters']['duration'] = float(args.duration)
-    if args.delta:
-        ov['tracker']['ros__parameters']['Delta'] = DELTAS[args.delta]
-    if args.delay_compensation:
-        ov['tracker']['ros__parameters']['delay_compensation'] = True
-    if args.path:
-        ov['reference']['ros__parameters']['path'] = args.path
-    params = scenario_parameters(scenario, gains, ov)
-    from .control.gains import read_gain_file
-    read_gain_file(gains)           # refuse a bad gain before starting anything (exit 2)
-    run_dir = new_run_dir(Path(args.out), args.name)
-    record = not args.no_record
-    dur = params['plant']['ros__parameters'].get('duration')
-    print(f'run directory: {run_dir}')
-    print(f'scenario {scenario.name}, gains {gains.name}, {dur} s simulated, '
-          f'{"composed" if args.composed else "one process per node"}, lockstep')
-    if args.composed:
-        res = run_composed(params, run_dir, record=record)
-    else:
-        res = run_processes(params, run_dir, record=record)
-    bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None, -2)}
-    print(f'wall time {res.wall_time:.1f} s ({res.steps / max(res.wall_time, 1e-9):.0f} steps/s '
-          'including start-up)')
-    if bad:
-        print(f'error: node(s) failed: {bad}; logs in {run_dir}', file=sys.stderr)
-        return 5
-    if record:
-        from .bag.report import bag_report, format_report
-        rep = bag_report(res.bag, run_dir)
-        print(format_report(rep))
-        print(f'bag: {res.bag}\nplots and summary: {run_dir}')
-    return 0
-
-
-def cmd_bag_report(args) -> int:
-    from .bag.report import bag_report, format_report
-    from .bag.reader import BagError
-    try:
-        rep = bag_report(Path(args.bag), Path(args.out) if args.out else None,
-                         overwrite=args.force)
-    except BagError as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return 2
-    print(format_report(rep))
-    return 0
-
-
-def cmd_bag_repair(args) -> int:
-    from .bag.reader import BagError
-    from .bag.repair import repair_bag
-    try:
-        res = repair_bag(Path(args.bag), Path(args.out) if args.out else None)
-    except BagError as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return 2
-    print(res.summary())
-    return 0

@@ -13,6 +13,17 @@ REF_TWIST = 'reference/twist'
 REF_ACCEL = 'reference/accel'
 CMD_VEL = 'cmd_vel'
 RUN_DONE = 'run_done'
+#: The trajectory to follow (nav_msgs/Path, transient-local): reference -> tracker.
+TRAJECTORY = 'trajectory'
+#: The same as trajectory_msgs/MultiDOFJointTrajectory (pose, velocity, acceleration).
+TRAJECTORY_MULTIDOF = 'trajectory_multidof'
+#: The reference for display (nav_msgs/Path, transient-local), any source.
+REF_PATH = 'reference/path'
+#: What the robot drove (nav_msgs/Path), the tracking error, the reference point marker.
+TRAVELLED_PATH = 'tracker/path'
+TRACKING_ERROR = 'tracker/error'
+REF_MARKER = 'tracker/reference_marker'
+DIAGNOSTICS = '/diagnostics'
 
 #: topic -> ROS 2 message type, for every topic a run records.
 TYPES: dict[str, str] = {
@@ -24,7 +35,17 @@ TYPES: dict[str, str] = {
     REF_ACCEL: 'geometry_msgs/msg/AccelStamped',
     CMD_VEL: 'geometry_msgs/msg/Twist',
     RUN_DONE: 'std_msgs/msg/UInt64',
+    TRAJECTORY: 'nav_msgs/msg/Path',
+    REF_PATH: 'nav_msgs/msg/Path',
 }
+
+#: The topics a tracking run's analysis reads (bag reader, golden bags): pose, reference,
+#: command.  ``/clock`` and ``pose`` repeat ``odom``'s stamps and pose.
+RUN_TOPICS: tuple[str, ...] = (ODOM, REF_POSE, REF_TWIST, REF_ACCEL, CMD_VEL)
+#: Topics whose S+1 samples the recorder waits for after ``run_done`` = S (lockstep).
+LOCKSTEP_TOPICS: tuple[str, ...] = (ODOM, POSE, REF_POSE, REF_TWIST, REF_ACCEL, CMD_VEL)
+#: cmd_vel's type with ``enable_stamped_cmd_vel`` (Nav2 name; Jazzy diff_drive_controller).
+CMD_VEL_STAMPED_TYPE = 'geometry_msgs/msg/TwistStamped'
 
 #: QoS of the data topics: reliable, volatile, keep last DEPTH.
 DEPTH = 100

@@ -13,6 +13,25 @@ CONFIG = ROOT / 'config'
 # Tests keep DDS discovery on this host, whatever the caller's environment says.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
+#: Test modules that start nodes or an rclpy context: every test in them is marked ``ros``
+#: (markers are registered in setup.cfg; ``pytest -m "not ros"`` runs the ROS-free suite).
+ROS_MODULES = {'test_bag_writer_reader', 'test_failures', 'test_golden_regression',
+               'test_node_parameters', 'test_realtime_faults', 'test_recorder_node',
+               'test_ros_lockstep', 'test_tracker_safety'}
+#: Modules whose tests take tens of seconds (marked ``slow``).
+SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_faults',
+                'test_ros_lockstep'}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests of :data:`ROS_MODULES` ``ros`` and of :data:`SLOW_MODULES` ``slow``."""
+    for item in items:
+        module = item.module.__name__.rpartition('.')[2] if item.module else ''
+        if module in ROS_MODULES:
+            item.add_marker(pytest.mark.ros)
+        if module in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
+
 
 def unique_domain_id(salt: str = '') -> int:
     """A ROS_DOMAIN_ID in 100..199 derived from the process id and a salt."""

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 import pytest
 from test_bag_writer_reader import RUN, simulated_run, write_run_bag
 
@@ -66,18 +68,28 @@ def test_report_tolerance_gaps_and_pose_fallback(tmp_path, sim):
     assert '~3 samples missing' in format_report(rep)
 
 
-def test_report_needs_pose_reference_and_commands(tmp_path, sim):
+def test_report_says_what_is_missing_and_reports_the_rest(tmp_path, sim):
     run, path = sim
     write_run_bag(tmp_path / 'nocmd', run, path, topics_=[t for t in RUN if t != '/cmd_vel'])
-    with pytest.raises(MissingTopicsError, match='cmd_vel') as exc:
-        bag_report(tmp_path / 'nocmd')
-    assert exc.value.missing == ('cmd_vel',)
+    rep = bag_report(tmp_path / 'nocmd', plots=False)
+    assert rep.command_samples == 0 and rep.metrics is not None
+    assert any('no commands (cmd_vel)' in n for n in rep.notes)
+    assert 'note: no commands (cmd_vel)' in format_report(rep)
     write_run_bag(tmp_path / 'noref', run, path, topics_=['/odom', '/cmd_vel'])
-    with pytest.raises(BagError, match='reference/pose, reference/twist, reference/accel'):
-        bag_report(tmp_path / 'noref')
+    rep = bag_report(tmp_path / 'noref')
+    assert rep.metrics is None and rep.timing.odom_count == run.t.size
+    assert any('reference/pose + reference/twist + reference/accel' in n and
+               'timing and the path only' in n for n in rep.notes)
+    assert sorted(rep.plots) == ['commands.png', 'xy.png']
+    assert rep.path_length == pytest.approx(np.sum(np.hypot(np.diff(run.x), np.diff(run.y))))
     write_run_bag(tmp_path / 'nopose', run, path, topics_=['/reference/pose', '/reference/twist',
                                                             '/reference/accel', '/cmd_vel'])
-    with pytest.raises(MissingTopicsError, match=r'odom \(or pose\)'):
-        bag_report(tmp_path / 'nopose')
+    rep = bag_report(tmp_path / 'nopose', plots=False)
+    assert rep.metrics is None and rep.timing is None and rep.command_samples == run.t.size
+    assert any(n.startswith('no odometry (odom or pose)') for n in rep.notes)
+    write_run_bag(tmp_path / 'refonly', run, path, topics_=['/reference/pose'])
+    with pytest.raises(MissingTopicsError, match=r'no odometry .* and no commands') as exc:
+        bag_report(tmp_path / 'refonly')
+    assert exc.value.missing == ('odom', 'cmd_vel')
     with pytest.raises(ValueError, match='tolerance'):
         bag_report(tmp_path / 'nopose', tolerance=0.0)

@@ -25,10 +25,10 @@ from nonfragile_tracker.bag.repair import scan_mcap
 from nonfragile_tracker.bag.writer import (BagError, BagExistsError, BagWriter,
                                            InvalidRunNameError, make_qos, new_run_dir,
                                            qos_to_dicts)
-from nonfragile_tracker.control.loop import (PlantConfig, TrackerConfig, step_time_ns,
-                                             yaw_to_quaternion)
+from nonfragile_tracker.control.loop import TrackerConfig, step_time_ns, yaw_to_quaternion
 from nonfragile_tracker.control.reference import make_path
 from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.scenario import paper_plant_config
 
 ROOT = Path(__file__).resolve().parent.parent
 DT = 0.01
@@ -43,7 +43,7 @@ def gain():
 
 def simulated_run(steps: int = 300):
     path = make_path('circle')
-    run = simulate_tracking(PlantConfig(dt=DT), TrackerConfig(K=gain(), dt=DT), path, steps)
+    run = simulate_tracking(paper_plant_config(dt=DT), TrackerConfig(K=gain(), dt=DT), path, steps)
     return run, path
 
 

@@ -31,11 +31,6 @@ def test_synthesize_writes_a_tracker_parameter_file(tmp_path, capsys):
     assert main(['synthesize', PAPER, '-o', str(out), '--force', '--nominal']) == 0
 
 
-def test_shipped_gain_file_is_what_synthesize_writes(tmp_path):
-    out = tmp_path / 'gains.yaml'
-    assert main(['synthesize', PAPER, '-o', str(out)]) == 0
-    np.testing.assert_allclose(read_gain_file(out), read_gain_file(CONFIG / 'tracker_gains.yaml'),
-                               atol=1e-6)
 
 
 def test_infeasible_exits_3_and_writes_nothing(tmp_path):

@@ -172,8 +172,8 @@ def test_a_wrong_solver_point_is_an_error(hard, monkeypatch):
 
     def broken(*args, **kw):
         sol = real(*args, **kw)
-        if 'Rb' in sol:
-            sol['Rb'] = -sol['Rb']
+        if sol.Rb is not None:
+            sol = dataclasses.replace(sol, Rb=-sol.Rb)
         return sol
     monkeypatch.setattr(prog, 'solve', broken)
     with pytest.raises(CertificateError, match='fails independent verification'):

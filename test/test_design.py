@@ -7,9 +7,10 @@ from nonfragile_tracker.control.design import (at_gain_norm, max_decay_rate,
                                                max_perturbation_scale, min_gain_norm,
                                                shifted_problem)
 from nonfragile_tracker.control.lmi import InfeasibleError, certify_gain
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.reference import circle
 from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.scenario import paper_plant_config
 
 PAPER_NORM = 8.67
 
@@ -60,7 +61,7 @@ def test_min_gain_norm(paper_problem):
 
 
 def test_tracking_with_optimized_gain_and_compensation(decay_design):
-    pc = PlantConfig()
+    pc = paper_plant_config()
     tc = TrackerConfig(K=decay_design.K, max_angular_speed=2.0, delay_compensation=True,
                        A_tau=pc.A_tau, tau=pc.tau)
     run = simulate_tracking(pc, tc, circle(), 62832)     # one period of the paper's circle

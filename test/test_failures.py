@@ -117,12 +117,13 @@ def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
     a.start(); b.start(); a.join(); b.join()
     bags = {k: read_bag(v.bag) for k, v in results.items()}
     from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.loop import TrackerConfig
+    from nonfragile_tracker.scenario import paper_plant_config
     from nonfragile_tracker.control.reference import circle
     from nonfragile_tracker.control.simulate import simulate_tracking
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     F = np.full((2, 4), 0.5)
     for name, pert in (('a', None), ('b', F)):
-        sim = simulate_tracking(PlantConfig(), TrackerConfig(K=K, perturbation=pert), circle(), 500)
+        sim = simulate_tracking(paper_plant_config(), TrackerConfig(K=K, perturbation=pert), circle(), 500)
         assert bags[name].counts['/odom'] == 501
         np.testing.assert_allclose(bags[name].run.pose.x, sim.x, atol=1e-9)

@@ -15,6 +15,7 @@ from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.gains import read_gain_file
 from nonfragile_tracker.nodes.common import DATA_QOS
 from nonfragile_tracker.nodes.tracker import TrackerNode
+from nonfragile_tracker.scenario import node_parameters
 
 from conftest import CONFIG, unique_domain_id
 
@@ -51,9 +52,10 @@ def test_replay_inputs_into_a_fresh_tracker(name, delta):
     expected = [(m.linear.x, m.angular.z) for _, m in read_messages(bag, 'cmd_vel')]
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=unique_domain_id('replay' + name))
-    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    K = read_gain_file(golden.golden_gains())
     tracker = TrackerNode(context=ctx, parameter_overrides=[
-        Parameter('K', value=[float(v) for v in K.ravel()]), Parameter('Delta', value=delta)])
+        Parameter('K', value=[float(v) for v in K.ravel()]), Parameter('Delta', value=delta),
+        Parameter('F', value=node_parameters('tracker')['F'])])   # the scenario's F
     player = rclpy.create_node('player', context=ctx)
     types = {'reference/pose': PoseStamped, 'reference/twist': TwistStamped,
              'reference/accel': AccelStamped, 'odom': Odometry}

@@ -47,9 +47,15 @@ def test_nonfragile_synthesis_is_verified_and_stable(paper_problem, bound):
 
 
 def test_unbounded_design_is_high_gain(paper_problem):
-    """Without a gain bound the most strictly feasible point has a large gain (documented)."""
-    res = synthesize(paper_problem, gain_bound=None)
+    """Stage 1 alone (the most strictly feasible point) has a large gain (documented);
+    the default second stage keeps half that margin with a moderate gain."""
+    res = synthesize(paper_problem, gain_bound=None, moderate=False)
     assert 100 < np.linalg.norm(res.K, 2) < 200
+    mod = synthesize(paper_problem, gain_bound=None)
+    assert mod.extra['rule'] == 'moderate' and mod.certificate.verification.ok
+    assert np.linalg.norm(mod.K, 2) < 10
+    assert mod.margin_achieved >= 0.5 * res.margin_achieved * (1 - 1e-6)
+    assert abs(mod.extra['stage1_norm'] - np.linalg.norm(res.K, 2)) < 1e-6 * 150
 
 
 def test_nominal_synthesis(paper_problem):
@@ -77,6 +83,17 @@ def test_a_wrong_solver_point_is_an_error(paper_problem, monkeypatch):
         status, t, X, W, R, eps, st = real(*args, **kw)
         return status, t, X, W, -R, eps, st      # a point the LMI does not hold for
     monkeypatch.setattr(prog, 'solve', broken)
+    # the retries (the minimum-norm stage, another program) give a verified gain instead
+    res = synthesize(paper_problem)
+    assert res.extra['recovered_by'] == 'minimum-norm stage'
+    assert verify_certificate(paper_problem, res.K, res.P, res.Q, res.eps).ok
+    # and with that one broken too, nothing unverified comes back
+    real_min = lmi._MinNormProgram.solve
+
+    def broken_min(self, *args, **kw):
+        status, t, X, W, R, eps, st = real_min(self, *args, **kw)
+        return status, t, X, W, -R, eps, st
+    monkeypatch.setattr(lmi._MinNormProgram, 'solve', broken_min)
     with pytest.raises(CertificateError, match='fails independent verification'):
         synthesize(paper_problem)
 

@@ -11,6 +11,7 @@ from nonfragile_tracker.control.loop import (LoopConfigError, PlantConfig, Track
 from nonfragile_tracker.control.model import double_integrator_model
 from nonfragile_tracker.control.reference import RefSample, circle, figure_eight, make_path, PathError
 from nonfragile_tracker.control.simulate import simulate_delay_loop, simulate_tracking
+from nonfragile_tracker.scenario import paper_plant_config
 
 K_NF = [[-4.4453, -4.8047, -1.4766, -1.5234], [-1.4766, -1.5234, -4.4453, -4.8047]]
 NO_DELAY = dict(A_tau=np.zeros((4, 4)), tau=0.0)
@@ -27,7 +28,7 @@ def test_plant_integrates_arcs_exactly():
 
 def test_plant_delay_term_matches_delay_equation():
     """At rest the plant's x obeys x' = 0.01 x(t - 0.2): compare with RK4 of the same DDE."""
-    p = UnicyclePlant(PlantConfig(x0=1.0, y0=2.0, th0=0.3, v0=0.0, dt=0.001))
+    p = UnicyclePlant(paper_plant_config(x0=1.0, y0=2.0, th0=0.3, v0=0.0, dt=0.001))
     for _ in range(20000):
         p.step(0.0, 0.0)
     ref = simulate_delay_loop(np.zeros((4, 4)), np.array(p.config.A_tau), 0.2,
@@ -97,7 +98,7 @@ def test_validate_gain_messages():
 
 def test_paper_scenario_steady_band_and_compensation():
     """Paper K_nf, 100 Hz, one period: a ~1 cm bias without compensation, < 0.1 mm with it."""
-    pc = PlantConfig()
+    pc = paper_plant_config()
     steps = 62832                                   # 2 pi / 0.01 rad/s at dt = 0.01 s
     plain = simulate_tracking(pc, TrackerConfig(K=K_NF), circle(), steps)
     comp = simulate_tracking(pc, TrackerConfig(K=K_NF, delay_compensation=True,

@@ -29,7 +29,7 @@ def make_tracker(context, **params):
 
 
 def test_runtime_gain_set_is_validated(context):
-    node = make_tracker(context)
+    node = make_tracker(context, F=[0.5] * 8)       # the paper's F (code default: zeros)
     try:
         old = node.tracker.config.K
         bad = [

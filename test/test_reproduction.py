@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker import reproduce
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.reference import circle
 from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT
 
@@ -82,7 +83,7 @@ def test_fig6_numbers_equal_the_in_process_simulation(committed):
     f6 = committed['fig6']
     K = np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'])
     steps = int(round(f6['duration'] / 0.01))
-    m = simulate_tracking(PlantConfig(), TrackerConfig(K=K), circle(), steps).metrics()
+    m = simulate_tracking(paper_plant_config(), TrackerConfig(K=K), circle(), steps).metrics()
     assert f6['steps'] == steps + 1
     assert f6['final_error'] == pytest.approx(m.final_error, abs=1e-9)
     assert f6['first_within_1cm'] == pytest.approx(m.first_within, abs=1e-9)

@@ -10,11 +10,12 @@ from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
 from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, Tracker, TrackerConfig
+from nonfragile_tracker.control.loop import Tracker, TrackerConfig
 from nonfragile_tracker.control.reference import RefSample, circle
 from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.nodes.common import fill_pose, fill_reference, ns_to_stamp
 from nonfragile_tracker.nodes.tracker import TrackerNode
+from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG
 
@@ -120,7 +121,7 @@ def test_core_tracker_never_returns_non_finite():
 def test_converges_from_far_initial_poses(dist, heading):
     """2 m (and 5 m) away, heading opposite to / along the path, at rest: converges."""
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    pc = PlantConfig(x0=0.5 + dist, y0=0.0, th0=math.pi / 2 + heading, v0=0.0)
+    pc = paper_plant_config(x0=0.5 + dist, y0=0.0, th0=math.pi / 2 + heading, v0=0.0)
     tc = TrackerConfig(K=K, max_linear_speed=1.0, max_angular_speed=2.0,
                        delay_compensation=True, A_tau=pc.A_tau, tau=pc.tau)
     run = simulate_tracking(pc, tc, circle(), 12000)

@@ -1,26 +1,44 @@
-"""Bags of tracking runs: write (rosbag2 v9 / MCAP), read, repair and report.
+"""Bags of tracking runs: write, read, report, compare, replay and repair (public API).
 
 * :mod:`.writer` - :class:`BagWriter` (raw CDR in, chunked flushes), :func:`new_run_dir`,
-  QoS helpers and the :class:`BagError` hierarchy;
+  QoS helpers and the :class:`BagError` hierarchy (an ``InputError``: exit 2);
 * :mod:`.reader` - :func:`read_bag` (numpy arrays of a run), :func:`read_messages`;
-* :mod:`.repair` - :func:`repair_bag` for a bag whose recorder was killed;
-* :mod:`.report` - :func:`bag_report` (metrics, gaps, PNG plots), :func:`format_report`.
+* :mod:`.report` - :func:`bag_report` (metrics, real-time timing, gaps, PNG plots),
+  :func:`format_report`;
+* :mod:`.compare` - :func:`compare_bags` (per topic/field tolerances, stamp/index/time
+  alignment), :func:`format_differences`;
+* :mod:`.replay` - :func:`replay` (recorded inputs into a fresh tracker, commands
+  compared), :func:`format_replay`;
+* :mod:`.repair` - :func:`repair_bag` for a bag whose recorder was killed or an MCAP
+  without metadata.yaml.
 
-None of these import rclpy; the ROS side is :mod:`nonfragile_tracker.nodes.recorder`.
+A user's regression test needs only these, e.g.::
+
+    from nonfragile_tracker.bag import compare_bags, format_differences, replay
+    res = replay('my_robot_run', gains='new_gains.yaml')
+    assert res.comparison.equal, format_differences(res.comparison)
+
+None of these import rclpy; the ROS side is :mod:`nonfragile_tracker.nodes.recorder` and
+:func:`nonfragile_tracker.nodes.replayer.replay_over_dds`.
 """
 from __future__ import annotations
 
+from .compare import (Comparison, Difference, Tolerance, ToleranceError, compare_bags,
+                      compare_messages, format_differences, parse_tolerance)
 from .reader import (BagData, BagNotFoundError, BagTruncatedError, CommandSeries,
                      MissingTopicsError, NotABagError, PoseSeries, ReferenceSeries, RunData,
                      read_bag, read_messages)
 from .repair import NothingToRepairError, RepairError, RepairResult, repair_bag
-from .report import Report, bag_report, format_report
+from .replay import ReplayResult, format_replay, replay
+from .report import Report, TimingMetrics, bag_report, format_report
 from .writer import (BagError, BagExistsError, BagWriter, InvalidRunNameError, default_qos,
                      make_qos, new_run_dir)
 
 __all__ = ['BagError', 'BagExistsError', 'BagNotFoundError', 'BagTruncatedError',
            'InvalidRunNameError', 'MissingTopicsError', 'NotABagError', 'RepairError',
-           'NothingToRepairError', 'BagWriter', 'new_run_dir', 'make_qos', 'default_qos',
-           'BagData', 'RunData', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'read_bag',
-           'read_messages', 'RepairResult', 'repair_bag', 'Report', 'bag_report',
-           'format_report']
+           'NothingToRepairError', 'ToleranceError', 'BagWriter', 'new_run_dir', 'make_qos',
+           'default_qos', 'BagData', 'RunData', 'PoseSeries', 'ReferenceSeries',
+           'CommandSeries', 'read_bag', 'read_messages', 'RepairResult', 'repair_bag', 'Report',
+           'TimingMetrics', 'bag_report', 'format_report', 'Comparison', 'Difference',
+           'Tolerance', 'compare_bags', 'compare_messages', 'format_differences',
+           'parse_tolerance', 'ReplayResult', 'replay', 'format_replay']

@@ -1,61 +1,175 @@
-"""Compare two bags topic by topic, field by field (bag-based regression tests).
+"""Compare two runs topic by topic, field by field: the one comparison engine.
 
-Every message is deserialized with the Jazzy typestore and flattened to its
-numeric and string leaves (``pose.pose.position.x`` ...).  Two bags agree when
-each compared topic has the same number of messages and every leaf agrees:
-numbers within ``atol + rtol * |expected|``, strings exactly.  Header stamps are
-message fields and are compared; the bag's receive timestamps are not by default
-(``receive_time=True`` compares them): they are the recorder's sim-time clock at
-reception, which follows ``/clock`` asynchronously and may differ by a few steps
-between two identical runs.  A stamped message repeating a header stamp already
-seen on its topic (a lockstep step republished while the plant waited) is dropped
-before comparing, as :func:`reader.read_bag` does.
-:func:`format_differences` prints a readable diff: topic, message index,
-field, expected vs got.
+Every message is flattened to its numeric and string leaves
+(``pose.pose.position.x`` ...).  Two runs agree when every compared topic has the
+same messages and every leaf agrees: numbers within ``atol + rtol * |expected|``
+(per topic and field with :class:`Tolerance` rules, see :func:`parse_tolerance`),
+strings exactly.
+
+Messages are paired per topic by one of three alignments (``align``):
+
+* ``stamp`` - by header stamp (lockstep bags: every step has its own stamp);
+* ``index`` - the i-th message with the i-th (unstamped topics of a lockstep run,
+  replayed commands);
+* ``time`` - by receive time since the first message of each bag, each expected
+  message with the nearest unused one within ``time_tolerance`` seconds (real-time
+  bags, whose stamps differ from run to run);
+* ``auto`` (default) - ``stamp`` for a stamped topic whose stamps mostly agree
+  (>= half of the expected ones), else ``index`` when both sides have as many
+  messages, else ``time``.
+
+Header stamps are message fields and are compared unless a rule excludes them
+(``header.stamp`` with a large tolerance); the bag's receive timestamps are not
+(``receive_time=True`` compares them with index/stamp alignment).  A stamped message
+repeating a header stamp already seen on its topic (a lockstep step republished
+while the plant waited) is dropped before comparing, as :func:`reader.read_bag` does.
+:func:`format_differences` prints a readable diff: topic, message index, field,
+expected vs got, the first N differences and a per-topic summary.
 """
 from __future__ import annotations
 
+import bisect
+import fnmatch
 import math
 import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Iterator
+from typing import Any
 
 import numpy as np
 
-from .reader import open_reader
-from .writer import jazzy_typestore
+from .reader import open_reader, typestore_for
+from .writer import BagError
 
-__all__ = ['Difference', 'Comparison', 'flatten', 'compare_bags', 'format_differences']
+__all__ = ['Difference', 'Comparison', 'TopicSummary', 'Tolerance', 'ToleranceError',
+           'flatten', 'parse_tolerance', 'compare_bags', 'compare_messages',
+           'format_differences', 'read_topic_messages', 'ALIGNMENTS']
+
+ALIGNMENTS = ('auto', 'stamp', 'index', 'time')
+#: Message pairs in time alignment may be this far apart (s) unless told otherwise.
+DEFAULT_TIME_TOLERANCE = 0.005
+
+Message = tuple[int, Any]            # (receive time ns, deserialized message)
+
+
+class ToleranceError(BagError):
+    """A ``--tol`` rule cannot be parsed; the message shows the expected form."""
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """Agreement of numbers: ``|got - expected| <= atol + rtol * |expected|``."""
+
+    atol: float
+    rtol: float = 0.0
+
+    def ok(self, expected: float, got: float) -> bool:
+        return abs(got - expected) <= self.atol + self.rtol * abs(expected)
+
+
+def parse_tolerance(spec: str) -> tuple[str, str, Tolerance]:
+    """Parse ``TOPIC.FIELD=ABS[,REL]`` into ``(topic, field pattern, Tolerance)``.
+
+    ``TOPIC`` is a topic name (leading ``/`` optional; topic names have no dots),
+    ``FIELD`` a dotted field (``pose.pose.position.x``), a prefix of one
+    (``pose.pose.position``) or a glob (``*.x``); without ``.FIELD`` the rule covers
+    the whole topic, and ``*`` as topic covers every topic.
+    """
+    if not isinstance(spec, str) or '=' not in spec:
+        raise ToleranceError(f'tolerance {spec!r} is not TOPIC.FIELD=ABS[,REL] (e.g. '
+                             '/odom.pose.pose.position.x=1e-3 or cmd_vel=1e-6,1e-3)')
+    key, _, value = spec.partition('=')
+    topic, _, fld = key.strip().partition('.')
+    if not topic:
+        raise ToleranceError(f'tolerance {spec!r} names no topic (TOPIC.FIELD=ABS[,REL])')
+    parts = [p.strip() for p in value.split(',')]
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        raise ToleranceError(f'tolerance {spec!r}: {value!r} is not ABS or ABS,REL (numbers '
+                             '>= 0)') from None
+    if len(nums) not in (1, 2) or not all(math.isfinite(n) and n >= 0 for n in nums):
+        raise ToleranceError(f'tolerance {spec!r}: give ABS or ABS,REL as finite numbers >= 0')
+    if topic != '*' and not topic.startswith('/'):
+        topic = '/' + topic
+    return topic, fld or '*', Tolerance(nums[0], nums[1] if len(nums) == 2 else 0.0)
+
+
+class _Rules:
+    """Tolerance lookup: the most specific matching rule wins, else the default."""
+
+    def __init__(self, default: Tolerance, rules: Iterable[tuple[str, str, Tolerance]]):
+        self.default = default
+        # more specific first: exact topic before '*', longer field pattern first
+        self.rules = sorted(rules, key=lambda r: (r[0] == '*', -len(r[1].strip('*'))))
+        self._cache: dict[tuple[str, str], Tolerance] = {}
+
+    def get(self, topic: str, fld: str) -> Tolerance:
+        key = (topic, fld)
+        hit = self._cache.get(key)
+        if hit is None:
+            hit = self.default
+            for t, f, tol in self.rules:
+                if (t == '*' or t == topic) and (f == '*' or fnmatch.fnmatchcase(fld, f)
+                                                 or fld.startswith(f + '.')):
+                    hit = tol
+                    break
+            self._cache[key] = hit
+        return hit
 
 
 @dataclass(frozen=True)
 class Difference:
-    """One disagreement between the expected (golden) and the new bag."""
+    """One disagreement between the expected and the new run."""
 
     topic: str
-    index: int | None          # message index within the topic; None: topic-level
+    index: int | None          # message index within the topic (expected side); None: topic
     field: str
     expected: Any
     got: Any
+    tolerance: Tolerance | None = None
 
     def __str__(self) -> str:
         where = self.topic if self.index is None else f'{self.topic}[{self.index}]'
-        return f'{where} {self.field}: expected {self.expected!r}, got {self.got!r}'
+        text = f'{where} {self.field}: expected {self.expected!r}, got {self.got!r}'
+        if self.tolerance is not None and isinstance(self.expected, (int, float)) \
+                and isinstance(self.got, (int, float)):
+            err = abs(self.got - self.expected)
+            text += (f' (|diff| {err:.3g} > atol {self.tolerance.atol:g}'
+                     + (f' + rtol {self.tolerance.rtol:g}' if self.tolerance.rtol else '') + ')')
+        return text
+
+
+@dataclass
+class TopicSummary:
+    """Per-topic outcome: messages paired, messages with a difference, worst error."""
+
+    align: str
+    expected: int
+    got: int
+    paired: int = 0
+    differing: int = 0               # paired messages with at least one field out of tolerance
+    unpaired: int = 0                # expected messages with no partner (and extra ones)
+    fields: set = field(default_factory=set)
+    max_abs_error: float = 0.0
 
 
 @dataclass
 class Comparison:
-    """Result of :func:`compare_bags`."""
+    """Result of :func:`compare_bags` / :func:`compare_messages`."""
 
     topics: list[str]
-    messages: dict[str, int]
-    differences: list[Difference] = field(default_factory=list)
+    messages: dict[str, int]                        # expected messages per topic
+    differences: list[Difference] = field(default_factory=list)   # the first max_differences
     max_abs_error: dict[str, float] = field(default_factory=dict)
-    repeats: dict[str, int] = field(default_factory=dict)   # repeated stamps dropped (new bag)
+    repeats: dict[str, int] = field(default_factory=dict)   # repeated stamps dropped (new run)
+    total_differences: int = 0
+    summary: dict[str, TopicSummary] = field(default_factory=dict)
+    max_differences: int = 50
 
     @property
     def equal(self) -> bool:
-        return not self.differences
+        return self.total_differences == 0
 
 
 def flatten(msg: Any, prefix: str = '') -> Iterator[tuple[str, Any]]:
@@ -77,64 +191,164 @@ def flatten(msg: Any, prefix: str = '') -> Iterator[tuple[str, Any]]:
         yield from flatten(getattr(msg, name), f'{prefix}.{name}' if prefix else name)
 
 
-def _messages(path, typestore) -> tuple[dict[str, list[tuple[int, Any]]], dict[str, int]]:
-    """Messages per topic; repeats of a header stamp already seen on the topic (the plant
-    republishes a lockstep step while it waits) are dropped and counted."""
-    out: dict[str, list[tuple[int, Any]]] = {}
+def _stamp(msg: Any) -> tuple[int, int] | None:
+    header = getattr(msg, 'header', None)
+    if header is None or not hasattr(header, 'stamp'):
+        return None
+    return int(header.stamp.sec), int(header.stamp.nanosec)
+
+
+def read_topic_messages(path: str | os.PathLike, topics: Iterable[str] | None = None
+                        ) -> tuple[dict[str, list[Message]], dict[str, int], int]:
+    """Messages per topic in bag order, the repeats dropped, and the bag's first time (ns).
+
+    A stamped message repeating a header stamp already seen on its topic is dropped
+    and counted.  Types unknown to the Jazzy typestore are read with the definitions
+    stored in the bag.
+    """
+    out: dict[str, list[Message]] = {}
     repeats: dict[str, int] = {}
     seen: dict[str, set] = {}
+    wanted = None if topics is None else set(topics)
+    first = None
     reader = open_reader(path)
     try:
-        for conn, ts, raw in reader.messages():
-            msg = typestore.deserialize_cdr(raw, conn.msgtype)
-            header = getattr(msg, 'header', None)
-            if header is not None:
-                stamp = (header.stamp.sec, header.stamp.nanosec)
-                stamps = seen.setdefault(conn.topic, set())
-                if stamp in stamps:
-                    repeats[conn.topic] = repeats.get(conn.topic, 0) + 1
-                    continue
-                stamps.add(stamp)
-            out.setdefault(conn.topic, []).append((ts, msg))
+        ts = typestore_for(reader)
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        try:
+            for conn, t, raw in reader.messages(connections=conns):
+                first = t if first is None else min(first, t)
+                msg = ts.deserialize_cdr(raw, conn.msgtype)
+                stamp = _stamp(msg)
+                if stamp is not None:
+                    stamps = seen.setdefault(conn.topic, set())
+                    if stamp in stamps:
+                        repeats[conn.topic] = repeats.get(conn.topic, 0) + 1
+                        continue
+                    stamps.add(stamp)
+                out.setdefault(conn.topic, []).append((t, msg))
+        except (ValueError, IndexError, KeyError, AssertionError) as exc:
+            raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: {exc}); '
+                           'the bag is damaged - try `nonfragile_tracker bag repair`') from None
     finally:
         reader.close()
-    return out, repeats
+    return out, repeats, first if first is not None else 0
 
 
-def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
-                 topics: Iterable[str] | None = None, rtol: float = 0.0, atol: float = 1e-9,
-                 receive_time: bool = False, max_differences: int = 50) -> Comparison:
-    """Compare ``got`` with the golden bag ``expected`` (see module docstring)."""
-    ts = jazzy_typestore()
-    (exp, _), (new, repeats) = _messages(expected, ts), _messages(got, ts)
-    names = sorted(topics) if topics is not None else sorted(set(exp) | set(new))
-    result = Comparison(topics=names, messages={k: len(v) for k, v in exp.items()},
-                        repeats=repeats)
-    diffs = result.differences
+def _pairs(align: str, a: Sequence[Message], b: Sequence[Message], ta0: int, tb0: int,
+           time_tol: float) -> tuple[list[tuple[int, int]], list[int], list[int]]:
+    """Index pairs (i in a, j in b), unpaired indices of a, unpaired of b."""
+    if align == 'index':
+        n = min(len(a), len(b))
+        return [(i, i) for i in range(n)], list(range(n, len(a))), list(range(n, len(b)))
+    if align == 'stamp':
+        where = {_stamp(m): j for j, (_, m) in enumerate(b)}
+        pairs, lost = [], []
+        for i, (_, m) in enumerate(a):
+            j = where.pop(_stamp(m), None)
+            (lost.append(i) if j is None else pairs.append((i, j)))
+        return pairs, lost, sorted(where.values())
+    # time: nearest unused partner within the tolerance, in order
+    tb = [t - tb0 for t, _ in b]
+    used = [False] * len(b)
+    tol = int(round(time_tol * 1e9))
+    pairs, lost = [], []
+    for i, (t, _) in enumerate(a):
+        t -= ta0
+        k = bisect.bisect_left(tb, t - tol)
+        best, dist = None, None
+        while k < len(tb) and tb[k] <= t + tol:
+            if not used[k] and (dist is None or abs(tb[k] - t) < dist):
+                best, dist = k, abs(tb[k] - t)
+            k += 1
+        if best is None:
+            lost.append(i)
+        else:
+            used[best] = True
+            pairs.append((i, best))
+    return pairs, lost, [j for j, u in enumerate(used) if not u]
 
-    def add(d: Difference) -> bool:
-        diffs.append(d)
-        return len(diffs) >= max_differences
+
+def _auto(a: Sequence[Message], b: Sequence[Message]) -> str:
+    sa = [_stamp(m) for _, m in a]
+    if sa and all(s is not None for s in sa):
+        sb = {_stamp(m) for _, m in b}
+        if sum(1 for s in sa if s in sb) >= 0.5 * len(sa):
+            return 'stamp'
+    return 'index' if len(a) == len(b) else 'time'
+
+
+def compare_messages(expected: Mapping[str, Sequence[Message]],
+                     got: Mapping[str, Sequence[Message]], *,
+                     topics: Iterable[str] | None = None, rtol: float = 0.0, atol: float = 1e-9,
+                     tolerances: Iterable[tuple[str, str, Tolerance] | str] = (),
+                     align: str | Mapping[str, str] = 'auto',
+                     time_tolerance: float = DEFAULT_TIME_TOLERANCE,
+                     expected_start_ns: int | None = None, got_start_ns: int | None = None,
+                     receive_time: bool = False, max_differences: int = 50) -> Comparison:
+    """The comparison engine: ``{topic: [(receive ns, message), ...]}`` on both sides.
+
+    ``tolerances`` are rules from :func:`parse_tolerance` (or their strings); other
+    fields use ``atol``/``rtol``.  ``align`` is one of :data:`ALIGNMENTS` or a mapping
+    topic -> alignment.  Differences beyond ``max_differences`` are counted, not kept.
+    """
+    rules = _Rules(Tolerance(atol, rtol), (parse_tolerance(r) if isinstance(r, str) else r
+                                           for r in tolerances))
+    if not isinstance(max_differences, int) or max_differences < 0:
+        raise BagError(f'max_differences must be an integer >= 0, got {max_differences!r}')
+    if not (math.isfinite(time_tolerance) and time_tolerance >= 0):
+        raise BagError(f'time tolerance must be a finite number >= 0 s, got {time_tolerance!r}')
+    names = sorted(topics) if topics is not None else sorted(set(expected) | set(got))
+
+    def start(side):
+        firsts = [msgs[0][0] for msgs in side.values() if msgs]
+        return min(firsts) if firsts else 0
+
+    ta0 = start(expected) if expected_start_ns is None else expected_start_ns
+    tb0 = start(got) if got_start_ns is None else got_start_ns
+    result = Comparison(topics=names, messages={k: len(v) for k, v in expected.items()},
+                        max_differences=max_differences)
+
+    def add(d: Difference) -> None:
+        result.total_differences += 1
+        if len(result.differences) < max_differences:
+            result.differences.append(d)
 
     for topic in names:
-        a, b = exp.get(topic), new.get(topic)
+        a, b = expected.get(topic), got.get(topic)
         if a is None or b is None:
-            if add(Difference(topic, None, 'topic', 'present' if a is not None else 'absent',
-                              'present' if b is not None else 'absent')):
-                return result
+            add(Difference(topic, None, 'topic', 'present' if a is not None else 'absent',
+                           'present' if b is not None else 'absent'))
             continue
+        how = align.get(topic, 'auto') if isinstance(align, Mapping) else align
+        if how not in ALIGNMENTS:
+            raise BagError(f'alignment {how!r} is not one of {", ".join(ALIGNMENTS)}')
+        if how == 'auto':
+            how = _auto(a, b)
+        summ = TopicSummary(how, len(a), len(b))
+        result.summary[topic] = summ
         if len(a) != len(b):
-            if add(Difference(topic, None, 'message count', len(a), len(b))):
-                return result
+            add(Difference(topic, None, 'message count', len(a), len(b)))
+        pairs, lost, extra = _pairs(how, a, b, ta0, tb0, time_tolerance)
+        summ.paired, summ.unpaired = len(pairs), len(lost) + len(extra)
+        if how != 'index':
+            for i in lost:
+                add(Difference(topic, i, f'no partner ({how} alignment)',
+                               _describe(how, a[i], ta0), 'missing'))
+            for j in extra:
+                add(Difference(topic, None, f'extra message ({how} alignment)', 'none',
+                               _describe(how, b[j], tb0)))
         worst = 0.0
-        for i, ((ta, ma), (tb, mb)) in enumerate(zip(a, b)):
-            if receive_time and ta != tb and add(Difference(topic, i, 'receive time (ns)', ta,
-                                                            tb)):
-                return result
+        for i, j in pairs:
+            (ta, ma), (tb, mb) = a[i], b[j]
+            bad = False
+            if receive_time and how != 'time' and ta != tb:
+                add(Difference(topic, i, 'receive time (ns)', ta, tb))
+                bad = True
             for (fa, va), (fb, vb) in zip(flatten(ma), flatten(mb)):
                 if fa != fb:
-                    if add(Difference(topic, i, fa, 'field layout', fb)):
-                        return result
+                    add(Difference(topic, i, fa, 'field layout', fb))
+                    bad = True
                     break
                 if isinstance(va, (int, float)) and isinstance(vb, (int, float)) \
                         and not isinstance(va, bool):
@@ -142,21 +356,101 @@ def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
                         continue
                     err = abs(va - vb)
                     worst = max(worst, err if math.isfinite(err) else math.inf)
-                    if not err <= atol + rtol * abs(va):
-                        if add(Difference(topic, i, fa, va, vb)):
-                            return result
+                    tol = rules.get(topic, fa)
+                    if not tol.ok(va, vb):
+                        add(Difference(topic, i, fa, va, vb, tol))
+                        summ.fields.add(fa)
+                        bad = True
                 elif va != vb:
-                    if add(Difference(topic, i, fa, va, vb)):
-                        return result
+                    add(Difference(topic, i, fa, va, vb))
+                    summ.fields.add(fa)
+                    bad = True
+            summ.differing += bad
+        summ.max_abs_error = worst
         result.max_abs_error[topic] = worst
     return result
 
 
-def format_differences(cmp: Comparison, limit: int = 20) -> str:
-    """Readable diff of a comparison (empty string when the bags agree)."""
+def _describe(how: str, item: Message, t0: int) -> str:
+    t, msg = item
+    if how == 'stamp':
+        s = _stamp(msg)
+        return f'stamp {s[0]}.{s[1]:09d}' if s else 'unstamped'
+    return f'at {(t - t0) * 1e-9:.6f} s'
+
+
+def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
+                 topics: Iterable[str] | None = None, rtol: float = 0.0, atol: float = 1e-9,
+                 tolerances: Iterable[tuple[str, str, Tolerance] | str] = (),
+                 align: str | Mapping[str, str] = 'auto',
+                 time_tolerance: float = DEFAULT_TIME_TOLERANCE, receive_time: bool = False,
+                 max_differences: int = 50) -> Comparison:
+    """Compare the bag ``got`` with the bag ``expected`` (see the module docstring).
+
+    Parameters
+    ----------
+    expected, got : path-like
+        Bag directories (or single MCAP files without metadata.yaml).
+    topics : iterable of str, optional
+        Stored topic names to compare (default: every topic of either bag).
+    rtol, atol : float
+        Default tolerance of numeric fields.
+    tolerances : iterable of str or rule
+        Per topic/field rules ``TOPIC.FIELD=ABS[,REL]`` (:func:`parse_tolerance`).
+    align : str or mapping
+        ``auto``, ``stamp``, ``index`` or ``time`` (per topic with a mapping).
+    time_tolerance : float
+        Largest receive-time distance (s) of a pair in ``time`` alignment.
+    receive_time : bool
+        Also compare the bags' receive timestamps (stamp/index alignment).
+    max_differences : int
+        Differences kept in ``Comparison.differences`` (all are counted).
+
+    Returns
+    -------
+    Comparison
+        ``equal`` is True when nothing differs beyond the tolerances.
+
+    Raises
+    ------
+    BagError
+        A bag cannot be read (an :class:`~nonfragile_tracker.errors.InputError`, exit 2).
+    """
+    exp, _, t0a = read_topic_messages(expected, topics)
+    new, repeats, t0b = read_topic_messages(got, topics)
+    cmp = compare_messages(exp, new, topics=topics, rtol=rtol, atol=atol, tolerances=tolerances,
+                           align=align, time_tolerance=time_tolerance, expected_start_ns=t0a,
+                           got_start_ns=t0b, receive_time=receive_time,
+                           max_differences=max_differences)
+    cmp.repeats = repeats
+    return cmp
+
+
+def format_differences(cmp: Comparison, limit: int | None = None) -> str:
+    """Readable diff of a comparison (empty string when the runs agree).
+
+    The first ``limit`` differences (default: all that were kept), then one summary
+    line per topic: alignment, messages, pairs, messages that differ, fields, worst error.
+    """
     if cmp.equal:
         return ''
-    lines = [f'{len(cmp.differences)} difference(s)'
-             + (' (stopped at the limit)' if len(cmp.differences) >= limit else '') + ':']
-    lines += [f'  {d}' for d in cmp.differences[:limit]]
+    limit = len(cmp.differences) if limit is None else limit
+    shown = cmp.differences[:limit]
+    lines = [f'{cmp.total_differences} difference(s); first {len(shown)}:']
+    lines += [f'  {d}' for d in shown]
+    if cmp.total_differences > len(shown):
+        lines.append(f'  ... and {cmp.total_differences - len(shown)} more')
+    lines.append('summary per topic:')
+    for topic in cmp.topics:
+        s = cmp.summary.get(topic)
+        if s is None:
+            lines.append(f'  {topic}: missing on one side')
+            continue
+        fields = ', '.join(sorted(s.fields)[:6]) + (' ...' if len(s.fields) > 6 else '')
+        status = 'equal' if not (s.differing or s.unpaired or s.expected != s.got) else \
+            f'{s.differing} of {s.paired} paired messages differ' \
+            + (f' ({fields})' if fields else '') + (f', {s.unpaired} unpaired' if s.unpaired
+                                                    else '')
+        lines.append(f'  {topic} [{s.align}]: expected {s.expected}, got {s.got}; {status}; '
+                     f'max |diff| {s.max_abs_error:.3g}')
     return '\n'.join(lines)

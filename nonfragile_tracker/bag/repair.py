@@ -10,8 +10,11 @@ with the same topics, message types, offered QoS profiles (from the MCAP
 channel metadata, else :func:`~nonfragile_tracker.bag.writer.default_qos`),
 timestamps (MCAP log time) and bytes.
 
-A bag whose MCAP is complete but whose metadata.yaml is missing is rebuilt the
-same way (nothing is lost).  A complete bag is refused
+A bag whose MCAP is complete but whose metadata.yaml is missing or unreadable is
+rebuilt the same way (nothing is lost), and so is an MCAP written by another
+recorder (e.g. the ``mcap`` writer, any profile) given as a directory or as the
+``.mcap`` file: its channels with CDR messages and ``ros2msg`` schemas become bag
+topics (others are skipped and named).  A complete, readable bag is refused
 (:class:`NothingToRepairError`).
 """
 from __future__ import annotations
@@ -31,7 +34,7 @@ from rosbags.interfaces import Qos
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
-from .reader import MCAP_MAGIC, BagNotFoundError, NotABagError, mcap_is_complete
+from .reader import MCAP_MAGIC, BagNotFoundError, NotABagError, mcap_is_complete, open_reader
 from .writer import BagError, BagExistsError, BagWriter
 
 __all__ = ['RepairError', 'NothingToRepairError', 'McapScan', 'RepairResult', 'scan_mcap',
@@ -175,6 +178,14 @@ def _offered_qos(channel: Channel) -> list[Qos] | None:
     return profiles or None
 
 
+def _opens(path: Path) -> bool:
+    try:
+        open_reader(path).close()
+    except BagError:
+        return False
+    return True
+
+
 def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) -> RepairResult:
     """Write a closed copy of a bag that was not closed; return what was recovered.
 
@@ -187,25 +198,37 @@ def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) ->
     if not src.exists():
         raise BagNotFoundError(f'bag directory {src} does not exist; pass the directory the '
                                'recorder created')
-    if not src.is_dir():
-        raise NotABagError(f'{src} is a file; pass the bag directory that holds the .mcap file')
-    mcaps = sorted(src.glob('*.mcap'))
+    if src.is_file():
+        if src.suffix != '.mcap':
+            raise NotABagError(f'{src} is a file but not .mcap; pass the bag directory that '
+                               'holds the .mcap file, or the .mcap file')
+        mcaps = [src]
+        default_out = src.with_name(src.stem + '_repaired')
+    else:
+        mcaps = sorted(src.glob('*.mcap'))
+        default_out = src.with_name(src.name + '_repaired')
     if not mcaps:
         raise NotABagError(f'{src} holds no .mcap file; there is nothing to repair (only MCAP '
                            'bags can be repaired)')
-    if (src / 'metadata.yaml').exists() and all(mcap_is_complete(m) for m in mcaps):
+    if src.is_dir() and (src / 'metadata.yaml').exists() \
+            and all(mcap_is_complete(m) for m in mcaps) and _opens(src):
         raise NothingToRepairError(f'{src} is complete (closed MCAP and metadata.yaml); nothing '
                                    'to repair - read it directly')
-    dst = Path(out) if out is not None else src.with_name(src.name + '_repaired')
+    dst = Path(out) if out is not None else default_out
     if dst.exists():
         raise BagExistsError(f'repair output {dst} exists already; it is never overwritten. '
                              'Pass another output directory (out=...) or remove it.')
     scans = [scan_mcap(m) for m in mcaps]
     channels: dict[str, tuple[str, list[Qos] | None, str]] = {}   # topic -> type, qos, msgdef
+    foreign: dict[str, str] = {}          # topic -> encodings we cannot write into a bag
     for scan in scans:
         for ch in scan.channels.values():
             schema = scan.schemas.get(ch.schema_id)
             if schema is None:
+                continue
+            if ch.message_encoding != 'cdr' or schema.encoding != 'ros2msg':
+                foreign[ch.topic] = (f'{ch.topic} ({ch.message_encoding} messages, '
+                                     f'{schema.encoding or "no"} schema)')
                 continue
             msgdef = schema.data.decode('utf-8', errors='replace')
             prev = channels.get(ch.topic)
@@ -215,6 +238,10 @@ def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) ->
             if prev is None or (prev[1] is None and _offered_qos(ch) is not None):
                 channels[ch.topic] = (schema.name, _offered_qos(ch), msgdef)
     total = sum(len(s.messages) for s in scans)
+    if not channels and foreign:
+        raise RepairError(f'{src} holds no ROS 2 data: {", ".join(sorted(foreign.values()))}; '
+                          'only MCAP channels with cdr messages and ros2msg schemas can be '
+                          'written into a rosbag2 bag')
     if not channels and total == 0:
         why = '; '.join(f'{s.path.name}: {s.problem or "no chunk was complete"}' for s in scans)
         raise RepairError(f'nothing recoverable in {src}: no complete chunk was written before '
@@ -229,6 +256,8 @@ def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) ->
         for scan in scans:
             for msg in scan.messages:
                 ch = scan.channels.get(msg.channel_id)
+                if ch is not None and ch.topic in foreign:
+                    continue
                 if ch is None or ch.topic not in channels:
                     orphans += 1
                     continue
@@ -243,4 +272,5 @@ def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) ->
         chunks=sum(s.chunks for s in scans),
         complete_source=all(s.complete for s in scans),
         discarded_bytes=sum(s.discarded_bytes for s in scans), orphan_messages=orphans,
-        problems=tuple(f'{s.path.name}: {s.problem}' for s in scans if s.problem))
+        problems=tuple(f'{s.path.name}: {s.problem}' for s in scans if s.problem)
+        + tuple(f'skipped {v}: not ROS 2 (cdr + ros2msg)' for v in sorted(foreign.values())))

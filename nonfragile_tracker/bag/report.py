@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +29,11 @@ from matplotlib.figure import Figure
 
 from .. import topics
 from ..control.metrics import TrackingMetrics, tracking_metrics
-from .reader import BagData, MissingTopicsError, read_bag
+from .reader import MissingTopicsError, read_bag
 from .writer import BagError
 
-__all__ = ['Gap', 'Report', 'bag_report', 'format_report', 'find_gaps', 'PLOTS',
-           'GAP_FACTOR']
+__all__ = ['Gap', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'find_gaps',
+           'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH']
 
 #: File names of the figures written by :func:`bag_report`.
 PLOTS = ('xy.png', 'errors.png', 'xi.png', 'commands.png')
@@ -63,16 +63,54 @@ class Gap:
 
 
 @dataclass(frozen=True)
+class TimingMetrics:
+    """Real-time timing of a run, from header stamps and the recorder's receive times.
+
+    Rates are messages per second; jitter is the standard deviation of the step
+    between consecutive odometry messages; a *missing* command is an odometry interval
+    (from one odometry receive time to the next) in which no command was received; a
+    command is *late* when its latency exceeds ``late_threshold`` (default: the median
+    odometry step).  Latency (input to command) is the receive time of a command minus
+    the receive time of the last odometry received before it (both on the recorder's
+    clock); ``stamp_latency`` uses that odometry's header stamp instead (only when the
+    stamps are on the recorder's clock, else NaN).
+    """
+
+    odom_count: int
+    odom_rate: float                 # from header stamps (1/s)
+    odom_step_median: float          # s
+    odom_jitter: float               # std of header-stamp steps (s)
+    odom_step_max: float
+    odom_receive_jitter: float       # std of receive-time steps (s)
+    command_count: int
+    command_rate: float              # from receive times (1/s)
+    missing_commands: int            # odometry intervals without a command
+    late_commands: int
+    late_threshold: float            # s
+    latency_median: float            # s
+    latency_p95: float
+    latency_max: float
+    stamp_latency_median: float      # s; NaN when the clocks differ
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
 class Report:
-    """Everything :func:`bag_report` found; times in s, distances in m."""
+    """Everything :func:`bag_report` found; times in s, distances in m.
+
+    ``metrics`` is None when the bag has no reference (or no pose); ``timing`` is
+    None without odometry; ``notes`` say what was missing and what is still reported.
+    """
 
     bag: Path
-    metrics: TrackingMetrics
+    metrics: TrackingMetrics | None
     counts: dict[str, int]
     msgtypes: dict[str, str]
     duplicates: dict[str, int]
     pose_topic: str
-    matched: int                    # pose samples with a reference at the same stamp
+    matched: int                    # pose samples compared with the reference
     pose_samples: int
     reference_samples: int
     command_samples: int
@@ -82,10 +120,14 @@ class Report:
     plots: dict[str, Path] = field(default_factory=dict)
     out_dir: Path | None = None
     command_time_note: str = ''
+    mode: str = 'lockstep'          # lockstep (stamps matched) or realtime (interpolated)
+    timing: TimingMetrics | None = None
+    notes: tuple[str, ...] = ()
+    path_length: float = math.nan   # m, robot path in the x-y plane
 
     @property
     def tolerance(self) -> float:
-        return self.metrics.tolerance
+        return self.metrics.tolerance if self.metrics is not None else math.nan
 
 
 def find_gaps(topic: str, t: np.ndarray, factor: float = GAP_FACTOR
@@ -99,62 +141,141 @@ def find_gaps(topic: str, t: np.ndarray, factor: float = GAP_FACTOR
     return med, [Gap(topic, int(i + 1), float(t[i]), float(t[i + 1]), med) for i in idx]
 
 
-def _require(data: BagData) -> None:
-    run = data.run
-    missing = []
-    if len(run.pose) == 0:
-        missing.append(f'{topics.ODOM} (or {topics.POSE})')
-    if len(run.reference) == 0:
-        missing.append(f'{topics.REF_POSE} + {topics.REF_TWIST} + {topics.REF_ACCEL} '
-                       'with common stamps')
-    if len(run.commands) == 0:
-        missing.append(topics.CMD_VEL)
-    if missing:
-        raise MissingTopicsError(
-            f'bag {data.path} has no messages on {", ".join(missing)}; a report needs the pose, '
-            'the reference and the commands of a run (message counts: '
-            f'{data.counts or "none"})', missing)
+def _rate(ns: np.ndarray) -> float:
+    if ns.size < 2 or ns[-1] == ns[0]:
+        return math.nan
+    return float((ns.size - 1) / ((ns[-1] - ns[0]) * 1e-9))
+
+
+def timing_metrics(odom_stamp_ns: np.ndarray, odom_receive_ns: np.ndarray,
+                   cmd_receive_ns: np.ndarray, *, late_threshold: float | None = None
+                   ) -> TimingMetrics:
+    """Timing of a real-time run (see :class:`TimingMetrics`); arrays in ns.
+
+    ``odom_stamp_ns`` and ``odom_receive_ns`` are per odometry message (sorted by
+    stamp); ``cmd_receive_ns`` per command.
+    """
+    st = np.asarray(odom_stamp_ns, dtype=np.int64)
+    rv = np.sort(np.asarray(odom_receive_ns, dtype=np.int64))
+    cr = np.sort(np.asarray(cmd_receive_ns, dtype=np.int64))
+    steps = np.diff(st) * 1e-9
+    med = float(np.median(steps)) if steps.size else math.nan
+    thr = float(late_threshold) if late_threshold is not None else med
+    nan = math.nan
+    if rv.size and cr.size:
+        # commands per odometry interval [r_i, r_i+1) (the last interval is open-ended)
+        per = np.diff(np.searchsorted(cr, rv, side='left'), append=cr.size)
+        first_cmd = int(np.searchsorted(rv, cr[0], side='right')) - 1
+        # intervals before the first command are start-up, not missing
+        missing = int(np.count_nonzero(per[max(first_cmd, 0):] == 0))
+        idx = np.searchsorted(rv, cr, side='right') - 1
+        ok = idx >= 0
+        lat = (cr[ok] - rv[idx[ok]]) * 1e-9
+        order = np.argsort(odom_receive_ns, kind='stable')
+        st_by_recv = np.asarray(odom_stamp_ns, dtype=np.int64)[order]
+        slat = (cr[ok] - st_by_recv[idx[ok]]) * 1e-9
+        same_clock = slat.size and abs(float(np.median(slat))) < 60.0
+    else:
+        missing, lat, slat, same_clock = (int(rv.size) if cr.size == 0 and rv.size else 0), \
+            np.zeros(0), np.zeros(0), False
+    late = int(np.count_nonzero(lat > thr)) if lat.size and math.isfinite(thr) else 0
+    return TimingMetrics(
+        odom_count=int(st.size), odom_rate=_rate(st), odom_step_median=med,
+        odom_jitter=float(np.std(steps)) if steps.size else nan,
+        odom_step_max=float(steps.max()) if steps.size else nan,
+        odom_receive_jitter=float(np.std(np.diff(rv) * 1e-9)) if rv.size > 1 else nan,
+        command_count=int(cr.size), command_rate=_rate(cr), missing_commands=missing,
+        late_commands=late, late_threshold=thr,
+        latency_median=float(np.median(lat)) if lat.size else nan,
+        latency_p95=float(np.percentile(lat, 95)) if lat.size else nan,
+        latency_max=float(lat.max()) if lat.size else nan,
+        stamp_latency_median=float(np.median(slat)) if same_clock else nan)
+
+
+#: Fraction of pose stamps that must equal a reference stamp for a lockstep match.
+LOCKSTEP_MATCH = 0.5
 
 
 def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
                tolerance: float = 0.01, plots: bool = True, namespace: str | None = None,
-               overwrite: bool = False) -> Report:
-    """Metrics, counts, gaps and (with ``plots``) the four PNGs of the run in bag ``path``.
+               overwrite: bool = False, topic_overrides: dict[str, str] | None = None,
+               late_threshold: float | None = None) -> Report:
+    """Metrics, timing, counts, gaps and (with ``plots``) the PNGs of the run in bag ``path``.
 
-    Figures go to ``out_dir`` (default ``<path>_report``; created).  Existing
-    figures are never replaced unless ``overwrite`` (:class:`BagError` otherwise).  Raises :class:`BagError` subclasses: for a bag
-    without odom/pose, reference or cmd_vel a :class:`MissingTopicsError`
-    naming the missing topics.
+    Lockstep bags (most pose stamps equal a reference stamp) are matched by stamp;
+    real-time bags get the reference interpolated (linearly) at each pose stamp within
+    the reference's time span.  Figures go to ``out_dir`` (default ``<path>_report``;
+    created); existing figures are never replaced unless ``overwrite``.  A bag without a
+    reference still gets timing and the path (``notes`` say so); a bag with neither
+    odometry/pose nor commands raises :class:`MissingTopicsError`.
     """
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f'tolerance must be a finite distance > 0 m, got {tolerance!r}')
-    data = read_bag(path, strict=True, namespace=namespace)
-    _require(data)
+        raise BagError(f'tolerance must be a finite distance > 0 m, got {tolerance!r}')
+    data = read_bag(path, strict=False, namespace=namespace, topic_overrides=topic_overrides)
     run = data.run
     pose, ref, cmd = run.pose, run.reference, run.commands
-    common, ip, ir = np.intersect1d(pose.stamp_ns, ref.stamp_ns, assume_unique=True,
-                                    return_indices=True)
-    if common.size == 0:
-        raise BagError(f'bag {path}: no pose stamp equals a reference stamp (pose '
-                       f'{pose.t[0]:.3f}..{pose.t[-1]:.3f} s, reference {ref.t[0]:.3f}..'
-                       f'{ref.t[-1]:.3f} s); the report matches samples by header stamp, so '
-                       'record a lockstep run or stamp both from the same clock')
-    t0 = int(min(pose.stamp_ns[0], ref.stamp_ns[0]))
-    t = (common - t0) * 1e-9
-    x, y, th, v = pose.x[ip], pose.y[ip], pose.th[ip], pose.v[ip]
-    xd, yd, vxd, vyd = ref.x[ir], ref.y[ir], ref.vx[ir], ref.vy[ir]
-    metrics = tracking_metrics(t, x, y, xd, yd, cmd.v, cmd.w, tolerance=tolerance)
-    med, gaps = find_gaps(pose.topic, (pose.stamp_ns - t0) * 1e-9)
+    if len(pose) == 0 and len(cmd) == 0:
+        raise MissingTopicsError(
+            f'bag {path} has no odometry ({topics.ODOM}, nav_msgs/Odometry, or {topics.POSE}) '
+            f'and no commands ({topics.CMD_VEL}, Twist or TwistStamped): nothing to report '
+            f'(topics: {data.counts or "none"}). Name them with --odom/--cmd if they are '
+            'recorded under other names.', [topics.ODOM, topics.CMD_VEL])
+    notes = []
+    if len(pose) == 0:
+        notes.append(f'no odometry ({topics.ODOM} or {topics.POSE}): reporting commands only '
+                     '(no tracking metrics, no timing of inputs)')
+    if len(ref) == 0:
+        notes.append(f'no reference ({topics.REF_POSE} + {topics.REF_TWIST} + '
+                     f'{topics.REF_ACCEL}, or a nav_msgs/Path): reporting timing and the path '
+                     'only (no tracking metrics)')
+    if len(cmd) == 0:
+        notes.append(f'no commands ({topics.CMD_VEL}): no command rate, latency or peaks')
+    starts = [a[0] for a in (pose.stamp_ns, ref.stamp_ns) if a.size]
+    t0 = int(min(starts)) if starts else int(cmd.receive_ns[0])
+    mode, metrics, matched = 'realtime', None, 0
+    x = y = xd = yd = vxd = vyd = th = v = t = np.zeros(0)
+    if len(pose) and len(ref):
+        common, ip, ir = np.intersect1d(pose.stamp_ns, ref.stamp_ns, assume_unique=True,
+                                        return_indices=True)
+        if common.size >= LOCKSTEP_MATCH * len(pose):
+            mode = 'lockstep'
+            sel = ip
+            xd, yd, vxd, vyd = ref.x[ir], ref.y[ir], ref.vx[ir], ref.vy[ir]
+        else:
+            sel = np.flatnonzero((pose.stamp_ns >= ref.stamp_ns[0])
+                                 & (pose.stamp_ns <= ref.stamp_ns[-1]))
+            rt = (ref.stamp_ns - t0) * 1e-9
+            pt = (pose.stamp_ns[sel] - t0) * 1e-9
+            xd, yd, vxd, vyd = (np.interp(pt, rt, a) for a in (ref.x, ref.y, ref.vx, ref.vy))
+            if sel.size == 0:
+                notes.append(f'no pose stamp lies within the reference\'s time span (pose '
+                             f'{pose.t[0]:.3f}..{pose.t[-1]:.3f} s, reference {ref.t[0]:.3f}..'
+                             f'{ref.t[-1]:.3f} s): the stamps come from different clocks; no '
+                             'tracking metrics')
+        matched = int(sel.size)
+        if matched:
+            t = (pose.stamp_ns[sel] - t0) * 1e-9
+            x, y, th, v = pose.x[sel], pose.y[sel], pose.th[sel], pose.v[sel]
+            metrics = tracking_metrics(t, x, y, xd, yd, cmd.v, cmd.w, tolerance=tolerance)
+    med, gaps = find_gaps(pose.topic, (pose.stamp_ns - t0) * 1e-9) if len(pose) \
+        else (math.nan, [])
+    timing = timing_metrics(pose.stamp_ns, pose.receive_ns, cmd.receive_ns,
+                            late_threshold=late_threshold) if len(pose) else None
     if cmd.receive_ns.size and abs(int(cmd.receive_ns[0]) - t0) < _SAME_CLOCK_NS:
         tc, note = (cmd.receive_ns - t0) * 1e-9, ''
-    else:
+    elif cmd.receive_ns.size:
         tc = (cmd.receive_ns - cmd.receive_ns[0]) * 1e-9
         note = 'command times are receive times on another clock: shown from the first command'
+    else:
+        tc, note = np.zeros(0), ''
+    length = float(np.sum(np.hypot(np.diff(pose.x), np.diff(pose.y)))) if len(pose) > 1 \
+        else math.nan
     report = Report(bag=Path(path), metrics=metrics, counts=dict(data.counts),
                     msgtypes=dict(data.msgtypes), duplicates=dict(data.duplicates),
-                    pose_topic=pose.topic, matched=int(common.size), pose_samples=len(pose),
+                    pose_topic=pose.topic, matched=matched, pose_samples=len(pose),
                     reference_samples=len(ref), command_samples=len(cmd), t0_ns=t0,
-                    median_step=med, gaps=tuple(gaps), command_time_note=note)
+                    median_step=med, gaps=tuple(gaps), command_time_note=note, mode=mode,
+                    timing=timing, notes=tuple(notes), path_length=length)
     if not plots:
         return report
     out = Path(out_dir) if out_dir is not None else Path(f'{Path(path)}_report')
@@ -162,19 +283,23 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BagError(f'cannot create report directory {out}: {exc.strerror or exc}') from None
-    names = ('xy.png', 'errors.png', 'xi.png', 'commands.png')
-    existing = [n for n in names if (out / n).exists()]
+    files = {}
+    if len(pose):
+        files['xy.png'] = lambda: _plot_xy(pose.x if metrics is None else x,
+                                           pose.y if metrics is None else y, xd, yd, ref.x,
+                                           ref.y, pose.topic)
+    if metrics is not None:
+        files['errors.png'] = lambda: _plot_errors(t, x - xd, y - yd, tolerance)
+        files['xi.png'] = lambda: _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose.topic)
+    if len(cmd):
+        files['commands.png'] = lambda: _plot_commands(tc, cmd.v, cmd.w, note)
+    existing = [n for n in files if (out / n).exists()]
     if existing and not overwrite:
         raise BagError(f'{out} already holds {", ".join(existing)}; pass --force to replace '
                        'them or choose another --out')
-    files = {
-        'xy.png': _plot_xy(x, y, xd, yd, ref.x, ref.y, pose.topic),
-        'errors.png': _plot_errors(t, x - xd, y - yd, tolerance),
-        'xi.png': _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose.topic),
-        'commands.png': _plot_commands(tc, cmd.v, cmd.w, note),
-    }
     written = {}
-    for name, fig in files.items():
+    for name, make in files.items():
+        fig = make()
         target = out / name
         FigureCanvasAgg(fig)
         fig.savefig(target, dpi=110)
@@ -186,12 +311,15 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
 # Figures
 
 def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
-    fig = Figure(figsize=(6.4, 6.0), layout='constrained')
+    fig = Figure(figsize=(6.4, 6.0))
+    fig.subplots_adjust(left=0.13, right=0.97, top=0.93, bottom=0.09)
     ax = fig.add_subplot()
-    ax.plot(rx, ry, 'k--', lw=1.2, label='reference $(x_d, y_d)$')
+    if len(rx):
+        ax.plot(rx, ry, 'k--', lw=1.2, label='reference $(x_d, y_d)$')
     ax.plot(x, y, 'C0-', lw=1.5, label=f'robot $(x, y)$ ({pose_topic})')
     ax.plot(x[:1], y[:1], 'C0o', label='robot start')
-    ax.plot(xd[:1], yd[:1], 'ks', mfc='none', label='reference start')
+    if len(xd):
+        ax.plot(xd[:1], yd[:1], 'ks', mfc='none', label='reference start')
     ax.set_aspect('equal', adjustable='datalim')
     ax.set_xlabel('x (m)')
     ax.set_ylabel('y (m)')
@@ -202,7 +330,8 @@ def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
 
 
 def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
-    fig = Figure(figsize=(7.5, 7.0), layout='constrained')
+    fig = Figure(figsize=(7.5, 7.0))
+    fig.subplots_adjust(left=0.12, right=0.97, top=0.94, bottom=0.08, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     err = np.hypot(ex, ey)
     for ax, val, lab, col in ((axes[0], ex, '$x - x_d$ (m)', 'C0'),
@@ -221,7 +350,8 @@ def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
 
 
 def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
-    fig = Figure(figsize=(8.0, 8.0), layout='constrained')
+    fig = Figure(figsize=(8.0, 8.0))
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.07, hspace=0.12)
     axes = fig.subplots(4, 1, sharex=True)
     have_v = bool(np.isfinite(v).any())
     xi = (x, v * np.cos(th), y, v * np.sin(th))
@@ -246,7 +376,8 @@ def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
 
 
 def _plot_commands(t, v, w, note: str) -> Figure:
-    fig = Figure(figsize=(7.5, 5.5), layout='constrained')
+    fig = Figure(figsize=(7.5, 5.5))
+    fig.subplots_adjust(left=0.12, right=0.97, top=0.93, bottom=0.1, hspace=0.12)
     axes = fig.subplots(2, 1, sharex=True)
     axes[0].plot(t, v, 'C0-', lw=1.2, label='v = cmd_vel.linear.x')
     axes[0].set_ylabel('v (m/s)')
@@ -270,26 +401,47 @@ def _fmt(value: float, unit: str, digits: int = 4) -> str:
 
 
 def format_report(report: Report) -> str:
-    """A readable summary: metrics table, messages per topic, gaps and plot files."""
+    """A readable summary: metrics table, timing, messages per topic, gaps and plot files."""
     m = report.metrics
-    tol = f'{m.tolerance * 100:g} cm'
-    rows = [
-        ('samples (pose matched with reference)', f'{report.matched} of {report.pose_samples}'),
-        ('steps', str(m.steps)),
-        ('duration', _fmt(m.duration, 's')),
-        ('final position error', _fmt(m.final_error, 'm')),
-        ('RMS position error', _fmt(m.rms_error, 'm')),
-        (f'first within {tol}', _fmt(m.first_within, 's')),
-        (f'enters and stays within {tol} at', _fmt(m.settling_time, 's')),
-        ('RMS error after settling', _fmt(m.rms_error_settled, 'm')),
-        ('max error after settling', _fmt(m.max_error_settled, 'm')),
-        ('peak |v| (cmd_vel)', _fmt(m.peak_abs_v, 'm/s')),
-        ('peak |w| (cmd_vel)', _fmt(m.peak_abs_w, 'rad/s')),
-        ('pose step (median)', _fmt(report.median_step, 's')),
-    ]
-    width = max(len(r[0]) for r in rows)
-    lines = [f'Bag {report.bag} (pose from {report.pose_topic})', '',
-             f'{"metric":<{width}}  value', f'{"-" * width}  {"-" * 16}']
+    rows = []
+    if m is not None:
+        tol = f'{m.tolerance * 100:g} cm'
+        how = 'matched with' if report.mode == 'lockstep' else 'within the span of'
+        rows += [
+            (f'samples (pose {how} reference)', f'{report.matched} of {report.pose_samples}'),
+            ('steps', str(m.steps)),
+            ('duration', _fmt(m.duration, 's')),
+            ('final position error', _fmt(m.final_error, 'm')),
+            ('RMS position error', _fmt(m.rms_error, 'm')),
+            (f'first within {tol}', _fmt(m.first_within, 's')),
+            (f'enters and stays within {tol} at', _fmt(m.settling_time, 's')),
+            ('RMS error after settling', _fmt(m.rms_error_settled, 'm')),
+            ('max error after settling', _fmt(m.max_error_settled, 'm')),
+            ('peak |v| (cmd_vel)', _fmt(m.peak_abs_v, 'm/s')),
+            ('peak |w| (cmd_vel)', _fmt(m.peak_abs_w, 'rad/s')),
+        ]
+    if report.pose_samples:
+        rows += [('path length', _fmt(report.path_length, 'm')),
+                 ('pose step (median)', _fmt(report.median_step, 's'))]
+    tm = report.timing
+    if tm is not None and report.mode == 'realtime':
+        rows += [
+            ('odometry rate (stamps)', _fmt(tm.odom_rate, 'Hz')),
+            ('odometry jitter (std of stamp step)', _fmt(tm.odom_jitter, 's')),
+            ('odometry max step', _fmt(tm.odom_step_max, 's')),
+            ('odometry receive jitter', _fmt(tm.odom_receive_jitter, 's')),
+            ('command rate (receive)', _fmt(tm.command_rate, 'Hz')),
+            ('odometry intervals without a command', str(tm.missing_commands)),
+            (f'late commands (> {tm.late_threshold * 1e3:.3g} ms)', str(tm.late_commands)),
+            ('input-to-command latency median', _fmt(tm.latency_median, 's')),
+            ('input-to-command latency p95 / max',
+             f'{_fmt(tm.latency_p95, "s")} / {_fmt(tm.latency_max, "s")}'),
+            ('odom stamp to command latency median', _fmt(tm.stamp_latency_median, 's')),
+        ]
+    width = max((len(r[0]) for r in rows), default=6)
+    lines = [f'Bag {report.bag} ({report.mode}; pose from {report.pose_topic or "none"})']
+    lines += [f'note: {n}' for n in report.notes]
+    lines += ['', f'{"metric":<{width}}  value', f'{"-" * width}  {"-" * 16}']
     lines += [f'{k:<{width}}  {v}' for k, v in rows]
     lines += ['', 'messages per topic:']
     tw = max((len(t) for t in report.counts), default=5)
@@ -307,7 +459,7 @@ def format_report(report: Report) -> str:
                          f'~{g.missing_samples} samples missing)')
         if len(report.gaps) > 10:
             lines.append(f'  ... and {len(report.gaps) - 10} more')
-    else:
+    elif report.pose_samples:
         lines += ['', f'gaps on {report.pose_topic}: none']
     if report.command_time_note:
         lines.append(f'note: {report.command_time_note}')

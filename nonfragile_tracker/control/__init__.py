@@ -1,0 +1,1 @@
+"""The ROS-free control core: model, synthesis, certificates, delay analysis, simulation."""

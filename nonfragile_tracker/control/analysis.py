@@ -38,6 +38,7 @@ class GainAnalysis:
     tau: float = 0.0
 
     def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
         return asdict(self)
 
 
@@ -72,9 +73,12 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
 
 def certified_decay_rate(problem: Problem, K, *, hi: float = 50.0, rel_tol: float = 1e-3
                          ) -> float:
-    """Largest ``alpha`` with Theorem 1 (non-fragile) certifying ``K`` on the shifted problem
-    (``A + alpha I``, ``e^{alpha tau} A_tau``): every ``||D(t)|| <= 1`` decays at least as
-    ``e^{-alpha t}``.  0.0 if ``K`` is not certified at all."""
+    """Largest ``alpha`` with Theorem 1 (non-fragile) certifying ``K`` on the shifted problem.
+
+    The shifted problem is (``A + alpha I``, ``e^{alpha tau} A_tau``): every
+    ``||D(t)|| <= 1`` decays at least as ``e^{-alpha t}``.  0.0 if ``K`` is not
+    certified at all.
+    """
     from .design import shifted_problem
     from .search import largest_feasible
 
@@ -103,7 +107,8 @@ def format_analysis(rows: list[GainAnalysis]) -> str:
     keys = list(rows[0].abscissa)
     lines = [('', [r.name for r in rows]),
              ('||K||_2', [_fmt(r.norm) for r in rows]),
-             ('Theorem 1 nominal certified', ['yes' if r.certified_nominal else 'no' for r in rows]),
+             ('Theorem 1 nominal certified',
+              ['yes' if r.certified_nominal else 'no' for r in rows]),
              ('Theorem 1 non-fragile certified',
               ['yes' if r.certified_nonfragile else 'no' for r in rows]),
              (f'abscissa, D = 0 (tau = {rows[0].tau:g} s)',

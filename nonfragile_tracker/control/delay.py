@@ -34,6 +34,8 @@ from typing import Any, Callable
 import numpy as np
 import scipy.linalg as sla
 
+from .validate import as_matrix, as_square
+
 __all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
            'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',
            'fragility_margin']
@@ -42,46 +44,10 @@ N_MIN = 16          # smallest discretization degree used by the adaptive rule
 N_MAX = 192         # largest discretization degree the adaptive rule will use
 RES_TOL = 1e-9      # a refined root is accepted iff its relative residual is below this
 STABLE_TOL = 1e-10  # is_stable: abscissa < -STABLE_TOL
+DENSE_MAX = 160     # generator size n (N+1) up to which a dense eig is used
 
 
 # ----------------------------------------------------------------------------- validation
-
-def _matrix(value: Any, name: str, rows: int | None = None, cols: int | None = None
-            ) -> np.ndarray:
-    """Finite real 2-D float array (a scalar becomes 1x1); ValueError naming ``name``."""
-    if value is None or isinstance(value, (str, bytes)):
-        raise ValueError(f'{name}: expected a real matrix, got {value!r}')
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name}: expected a real matrix ({exc})') from None
-    if np.iscomplexobj(arr):
-        raise ValueError(f'{name}: expected a real matrix, got complex entries')
-    try:
-        arr = np.array(arr, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name}: expected a matrix of numbers ({exc})') from None
-    if arr.ndim == 0:
-        arr = arr.reshape(1, 1)
-    if arr.ndim != 2:
-        raise ValueError(f'{name}: expected a 2-D matrix, got an array of shape {arr.shape}')
-    want = (rows if rows is not None else arr.shape[0], cols if cols is not None else arr.shape[1])
-    if arr.shape != want:
-        exp = f"({'n' if rows is None else rows}, {'*' if cols is None else cols})"
-        raise ValueError(f'{name}: expected shape {exp}, got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name}: all entries must be finite')
-    return arr
-
-
-def _square(value: Any, name: str, n: int | None = None) -> np.ndarray:
-    arr = _matrix(value, name)
-    if arr.shape[0] != arr.shape[1]:
-        raise ValueError(f'{name}: expected a square matrix, got shape {arr.shape}')
-    if n is not None and arr.shape != (n, n):
-        raise ValueError(f'{name}: expected shape ({n}, {n}), got {arr.shape}')
-    return arr
-
 
 def _delay(tau: Any, name: str = 'tau') -> float:
     try:
@@ -94,19 +60,19 @@ def _delay(tau: Any, name: str = 'tau') -> float:
 
 
 def _pair(A0: Any, A1: Any, tau: Any) -> tuple[np.ndarray, np.ndarray, float]:
-    a0 = _square(A0, 'A0')
-    return a0, _square(A1, 'A1', a0.shape[0]), _delay(tau)
+    a0 = as_square(A0, 'A0')
+    return a0, as_square(A1, 'A1', a0.shape[0]), _delay(tau)
 
 
 def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any):
-    a = _square(A, 'A')
+    a = as_square(A, 'A')
     n = a.shape[0]
-    b = _matrix(B, 'B', n, None)
+    b = as_matrix(B, 'B', (n, None))
     m = b.shape[1]
-    k = _matrix(K, 'K', m, n)
-    a1 = _square(A_tau, 'A_tau', n)
-    e = _matrix(E, 'E', m, None)
-    f = _matrix(F, 'F', None, n)
+    k = as_matrix(K, 'K', (m, n))
+    a1 = as_square(A_tau, 'A_tau', n)
+    e = as_matrix(E, 'E', (m, None))
+    f = as_matrix(F, 'F', (None, n))
     return a, b, k, a1, _delay(tau), e, f
 
 
@@ -138,16 +104,16 @@ def closed_loop_matrix(A: Any, B: Any, K: Any, E: Any = None, F: Any = None,
     ValueError
         If a matrix is not finite or has the wrong shape (the message names it).
     """
-    a = _square(A, 'A')
+    a = as_square(A, 'A')
     n = a.shape[0]
-    b = _matrix(B, 'B', n, None)
+    b = as_matrix(B, 'B', (n, None))
     m = b.shape[1]
-    k = _matrix(K, 'K', m, n)
-    e = np.eye(m) if E is None else _matrix(E, 'E', m, None)
-    f = np.eye(n) if F is None else _matrix(F, 'F', None, n)
+    k = as_matrix(K, 'K', (m, n))
+    e = np.eye(m) if E is None else as_matrix(E, 'E', (m, None))
+    f = np.eye(n) if F is None else as_matrix(F, 'F', (None, n))
     if Delta is None:
         return a + b @ k
-    d = _matrix(Delta, 'Delta', e.shape[1], f.shape[0])
+    d = as_matrix(Delta, 'Delta', (e.shape[1], f.shape[0]))
     return a + b @ (k + e @ d @ f)
 
 
@@ -194,6 +160,21 @@ def _cheb(N: int) -> np.ndarray:
     return D
 
 
+@lru_cache(maxsize=64)
+def _cheb_resolvent(N: int, tau: float, sigma: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Shift-invert pieces of the Chebyshev differentiation matrix (cached, read-only).
+
+    ``G = (Dt[1:, 1:] - sigma I)^-1``, ``d0 = Dt[1:, 0]`` and ``c = G[-1] @ d0``, with
+    ``Dt = (2 / tau) D_N`` (see :class:`_ShiftInvert`).
+    """
+    Dt = _cheb(N) * (2.0 / tau)
+    G = np.linalg.inv(Dt[1:, 1:] - sigma * np.eye(N))
+    d0 = np.ascontiguousarray(Dt[1:, 0])
+    G.setflags(write=False)
+    d0.setflags(write=False)
+    return G, d0, float(G[-1] @ d0)
+
+
 def _generator(A0: np.ndarray, A1: np.ndarray, tau: float, N: int) -> np.ndarray:
     """BMV discretization of the infinitesimal generator, size n (N+1).
 
@@ -224,6 +205,8 @@ class _Char:
         self.I = np.eye(self.n)
         self.nrm0 = float(np.linalg.norm(A0, 2)) if self.n else 0.0
         self.nrm1 = float(np.linalg.norm(A1, 2)) if self.n else 0.0
+        self.hmax = float(np.linalg.eigvalsh(0.5 * (A0 + A0.T))[-1]) if self.n else 0.0
+        self.skew = float(np.linalg.norm(0.5 * (A0 - A0.T), 2)) if self.n else 0.0
 
     def T(self, s: complex) -> np.ndarray:
         return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
@@ -322,8 +305,87 @@ def _resolved_radius(N: int, tau: float) -> float:
 
 
 def _radius(ch: _Char, re: float) -> float:
-    """Bound on |s| for every root with Re s >= re: ||A0|| + ||A1|| exp(-re tau)."""
-    return ch.nrm0 + ch.nrm1 * math.exp(min(-re * ch.tau, 700.0))
+    """Bound on |s| for every root with Re s >= re.
+
+    A root is ``s = v^H A0 v + z v^H A1 v`` (``T(s) v = 0``, ``|v| = 1``,
+    ``z = exp(-s tau)``, ``|z| <= exp(-re tau) =: e``), so
+    ``Re s <= h + ||A1|| e`` (``h = lambda_max(He A0 / 2)``),
+    ``|Im s| <= ||(A0 - A0^T) / 2|| + ||A1|| e`` and ``|s| <= ||A0|| + ||A1|| e``;
+    the smaller of the disc and of the rectangle ``[re, Re max] x [-Im max, Im max]``'s
+    farthest corner.
+    """
+    e = ch.nrm1 * math.exp(min(-re * ch.tau, 700.0))
+    re_hi, im_hi = ch.hmax + e, ch.skew + e
+    if re_hi < re:
+        return 0.0
+    return min(ch.nrm0 + e, math.hypot(max(abs(re), abs(re_hi)), im_hi))
+
+
+class _ShiftInvert:
+    """``(M - sigma I)^-1 b`` for the generator ``M`` of :func:`_generator` in O(n N^2 + n^2).
+
+    With ``X`` the ``(N+1, n)`` node-major reshape of ``x`` and ``Dt = (2/tau) D_N``,
+    rows ``1..N`` give ``X[1:] = G (B[1:] - d0 x0^T)`` with
+    ``G = (Dt[1:, 1:] - sigma I)^-1`` and ``d0 = Dt[1:, 0]``; hence
+    ``x_N = g^T B[1:] - c x0`` (``g`` the last row of ``G``, ``c = g^T d0``) and row 0,
+    ``(A0 - sigma I) x0 + A1 x_N = b0``, is the n x n system
+    ``(A0 - sigma I - c A1) x0 = b0 - A1 B[1:]^T g``.
+    """
+
+    def __init__(self, ch: _Char, N: int, sigma: float) -> None:
+        n = ch.n
+        self.G, self.d0, c = _cheb_resolvent(N, ch.tau, sigma)
+        self.g = self.G[-1]
+        S = ch.A0 - sigma * np.eye(n) - c * ch.A1
+        self.lu = sla.lu_factor(S, check_finite=False)
+        piv = np.abs(np.diag(self.lu[0]))
+        self.ok = bool(np.all(np.isfinite(self.G)) and piv.min() > 1e-13 * max(piv.max(), 1.0))
+        self.A1, self.N, self.n = ch.A1, N, n
+
+    def __call__(self, b: np.ndarray) -> np.ndarray:
+        B = b.reshape(self.N + 1, self.n)
+        x0 = sla.lu_solve(self.lu, B[0] - self.A1 @ (self.g @ B[1:]), check_finite=False)
+        X1 = self.G @ (B[1:] - np.outer(self.d0, x0))
+        return np.concatenate([x0, X1.ravel()])
+
+
+def _generator_eigs(ch: _Char, N: int, k: int) -> tuple[np.ndarray, float]:
+    """Eigenvalues of the generator: all of them (dense) or the ``k`` nearest a shift.
+
+    Returns ``(ev, covered)``: every eigenvalue of modulus ``< covered`` is in
+    ``ev`` (``covered = inf`` for the dense solve).  Small matrices (``n (N+1) <=
+    DENSE_MAX``) or ``k`` close to the size use LAPACK; otherwise shift-invert
+    Arnoldi (``scipy.sparse.linalg.eigs`` on :class:`_ShiftInvert`) returns the
+    ``k`` eigenvalues nearest ``sigma`` (0, or a small real shift if ``0`` is
+    too close to an eigenvalue): the disc ``|lambda - sigma| < rho_k`` holds no
+    other eigenvalue, so ``covered = rho_k - |sigma|``.
+    """
+    size = ch.n * (N + 1)
+    if size > DENSE_MAX and k < size // 3:
+        from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigs
+        scale = max(ch.nrm0 + ch.nrm1, 1e-300)
+        for sigma in (0.0, 1e-2 * scale, -3e-2 * scale):
+            op = _ShiftInvert(ch, N, sigma)
+            if not op.ok:
+                continue
+            lin = LinearOperator((size, size), matvec=op, dtype=float)
+            try:
+                # Ritz values to 1e-8 (relative) suffice: Newton refines every root
+                mu = eigs(lin, k=k, which='LM', return_eigenvectors=False, tol=1e-8,
+                          v0=np.ones(size) / math.sqrt(size))
+            except (ArpackError, ArpackNoConvergence):
+                break
+            mu = mu[mu != 0]
+            if mu.size == 0 or not np.all(np.isfinite(mu)):
+                break
+            ev = sigma + 1.0 / mu
+            rho = float(np.max(np.abs(ev - sigma)))
+            up = ev[ev.imag >= 0]           # a pair may be cut at the disc's edge: keep
+            lo = ev[ev.imag < 0].conj()     # one member of each, with Im >= 0
+            lo = [z for z in lo if up.size == 0 or np.min(np.abs(up - z)) > 1e-8 * abs(z)]
+            ev = np.concatenate([up, np.asarray(lo, dtype=complex)])
+            return ev, rho * (1.0 - 1e-9) - abs(sigma)
+    return np.linalg.eigvals(_generator(ch.A0, ch.A1, ch.tau, N)), math.inf
 
 
 def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float], bool]:
@@ -334,10 +396,37 @@ def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float]
     of decreasing real part until ``count`` roots are found and the remaining
     candidates lie to their left.  ``agree`` is false if a candidate to the
     right of the last returned root failed to refine or moved by more than
-    1e-6 (relative).
+    1e-6 (relative).  With the shift-invert solver the number ``k`` of
+    eigenvalues computed is doubled until they cover the disc
+    ``|s| <= 1.05 R(a)`` that holds every root right of the last returned one
+    (``a`` its real part, ``R`` of :func:`_radius`), or the resolved disc.
     """
-    ev = np.linalg.eigvals(_generator(ch.A0, ch.A1, ch.tau, N))
-    ev = ev[np.abs(ev) <= _resolved_radius(N, ch.tau)]
+    r_res = _resolved_radius(N, ch.tau)
+    key = (ch.n, N, count)
+    k = _K_USED.get(key, max(2 * count + 10, 2 * ch.n + 12))
+    while True:
+        ev, covered = _generator_eigs(ch, N, k)
+        out, resid, agree = _refine(ch, ev[np.abs(ev) <= r_res], count)
+        need = r_res if not out else min(r_res, 1.05 * _radius(ch, out[-1].real) + 1e-9)
+        if covered >= need or math.isinf(covered):
+            if not math.isinf(covered):
+                if len(_K_USED) > 256:
+                    _K_USED.clear()
+                _K_USED[key] = k
+            return out, resid, agree
+        k = 2 * k
+
+
+# degree that converged last time, per (n, tau, count): the start of the adaptive rule
+_N_USED: dict[tuple[int, float, int], int] = {}
+
+# k that covered the needed disc last time, per (n, N, count): margin and worst-case
+# searches evaluate many nearby loops of one shape, so the first call learns it
+_K_USED: dict[tuple[int, int, int], int] = {}
+
+
+def _refine(ch: _Char, ev: np.ndarray, count: int) -> tuple[list[complex], list[float], bool]:
+    """Newton-refine candidate eigenvalues in order of decreasing real part (see _roots_at)."""
     ev = ev[np.argsort(-ev.real, kind='stable')]
     found: list[complex] = []          # distinct roots with Im >= 0
     resid: list[float] = []
@@ -389,10 +478,17 @@ def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
     if not np.any(A1):
         return _delay_free(ch, A0, count)
     adaptive = N is None
+    key = (ch.n, tau, count)
     if adaptive:
-        # resolves the region Re s >= 0 (enough when the loop is near the stability
-        # boundary); capped because R(abscissa) is much smaller for unstable loops
-        N = min(_n_needed(ch.nrm0 + ch.nrm1, tau), 32)
+        N = _N_USED.get(key)
+        if N is None:
+            # resolve R(a0), a0 a guess of the last wanted root's real part from the
+            # delay-free matrices A0 + A1 and A0 (only a start: the loop below checks);
+            # capped because the loop raises N when needed
+            re = np.sort(np.concatenate([np.linalg.eigvals(A0 + A1).real,
+                                         np.linalg.eigvals(A0).real]))[::-1]
+            a0 = min(0.0, float(re[min(count, re.size) - 1]))
+            N = min(_n_needed(_radius(ch, 1.2 * a0), tau), 64)
     N = int(N)
     retried = False
     while True:
@@ -409,6 +505,10 @@ def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
             N = min(N_MAX, 2 * N)
         else:
             break
+    if adaptive and ok:
+        if len(_N_USED) > 256:
+            _N_USED.clear()
+        _N_USED[key] = N
     if not roots:
         raise RuntimeError(f'rightmost_roots: no characteristic root could be refined (N={N})')
     absc = max(z.real for z in roots)
@@ -457,18 +557,27 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
     exceeds ``1e-9`` are dropped and coincident ones merged, so in the delay
     case each distinct root is listed once (multiplicity is not reported).
 
-    Adaptive degree: any root with ``Re s >= a`` satisfies
-    ``|s| <= ||A0|| + ||A1|| exp(-a tau) =: R(a)``; ``exp(s theta)`` on
-    ``[-tau, 0]`` is resolved for ``|s| <= R`` by ``N >= 12 + 1.2 R tau``
-    (at least 16), and only discretized eigenvalues inside that disc are used
-    (the discretization also has spurious ones of large modulus).  The
-    degree starts from ``R(0)`` (at most 32) and is raised, up to 192, until
-    it covers ``R(a)`` for ``a`` the real part of the last returned root and
-    every discretized eigenvalue right of ``a`` refined to a root within
-    ``1e-6`` (relative); ``converged`` reports whether that succeeded.  The
-    bound uses norms, so stiff systems (``||A0|| tau`` in the hundreds) hit
-    the cap and report ``converged=False`` although their rightmost roots are
-    usually right.  An explicit ``N`` disables the adaptation.
+    Adaptive degree: any root with ``Re s >= a`` satisfies ``|s| <= R(a)``, the
+    smaller of ``||A0|| + ||A1|| e`` and the farthest corner of the rectangle
+    ``a <= Re s <= lambda_max(He A0 / 2) + ||A1|| e``,
+    ``|Im s| <= ||(A0 - A0^T) / 2|| + ||A1|| e`` (``e = exp(-a tau)``; numerical-range
+    bounds).  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for ``|s| <= R`` by
+    ``N >= 12 + 1.2 R tau`` (at least 16), and only discretized eigenvalues inside that
+    disc are used (the discretization also has spurious ones of large modulus).  The
+    degree starts from ``R(a0)``, ``a0`` a guess from the eigenvalues of ``A0 + A1`` and
+    ``A0`` (at most 64), or from the degree that converged on the previous call for the
+    same ``(n, tau, count)``, and is raised, up to 192, until it covers ``R(a)`` for ``a``
+    the real part of the last returned root and every discretized eigenvalue right of
+    ``a`` refined to a root within ``1e-6`` (relative); ``converged`` reports whether
+    that succeeded.  An explicit ``N`` disables the adaptation.
+
+    Eigenvalues: a generator of size ``n (N+1) <= 160`` is solved densely (LAPACK).
+    Larger ones use shift-invert Arnoldi (ARPACK via ``scipy.sparse.linalg.eigs``) at
+    ``sigma = 0`` with a structured solve of ``(M - sigma I) x = b`` in
+    ``O(n N^2 + n^2)`` (one ``n x n`` LU per call): the ``k`` eigenvalues nearest
+    ``sigma`` fill a disc that holds no other eigenvalue, and ``k`` is doubled until
+    that disc covers ``1.05 R(a)``.  The ``k`` that sufficed is remembered per shape,
+    so the many calls of margin and worst-case searches start from it.
 
     ``tau == 0`` is solved as ``eig(A0 + A1)`` and ``A1 == 0`` as ``eig(A0)``
     (``N = 0``; roots repeated with multiplicity, as LAPACK returns them).
@@ -652,8 +761,8 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
        margins for stability of linear delay systems", Systems & Control
        Letters 26(2):107-117, 1995.
     """
-    a0 = _square(A0, 'A0')
-    a1 = _square(A1, 'A1', a0.shape[0])
+    a0 = as_square(A0, 'A0')
+    a1 = as_square(A1, 'A1', a0.shape[0])
     try:
         tmax = float(tau_max)
     except (TypeError, ValueError):

@@ -125,25 +125,27 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
 
-from .lmi import CertificateError, InfeasibleError, SolverFailure
+from ..errors import CertificateError, InfeasibleError, SolverFailure
 from .problem import Problem
+from .search import golden_section_max
+from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
+                  cached_program, solve)
+from .sdp import sym as _sym
 
-__all__ = ['DEFAULT_EPS_GRID', 'DelayDependentVerification', 'DelayDependentCertificate',
+__all__ = ['DEFAULT_EPS_GRID', 'DescriptorSolution',
+           'DelayDependentVerification', 'DelayDependentCertificate',
            'DelayDependentResult', 'descriptor_verification_matrix', 'verify_delay_dependent',
            'synthesize_delay_dependent', 'max_certified_delay']
 
-DEFAULT_MARGIN = 1e-6
-DEFAULT_SOLVER = 'CLARABEL'
 DEFAULT_EPS_GRID: tuple[float, ...] = tuple(float(e) for e in np.logspace(-3, 2, 21))
 DEFAULT_REFINE = 8
-_OK = ('optimal', 'optimal_inaccurate')
-_INFEASIBLE = ('infeasible', 'infeasible_inaccurate')
+_OK = OK_STATUSES
+_INFEASIBLE = INFEASIBLE_STATUSES
 
 
 # ---------------------------------------------------------------------------------------------
@@ -231,12 +233,35 @@ class DelayDependentResult:
         return self.certificate.verification
 
 
+@dataclass(frozen=True)
+class DescriptorSolution:
+    """One solve of the descriptor SDP at a fixed ``eps`` (solver coordinates).
+
+    ``X`` etc. are ``None`` unless the status is optimal; ``t`` is the strictness
+    (``None`` if the solver gave no value).
+    """
+
+    status: str
+    t: float | None
+    solve_time: float
+    eps: float
+    X: np.ndarray | None = None
+    Y: np.ndarray | None = None
+    Pb: np.ndarray | None = None
+    Sb: np.ndarray | None = None
+    Rb: np.ndarray | None = None
+    lam: float | None = None
+
+    @property
+    def strictness(self) -> float:
+        """``t`` of a usable point, ``-inf`` otherwise."""
+        if self.status not in _OK or self.t is None or self.X is None:
+            return -math.inf
+        return float(self.t)
+
+
 # ---------------------------------------------------------------------------------------------
 # independent verification (numpy only)
-
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
-
 
 def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, lam
                                    ) -> np.ndarray:
@@ -374,7 +399,7 @@ class _DescriptorProgram:
         if self.kappa2 is not None:
             self.kappa2.value = float(kappa) ** 2
 
-    def solve(self, problem: Problem, h: float, eps: float, solver: str) -> dict:
+    def solve(self, problem: Problem, h: float, eps: float, solver: str) -> DescriptorSolution:
         self.eps.value = eps
         self.h2.value = h * h
         self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
@@ -382,57 +407,48 @@ class _DescriptorProgram:
         if not self.nominal:
             self.eBE.value = eps * (problem.B @ problem.E)
         try:
-            with warnings.catch_warnings():
-                # 'optimal_inaccurate' is reported in the status; the point is verified anyway
-                warnings.filterwarnings('ignore', message='Solution may be inaccurate')
-                self.problem.solve(solver=solver)
-        except self.cp.error.SolverError as exc:
-            return dict(status=f'solver_error: {exc}', t=None, solve_time=0.0, eps=eps)
-        stats = self.problem.solver_stats
-        st = float(stats.solve_time or 0.0) if stats is not None else 0.0
-        out = dict(status=self.problem.status, t=self.t.value, solve_time=st, eps=eps)
-        if self.problem.status in _OK and self.X.value is not None:
-            out.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
-                       Pb=np.array(self.Pb.value), Sb=np.array(self.Sb.value),
-                       Rb=np.array(self.Rb.value),
-                       lam=None if self.lam is None else float(self.lam.value))
-        return out
-
-
-_PROGRAMS: dict[tuple, _DescriptorProgram] = {}
+            # 'optimal_inaccurate' is reported in the status; the point is verified anyway
+            out = solve(self.problem, solver, what='the descriptor LMI', quiet_inaccurate=True)
+        except SolverFailure as exc:
+            return DescriptorSolution(status=f'solver_error: {exc}', t=None, solve_time=0.0,
+                                      eps=eps)
+        t = self.t.value
+        if out.status in _OK and self.X.value is not None:
+            return DescriptorSolution(
+                status=out.status, t=None if t is None else float(t),
+                solve_time=out.solve_time, eps=eps, X=np.array(self.X.value),
+                Y=np.array(self.Y.value), Pb=np.array(self.Pb.value),
+                Sb=np.array(self.Sb.value), Rb=np.array(self.Rb.value),
+                lam=None if self.lam is None else float(self.lam.value))
+        return DescriptorSolution(status=out.status, t=None if t is None else float(t),
+                                  solve_time=out.solve_time, eps=eps)
 
 
 def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _DescriptorProgram:
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
-    prog = _PROGRAMS.get(key)
-    if prog is None:
-        prog = _PROGRAMS[key] = _DescriptorProgram(*key)
-    return prog
+    shape = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    return cached_program(('descriptor',) + shape, lambda: _DescriptorProgram(*shape))
 
 
-def _t_of(sol: dict) -> float:
-    t = sol.get('t')
-    if sol['status'] not in _OK or t is None or 'X' not in sol:
-        return -math.inf
-    return float(t)
+def _t_of(sol: DescriptorSolution) -> float:
+    return sol.strictness
 
 
-def _certificate(problem: Problem, h: float, sol: dict, verify_tol: float
+def _certificate(problem: Problem, h: float, sol: DescriptorSolution, verify_tol: float
                  ) -> DelayDependentCertificate:
     """Back transformation of a solver point to original coordinates, then verification."""
-    eps = float(sol['eps'])
-    Xi = np.linalg.inv(sol['X'])
-    K = sol['Y'] @ Xi
-    P1 = _sym(Xi.T @ _sym(sol['Pb']) @ Xi)
-    S = _sym(Xi.T @ _sym(sol['Sb']) @ Xi)
-    R = _sym(Xi.T @ _sym(sol['Rb']) @ Xi)
+    eps = float(sol.eps)
+    Xi = np.linalg.inv(sol.X)
+    K = sol.Y @ Xi
+    P1 = _sym(Xi.T @ _sym(sol.Pb) @ Xi)
+    S = _sym(Xi.T @ _sym(sol.Sb) @ Xi)
+    R = _sym(Xi.T @ _sym(sol.Rb) @ Xi)
     P2 = Xi
     P3 = eps * Xi
     cert = DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
-                                     lam=sol['lam'], verification=None)  # type: ignore[arg-type]
+                                     lam=sol.lam, verification=None)  # type: ignore[arg-type]
     ver = verify_delay_dependent(problem, K, h, cert, tol=verify_tol)
     return DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
-                                     lam=sol['lam'], verification=ver)
+                                     lam=sol.lam, verification=ver)
 
 
 def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_bound) -> None:
@@ -448,22 +464,6 @@ def _describe(problem: Problem, h: float, nominal: bool, gain_bound) -> str:
     kind = 'nominal' if nominal else 'non-fragile'
     bound = '' if gain_bound is None else f', ||K||_2 <= {gain_bound:g}'
     return f'delay-dependent design ({kind}{bound}) for problem {problem.name!r} at h = {h:g}'
-
-
-def _golden(f, a: float, b: float, steps: int) -> None:
-    """Golden-section maximization of f on [a, b] (values are recorded by f itself)."""
-    g = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = f(c), f(d)
-    for _ in range(max(0, steps - 2)):
-        if fc >= fd:
-            b, d, fd = d, c, fc
-            c = b - g * (b - a)
-            fc = f(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + g * (b - a)
-            fd = f(d)
 
 
 def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
@@ -507,7 +507,7 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
     _check_args(problem, h, grid, gain_bound)
     prog = _program(problem, nominal, gain_bound is not None)
     prog.set_data(problem, gain_bound)
-    sols: list[dict] = []
+    sols: list[DescriptorSolution] = []
 
     def run(e: float) -> float:
         sol = prog.solve(problem, h, e, solver)
@@ -521,20 +521,20 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         lo = math.log(grid[order[max(k - 1, 0)]])
         hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
         if hi > lo:
-            _golden(lambda u: run(math.exp(u)), lo, hi, refine)
-    solve_time = sum(s['solve_time'] for s in sols)
-    scan = tuple((float(s['eps']), _t_of(s)) for s in sols)
+            golden_section_max(lambda u: run(math.exp(u)), lo, hi, refine)
+    solve_time = sum(s.solve_time for s in sols)
+    scan = tuple((float(s.eps), _t_of(s)) for s in sols)
     best = max(sols, key=_t_of)
     t_best = _t_of(best)
     what = _describe(problem, h, nominal, gain_bound)
     if t_best < margin:
-        if t_best == -math.inf and not any(s['status'] in _INFEASIBLE or
-                                           (s['status'] in _OK) for s in sols):
+        if t_best == -math.inf and not any(s.status in _INFEASIBLE or
+                                           (s.status in _OK) for s in sols):
             raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
-                                f'(statuses {sorted({s["status"] for s in sols})}); no gain '
+                                f'(statuses {sorted({s.status for s in sols})}); no gain '
                                 'was produced. Check that the solver is installed.')
         best_txt = ('no feasible point' if t_best == -math.inf
-                    else f'best margin t = {t_best:.3g} at eps = {best["eps"]:.3g}')
+                    else f'best margin t = {t_best:.3g} at eps = {best.eps:.3g}')
         e_txt = (f'eps = {grid[0]:g}' if eps is not None
                  else f'eps in [{min(grid):g}, {max(grid):g}]')
         raise InfeasibleError(
@@ -545,17 +545,17 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         cert = _certificate(problem, h, best, verify_tol)
     except np.linalg.LinAlgError:
         raise CertificateError(f'{solver} returned a singular X for the {what} '
-                               f'(eps = {best["eps"]:.3g}); no gain can be recovered') from None
+                               f'(eps = {best.eps:.3g}); no gain can be recovered') from None
     ver = cert.verification
     if not ver.ok:
         raise CertificateError(
-            f'{solver} returned a point for the {what} (eps = {best["eps"]:.3g}) that fails '
+            f'{solver} returned a point for the {what} (eps = {best.eps:.3g}) that fails '
             f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig P1 = '
             f'{ver.min_eig_P1:.3g}, S = {ver.min_eig_S:.3g}, R = {ver.min_eig_R:.3g}. '
             'Use CLARABEL or raise the margin.')
     return DelayDependentResult(
-        K=cert.K, h=h, eps=float(best['eps']), certificate=cert, margin_required=margin,
-        margin_achieved=t_best, status=str(best['status']), solver=solver,
+        K=cert.K, h=h, eps=float(best.eps), certificate=cert, margin_required=margin,
+        margin_achieved=t_best, status=str(best.status), solver=solver,
         solve_time=solve_time, wall_time=time.perf_counter() - t0, nominal=nominal,
         gain_bound=gain_bound, eps_scan=scan, extra={'solves': len(sols)})
 
@@ -597,7 +597,7 @@ def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gai
         if refine > 0 and len(grid) > 1 and tried[grid[k]] > -math.inf:
             lo = math.log(grid[max(k - 1, 0)])
             hi = math.log(grid[min(k + 1, len(grid) - 1)])
-            _golden(lambda u: attempt(math.exp(u)), lo, hi, refine)
+            golden_section_max(lambda u: attempt(math.exp(u)), lo, hi, refine)
     except _Found as found:
         return float(found.args[0])
     return None

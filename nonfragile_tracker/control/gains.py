@@ -9,6 +9,19 @@ A gain file is a ROS 2 parameter file for the ``tracker`` node (in any namespace
 
 Values are always written as floats (a YAML ``[1, 0, ...]`` would be an
 INTEGER_ARRAY, which a DOUBLE_ARRAY parameter rejects).
+
+A file may also record what the gain was designed for, machine-readable, in a section
+of its own that no node reads (a top-level key other than a node section with
+``ros__parameters`` is rejected by ``--params-file``, so the record is one)::
+
+    gain_design:
+      ros__parameters:
+        method: input-delay LMI ...
+        latency_interval: [0.0, 0.1]
+        certified_h_max: 0.31
+        ...
+
+:func:`read_gain_design` returns that mapping (``None`` if absent).
 """
 from __future__ import annotations
 
@@ -19,18 +32,24 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
-from ..errors import InputError
-
+from ..files import read_yaml
 from .loop import LoopConfigError, validate_gain
 
 __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
-           'read_gain_file', 'TRACKER_NODE']
+           'read_gain_file', 'read_gain_design', 'TRACKER_NODE', 'DESIGN_SECTION']
 
 TRACKER_NODE = 'tracker'
+#: Section of a gain file holding the design record (no node of that name exists).
+DESIGN_SECTION = 'gain_design'
 
 
-class GainFileError(InputError):
-    """A gain file or gain parameter is malformed; the message says which and why."""
+class GainFileError(LoopConfigError):
+    """A gain file or gain parameter is malformed; the message says which and why.
+
+    A bad gain is a bad tracker configuration: :func:`validate_gain`'s
+    ``LoopConfigError`` passes through :func:`gain_from_parameters` unchanged and the
+    tracker node catches ``LoopConfigError`` for both.
+    """
 
 
 def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> np.ndarray:
@@ -46,10 +65,7 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
     for i, val in enumerate(flat):
         if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)):
             raise GainFileError(f'K[{i}] is {val!r}; every entry must be a number')
-    try:
-        return validate_gain(list(flat), shape=shp)
-    except LoopConfigError as exc:
-        raise GainFileError(str(exc)) from None
+    return validate_gain(list(flat), shape=shp)
 
 
 def gain_parameters(K) -> dict[str, list]:
@@ -58,15 +74,53 @@ def gain_parameters(K) -> dict[str, list]:
     return {'K': [float(v) for v in K.ravel()], 'K_shape': [int(s) for s in K.shape]}
 
 
+def _design_value(key: str, value: Any) -> Any:
+    """A design-record value as a ROS parameter can hold it (no None, no mixed lists)."""
+    if isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return float(value)
+    if isinstance(value, (list, tuple)) and value and all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            for v in value):
+        return [float(v) for v in value]
+    if isinstance(value, (list, tuple)) and value and all(isinstance(v, str) for v in value):
+        return list(value)
+    raise GainFileError(f'design record {key!r}: {value!r} is not a number, string, bool or '
+                        'a non-empty list of numbers or strings')
+
+
 def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite: bool = False,
-                    extra: dict[str, Any] | None = None) -> Path:
-    """Write the tracker parameter file; refuses to replace an existing file unless asked."""
+                    extra: dict[str, Any] | None = None,
+                    design: dict[str, Any] | None = None) -> Path:
+    """Write the tracker parameter file; refuses to replace an existing file unless asked.
+
+    Parameters
+    ----------
+    path : path-like
+        File to write.
+    K : array_like
+        The gain.
+    comment : str
+        Written as ``#`` lines at the top.
+    overwrite : bool
+        Replace an existing file.
+    extra : dict, optional
+        More tracker parameters.
+    design : dict, optional
+        What the gain was designed for (flat mapping of numbers, strings, bools and
+        lists of numbers), written to the :data:`DESIGN_SECTION` section.
+    """
     path = Path(path)
     params = gain_parameters(K)
     params.update(extra or {})
     text = ''.join(f'# {line}\n' for line in comment.splitlines())
     text += yaml.safe_dump({f'/**/{TRACKER_NODE}': {'ros__parameters': params}},
                            default_flow_style=None, sort_keys=False)
+    if design:
+        record = {str(k): _design_value(str(k), v) for k, v in design.items()}
+        text += yaml.safe_dump({DESIGN_SECTION: {'ros__parameters': record}},
+                               default_flow_style=False, sort_keys=False, width=100)
     mode = 'w' if overwrite else 'x'
     try:
         with open(path, mode) as fh:
@@ -79,14 +133,11 @@ def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite:
 def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndarray:
     """Read ``K`` from a tracker parameter file (``node`` or ``/**`` section)."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise GainFileError(f'{path}: cannot read gain file ({exc.strerror})') from None
-    except yaml.YAMLError as exc:
-        raise GainFileError(f'{path}: not valid YAML ({exc})') from None
+    data = read_yaml(path, 'gain file', error=GainFileError)
     if not isinstance(data, dict):
-        raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section')
+        got = 'an empty file' if data is None else f'a {type(data).__name__}'
+        raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section, '
+                            f'got {got}')
     for key in (f'/**/{node}', node, f'/{node}', '/**'):
         section = data.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict) \
@@ -94,6 +145,24 @@ def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndar
             params = section['ros__parameters']
             try:
                 return gain_from_parameters(params['K'], params.get('K_shape', (2, 4)))
-            except GainFileError as exc:
+            except LoopConfigError as exc:        # add the file's name
                 raise GainFileError(f'{path}: {exc}') from None
     raise GainFileError(f'{path}: no {node}.ros__parameters.K found')
+
+
+def read_gain_design(path: str | os.PathLike) -> dict[str, Any] | None:
+    """The design record of a gain file (see module docstring), ``None`` if it has none."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise GainFileError(f'{path}: cannot read gain file ({exc.strerror})') from None
+    except yaml.YAMLError as exc:
+        raise GainFileError(f'{path}: not valid YAML ({exc})') from None
+    section = data.get(DESIGN_SECTION) if isinstance(data, dict) else None
+    if not isinstance(section, dict):
+        return None
+    params = section.get('ros__parameters')
+    if not isinstance(params, dict):
+        raise GainFileError(f'{path}: section {DESIGN_SECTION!r} has no ros__parameters mapping')
+    return dict(params)

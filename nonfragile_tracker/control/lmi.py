@@ -38,20 +38,22 @@ is :func:`certify_gain`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .problem import Problem
+from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
+                  solve)
+from .sdp import sym as _sym
 
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
            'Verification', 'SynthesisResult', 'CertifyResult', 'verify_certificate',
-           'synthesize', 'certify_gain', 'certified_perturbation_scale']
-
-DEFAULT_MARGIN = 1e-6
-DEFAULT_SOLVER = 'CLARABEL'
+           'synthesize', 'certify_gain', 'certified_perturbation_scale',
+           'UntrustedGainWarning', 'gain_trust_message']
 
 
 @dataclass(frozen=True)
@@ -120,10 +122,6 @@ class CertifyResult:
     margin_achieved: float   # best t in normalized units (> 0 iff certified)
     certificate: Certificate | None
     status: str
-
-
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
 
 
 def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
@@ -235,33 +233,20 @@ class _Theorem1Program:
             self.F.value = problem.F
         if self.kappa2 is not None:
             self.kappa2.value = float(kappa) ** 2
-        try:
-            self.problem.solve(solver=solver)
-        except self.cp.error.SolverError as exc:
-            raise SolverFailure(f'solver {solver} failed on problem {problem.name!r}: {exc}. '
-                                'Check that the solver is installed (pip install clarabel).') \
-                from None
-        stats = self.problem.solver_stats
-        return (self.problem.status, self.t.value, self.X.value, self.W.value, self.R.value,
-                None if self.eps is None else self.eps.value,
-                float(stats.solve_time or 0.0) if stats is not None else 0.0)
-
-
-_PROGRAMS: dict[tuple, _Theorem1Program] = {}
+        out = solve(self.problem, solver, what=f'problem {problem.name!r}')
+        return (out.status, self.t.value, self.X.value, self.W.value, self.R.value,
+                None if self.eps is None else self.eps.value, out.solve_time)
 
 
 def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
-    prog = _PROGRAMS.get(key)
-    if prog is None:
-        prog = _PROGRAMS[key] = _Theorem1Program(*key)
-    return prog
+    shape = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    return cached_program(('theorem1',) + shape, lambda: _Theorem1Program(*shape))
 
 
-def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None = None,
-               solver: str | None = None, gain_bound: float | None = None,
-               verify_tol: float = 1e-9) -> SynthesisResult:
-    """Solve Theorem 1 (or its nominal form) and return a verified gain.
+def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
+                     solver: str | None = None, gain_bound: float | None = None,
+                     verify_tol: float = 1e-9) -> SynthesisResult:
+    """One solve of Theorem 1 (or its nominal form), verified (see :func:`synthesize`).
 
     Parameters
     ----------
@@ -295,15 +280,15 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
     prog = _program(problem, nominal, gain_bound is not None)
     status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
     kind = 'nominal' if nominal else 'non-fragile'
-    if status in ('infeasible', 'infeasible_inaccurate') or (
-            status in ('optimal', 'optimal_inaccurate') and (t is None or t < margin)):
+    verdict = classify(status, t, margin)
+    if verdict == 'infeasible':
         best = 'no feasible point' if t is None else f'best margin t = {t:.3g}'
         bound = '' if gain_bound is None else f' with ||K||_2 <= {gain_bound:g}'
         raise InfeasibleError(
             f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
             f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
             'nominal design, or the delay-dependent design.')
-    if status not in ('optimal', 'optimal_inaccurate') or X is None:
+    if verdict == 'failed' or X is None:
         raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
                             f'{problem.name!r}; no gain was produced')
     P = np.linalg.inv(_sym(X))
@@ -312,16 +297,286 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
     eps_val = None if nominal else float(eps)
     ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
     if not ver.ok:
-        raise CertificateError(
+        err = CertificateError(
             f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
             f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
-            f'min eig Q = {ver.min_eig_Q:.3g}. Use CLARABEL or raise the margin.')
+            f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
+            f't = {t:.3g}). Use CLARABEL or raise the margin.')
+        err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
+        raise err
     cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
     return SynthesisResult(K=K, certificate=cert, margin_required=margin,
                            margin_achieved=float(t), status=status, solver=solver,
                            solve_time=solve_time, wall_time=time.perf_counter() - t0,
                            nominal=nominal,
                            extra={} if gain_bound is None else {'gain_bound': gain_bound})
+
+
+# ---------------------------------------------------------------------------------------------
+# Moderate gains by default, recovery from failed verification, trust warning.
+
+MODERATE_FRACTION = 0.5   # unbounded synthesis: keep this fraction of the best margin t_max
+TRUST_GAIN_NORM = 1e3     # ||K||_2 above this (or cond(P) above TRUST_COND_P): warn
+TRUST_COND_P = 1e8
+SECOND_SOLVER = 'SCS'
+
+
+class UntrustedGainWarning(UserWarning):
+    """A certified gain whose size a double-precision check cannot vouch for."""
+
+
+class _MinNormProgram:
+    """Stage 2 of unbounded synthesis: the smallest gain-norm bound at a given margin.
+
+    Same variables and normalization as the unbounded :class:`_Theorem1Program`
+    (``tr X + tr W + eps <= 1``), margin fixed to ``t_req`` (a parameter), and
+    ``minimize s`` s.t. ``[[s I, R], [R^T, X]] >= 0``, i.e. ``R X^-1 R^T <= s I``:
+    with ``X >= t_req I`` this bounds ``||K||_2 = ||R X^-1||_2 <= sqrt(s / t_req)``.
+    """
+
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool):
+        import cvxpy as cp
+        self.cp = cp
+        self.base = _Theorem1Program(n, m, q, p, nominal, False)
+        b = self.base
+        self.t_req = cp.Parameter(nonneg=True, name='t_req')
+        self.s = cp.Variable(name='s')
+        G = cp.bmat([[self.s * np.eye(m), b.R], [b.R.T, b.X]])
+        cons = [c for c in b.problem.constraints] + [b.t >= self.t_req, 0.5 * (G + G.T) >> 0]
+        self.problem = cp.Problem(cp.Minimize(self.s), cons)
+
+    def solve(self, problem: Problem, solver: str, t_req: float) -> tuple:
+        b = self.base
+        b.A.value, b.B.value, b.Ad.value = problem.A, problem.B, problem.A_tau
+        if not b.nominal:
+            b.BE.value = problem.B @ problem.E
+            b.F.value = problem.F
+        self.t_req.value = float(t_req)
+        try:
+            self.problem.solve(solver=solver)
+        except self.cp.error.SolverError as exc:
+            raise SolverFailure(f'solver {solver} failed on the minimum-norm stage for '
+                                f'problem {problem.name!r}: {exc}') from None
+        stats = self.problem.solver_stats
+        return (self.problem.status, b.t.value, b.X.value, b.W.value, b.R.value,
+                None if b.eps is None else b.eps.value,
+                float(stats.solve_time or 0.0) if stats is not None else 0.0)
+
+
+_MIN_NORM: dict[tuple, _MinNormProgram] = {}
+
+
+def _min_norm_stage(problem: Problem, nominal: bool, solver: str, t_req: float,
+                    verify_tol: float) -> SynthesisResult | None:
+    """Stage 2 (see :class:`_MinNormProgram`); ``None`` if it gives no verified gain."""
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal)
+    prog = _MIN_NORM.get(key)
+    if prog is None:
+        if len(_MIN_NORM) > 32:
+            _MIN_NORM.clear()
+        prog = _MIN_NORM[key] = _MinNormProgram(*key)
+    t0 = time.perf_counter()
+    try:
+        status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, t_req)
+    except SolverFailure:
+        return None
+    if status not in ('optimal', 'optimal_inaccurate') or X is None or t is None:
+        return None
+    try:
+        P = np.linalg.inv(_sym(X))
+        Q = np.linalg.inv(_sym(W))
+    except np.linalg.LinAlgError:
+        return None
+    K = R @ P
+    eps_val = None if nominal else float(eps)
+    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
+    if not ver.ok:
+        return None
+    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
+    return SynthesisResult(K=K, certificate=cert, margin_required=t_req,
+                           margin_achieved=float(t), status=status,
+                           solver=solver, solve_time=solve_time,
+                           wall_time=time.perf_counter() - t0, nominal=nominal)
+
+
+def _balanced(problem: Problem) -> tuple[Problem, np.ndarray]:
+    """Diagonal similarity ``xi = T z`` balancing ``|A| + |A_tau|`` (LAPACK gebal)."""
+    import scipy.linalg as sla
+    M = np.abs(problem.A) + np.abs(problem.A_tau) + np.abs(problem.B) @ np.ones(
+        (problem.m, problem.n)) / max(problem.m, 1)
+    _, (scale, _) = sla.matrix_balance(M, permute=False, separate=True)
+    T = np.diag(scale)
+    Ti = np.diag(1.0 / scale)
+    return problem.replace(A=Ti @ problem.A @ T, B=Ti @ problem.B, A_tau=Ti @ problem.A_tau @ T,
+                           F=problem.F @ T), T
+
+
+def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
+                   verify_tol: float) -> SynthesisResult | None:
+    """Map a gain of the balanced problem back (``K = K_z T^-1``) and verify it there."""
+    Ti = np.linalg.inv(T)
+    c = res.certificate
+    K = c.K @ Ti
+    P = _sym(Ti.T @ c.P @ Ti)
+    Q = _sym(Ti.T @ c.Q @ Ti)
+    ver = verify_certificate(problem, K, P, Q, c.eps, tol=verify_tol)
+    if not ver.ok:
+        return None
+    cert = Certificate(K=K, P=P, Q=Q, eps=c.eps, verification=ver)
+    return replace(res, K=K, certificate=cert)
+
+
+def _verified(problem: Problem, **kw) -> SynthesisResult:
+    """Synthesize once; if the point fails verification, retry before giving up.
+
+    The retries are the balanced problem, a 100x higher margin, then the second solver.
+    """
+    try:
+        return _synthesize_once(problem, **kw)
+    except CertificateError as first:
+        tried = [f'{kw.get("solver") or "default solver"}: {first}']
+        t_first = getattr(first, 'margin_achieved', None)
+    verify_tol = kw.get('verify_tol', 1e-9)
+    margin = float(problem.options.get('margin', DEFAULT_MARGIN) if kw.get('margin') is None
+                   else kw['margin'])
+    solver = str(problem.options.get('solver', DEFAULT_SOLVER) if kw.get('solver') is None
+                 else kw['solver'])
+    if kw.get('gain_bound') is None and t_first is not None:
+        # the most strictly feasible point is often badly scaled (tiny X, huge P and K):
+        # the minimum-norm point at half its margin usually verifies
+        req = max(margin, MODERATE_FRACTION * t_first)
+        res = _min_norm_stage(problem, kw.get('nominal', False), solver, req, verify_tol)
+        if res is not None:
+            return replace(res, margin_required=margin, extra=dict(
+                recovered_by='minimum-norm stage', t_max=t_first, rule='moderate',
+                fraction=MODERATE_FRACTION))
+        tried.append(f'minimum-norm stage at t >= {req:.3g}: no verified point')
+    attempts = [('balanced problem', dict(kw), True),
+                ('margin x100', dict(kw, margin=100 * margin), False),
+                (f'solver {SECOND_SOLVER}', dict(kw, solver=SECOND_SOLVER), False),
+                (f'solver {SECOND_SOLVER}, balanced', dict(kw, solver=SECOND_SOLVER), True)]
+    for what, args, balance in attempts:
+        try:
+            if balance:
+                bal, T = _balanced(problem)
+                res = _from_balanced(problem, _synthesize_once(bal, **args), T, verify_tol)
+                if res is None:
+                    tried.append(f'{what}: the mapped-back certificate fails verification')
+                    continue
+            else:
+                res = _synthesize_once(problem, **args)
+            res.extra['recovered_by'] = what
+            return res
+        except InfeasibleError as exc:
+            tried.append(f'{what}: infeasible ({exc})')
+        except LmiError as exc:
+            tried.append(f'{what}: {exc}')
+    if t_first is not None and t_first < 100 * margin and any(
+            'infeasible' in x for x in tried):
+        raise InfeasibleError(
+            f'Theorem 1 for problem {problem.name!r} is feasible only at the edge: the best '
+            f'margin t = {t_first:.3g} is below 100 x the required {margin:g}, and no point '
+            'found passes the double-precision verification (attempts: '
+            + ' | '.join(tried) + '). Treat it as infeasible: try a smaller A_tau or F, '
+            'the nominal design, or the delay-dependent design.')
+    raise CertificateError(f'no verified gain for problem {problem.name!r}; attempts: '
+                           + ' | '.join(tried))
+
+
+def gain_trust_message(problem: Problem, K, P) -> str | None:
+    """Why a double-precision check cannot vouch for this certified gain, or ``None``.
+
+    Rule: ``||K||_2 > 1e3`` or ``cond(P) > 1e8``.  The check is an eigenvalue test of
+    ``V`` (module docstring) whose entries are ``~ ||P|| ||B|| ||K||``; LAPACK's
+    eigenvalues carry an absolute error ``~ 1e-16 ||V||``, while the slack that proves
+    ``V < 0`` lives on directions where ``P`` is small (``~ ||P|| / cond(P)``).  With
+    ``cond(P) > 1e8`` or a gain that large the proof rests on digits that round-off
+    reaches - and no actuator applies such a gain anyway.
+    """
+    norm = float(np.linalg.norm(K, 2))
+    cond = float(np.linalg.cond(P))
+    if norm <= TRUST_GAIN_NORM and cond <= TRUST_COND_P:
+        return None
+    return (f'gain for {problem.name!r} has ||K||_2 = {norm:.3g} and cond(P) = {cond:.3g}; '
+            f'beyond ||K||_2 <= {TRUST_GAIN_NORM:g} and cond(P) <= {TRUST_COND_P:g} a '
+            'double-precision certificate check is not trustworthy (round-off ~1e-16 ||V|| '
+            'against a slack ~||P|| / cond(P)). Give a gain bound (--gain-bound / '
+            'options.gain_bound).')
+
+
+def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None = None,
+               solver: str | None = None, gain_bound: float | None = None,
+               verify_tol: float = 1e-9, moderate: bool = True) -> SynthesisResult:
+    """Solve Theorem 1 (or its nominal form) and return a verified gain.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
+        delay-independent).
+    nominal : bool
+        Drop the ``E, F`` terms (the paper's "normal state feedback").
+    margin : float
+        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
+        or 1e-6.
+    solver : str
+        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
+    gain_bound : float, optional
+        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
+    moderate : bool
+        Without ``gain_bound``: two stages (default).  Stage 1 finds the largest margin
+        ``t_max`` (the most strictly feasible point, whose gain can be huge: norms of
+        1e6-1e7 on random problems); stage 2 keeps ``t >= max(margin,
+        0.5 t_max)`` and minimizes the gain-norm bound ``s`` with ``R X^-1 R^T <= s I``
+        (:class:`_MinNormProgram`).  ``extra`` records ``rule``, ``t_max`` and the
+        stage-1 norm.  ``False``: stage 1 only (the behaviour before).
+    verify_tol : float
+        Relative tolerance of :func:`verify_certificate`.
+
+    Returns
+    -------
+    SynthesisResult
+        Verified.  If ``||K||_2 > 1e3`` or ``cond(P) > 1e8`` an
+        :class:`UntrustedGainWarning` is issued and ``extra['warning']`` holds why
+        (:func:`gain_trust_message`).
+
+    Raises
+    ------
+    InfeasibleError
+        No point with ``t >= margin`` exists; nothing is returned.
+    SolverFailure
+        The solver is missing or returned no solution.
+    CertificateError
+        The solver's point failed :func:`verify_certificate`, and so did the
+        retries: the balanced problem (diagonal similarity), a 100x higher margin,
+        the second solver (SCS), SCS on the balanced problem.
+    """
+    if gain_bound is not None and not gain_bound > 0:
+        raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
+    t0 = time.perf_counter()
+    kw = dict(nominal=nominal, margin=margin, solver=solver, gain_bound=gain_bound,
+              verify_tol=verify_tol)
+    res = _verified(problem, **kw)
+    if gain_bound is None and moderate and res.extra.get('rule') != 'moderate':
+        t_max = res.margin_achieved
+        req = max(float(res.margin_required), MODERATE_FRACTION * t_max)
+        stage2 = _min_norm_stage(problem, nominal, res.solver, req, verify_tol)
+        norm1 = float(np.linalg.norm(res.K, 2))
+        if stage2 is not None and np.linalg.norm(stage2.K, 2) <= norm1:
+            extra = dict(res.extra, rule='moderate', t_max=t_max, stage1_norm=norm1,
+                         fraction=MODERATE_FRACTION)
+            res = replace(stage2, margin_required=res.margin_required,
+                          solve_time=res.solve_time + stage2.solve_time, extra=extra)
+        else:
+            res.extra.update(rule='max-margin (the minimum-norm stage gave no better '
+                             'verified gain)', t_max=t_max, stage1_norm=norm1)
+    elif gain_bound is None:
+        res.extra.setdefault('rule', 'max-margin')
+    msg = gain_trust_message(problem, res.K, res.P)
+    if msg is not None:
+        res.extra['warning'] = msg
+        warnings.warn(msg, UntrustedGainWarning, stacklevel=2)
+    return replace(res, wall_time=time.perf_counter() - t0)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -361,11 +616,8 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     V = 0.5 * (V + V.T)
     cons += [V << -t * np.eye(V.shape[0]), P >> t * np.eye(n), Q >> t * np.eye(n), norm <= 1]
     prob = cp.Problem(cp.Maximize(t), cons)
-    try:
-        prob.solve(solver=solver)
-    except cp.error.SolverError as exc:
-        raise SolverFailure(f'solver {solver} failed while certifying K: {exc}') from None
-    if prob.status not in ('optimal', 'optimal_inaccurate') or t.value is None:
+    solve(prob, solver, what='the certification LMI for K')
+    if prob.status not in OK_STATUSES or t.value is None:
         return CertifyResult(False, float('-inf'), None, prob.status)
     tv = float(t.value)
     if tv < margin:

@@ -6,6 +6,12 @@
   with the dynamic extension ``v' = a`` held as the tracker's own state.
 * :func:`step_time` - the time of step ``k`` (integer nanoseconds, as in ROS stamps).
 
+Latency as real bases have it (each optional, off by default, so the paper's plant is
+unchanged bit for bit): the plant delays commands by whole steps, passes them through
+the actuator (:mod:`control.actuator`: first-order lag, acceleration limits) and
+reports odometry late, decimated and noisy (:mod:`control.sensors`); the tracker can
+predict the state at the time its command will act (:mod:`control.predictor`).
+
 The ROS nodes call exactly these methods, in the same order as
 :func:`nonfragile_tracker.control.simulate.simulate_tracking`, so a lockstep ROS
 run and an in-process run agree to round-off.  Everything is plain floats for
@@ -21,12 +27,16 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import InputError
+from .actuator import ActuatorModel, actuate
 from .model import xi_from_state
+from .predictor import LatencyPredictor, invert_lag
 from .reference import RefSample
+from .sensors import Odometer, OdometryModel, OdometrySample
+from .validate import as_finite_float, as_matrix
 
 __all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', 'Tracker',
            'Command', 'delay_steps', 'step_time', 'step_time_ns', 'yaw_to_quaternion',
-           'quaternion_to_yaw', 'validate_gain']
+           'quaternion_to_yaw', 'validate_gain', 'odometry_period_steps']
 
 
 class LoopConfigError(InputError):
@@ -67,11 +77,24 @@ def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
     return math.atan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
 
 
-def _matrix4(name: str, value) -> tuple[tuple[float, ...], ...]:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
-        raise LoopConfigError(f'{name} must be a finite 4x4 matrix, got {np.asarray(value)!r}')
-    return tuple(tuple(float(v) for v in row) for row in arr)
+def _nonneg(name: str, value) -> float:
+    return as_finite_float(value, name, low=0.0, error=LoopConfigError)
+
+
+def odometry_period_steps(rate: float, dt: float) -> tuple[int, float]:
+    """Odometry every ``N = round(1 / (rate dt))`` plant steps and the effective rate.
+
+    ``rate = 0`` means every step.  A rate above the plant rate ``1/dt`` is refused;
+    one that does not divide it is rounded (the caller reports the effective rate).
+    """
+    rate = _nonneg('odom_rate', rate)
+    if rate == 0.0:
+        return 1, 1.0 / dt
+    if rate > (1.0 + 1e-9) / dt:
+        raise LoopConfigError(f'odom_rate = {rate} Hz is above the plant rate 1/dt = '
+                              f'{1.0 / dt:g} Hz; use at most {1.0 / dt:g} Hz (0 = every step)')
+    n = max(1, int(round(1.0 / (rate * dt))))
+    return n, 1.0 / (n * dt)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -79,26 +102,82 @@ def _matrix4(name: str, value) -> tuple[tuple[float, ...], ...]:
 
 @dataclass(frozen=True)
 class PlantConfig:
-    """Unicycle plant settings (SI units).  ``A_tau`` acts on ``xi = [x, x', y, y']``."""
+    """Unicycle plant settings (SI units).  ``A_tau`` acts on ``xi = [x, x', y, y']``.
+
+    Defaults are neutral (no delay term, at rest at the origin); the paper's scenario
+    is ``nonfragile_tracker.scenario.paper_plant_config()`` (``config/``).
+
+    Latency settings (all off by default; delays are rounded to whole steps ``dt``):
+    ``cmd_latency`` (s: a command received at step ``k`` acts from step ``k + d``),
+    ``lag_v``, ``lag_w`` (first-order actuator time constants, s),
+    ``max_linear_accel`` (m/s^2), ``max_angular_accel`` (rad/s^2) (0 = unlimited),
+    ``odom_latency`` (s: the measurement of step ``k`` is published at ``k + d`` with
+    the stamp of step ``k``), ``odom_rate`` (Hz, 0 = every step), ``odom_noise``
+    (standard deviations of x, y (m) and yaw (rad)) and ``noise_seed``.
+    """
 
     dt: float = 0.01
-    tau: float = 0.2
-    A_tau: tuple = ((0.01, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0.02, 0), (0, 0, 0, 0))
-    x0: float = 0.7
-    y0: float = 0.1
-    th0: float = math.pi / 2
-    v0: float = 0.05
+    tau: float = 0.0
+    A_tau: tuple = ((0.0,) * 4,) * 4
+    x0: float = 0.0
+    y0: float = 0.0
+    th0: float = 0.0
+    v0: float = 0.0
+    cmd_latency: float = 0.0
+    lag_v: float = 0.0
+    lag_w: float = 0.0
+    max_linear_accel: float = 0.0
+    max_angular_accel: float = 0.0
+    odom_latency: float = 0.0
+    odom_rate: float = 0.0
+    odom_noise: tuple = (0.0, 0.0, 0.0)
+    noise_seed: int = 0
 
     def __post_init__(self):
-        object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+        object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
+            self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
         delay_steps(self.tau, self.dt)
         for name in ('x0', 'y0', 'th0', 'v0'):
             if not math.isfinite(getattr(self, name)):
                 raise LoopConfigError(f'{name} must be finite, got {getattr(self, name)!r}')
+        for name in ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
+                     'odom_latency', 'odom_rate'):
+            object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
+        for name in ('cmd_latency', 'odom_latency'):
+            try:
+                delay_steps(getattr(self, name), self.dt)
+            except LoopConfigError as exc:
+                raise LoopConfigError(f'{name}: {exc}') from None
+        odometry_period_steps(self.odom_rate, self.dt)
+        noise = tuple(self.odom_noise) if not isinstance(self.odom_noise, str) else ()
+        if len(noise) != 3:
+            raise LoopConfigError('odom_noise needs 3 standard deviations [x (m), y (m), '
+                                  f'yaw (rad)], got {self.odom_noise!r}')
+        object.__setattr__(self, 'odom_noise',
+                           tuple(_nonneg(f'odom_noise[{i}]', v) for i, v in enumerate(noise)))
+        seed = self.noise_seed
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise LoopConfigError(f'noise_seed must be an integer >= 0, got {seed!r}')
 
     @property
     def delay_steps(self) -> int:
         return delay_steps(self.tau, self.dt)[0]
+
+    @property
+    def cmd_latency_steps(self) -> int:
+        """Command latency in whole plant steps."""
+        return delay_steps(self.cmd_latency, self.dt)[0]
+
+    @property
+    def actuator(self) -> ActuatorModel:
+        return ActuatorModel(self.lag_v, self.lag_w, self.max_linear_accel,
+                             self.max_angular_accel)
+
+    @property
+    def odometry(self) -> OdometryModel:
+        return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
+                             odometry_period_steps(self.odom_rate, self.dt)[0],
+                             self.odom_noise, int(self.noise_seed))
 
 
 class UnicyclePlant:
@@ -114,6 +193,14 @@ class UnicyclePlant:
     rows accumulate into a velocity offset ``(ox, oy)``.  The history buffer holds
     ``xi_k = [x, v cos th + ox, y, v sin th + oy]`` at each step (``v`` the speed
     applied from ``t_k``); before ``t = 0`` the history is the initial ``xi``.
+
+    Latency (see :class:`PlantConfig`): :meth:`command` queues a command received at
+    step ``k`` to act from step ``k + cmd_latency_steps`` (until then the previous one
+    is held; before the first, ``(v0, 0)``); :meth:`advance` applies the command in
+    force through the actuator, whose mean speeds over the step move the robot and
+    whose end speeds are ``v, w`` (the speeds odometry reports).  :meth:`odometry` is
+    the measurement to publish at the current step, if any.  :meth:`step` is
+    ``command`` + ``advance``: with the defaults it is the ideal plant of the paper.
     """
 
     def __init__(self, config: PlantConfig):
@@ -122,6 +209,11 @@ class UnicyclePlant:
         # nonzero entries of A_tau per row: the delay term costs only what it uses
         self._terms = tuple((i, j, a) for i, row in enumerate(config.A_tau)
                             for j, a in enumerate(row) if a != 0.0)
+        self.cmd_delay = config.cmd_latency_steps
+        actuator = config.actuator
+        self.actuator = None if actuator.ideal else actuator
+        odometry = config.odometry
+        self.odometer = None if odometry.ideal else Odometer(odometry)
         self.reset()
 
     def reset(self) -> None:
@@ -133,6 +225,11 @@ class UnicyclePlant:
         self.w = 0.0
         xi0 = xi_from_state(self.x, self.y, self.th, self.v)
         self._hist: deque = deque([xi0] * (self.N + 1), maxlen=self.N + 1)
+        self._queue: deque = deque()    # (first step it acts, v, w)
+        self.cmd = (self.v, 0.0)        # command in force
+        if self.odometer is not None:
+            self.odometer.reset()
+            self.odometer.measure(0, self.x, self.y, self.th, self.v, self.w)
 
     @property
     def t(self) -> float:
@@ -144,9 +241,34 @@ class UnicyclePlant:
         c, s = math.cos(self.th), math.sin(self.th)
         return (self.x, v * c + self.ox, self.y, v * s + self.oy)
 
+    def command(self, v: float, w: float) -> None:
+        """Receive ``(v, w)`` at the current step: it acts from step ``k + cmd_latency_steps``."""
+        if self.cmd_delay == 0 and not self._queue:
+            self.cmd = (v, w)
+        else:
+            self._queue.append((self.k + self.cmd_delay, v, w))
+
+    def odometry(self) -> OdometrySample | None:
+        """The odometry sample to publish at the current step (measured earlier), if any."""
+        if self.odometer is None:               # ideal: the current state, every step
+            return OdometrySample(self.k, self.x, self.y, self.th, self.v, self.w)
+        return self.odometer.due(self.k)
+
     def step(self, v: float, w: float) -> None:
-        """Apply ``(v, w)`` for one step ``dt``: ``k -> k + 1``."""
+        """Receive ``(v, w)`` and advance one step ``dt``: ``k -> k + 1``."""
+        self.command(v, w)
+        self.advance()
+
+    def advance(self) -> None:
+        """Apply the command in force for one step ``dt``: ``k -> k + 1``."""
+        queue = self._queue
+        while queue and queue[0][0] <= self.k:
+            _, cv, cw = queue.popleft()
+            self.cmd = (cv, cw)
+        v, w = self.cmd
         h = self.config.dt
+        if self.actuator is not None:
+            v_end, w_end, v, w = actuate(self.actuator, self.v, self.w, v, w, h)
         xi_now = self.xi(v)
         if self.N == 0:
             d_xi = xi_now
@@ -165,8 +287,13 @@ class UnicyclePlant:
         self.ox += d[1] * h
         self.oy += d[3] * h
         self.th = math.remainder(self.th + w * h, math.tau)
-        self.v, self.w = float(v), float(w)
+        if self.actuator is not None:
+            self.v, self.w = v_end, w_end
+        else:
+            self.v, self.w = float(v), float(w)
         self.k += 1
+        if self.odometer is not None:
+            self.odometer.measure(self.k, self.x, self.y, self.th, self.v, self.w)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -221,6 +348,10 @@ class TrackerConfig:
     delay_compensation: bool = False
     A_tau: tuple | None = None
     tau: float = 0.0
+    predict_latency: float = 0.0
+    predict_odom_latency: float = 0.0
+    predict_lag_v: float = 0.0
+    predict_lag_w: float = 0.0
 
     def __post_init__(self):
         K = validate_gain(self.K)
@@ -242,12 +373,22 @@ class TrackerConfig:
         if self.delay_compensation:
             if self.A_tau is None:
                 raise LoopConfigError('delay_compensation needs A_tau')
-            object.__setattr__(self, 'A_tau', _matrix4('A_tau', self.A_tau))
+            object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
+                self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
             delay_steps(self.tau, self.dt)
+        for name in ('predict_latency', 'predict_odom_latency', 'predict_lag_v',
+                     'predict_lag_w'):
+            object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
 
         K = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
         object.__setattr__(self, 'K_effective', K)   # the gain actually applied: K + E D F
+
+    @property
+    def predicts(self) -> bool:
+        """True if the law is evaluated on a prediction (any latency or lag assumed)."""
+        return bool(self.predict_latency or self.predict_odom_latency or self.predict_lag_v
+                    or self.predict_lag_w)
 
 
 class Command(NamedTuple):
@@ -277,6 +418,17 @@ class Tracker:
     reference ``xi*`` instead of ``xi_d`` (see :meth:`_compensated_reference`), so
     that the error ``e = xi - xi*`` obeys ``e' = (A + B K) e + A_tau e(t - tau)``
     exactly and the steady-state bias caused by ``A_tau xi(t - tau)`` vanishes.
+
+    Predictor (``config.predicts``; :mod:`control.predictor`): the pose measured at
+    ``stamp`` is replaced by the pose predicted at ``t_act = stamp +
+    predict_odom_latency + predict_latency`` (the time this command acts), from the
+    commands already sent and the assumed actuator lag, and the reference by the
+    reference at ``t_act``; the law above is evaluated there.  With a time constant
+    the command is the one that takes the predicted actual speed to the law's value at
+    the end of the command interval ``dt`` (:func:`control.predictor.invert_lag`: the
+    compensator's next speed for ``v``, ``w`` itself for ``w``).  The compensator speed
+    ``v`` is the speed at ``t_act``.  With every ``predict_*`` at 0 the law is
+    today's, operation for operation.
     """
 
     def __init__(self, config: TrackerConfig):
@@ -286,15 +438,24 @@ class Tracker:
         if config.delay_compensation:
             n = delay_steps(config.tau, config.dt)[0]
             self._ref_hist = deque(maxlen=max(n, 1))
+        self.predictor: LatencyPredictor | None = None
+        if config.predicts:
+            self.predictor = LatencyPredictor(
+                config.predict_latency, config.predict_odom_latency,
+                ActuatorModel(config.predict_lag_v, config.predict_lag_w), config.dt)
 
     def reset(self, v: float | None = None) -> None:
         """Forget the compensator state (re-initialised from the next measured speed)."""
         self.v = v
         if self._ref_hist is not None:
             self._ref_hist.clear()
+        if self.predictor is not None:
+            self.predictor.reset()
 
     def step(self, x: float, y: float, th: float, ref: RefSample,
-             measured_speed: float | None = None) -> Command:
+             measured_speed: float | None = None, stamp: float | None = None) -> Command:
+        """One command from the pose ``(x, y, th)`` measured at ``stamp`` (s; default
+        ``ref.t``) and a reference sample (any time; the predictor extrapolates it)."""
         c = self.config
         if self.v is None:
             self.v = float(measured_speed) if measured_speed is not None else 0.0
@@ -302,6 +463,14 @@ class Tracker:
                 self.v = 0.0
             self.v = max(-c.max_linear_speed, min(c.max_linear_speed, self.v))
         v = self.v
+        pred = self.predictor
+        if pred is not None:
+            t_meas = ref.t if stamp is None else float(stamp)
+            if not math.isfinite(t_meas):          # no time, no prediction: stop
+                return Command(v=0.0, w=0.0, saturated=True)
+            p = pred.predict(x, y, th, t_meas, v)
+            x, y, th = p.x, p.y, p.th
+            ref = pred.reference(ref, p.t)
         cth, sth = math.cos(th), math.sin(th)
         if self._ref_hist is None:
             xd, ud = ref.xi, (ref.ax, ref.ay)
@@ -328,10 +497,24 @@ class Tracker:
             v_next, saturated = -vmax, True
         if not (math.isfinite(w) and math.isfinite(v_next)):
             # non-finite input slipped through: stop, keep the compensator state
+            if pred is not None:
+                pred.record(p.t, 0.0, 0.0)
             return Command(v=0.0, w=0.0, a=0.0, u=(u1, u2), error=e, saturated=True,
                            floored=floored)
         self.v = v_next
         cmd_v = 0.5 * (v + v_next)
+        if pred is not None:
+            if c.predict_lag_v > 0.0:
+                cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, c.dt)
+                if abs(cmd_v) > vmax:
+                    cmd_v, saturated = math.copysign(vmax, cmd_v), True
+            if c.predict_lag_w > 0.0:
+                w = invert_lag(w, p.w, c.predict_lag_w, c.dt)
+                if abs(w) > c.max_angular_speed:
+                    w, saturated = math.copysign(c.max_angular_speed, w), True
+            if not (math.isfinite(cmd_v) and math.isfinite(w)):
+                cmd_v = w = 0.0
+            pred.record(p.t, cmd_v, w)
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
                        floored=floored)
 

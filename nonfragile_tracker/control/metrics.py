@@ -26,6 +26,7 @@ class TrackingMetrics:
     peak_abs_w: float
 
     def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
         return asdict(self)
 
 

@@ -77,8 +77,9 @@ def u_from_inputs(th: float, v: float, a: float, w: float) -> tuple[float, float
 
 def inputs_from_u(th: float, v: float, u1: float, u2: float,
                   min_speed: float = 0.0) -> tuple[float, float]:
-    """Invert :func:`u_from_inputs`: ``a = u1 cos th + u2 sin th``,
-    ``w = (u2 cos th - u1 sin th) / v``.
+    """Invert :func:`u_from_inputs`.
+
+    ``a = u1 cos th + u2 sin th``, ``w = (u2 cos th - u1 sin th) / v``.
 
     Raises :class:`SingularSpeedError` when ``|v| <= min_speed`` (and always at
     ``v = 0``); the tracker applies its documented speed floor before calling.

@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
 from ..errors import InputError
+from ..files import read_yaml
 from . import validate
 
 __all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from_mapping',
@@ -71,10 +71,12 @@ class Problem:
 
     @property
     def n(self) -> int:
+        """Number of states."""
         return self.A.shape[0]
 
     @property
     def m(self) -> int:
+        """Number of inputs."""
         return self.B.shape[1]
 
     def replace(self, **changes: Any) -> 'Problem':
@@ -94,8 +96,9 @@ def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
                          check_stabilizable: bool = True) -> Problem:
     """Validate a mapping and build a :class:`Problem`; errors name ``source`` and the field."""
     if not isinstance(data, Mapping):
+        got = 'an empty file' if data is None else f'a {type(data).__name__}'
         raise ProblemError(f'{source}: expected a mapping with keys A, B, A_tau, tau, E, F; '
-                           f'got {type(data).__name__}')
+                           f'got {got}')
     missing = [k for k in ('A', 'B', 'A_tau', 'tau', 'E', 'F') if k not in data]
     if missing:
         raise ProblemError(f'{source}: missing key(s) {", ".join(missing)}; a problem needs '
@@ -123,6 +126,15 @@ def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
     options = data.get('options') or {}
     if not isinstance(options, Mapping):
         raise ProblemError(f'{source}: options must be a mapping, got {options!r}')
+    options = dict(options)
+    for key, low, inclusive in (('gain_bound', 0.0, False), ('margin', 0.0, True)):
+        if options.get(key) is not None:
+            options[key] = validate.as_finite_float(options[key], f'{source}: options.{key}',
+                                                    low=low, low_inclusive=inclusive,
+                                                    error=ProblemError)
+    if 'solver' in options and not isinstance(options['solver'], str):
+        raise ProblemError(f'{source}: options.solver must be a solver name such as CLARABEL, '
+                           f'got {options["solver"]!r}')
     if check_stabilizable:
         ok, bad = is_stabilizable(A, B)
         if not ok:
@@ -131,19 +143,12 @@ def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
                 f'{", ".join(f"{z.real:.4g}{z.imag:+.4g}j" for z in bad)} of A are not reached '
                 'by B; no state feedback can stabilize this model')
     return Problem(A=A, B=B, A_tau=A_tau, tau=float(tau), E=E, F=F,
-                   name=str(data.get('name', Path(source).stem if source != 'problem' else 'problem')),
+                   name=str(data.get('name', Path(source).stem if source != 'problem'
+                                     else 'problem')),
                    perturbations=perts, options=dict(options))
 
 
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a problem YAML file."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ProblemError(f'{path}: cannot read problem file ({exc.strerror})') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ProblemError(f'{path}: not valid YAML ({exc})') from None
+    data = read_yaml(path, 'problem file', error=ProblemError)
     return problem_from_mapping(data, source=str(path))

@@ -1,9 +1,10 @@
 """One bisection for every "largest value that is still certified/feasible" search."""
 from __future__ import annotations
 
+import math
 from typing import Callable, TypeVar
 
-__all__ = ['largest_feasible']
+__all__ = ['largest_feasible', 'golden_section_max']
 
 T = TypeVar('T')
 
@@ -37,3 +38,24 @@ def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *
         else:
             lo, best = mid, r
     return lo, best, trials
+
+
+def golden_section_max(f: Callable[[float], float], a: float, b: float, steps: int) -> None:
+    """Golden-section maximization of ``f`` on ``[a, b]`` with ``steps`` evaluations.
+
+    Nothing is returned: callers record the values (and the points they belong to)
+    inside ``f``, and may stop early by raising from it.  ``f`` need not be unimodal;
+    then this is a heuristic local refinement.
+    """
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(max(0, steps - 2)):
+        if fc >= fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)

@@ -1,22 +1,26 @@
 """Fixed-step simulations: the linear delay loop (paper Figs. 2-5) and the tracking loop.
 
 :func:`simulate_tracking` runs exactly the sequence of the ROS lockstep loop:
-for each step ``k`` the plant's pose (yaw through a quaternion, as in the
-message) and the reference sample at ``t_k`` go into :meth:`Tracker.step`, and
-its command drives :meth:`UnicyclePlant.step`.
+for each step ``k`` with an odometry sample due (every step for the paper's plant)
+the measured pose (yaw through a quaternion, as in the message), its stamp and the
+reference sample at that stamp go into :meth:`Tracker.step`, and its command is
+given to :meth:`UnicyclePlant.command`; then :meth:`UnicyclePlant.advance` applies
+the command in force (held at steps without odometry).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
-from .loop import (PlantConfig, Tracker, TrackerConfig, UnicyclePlant, quaternion_to_yaw,
-                   step_time, yaw_to_quaternion)
+from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
+                   odometry_period_steps, quaternion_to_yaw, step_time, yaw_to_quaternion)
 from .metrics import TrackingMetrics, tracking_metrics
-from .reference import Path
+from .reference import Path, RefSample
+from .sensors import OdometrySample
 
-__all__ = ['TrackingRun', 'simulate_tracking', 'DelayRun', 'simulate_delay_loop',
+__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'DelayRun', 'simulate_delay_loop',
            'steps_for_duration']
 
 
@@ -31,8 +35,10 @@ def steps_for_duration(duration: float, dt: float) -> int:
 class TrackingRun:
     """Samples of a tracking run, one row per step ``k = 0..steps`` (SI units).
 
-    Row ``k`` holds the pose at ``t_k``, the reference at ``t_k`` and the command
-    computed from them (the last command is computed but not applied).
+    Row ``k`` holds the true pose at ``t_k``, the reference at ``t_k`` and the last
+    command the tracker sent up to step ``k`` (``commanded[k]`` is 1 where it computed
+    one at step ``k``; with the paper's plant every step, from the pose and reference
+    of that step; the last command is computed but not applied).
     """
 
     t: np.ndarray
@@ -46,6 +52,7 @@ class TrackingRun:
     vyd: np.ndarray
     cmd_v: np.ndarray
     cmd_w: np.ndarray
+    commanded: np.ndarray    # 1.0 at steps where the tracker computed a command
 
     def metrics(self, tolerance: float = 0.01) -> TrackingMetrics:
         return tracking_metrics(self.t, self.x, self.y, self.xd, self.yd, self.cmd_v,
@@ -58,25 +65,57 @@ class TrackingRun:
 
 def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, path: Path,
                       steps: int) -> TrackingRun:
-    """Run the nonlinear tracking loop for ``steps`` plant steps (``steps + 1`` samples)."""
-    if tracker_config.dt != plant_config.dt:
-        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal plant dt '
-                         f'({plant_config.dt}) in lockstep')
-    plant = UnicyclePlant(plant_config)
+    """Run the nonlinear tracking loop for ``steps`` plant steps (``steps + 1`` samples).
+
+    The tracker's ``dt`` (its command period) must equal the odometry period
+    (``plant dt`` times the odometry decimation; the plant step by default).
+    """
+    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
+    if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
+        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
+                         f'({period} x plant dt {plant_config.dt}) in lockstep')
     tracker = Tracker(tracker_config)
+    dt = plant_config.dt
+
+    def command(meas: OdometrySample, th: float, k: int, ref: RefSample) -> Command:
+        if meas.step == k:
+            return tracker.step(meas.x, meas.y, th, ref, meas.v)
+        ts = step_time(meas.step, dt)
+        return tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
+
+    return run_loop(plant_config, steps, command, lambda k: path.sample(step_time(k, dt)))
+
+
+def run_loop(plant_config: PlantConfig, steps: int,
+             command: Callable[[OdometrySample, float, int, RefSample], Command],
+             reference: Callable[[int], RefSample]) -> TrackingRun:
+    """The lockstep sequence of the ROS nodes, in process: the one simulation loop.
+
+    For each step ``k``: the plant's odometry due at ``k`` (if any; yaw through a
+    quaternion, as in the message) goes to ``command(measurement, yaw, k, reference(k))``, whose
+    command the plant takes (after its command latency); otherwise the command in force
+    is held.  ``reference(k)`` is logged with step ``k``.  Used by
+    :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
+    """
+    plant = UnicyclePlant(plant_config)
     rows = []
     append = rows.append
     dt = plant_config.dt
+    cmd_v, cmd_w = plant.cmd
     for k in range(steps + 1):
         t = step_time(k, dt)
-        th = quaternion_to_yaw(*yaw_to_quaternion(plant.th))   # as through a message
-        ref = path.sample(t)
-        cmd = tracker.step(plant.x, plant.y, th, ref, plant.v)
+        ref = reference(k)
+        meas = plant.odometry()
+        if meas is not None:
+            th = quaternion_to_yaw(*yaw_to_quaternion(meas.th))   # as through a message
+            cmd = command(meas, th, k, ref)
+            cmd_v, cmd_w = cmd.v, cmd.w
+            plant.command(cmd_v, cmd_w)
         append((t, plant.x, plant.y, plant.th, plant.v, ref.x, ref.y, ref.vx, ref.vy,
-                cmd.v, cmd.w))
+                cmd_v, cmd_w, meas is not None))
         if k < steps:
-            plant.step(cmd.v, cmd.w)
-    return TrackingRun(*np.array(rows).T.copy())
+            plant.advance()
+    return TrackingRun(*np.array(rows, dtype=float).T.copy())
 
 
 @dataclass(frozen=True)

@@ -63,7 +63,7 @@ def as_matrix(value: Any, name: str, shape: Shape | None = None, *,
             raise TypeError('as_matrix(flat=True) needs a full shape')
         rows, cols = int(shape[0]), int(shape[1])
         if arr.ndim != 1 or arr.size != rows * cols:
-            raise error(f'{name} needs {rows * cols} numbers ({rows}x{cols} row-major), '
+            raise error(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
                         f'got {arr.size}')
         arr = arr.reshape(rows, cols)
     elif arr.ndim == 0:

@@ -1,0 +1,1 @@
+"""Thin rclpy adapters over the control core: reference, plant, tracker, recorder."""

@@ -3,7 +3,6 @@ the nodes' base class (constructor shape, parameter flow) and the Jazzy shutdown
 No control math lives here."""
 from __future__ import annotations
 
-import math
 import os
 import signal
 import sys
@@ -20,11 +19,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .. import topics
-import numpy as np
-
 from ..errors import InputError
-from ..control.loop import LoopConfigError, quaternion_to_yaw, yaw_to_quaternion
-from ..control.reference import RefSample
+# message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
+from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
+                      pose_from_odom, reference_from_msgs, stamp_ns)
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
            'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
@@ -38,8 +36,6 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 MODES = ('lockstep', 'realtime')
-#: The paper's delay matrix, 16 doubles row-major on xi = [x, vx, y, vy] (default of the nodes).
-PAPER_A_TAU = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
 class StartupError(InputError):
@@ -88,18 +84,6 @@ def declare(node: Node, params: Iterable[Param]) -> None:
                                desc)
 
 
-def matrix_param(values, rows: int, cols: int, name: str) -> np.ndarray:
-    """A flat row-major double-array parameter as a finite ``rows x cols`` matrix."""
-    vals = list(values)
-    if len(vals) != rows * cols:
-        raise LoopConfigError(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
-                              f'got {len(vals)}')
-    arr = np.array(vals, dtype=float).reshape(rows, cols)
-    if not np.all(np.isfinite(arr)):
-        raise LoopConfigError(f'{name} has non-finite entries: {vals}')
-    return arr
-
-
 def get(node: Node, name: str) -> Any:
     return node.get_parameter(name).value
 
@@ -110,54 +94,6 @@ def check_mode(value: str, node_name: str | None = None) -> str:
         prefix = f'{node_name}: ' if node_name else ''
         raise StartupError(f'{prefix}parameter mode is {value!r}; use one of {MODES}')
     return value
-
-
-def stamp_ns(stamp) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def ns_to_stamp(ns: int, stamp) -> None:
-    stamp.sec, stamp.nanosec = divmod(int(ns), 1_000_000_000)
-
-
-def fill_pose(pose, x: float, y: float, th: float) -> None:
-    """Fill a geometry_msgs/Pose from a planar pose (REP-103: yaw about +z)."""
-    pose.position.x, pose.position.y, pose.position.z = float(x), float(y), 0.0
-    q = pose.orientation
-    q.x, q.y, q.z, q.w = yaw_to_quaternion(th)
-
-
-def pose_from_odom(pose) -> tuple[float, float, float] | str:
-    """Planar pose from a geometry_msgs/Pose, or a reason string if it is unusable."""
-    p, q = pose.position, pose.orientation
-    vals = (p.x, p.y, q.x, q.y, q.z, q.w)
-    if not all(math.isfinite(v) for v in vals):
-        return f'non-finite pose {vals}'
-    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
-    if abs(norm - 1.0) > 1e-3:
-        return f'quaternion norm {norm:.6g} is not 1'
-    return (p.x, p.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
-
-
-def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
-    fill_pose(pose_msg.pose, ref.x, ref.y, ref.heading)
-    tw = twist_msg.twist.linear
-    tw.x, tw.y, tw.z = ref.vx, ref.vy, 0.0
-    ac = accel_msg.accel.linear
-    ac.x, ac.y, ac.z = ref.ax, ref.ay, 0.0
-
-
-def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample | str:
-    """RefSample from the three reference messages, or a reason string if unusable."""
-    pose = pose_from_odom(pose_msg.pose)
-    if isinstance(pose, str):
-        return f'reference/pose: {pose}'
-    tw, ac = twist_msg.twist.linear, accel_msg.accel.linear
-    vals = (tw.x, tw.y, ac.x, ac.y)
-    if not all(math.isfinite(v) for v in vals):
-        return f'reference twist/accel not finite: {vals}'
-    return RefSample(t, pose[0], pose[1], tw.x, tw.y, ac.x, ac.y, pose[2])
 
 
 def make_executor(context=None):

@@ -1,16 +1,23 @@
 """``plant``: kinematic unicycle with the paper's delayed-state term; the run's clock.
 
-Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w).
+Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w; or
+TwistStamped with ``enable_stamped_cmd_vel``, as a Jazzy diff_drive_controller).
 Publishes ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``,
 twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
 and, in lockstep mode, ``/clock`` and ``run_done``.
 
-Lockstep (default): step ``k -> k+1`` happens only when the command for step
-``k`` has arrived; the plant waits for its peers to be discovered, republishes
-step ``k`` every ``lockstep_retry`` s while it waits (peers ignore repeats), and
-aborts with exit code 5 after ``lockstep_timeout`` s of silence.  Real time:
-a wall timer steps at ``1/dt`` with the latest command (zero after
-``cmd_timeout``).  The physics is :class:`control.loop.UnicyclePlant`.
+Lockstep (default): at each step ``k`` the plant publishes ``/clock`` and ``pose``
+(the true pose) and, if an odometry sample is due at ``k``, ``odom``; only then does
+it wait for the tracker's command before stepping ``k -> k+1`` (at steps without
+odometry the tracker has nothing to answer: the plant holds the command in force and
+steps on).  With the default plant odometry is due every step, so every step waits.
+The plant waits for its peers to be discovered, republishes step ``k`` every
+``lockstep_retry`` s while it waits (peers ignore repeats), and aborts with exit
+code 5 after ``lockstep_timeout`` s of silence.  Real time: a wall timer steps at
+``1/dt`` with the latest command (zero after ``cmd_timeout``).  The physics,
+including command latency, actuator lag, acceleration limits and odometry latency,
+rate and noise, is :class:`control.loop.UnicyclePlant`; an odometry message carries
+the stamp of its measurement.
 """
 from __future__ import annotations
 
@@ -18,7 +25,7 @@ import math
 import time
 from dataclasses import dataclass
 
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
@@ -26,21 +33,25 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
 from .. import topics
-from ..control.loop import PlantConfig, UnicyclePlant, step_time_ns
-from .common import (DATA_QOS, LATCHED_QOS, PAPER_A_TAU, AdapterNode, Param, StartupError,
-                     check_mode, fill_pose, matrix_param, ns_to_stamp, run)
+from ..control.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
+                            odometry_period_steps, step_time_ns)
+from ..control.validate import as_matrix
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_pose, ns_to_stamp, run)
 
+LATENCY_PARAMS = ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
+                  'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed')
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
           read_only=True),
     Param('dt', 0.01, 'integration step (s)', low=1e-6, high=10.0, read_only=True),
-    Param('tau', 0.2, 'state delay (s); rounded to a whole number of steps', low=0.0,
+    Param('tau', 0.0, 'state delay (s); rounded to a whole number of steps', low=0.0,
           high=1e3, read_only=True),
-    Param('A_tau', PAPER_A_TAU, 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles '
+    Param('A_tau', [0.0] * 16, 'delay matrix A_tau acting on xi = [x, vx, y, vy], 16 doubles '
           'row-major', read_only=True),
-    Param('initial_pose', [0.7, 0.1, math.pi / 2], 'initial [x (m), y (m), yaw (rad)] in odom',
+    Param('initial_pose', [0.0, 0.0, 0.0], 'initial [x (m), y (m), yaw (rad)] in odom',
           read_only=True),
-    Param('initial_speed', 0.05, 'speed in force before the first command (m/s)',
+    Param('initial_speed', 0.0, 'speed in force before the first command (m/s)',
           read_only=True),
     Param('duration', 60.0, 'run length (s); lockstep stops after it, realtime: 0 = forever',
           low=0.0, high=1e9, read_only=True),
@@ -51,9 +62,36 @@ PARAMS = [
     Param('lockstep_retry', 0.25, 'lockstep: republish the current step after this long (s, wall)',
           low=0.001, high=1e6),
     Param('lockstep_subscribers', 1, 'lockstep: wait until odom has this many subscribers'),
+    Param('enable_stamped_cmd_vel', False, 'subscribe cmd_vel as geometry_msgs/TwistStamped '
+          '(Nav2 name) instead of Twist', read_only=True),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of odom and pose (REP-105)', read_only=True),
+    Param('base_frame', topics.BASE_FRAME, 'robot body frame (odom child_frame_id)',
+          read_only=True),
     Param('cmd_timeout', 0.5, 'realtime: command older than this (s) is replaced by a stop',
           low=0.0, high=1e6),
+    Param('cmd_latency', 0.0, 'command-to-motion latency (s): a command received at step k '
+          'acts from step k + round(cmd_latency/dt); 0 = none', low=0.0, high=1e3,
+          read_only=True),
+    Param('lag_v', 0.0, 'first-order time constant of the linear speed (s); 0 = none',
+          low=0.0, high=1e3, read_only=True),
+    Param('lag_w', 0.0, 'first-order time constant of the angular speed (s); 0 = none',
+          low=0.0, high=1e3, read_only=True),
+    Param('max_linear_accel', 0.0, 'limit on |dv/dt| of the base (m/s^2); 0 = unlimited',
+          low=0.0, high=1e6, read_only=True),
+    Param('max_angular_accel', 0.0, 'limit on |dw/dt| of the base (rad/s^2); 0 = unlimited',
+          low=0.0, high=1e6, read_only=True),
+    Param('odom_latency', 0.0, 'odometry latency (s): the measurement of step k is published '
+          'at step k + round(odom_latency/dt) with the stamp of step k; 0 = none', low=0.0,
+          high=1e3, read_only=True),
+    Param('odom_rate', 0.0, 'odometry rate (Hz), at most 1/dt: published every '
+          'round(1/(odom_rate dt)) steps; 0 = every step', low=0.0, high=1e9, read_only=True),
+    Param('odom_noise', [0.0, 0.0, 0.0], 'standard deviation of the odometry noise '
+          '[x (m), y (m), yaw (rad)], Gaussian; 0 = exact', read_only=True),
+    Param('noise_seed', 0, 'seed of the odometry noise (numpy Generator); same seed, same '
+          'noise', read_only=True),
 ]
+#: Lockstep: at most this many steps without waiting (QoS keep-last depth headroom).
+MAX_FREE_STEPS = 50
 
 
 @dataclass(frozen=True)
@@ -68,6 +106,9 @@ class PlantSettings:
     lockstep_retry: float
     lockstep_subscribers: int
     cmd_timeout: float
+    stamped: bool
+    odom_frame: str
+    base_frame: str
 
 
 def plant_settings(values: dict) -> PlantSettings:
@@ -80,15 +121,27 @@ def plant_settings(values: dict) -> PlantSettings:
         raise StartupError(f'lockstep_subscribers must be at least 1, got '
                            f'{values["lockstep_subscribers"]}')
     cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
-                      A_tau=matrix_param(values['A_tau'], 4, 4, 'A_tau'),
-                      x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'])
+                      A_tau=as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True,
+                                      error=LoopConfigError),
+                      x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'],
+                      **{n: values[n] for n in LATENCY_PARAMS})
+    odo = cfg.odometry
+    if mode == 'lockstep' and max(odo.latency_steps, odo.period_steps) > MAX_FREE_STEPS:
+        raise StartupError(
+            f'odom_latency ({odo.latency_steps} steps) and the odometry period '
+            f'({odo.period_steps} steps) must each be at most {MAX_FREE_STEPS} plant steps '
+            'in lockstep (the plant steps on without waiting in between and the topics '
+            'keep the last 100 messages); use a larger dt, a smaller odom_latency or a higher '
+            'odom_rate')
     return PlantSettings(mode=mode, plant=cfg,
                          final_step=int(round(values['duration'] / cfg.dt)),
                          lockstep_timeout=values['lockstep_timeout'],
                          startup_timeout=values['startup_timeout'],
                          lockstep_retry=values['lockstep_retry'],
                          lockstep_subscribers=values['lockstep_subscribers'],
-                         cmd_timeout=values['cmd_timeout'])
+                         cmd_timeout=values['cmd_timeout'],
+                         stamped=values['enable_stamped_cmd_vel'],
+                         odom_frame=values['odom_frame'], base_frame=values['base_frame'])
 
 
 class PlantNode(AdapterNode):
@@ -99,21 +152,34 @@ class PlantNode(AdapterNode):
         self.config = self.bind_parameters(PARAMS, plant_settings)
         self.mode = self.config.mode
         cfg = self.config.plant
-        if abs(cfg.delay_steps * cfg.dt - cfg.tau) > 1e-9:
-            self.get_logger().warn(
-                f'tau = {cfg.tau} s is not a multiple of dt = {cfg.dt} s: using '
-                f'{cfg.delay_steps} steps = {cfg.delay_steps * cfg.dt:.6g} s')
+        for name in ('tau', 'cmd_latency', 'odom_latency'):
+            value = getattr(cfg, name)
+            n = delay_steps(value, cfg.dt)[0]
+            if abs(n * cfg.dt - value) > 1e-9:
+                self.get_logger().warn(
+                    f'{name} = {value} s is not a multiple of dt = {cfg.dt} s: using '
+                    f'{n} steps = {n * cfg.dt:.6g} s')
+        period, rate = odometry_period_steps(cfg.odom_rate, cfg.dt)
+        if cfg.odom_rate and abs(rate - cfg.odom_rate) > 1e-9 * rate:
+            self.get_logger().warn(f'odom_rate = {cfg.odom_rate} Hz does not divide the plant '
+                                   f'rate {1 / cfg.dt:g} Hz: odometry every {period} steps '
+                                   f'= {rate:.6g} Hz')
         self.plant = UnicyclePlant(cfg)
         self.dt = cfg.dt
+        self.dt_ns = step_time_ns(1, cfg.dt)
         self.final_step = self.config.final_step
         self.progress_every = max(1, self.final_step // 10)
 
         self.pub_odom = self.create_publisher(Odometry, topics.ODOM, DATA_QOS)
         self.pub_pose = self.create_publisher(PoseStamped, topics.POSE, DATA_QOS)
-        self.sub_cmd = self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd, DATA_QOS)
+        self.stamped = self.config.stamped
+        self.last_cmd_header = None
+        self.sub_cmd = self.create_subscription(
+            TwistStamped if self.stamped else Twist, topics.CMD_VEL,
+            self._on_stamped_cmd if self.stamped else self._on_cmd, DATA_QOS)
         self._odom, self._pose = Odometry(), PoseStamped()
-        self._odom.header.frame_id = self._pose.header.frame_id = topics.ODOM_FRAME
-        self._odom.child_frame_id = topics.BASE_FRAME
+        self._odom.header.frame_id = self._pose.header.frame_id = self.config.odom_frame
+        self._odom.child_frame_id = self.config.base_frame
         self.cmd = (cfg.v0, 0.0)
         self.commands = 0
         if self.mode == 'lockstep':
@@ -130,21 +196,26 @@ class PlantNode(AdapterNode):
             self.timer = self.create_timer(cfg.dt, self._realtime_step)
 
     # ------------------------------------------------------------------ publishing
-    def _publish_state(self, stamp_ns: int) -> None:
+    def _publish_state(self, stamp_ns: int) -> bool:
+        """Publish the current step (clock, true pose, odometry if due); True if odom went out."""
         p = self.plant
         if self.mode == 'lockstep':
             ns_to_stamp(stamp_ns, self._clock_msg.clock)
             self.pub_clock.publish(self._clock_msg)
-        for msg in (self._odom, self._pose):
-            ns_to_stamp(stamp_ns, msg.header.stamp)
-        fill_pose(self._odom.pose.pose, p.x, p.y, p.th)
-        self._odom.twist.twist.linear.x = p.v
-        self._odom.twist.twist.angular.z = p.w
-        self._pose.pose = self._odom.pose.pose
-        self.pub_odom.publish(self._odom)
-        if self.pub_pose.get_subscription_count():       # nobody listening: skip the copy
+        ns_to_stamp(stamp_ns, self._pose.header.stamp)
+        fill_pose(self._pose.pose, p.x, p.y, p.th)
+        meas = p.odometry()
+        if meas is not None:
+            odom_ns = stamp_ns - (p.k - meas.step) * self.dt_ns     # measurement time
+            ns_to_stamp(odom_ns, self._odom.header.stamp)
+            fill_pose(self._odom.pose.pose, meas.x, meas.y, meas.th)
+            self._odom.twist.twist.linear.x = meas.v
+            self._odom.twist.twist.angular.z = meas.w
+            self.pub_odom.publish(self._odom)
+        if self.pub_pose.get_subscription_count():       # nobody listening: skip it
             self.pub_pose.publish(self._pose)
         self.last_publish = time.monotonic()
+        return meas is not None
 
     # ------------------------------------------------------------------ lockstep
     def _peers_ready(self) -> bool:
@@ -162,14 +233,14 @@ class PlantNode(AdapterNode):
                 self.get_logger().info(f'peers matched: starting lockstep run of '
                                        f'{self.final_step} steps (dt = {self.dt} s)')
                 self.waiting_since = now
-                self._publish_state(step_time_ns(self.plant.k, self.dt))
+                self._publish_step()
             elif now - self.waiting_since > self.config.startup_timeout:
                 self._abort('no tracker/reference discovered', 'startup_timeout')
             return
         if now - self.waiting_since > self.config.lockstep_timeout:
             self._abort(f'no command for step {self.plant.k}')
         elif now - self.last_publish > self.config.lockstep_retry:
-            self._publish_state(step_time_ns(self.plant.k, self.dt))
+            self._publish_state(step_time_ns(self.plant.k, self.dt))   # same sample again
 
     def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
         self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
@@ -188,6 +259,10 @@ class PlantNode(AdapterNode):
         if self.mode == 'lockstep':
             self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
 
+    def _on_stamped_cmd(self, msg: TwistStamped) -> None:
+        self.last_cmd_header = msg.header
+        self._on_cmd(msg.twist)
+
     def _on_cmd(self, msg: Twist) -> None:
         v, w = msg.linear.x, msg.angular.z
         if not (math.isfinite(v) and math.isfinite(w)):
@@ -201,16 +276,31 @@ class PlantNode(AdapterNode):
         if not self.started or self.finished:
             return
         if self.plant.k >= self.final_step:      # command for the last pose: run complete
-            self.get_logger().info(f'lockstep run complete: {self.plant.k} steps, '
-                                   f't = {self.plant.t:.3f} s')
-            self._finish()
+            self._complete()
             return
-        self.plant.step(v, w)
+        self.plant.command(v, w)
+        self._advance()
         self.waiting_since = time.monotonic()
-        self._publish_state(step_time_ns(self.plant.k, self.dt))
+        self._publish_step()
+
+    def _advance(self) -> None:
+        self.plant.advance()
         if self.plant.k % self.progress_every == 0:
             self.get_logger().info(f'progress: t = {self.plant.t:.2f} s of '
                                    f'{self.final_step * self.dt:.2f} s')
+
+    def _publish_step(self) -> None:
+        """Publish step k; where no odometry is due, hold the command and step on."""
+        while not self._publish_state(step_time_ns(self.plant.k, self.dt)):
+            if self.plant.k >= self.final_step:
+                self._complete()
+                return
+            self._advance()
+
+    def _complete(self) -> None:
+        self.get_logger().info(f'lockstep run complete: {self.plant.k} steps, '
+                               f't = {self.plant.t:.3f} s')
+        self._finish()
 
     # ------------------------------------------------------------------ real time
     def _realtime_step(self) -> None:

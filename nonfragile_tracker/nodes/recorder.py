@@ -30,8 +30,9 @@ recorder loses at most that much (``nonfragile_tracker bag repair``).
 In-process use: ``Recorder(node_name='recorder', **node_kwargs)`` takes the rclpy ``Node``
 keyword arguments like every node of the package, e.g.
 ``Recorder(context=ctx, parameter_overrides=overrides(output=str(path)))``
-(:func:`nodes.common.overrides`); add it to an executor, watch ``recorder.done`` (a Future whose result is the message count per
-recorded topic, by logical name) or ``recorder.finished``, and call
+(:func:`nodes.common.overrides`); add it to an executor, watch ``recorder.done`` (a
+Future whose result is the message count per recorded topic, by logical name) or
+``recorder.finished``, and call
 ``recorder.close()`` (also done by ``destroy_node()``).
 """
 from __future__ import annotations
@@ -57,8 +58,7 @@ from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
 #: Topics whose S+1 samples the recorder waits for after ``run_done`` = S.
-LOCKSTEP_TOPICS = (topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST,
-                   topics.REF_ACCEL, topics.CMD_VEL)
+LOCKSTEP_TOPICS = topics.LOCKSTEP_TOPICS
 _STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
 _RUNS_ROOT = 'runs'
 
@@ -66,6 +66,8 @@ PARAMS = [
     Param('output', '', 'bag directory to create (never overwritten; relative to the working '
           'directory); empty: a new run directory runs/run_YYYYmmdd_HHMMSS[_N] with the bag in '
           'its subdirectory "bag"', read_only=True),
+    Param('enable_stamped_cmd_vel', False, 'cmd_vel is geometry_msgs/TwistStamped (as the '
+          'tracker publishes it with the same parameter)', read_only=True),
     Param('topics', list(topics.TYPES), 'topics to record (names of nonfragile_tracker.topics; '
           'relative names resolve in the node namespace)', read_only=True),
     Param('drain_timeout', 5.0, 'after run_done: longest wait (wall s) for the last messages',
@@ -128,6 +130,7 @@ class RecorderSettings:
     drain_timeout: float
     lockstep_gate: bool
     gate_timeout: float
+    stamped_cmd_vel: bool
 
 
 def recorder_settings(values: dict) -> RecorderSettings:
@@ -139,7 +142,8 @@ def recorder_settings(values: dict) -> RecorderSettings:
                             chunk_size=chunk, flush_period=values['flush_period'],
                             drain_timeout=values['drain_timeout'],
                             lockstep_gate=values['lockstep_gate'],
-                            gate_timeout=values['gate_timeout'])
+                            gate_timeout=values['gate_timeout'],
+                            stamped_cmd_vel=values['enable_stamped_cmd_vel'])
 
 
 def _topic_list(values) -> list[str]:
@@ -183,7 +187,10 @@ class Recorder(AdapterNode):
 
         names = list(cfg.topics)
         self.bag_path = self._output_path(cfg.output)
-        self._types = {n: import_message(topics.TYPES[n]) for n in names}
+        self._msgtypes = dict(topics.TYPES)
+        if cfg.stamped_cmd_vel:
+            self._msgtypes[topics.CMD_VEL] = topics.CMD_VEL_STAMPED_TYPE
+        self._types = {n: import_message(self._msgtypes[n]) for n in names}
         try:
             self.writer = BagWriter(self.bag_path, chunk_size=cfg.chunk_size,
                                     flush_period=cfg.flush_period,
@@ -215,7 +222,8 @@ class Recorder(AdapterNode):
 
     # ------------------------------------------------------------------ setup
     def _subscribe(self, name: str) -> None:
-        qos = _LATCHED_QOS if name == topics.RUN_DONE else _DATA_QOS
+        qos = _LATCHED_QOS if name in (topics.RUN_DONE, topics.TRAJECTORY, topics.REF_PATH) \
+            else _DATA_QOS
         sub = self.create_subscription(self._types[name], name, self._make_callback(name),
                                        qos, raw=True)
         self._subs[name] = sub
@@ -257,7 +265,7 @@ class Recorder(AdapterNode):
                 return
             topic = self._resolved[name]
             if not writer.has_connection(topic):
-                writer.add_connection(topic, topics.TYPES[name], self._offered_qos(name))
+                writer.add_connection(topic, self._msgtypes[name], self._offered_qos(name))
                 self.get_logger().info(f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1

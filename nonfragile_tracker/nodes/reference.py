@@ -5,21 +5,40 @@ Publishes, all in frame ``odom`` and stamped with the sample time:
 ``reference/twist`` (geometry_msgs/TwistStamped: linear = desired velocity in
 ``odom``) and ``reference/accel`` (geometry_msgs/AccelStamped: linear = desired
 acceleration in ``odom``).  Lockstep: one sample per ``/clock`` message, at the
-clock's time.  Real time: a wall timer at ``publish_rate``.  The path is
-:func:`control.reference.make_path`.
+clock's time.  Real time: a wall timer at ``publish_rate``.
+
+Where the trajectory comes from (:mod:`control.trajectory`):
+
+* a built-in analytic path (``path``, default): exact, as :func:`control.reference.make_path`;
+  the tracker follows the three per-step topics (exact, golden bags unchanged);
+* a waypoint file (``trajectory_file``, CSV or YAML: t, x, y[, yaw][, speed]), or
+* a nav_msgs/Path relayed from ``trajectory_topic`` (e.g. a planner's output).
+
+A file or relayed trajectory is published on ``trajectory`` (nav_msgs/Path,
+transient-local; poses at the knots, stamped origin + t) for the tracker, which builds
+the same trajectory from it and samples it itself at the odometry stamp; the per-step
+samples are then those of the trajectory rebuilt from that very message (what the
+tracker follows).  Every source is also shown on ``reference/path`` (transient-local,
+for RViz).  A relayed Path that is not a valid trajectory is refused with the reason
+and the previous trajectory stays.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from nav_msgs.msg import Path as PathMsg
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from .. import topics
 from ..control.reference import Path, make_path
-from .common import (DATA_QOS, AdapterNode, Param, StartupError, check_mode, fill_reference,
-                     ns_to_stamp, run, stamp_ns)
+from ..control.trajectory import Trajectory, TrajectoryError, load_waypoints
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_reference, ns_to_stamp, run, stamp_ns)
+from .trajectory_io import path_to_trajectory, trajectory_to_path
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (one sample per /clock) or realtime (wall timer)',
@@ -31,6 +50,19 @@ PARAMS = [
     Param('phase', 0.0, 'phase of the path parameter at t = 0 (rad)', read_only=True),
     Param('publish_rate', 100.0, 'realtime: samples per second (Hz)', low=1e-3, high=1e5,
           read_only=True),
+    Param('trajectory_file', '', 'waypoint file (CSV or YAML: t, x, y[, yaw][, speed]) to '
+          'follow instead of the built-in path; "" = built-in path', read_only=True),
+    Param('trajectory_topic', '', 'relay nav_msgs/Path trajectories from this topic '
+          '(reliable, volatile); "" = none', read_only=True),
+    Param('smoothing', 0.0, 'waypoint file: 0 interpolates (cubic spline), > 0 smoothing '
+          'spline penalty (noisy points)', low=0.0, high=1e12, read_only=True),
+    Param('cruise_speed', 0.5, 'time law for a Path with zero stamps: cruise speed (m/s)',
+          low=1e-6, high=1e3, read_only=True),
+    Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
+          '(m/s^2)', low=1e-6, high=1e3, read_only=True),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of the trajectory (the odometry frame)',
+          read_only=True),
+    Param('display_points', 400, 'points of the reference/path shown (at least 2)'),
 ]
 
 
@@ -41,6 +73,13 @@ class ReferenceSettings:
     mode: str
     path: Path
     publish_rate: float
+    trajectory_file: str
+    trajectory_topic: str
+    smoothing: float
+    cruise_speed: float
+    max_accel: float
+    frame: str
+    display_points: int
 
 
 def reference_settings(values: dict) -> ReferenceSettings:
@@ -51,34 +90,107 @@ def reference_settings(values: dict) -> ReferenceSettings:
         raise StartupError(f'center needs [x, y], got {center}')
     path = make_path(values['path'], radius=values['radius'], rate=values['rate'],
                      center_x=center[0], center_y=center[1], phase=values['phase'])
-    return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'])
+    if values['display_points'] < 2:
+        raise StartupError(f'display_points must be at least 2, got {values["display_points"]}')
+    return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'],
+                             trajectory_file=values['trajectory_file'],
+                             trajectory_topic=values['trajectory_topic'],
+                             smoothing=values['smoothing'],
+                             cruise_speed=values['cruise_speed'],
+                             max_accel=values['max_accel'], frame=values['odom_frame'],
+                             display_points=values['display_points'])
 
 
 class ReferenceNode(AdapterNode):
-    """ROS adapter around :class:`control.reference.Path`."""
+    """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`."""
 
     def __init__(self, node_name: str = 'reference', **node_kwargs):
         super().__init__(node_name, **node_kwargs)
-        self.config = self.bind_parameters(PARAMS, reference_settings)
-        self.mode = self.config.mode
-        self.path = self.config.path
+        self.config = cfg = self.bind_parameters(PARAMS, reference_settings)
+        self.mode = cfg.mode
+        self.path = cfg.path
+        self.frame = cfg.frame
         self.pub_pose = self.create_publisher(PoseStamped, topics.REF_POSE, DATA_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, topics.REF_TWIST, DATA_QOS)
         self.pub_accel = self.create_publisher(AccelStamped, topics.REF_ACCEL, DATA_QOS)
+        self.pub_traj = self.create_publisher(PathMsg, topics.TRAJECTORY, LATCHED_QOS)
+        self.pub_display = self.create_publisher(PathMsg, topics.REF_PATH, LATCHED_QOS)
         self._msgs = (PoseStamped(), TwistStamped(), AccelStamped())
         for m in self._msgs:
-            m.header.frame_id = topics.ODOM_FRAME
+            m.header.frame_id = self.frame
+        self.traj: Trajectory = Trajectory.analytic(self.path)
+        self.origin_ns = 0
+        self.last_refusal = ''
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
             self.sub_clock = self.create_subscription(Clock, topics.CLOCK, self._on_clock,
                                                       DATA_QOS)
         else:
             self.t0_ns = self.get_clock().now().nanoseconds   # path time 0 = node start
-            self.timer = self.create_timer(1.0 / self.config.publish_rate, self._on_timer)
+            self.timer = self.create_timer(1.0 / cfg.publish_rate, self._on_timer)
+        start_ns = 0 if self.mode == 'lockstep' else self.t0_ns
+        self._display_origin = start_ns
+        file = cfg.trajectory_file
+        if file:
+            try:
+                traj = load_waypoints(file, smoothing=cfg.smoothing)
+            except (TrajectoryError, OSError) as exc:
+                raise StartupError(f'reference: trajectory_file: {exc}') from None
+            self._follow(trajectory_to_path(traj, start_ns, self.frame), file)
+        else:
+            self._display(self.traj, start_ns)
+        relay = cfg.trajectory_topic
+        if relay:
+            self.create_subscription(PathMsg, relay, self._on_relay, 10)
+
+    def apply_config(self, old: ReferenceSettings, new: ReferenceSettings) -> None:
+        """An accepted runtime set (post-set callback): show the path with the new points."""
+        if new.display_points != old.display_points:
+            self._display(self.traj, self._display_origin)
+
+    def _display(self, traj: Trajectory, origin_ns: int) -> None:
+        self._display_origin = origin_ns
+        n = self.config.display_points
+        if traj.is_analytic:
+            w = abs(self.path.params['rate'])
+            span = 2 * math.pi / w if w > 0 else 1.0
+            times = np.linspace(0.0, span, n)
+        else:
+            times = np.linspace(traj.t_start, traj.t_end, n)
+        self.pub_display.publish(trajectory_to_path(traj, origin_ns, self.frame, times))
+
+    def _follow(self, msg: PathMsg, source: str) -> None:
+        """Adopt the trajectory of a timed Path that this node built, and publish it.
+
+        The per-step samples come from the trajectory rebuilt from ``msg`` exactly as
+        the tracker rebuilds it, so the recorded reference is what the tracker follows.
+        """
+        traj, origin = path_to_trajectory(msg, frame=self.frame, source=source)
+        self.traj, self.origin_ns = traj, origin
+        self.pub_traj.publish(msg)
+        self._display(traj, origin)
+        self.get_logger().info(f'trajectory from {source}: {len(traj.knots)} points, '
+                               f'{traj.duration:.3f} s')
+
+    def _relay(self, msg: PathMsg, source: str) -> None:
+        """Validate a Path (time law if untimed) and follow its timed form."""
+        traj, origin = path_to_trajectory(msg, frame=self.frame, source=source,
+                                          cruise_speed=self.config.cruise_speed,
+                                          max_accel=self.config.max_accel,
+                                          now_ns=self.get_clock().now().nanoseconds)
+        self._follow(trajectory_to_path(traj, origin, self.frame), source)
+
+    def _on_relay(self, msg: PathMsg) -> None:
+        source = f'topic {self.config.trajectory_topic}'
+        try:
+            self._relay(msg, source)
+        except TrajectoryError as exc:
+            self.last_refusal = str(exc)
+            self.get_logger().error(f'refused trajectory: {exc}; keeping the previous one')
 
     def publish_sample(self, t_ns: int, t: float) -> None:
         """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``."""
-        ref = self.path.sample(t)
+        ref = self.traj.sample(t)
         pose, twist, accel = self._msgs
         for m in self._msgs:
             ns_to_stamp(t_ns, m.header.stamp)
@@ -89,11 +201,12 @@ class ReferenceNode(AdapterNode):
 
     def _on_clock(self, msg: Clock) -> None:
         t_ns = stamp_ns(msg.clock)
-        self.publish_sample(t_ns, t_ns * 1e-9)
+        self.publish_sample(t_ns, (t_ns - self.origin_ns) * 1e-9)
 
     def _on_timer(self) -> None:
         now = self.get_clock().now().nanoseconds
-        self.publish_sample(now, (now - self.t0_ns) * 1e-9)
+        origin = self.t0_ns if self.traj.is_analytic else self.origin_ns
+        self.publish_sample(now, (now - origin) * 1e-9)
 
 
 def main(args=None) -> int:

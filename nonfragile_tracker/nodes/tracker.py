@@ -2,14 +2,38 @@
 
 Subscribes ``odom`` (nav_msgs/Odometry; its twist.linear.x initialises the
 compensator speed), ``reference/pose``, ``reference/twist``, ``reference/accel``;
-publishes ``cmd_vel`` (geometry_msgs/Twist).  The law is
+publishes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
+``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
+``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
+z heading error in rad, in the reference point's frame; every step, when subscribed),
+``tracker/path`` (nav_msgs/Path, the travelled path) and ``tracker/reference_marker``
+(visualization_msgs/Marker, arrow at the current reference) every ``viz_period`` s of
+stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
+loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
+commands, trajectory state and end) every ``diagnostics_period`` s.  The law is
 :class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
 
-Lockstep: a command is computed once per stamp, when the pose and the three
-reference parts with that stamp have all arrived (repeats are ignored).  Real
+Lockstep: a command is computed once per odom stamp, when the pose and the three
+reference parts with that stamp have all arrived (repeats are ignored; reference
+samples are kept by stamp until the odometry measured at that time arrives, so a
+plant with odometry latency pairs each measurement with the reference of its
+measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
+``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
+the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
+stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
+
+Trajectories (:mod:`control.trajectory`): a nav_msgs/Path on ``trajectory``
+(transient-local; stamps give the times, all zero: a trapezoidal time law with
+``cruise_speed``/``max_accel``) or a trajectory_msgs/MultiDOFJointTrajectory on
+``trajectory_multidof`` is turned into a trajectory that the tracker samples itself at
+each odometry stamp (:class:`control.follow.Follower`): no reference samples are needed
+then.  Each new valid trajectory starts a new run; an invalid one is refused with the
+reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
+trajectory's end the robot is brought to rest and the tracker says so.  Without a
+trajectory the three reference topics are followed (the built-in analytic paths).
 
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
 go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
@@ -20,19 +44,24 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.gains import GainFileError, gain_from_parameters
-from ..control.loop import LoopConfigError, Tracker, TrackerConfig
-from .common import (DATA_QOS, PAPER_A_TAU, AdapterNode, Param, StartupError, check_mode,
-                     matrix_param, pose_from_odom, reference_from_msgs, run, stamp_ns)
+from ..control.follow import REST_SPEED, Follower, path_errors
+from ..control.loop import Tracker, TrackerConfig
+from ..control.trajectory import TrajectoryError
+from ..msgconv import tracker_config
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)
+from .trajectory_io import multidof_to_trajectory, path_to_trajectory
 
-PAPER_F = [0.5] * 8
 PARAMS = [
     Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
           '`nonfragile_tracker synthesize`', type=ParameterType.PARAMETER_DOUBLE_ARRAY),
@@ -46,19 +75,51 @@ PARAMS = [
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),
-    Param('F', PAPER_F, 'perturbation matrix F (2x4 row-major)'),
+    Param('F', [0.0] * 8, 'perturbation matrix F (2x4 row-major)'),
     Param('Delta', [0.0, 0.0, 0.0, 0.0], 'injected gain perturbation Delta (2x2 row-major); '
           'the applied gain is K + E Delta F'),
     Param('delay_compensation', False, 'follow the delay-consistent reference (zero '
           'steady-state error); needs A_tau and tau', read_only=True),
-    Param('A_tau', PAPER_A_TAU, 'delay matrix for delay_compensation (16 doubles)',
+    Param('A_tau', [0.0] * 16, 'delay matrix for delay_compensation (16 doubles)',
           read_only=True),
-    Param('tau', 0.2, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
+    Param('tau', 0.0, 'delay for delay_compensation (s)', low=0.0, high=1e3, read_only=True),
     Param('input_timeout', 0.5, 'realtime: stop if pose or reference is older than this (s)',
           low=1e-6, high=1e6),
+    Param('predict_latency', 0.0, 'assumed command-to-motion latency (s): the law is evaluated '
+          'on the state predicted at the time the command acts; 0 = no prediction',
+          low=0.0, high=10.0, read_only=True),
+    Param('predict_odom_latency', 0.0, 'assumed odometry latency (s): now = odom stamp + this',
+          low=0.0, high=10.0, read_only=True),
+    Param('predict_lag_v', 0.0, 'assumed time constant of the base\'s linear speed (s); '
+          '0 = none', low=0.0, high=10.0, read_only=True),
+    Param('predict_lag_w', 0.0, 'assumed time constant of the base\'s angular speed (s); '
+          '0 = none', low=0.0, high=10.0, read_only=True),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
+    Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
+          read_only=True),
+    Param('cruise_speed', 0.5, 'time law for a Path with zero stamps: cruise speed (m/s)',
+          low=1e-6, high=1e3),
+    Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
+          '(m/s^2)', low=1e-6, high=1e3),
+    Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
+          'trajectory topics (ignore the per-step reference samples); set it when the '
+          'reference publishes a file or relayed trajectory', read_only=True),
+    Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
+          '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
+          'instead of Twist', read_only=True),
+    Param('base_frame', topics.BASE_FRAME, 'robot body frame (frame_id of TwistStamped)',
+          read_only=True),
+    Param('viz_period', 0.2, 'period (s, stamp time) of the travelled path and the reference '
+          'marker', low=1e-3, high=1e6, read_only=True),
+    Param('max_path_poses', 5000, 'travelled path: keep the last this many poses (>= 1)'),
+    Param('diagnostics_period', 1.0, 'period (s, node clock) of the status on /diagnostics',
+          low=1e-3, high=1e6, read_only=True),
+    Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
+          'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
+#: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
+REF_BUFFER = 1000
 
 
 @dataclass(frozen=True)
@@ -69,61 +130,101 @@ class TrackerSettings:
     tracker: TrackerConfig
     input_timeout: float
     max_stamp_jump: float
-
-
-def tracker_config(values: dict) -> TrackerConfig:
-    """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
-    if values['K'] is None:
-        raise StartupError('parameter K is not set; pass a gain file, e.g. '
-                           '--ros-args --params-file config/tracker_gains.yaml')
-    try:
-        K = gain_from_parameters(values['K'], values['K_shape'])
-    except GainFileError as exc:
-        raise LoopConfigError(str(exc)) from None
-    E = matrix_param(values['E'], 2, 2, 'E')
-    F = matrix_param(values['F'], 2, 4, 'F')
-    D = matrix_param(values['Delta'], 2, 2, 'Delta')
-    pert = E @ D @ F
-    a_tau = matrix_param(values['A_tau'], 4, 4, 'A_tau')
-    return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
-                         max_angular_speed=values['max_angular_speed'],
-                         min_speed=values['min_speed'],
-                         perturbation=pert if np.any(pert) else None,
-                         delay_compensation=values['delay_compensation'], A_tau=a_tau,
-                         tau=values['tau'])
+    frame: str
+    cruise_speed: float
+    max_accel: float
+    wait_for_trajectory: bool
+    stamped_cmd_vel: bool
+    base_frame: str
+    viz_period: float
+    max_path_poses: int
+    diagnostics_period: float
+    rest_speed: float
 
 
 def tracker_settings(values: dict) -> TrackerSettings:
-    """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad."""
+    """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad.
+
+    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` (shared
+    with bag replay); the rest are the node's own settings.
+    """
+    if values['K'] is None:
+        raise StartupError('parameter K is not set; pass a gain file, e.g. '
+                           '--ros-args --params-file config/tracker_gains.yaml')
+    if values['max_path_poses'] < 1:
+        raise StartupError(f'max_path_poses must be at least 1, got {values["max_path_poses"]}')
     return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
                            input_timeout=values['input_timeout'],
-                           max_stamp_jump=values['max_stamp_jump'])
+                           max_stamp_jump=values['max_stamp_jump'], frame=values['odom_frame'],
+                           cruise_speed=values['cruise_speed'], max_accel=values['max_accel'],
+                           wait_for_trajectory=values['wait_for_trajectory'],
+                           stamped_cmd_vel=values['enable_stamped_cmd_vel'],
+                           base_frame=values['base_frame'], viz_period=values['viz_period'],
+                           max_path_poses=values['max_path_poses'],
+                           diagnostics_period=values['diagnostics_period'],
+                           rest_speed=values['rest_speed'])
 
 
 class TrackerNode(AdapterNode):
-    """ROS adapter around :class:`control.loop.Tracker`."""
+    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`."""
 
     def __init__(self, node_name: str = 'tracker', **node_kwargs):
         super().__init__(node_name, **node_kwargs)
-        self.config = self.bind_parameters(PARAMS, tracker_settings)
-        self.mode = self.config.mode
-        self.tracker = Tracker(self.config.tracker)
-        self.pub_cmd = self.create_publisher(Twist, topics.CMD_VEL, DATA_QOS)
+        self.config = cfg = self.bind_parameters(PARAMS, tracker_settings)
+        self.mode = cfg.mode
+        self.tracker = Tracker(cfg.tracker)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
         self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
         self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel, DATA_QOS)
+        self.frame = cfg.frame
+        self.wait_for_trajectory = cfg.wait_for_trajectory
+        self.follower: Follower | None = None
+        self.last_refusal = ''
+        self.origin_ns = 0
+        self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
+        self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
+                                 self._on_multidof, LATCHED_QOS)
         if self.mode == 'lockstep':
             self.set_parameters([Parameter('use_sim_time', value=True)])
         self._odom: Odometry | None = None
         self._ref = [None, None, None]
+        self._refs: dict[int, list] = {}      # lockstep: stamp -> [pose, twist, accel]
         self.last_stamp = -1
         self.last_odom_stamp = -1
         self.rejected = 0
         self.jumps = 0
         self.commands = 0
-        self._cmd = Twist()
         self._stopped = False
+        self.saturated = self.stale_stops = self.deadline_misses = 0
+        self._rejected_reported = 0
+        self._odom_intervals, self._odom_interval_sum = 0, 0.0
+        self._last_odom_rx = self._last_ref_rx = 0
+        self.base_frame = cfg.base_frame
+        if cfg.stamped_cmd_vel:
+            self._cmd_msg = TwistStamped()
+            self._cmd_msg.header.frame_id = self.base_frame
+            self._cmd = self._cmd_msg.twist
+        else:
+            self._cmd = self._cmd_msg = Twist()
+        self.pub_cmd = self.create_publisher(type(self._cmd_msg), topics.CMD_VEL, DATA_QOS)
+        self.pub_error = self.create_publisher(Vector3Stamped, topics.TRACKING_ERROR, DATA_QOS)
+        self.pub_path = self.create_publisher(PathMsg, topics.TRAVELLED_PATH, DATA_QOS)
+        self.pub_marker = self.create_publisher(Marker, topics.REF_MARKER, DATA_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, DATA_QOS)
+        self._err_msg = Vector3Stamped()
+        self._err_msg.header.frame_id = self.frame
+        self._travelled = PathMsg()
+        self._travelled.header.frame_id = self.frame
+        self.viz_period_ns = int(cfg.viz_period * 1e9)
+        self.max_path_poses = cfg.max_path_poses
+        self._last_viz = -(1 << 62)
+        mk = self._marker = Marker()
+        mk.header.frame_id = self.frame
+        mk.ns, mk.id, mk.type, mk.action = 'reference', 0, Marker.ARROW, Marker.ADD
+        mk.scale.x, mk.scale.y, mk.scale.z = 0.25, 0.04, 0.04
+        mk.color.r, mk.color.g, mk.color.b, mk.color.a = 1.0, 0.3, 0.0, 1.0
+        self.create_timer(cfg.diagnostics_period, self._diagnostics)
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
@@ -131,6 +232,7 @@ class TrackerNode(AdapterNode):
     def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
         """An accepted runtime set (post-set callback): the law uses the new gains/limits."""
         self.tracker.config = new.tracker
+        self.max_path_poses = new.max_path_poses
 
     # ------------------------------------------------------------------ inputs
     def _reject(self, what: str) -> None:
@@ -138,10 +240,41 @@ class TrackerNode(AdapterNode):
         if self.rejected <= 10 or self.rejected % 1000 == 0:
             self.get_logger().warn(f'ignored {what} (rejected so far: {self.rejected})')
 
+    def _new_trajectory(self, build, source: str) -> None:
+        try:
+            traj, origin = build()
+        except TrajectoryError as exc:
+            self.rejected += 1
+            self.last_refusal = str(exc)
+            keep = 'the previous trajectory' if self.follower else 'the reference topics'
+            self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
+            return
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, self.config.rest_speed)
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        self.get_logger().info(f'new trajectory from {source}: {len(traj.knots)} points '
+                               f'({traj.kind}), {traj.duration:.3f} s from stamp '
+                               f'{origin * 1e-9:.3f} s: starting a new run')
+        self._try_compute()                # a pose not yet answered gets its command now
+
+    def _on_path(self, msg: PathMsg) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
+        self._new_trajectory(lambda: path_to_trajectory(
+            msg, frame=self.frame, source=source, cruise_speed=self.config.cruise_speed,
+            max_accel=self.config.max_accel, now_ns=self.get_clock().now().nanoseconds),
+            source)
+
+    def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
+        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'
+        self._new_trajectory(lambda: multidof_to_trajectory(msg, frame=self.frame,
+                                                            source=source), source)
+
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'odom in frame {msg.header.frame_id!r} (expected '
-                                f'{topics.ODOM_FRAME!r})')
+                                f'{self.frame!r})')
         s = stamp_ns(msg.header.stamp)
         if s <= self.last_odom_stamp:
             if s < self.last_odom_stamp:
@@ -153,6 +286,13 @@ class TrackerNode(AdapterNode):
             self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
+        if self.last_odom_stamp >= 0:
+            gap = (s - self.last_odom_stamp) * 1e-9
+            self._odom_intervals += 1
+            self._odom_interval_sum += gap
+            if gap > 1.5 * self.tracker.config.dt:
+                self.deadline_misses += 1
+        self._last_odom_rx = self.get_clock().now().nanoseconds
         self._odom = msg
         self.last_odom_stamp = s
         if self.mode == 'realtime':
@@ -160,12 +300,22 @@ class TrackerNode(AdapterNode):
         self._try_compute()
 
     def _on_ref(self, i: int, msg) -> None:
-        if msg.header.frame_id != topics.ODOM_FRAME:
+        if msg.header.frame_id != self.frame:
             return self._reject(f'reference in frame {msg.header.frame_id!r}')
         self._ref[i] = msg
+        self._last_ref_rx = self.get_clock().now().nanoseconds
         if self.mode == 'realtime':
             self._last_ref_wall = self.get_clock().now().nanoseconds
-        else:
+        elif self.follower is None and not self.wait_for_trajectory:
+            s = stamp_ns(msg.header.stamp)
+            if s < self.last_stamp:
+                return                     # older than the last odometry used: never needed
+            parts = self._refs.get(s)
+            if parts is None:
+                if len(self._refs) >= REF_BUFFER:
+                    del self._refs[min(self._refs)]
+                parts = self._refs[s] = [None, None, None]
+            parts[i] = msg
             self._try_compute()
 
     def _on_ref_pose(self, msg):
@@ -179,51 +329,179 @@ class TrackerNode(AdapterNode):
 
     # ------------------------------------------------------------------ law
     def _try_compute(self) -> None:
+        if self.follower is not None:
+            return self._follow()
+        if self.wait_for_trajectory:
+            return
         odom = self._odom
         if odom is None or any(r is None for r in self._ref):
             return
         if self.mode == 'realtime' and self._stopped:
             return                         # the watchdog publishes the stop
         s = stamp_ns(odom.header.stamp)
+        parts = self._ref
         if self.mode == 'lockstep':
-            if s <= self.last_stamp or any(stamp_ns(r.header.stamp) != s for r in self._ref):
+            parts = self._refs.get(s)
+            if s <= self.last_stamp or parts is None or any(r is None for r in parts):
                 return
         pose = pose_from_odom(odom.pose.pose)
         if isinstance(pose, str):
             self._odom = None
             return self._reject(f'odom: {pose}')
-        t_ref = stamp_ns(self._ref[0].header.stamp) * 1e-9
-        ref = reference_from_msgs(t_ref, *self._ref)
+        t_ref = stamp_ns(parts[0].header.stamp) * 1e-9
+        ref = reference_from_msgs(t_ref, *parts)
         if isinstance(ref, str):
             return self._reject(ref)
         self.last_stamp = s
+        if self.mode == 'lockstep':
+            for old in [k for k in self._refs if k <= s]:
+                del self._refs[old]
         speed = odom.twist.twist.linear.x
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                measured_speed=speed if math.isfinite(speed) else 0.0)
-        self._publish(cmd.v, cmd.w)
+                                measured_speed=speed if math.isfinite(speed) else 0.0,
+                                stamp=s * 1e-9)
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, ref, cmd)
 
-    def _publish(self, v: float, w: float) -> None:
+    def _follow(self) -> None:
+        """One command from the own trajectory, sampled at the odometry stamp."""
+        odom = self._odom
+        if odom is None or (self.mode == 'realtime' and self._stopped):
+            return
+        s = stamp_ns(odom.header.stamp)
+        if s <= self.last_stamp:
+            return
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            return self._reject(f'odom: {pose}')
+        self.last_stamp = s
+        f = self.follower
+        speed = odom.twist.twist.linear.x
+        was_finished = f.finished
+        cmd = f.step(pose[0], pose[1], pose[2], (s - self.origin_ns) * 1e-9,
+                     measured_speed=speed if math.isfinite(speed) else 0.0)
+        if f.finished and not was_finished:
+            e = math.hypot(cmd.error[0], cmd.error[2])
+            self.get_logger().info(
+                f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
+                f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
+                'a new trajectory')
+            self._diagnostics()
+        self._publish(cmd.v, cmd.w, s)
+        self._outputs(s, pose, f.last_ref, cmd)
+
+    def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
+        """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
+
+        The stamped header carries the command time - the odometry stamp it answers in
+        lockstep, the node clock's now in real time (what diff_drive_controller checks
+        against its cmd_vel_timeout) - and the body frame.
+        """
         c = self.tracker.config
         if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
             v = w = 0.0
         self._cmd.linear.x = max(-c.max_linear_speed, min(c.max_linear_speed, v))
         self._cmd.angular.z = max(-c.max_angular_speed, min(c.max_angular_speed, w))
-        self.pub_cmd.publish(self._cmd)
+        if self._cmd_msg is not self._cmd:
+            if stamp is None or self.mode == 'realtime':
+                stamp = self.get_clock().now().nanoseconds
+            ns_to_stamp(stamp, self._cmd_msg.header.stamp)
+        self.pub_cmd.publish(self._cmd_msg)
         self.commands += 1
 
+    # ------------------------------------------------------------------ outputs
+    def _outputs(self, stamp: int, pose, ref, cmd) -> None:
+        """Tracking error every step, travelled path and reference marker at viz_period."""
+        if cmd.saturated:
+            self.saturated += 1
+        if ref is None:
+            return
+        if self.pub_error.get_subscription_count():
+            along, cross, head = path_errors(pose[0], pose[1], pose[2], ref)
+            m = self._err_msg
+            ns_to_stamp(stamp, m.header.stamp)
+            m.vector.x, m.vector.y, m.vector.z = along, cross, head
+            self.pub_error.publish(m)
+        if stamp - self._last_viz < self.viz_period_ns:
+            return
+        self._last_viz = stamp
+        ps = PoseStamped()
+        ps.header.frame_id = self.frame
+        ns_to_stamp(stamp, ps.header.stamp)
+        fill_pose(ps.pose, pose[0], pose[1], pose[2])
+        self._travelled.poses.append(ps)
+        if len(self._travelled.poses) > self.max_path_poses:
+            del self._travelled.poses[:len(self._travelled.poses) - self.max_path_poses]
+        self._travelled.header.stamp = ps.header.stamp
+        if self.pub_path.get_subscription_count():
+            self.pub_path.publish(self._travelled)
+        if self.pub_marker.get_subscription_count():
+            mk = self._marker
+            mk.header.stamp = ps.header.stamp
+            fill_pose(mk.pose, ref.x, ref.y, ref.heading)
+            self.pub_marker.publish(mk)
+
+    def _diagnostics(self) -> None:
+        """Tracker status on /diagnostics (diagnostic_msgs/DiagnosticArray)."""
+        now = self.get_clock().now().nanoseconds
+        f = self.follower
+        if f is None:
+            state = 'waiting for a trajectory' if self.wait_for_trajectory else \
+                'following the reference topics'
+        elif f.finished:
+            state = f'trajectory finished, at rest since t = {f.finished_at:.3f} s'
+        elif f.ended:
+            state = 'trajectory ended, coming to rest'
+        else:
+            state = 'following the trajectory'
+        n = self._odom_intervals
+        period = self._odom_interval_sum / n if n else 0.0
+        odom_age = (now - self._last_odom_rx) * 1e-9 if self._last_odom_rx else math.inf
+        ref_age = (now - self._last_ref_rx) * 1e-9 if self._last_ref_rx else math.inf
+        level = DiagnosticStatus.OK
+        msgs = [state]
+        if self._stopped:
+            level = DiagnosticStatus.WARN
+            msgs.append('inputs stale: stopped')
+        if self.rejected > self._rejected_reported:
+            level = max(level, DiagnosticStatus.WARN)
+            msgs.append(f'{self.rejected - self._rejected_reported} input(s) rejected')
+        self._rejected_reported = self.rejected
+        st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
+                              message='; '.join(msgs),
+                              hardware_id=self.get_fully_qualified_name())
+        vals = {'loop period (s)': f'{period:.6f}', 'deadline misses': self.deadline_misses,
+                'odom age (s)': f'{odom_age:.3f}',
+                'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
+                'commands': self.commands,
+                'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
+                'saturated commands': self.saturated, 'stamp jumps': self.jumps,
+                'trajectory': state,
+                'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
+                'last refused trajectory': self.last_refusal or 'none'}
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self.pub_diag.publish(arr)
+
     def _watchdog(self) -> None:
-        if self._last_odom_wall is None or self._last_ref_wall is None:
+        own = self.follower is not None      # own trajectory: reference samples not needed
+        if self._last_odom_wall is None or (self._last_ref_wall is None and not own):
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
         limit = self.config.input_timeout * 1e9
-        stale = [name for name, t in (('odom', self._last_odom_wall),
-                                      ('reference', self._last_ref_wall))
-                 if now - t > limit]
+        inputs = [('odom', self._last_odom_wall)]
+        if not own:
+            inputs.append(('reference', self._last_ref_wall))
+        stale = [name for name, t in inputs if now - t > limit]
         if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
                                        f'{self.config.input_timeout} s: publishing stop')
                 self._stopped = True
+                self.stale_stops += 1
                 self.tracker.reset()
             self._publish(0.0, 0.0)
         elif not stale and self._stopped:

@@ -1,0 +1,1 @@
+"""One module per benchmark section; each exposes ``bench_<section>(cfg, table, raw, ...)``."""

@@ -1,0 +1,221 @@
+"""Velocity commands and odometry of any rosbag2 bag, for latency identification.
+
+:func:`read_motion` returns the series :func:`nonfragile_tracker.control.identify.identify_latency`
+needs, from a bag of this package or of any robot:
+
+* commands: ``geometry_msgs/msg/Twist`` timed by the bag's receive (log) time, or
+  ``geometry_msgs/msg/TwistStamped`` timed by its header stamp (receive time if
+  the publisher left the stamp at zero);
+* odometry: ``nav_msgs/msg/Odometry`` from any node, timed by its header stamp
+  (the measurement time), with pose and body twist.
+
+Topics: ``cmd_topic`` / ``odom_topic`` are looked up as stored (``/cmd_vel``),
+with a leading slash, then as a namespaced topic ending in the name
+(``/robot1/cmd_vel``); if a *default* name is absent, the one topic of the right
+type is taken.  More than one candidate, a wrong type or nothing at all raises
+:class:`MissingTopicsError` (a :class:`BagError`) naming the topics the bag has.
+No ROS (rclpy) import; rosbags only.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag2 import ReaderError
+
+from .. import topics
+from ..errors import InputError
+from ..control.identify import CommandSamples, OdometrySamples
+from ..control.loop import quaternion_to_yaw
+from .reader import MissingTopicsError, NotABagError, open_reader
+from .writer import jazzy_typestore
+
+__all__ = ['MotionData', 'read_motion', 'pick_topic', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
+           'CMD_TYPES', 'ODOM_TYPES']
+
+TWIST = 'geometry_msgs/msg/Twist'
+TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
+ODOMETRY = 'nav_msgs/msg/Odometry'
+CMD_TYPES = (TWIST, TWIST_STAMPED)
+ODOM_TYPES = (ODOMETRY,)
+
+
+@dataclass(frozen=True)
+class MotionData:
+    """What :func:`read_motion` found (times in s on the bag's clock)."""
+
+    path: Path
+    commands: CommandSamples
+    odometry: OdometrySamples
+    cmd_topic: str
+    cmd_type: str
+    #: 'receive time' or 'header stamp'
+    cmd_time: str
+    odom_topic: str
+    #: 'header stamp' or 'receive time' (all odometry stamps were zero)
+    odom_time: str
+    #: median of (receive time - header stamp) of the odometry; NaN if stamps unused
+    odom_delay_s: float
+    #: odometry messages dropped because their stamp repeated an earlier one
+    duplicates: int
+
+
+def _describe(by_type: dict[str, str]) -> str:
+    return ', '.join(f'{t} ({ty})' for t, ty in sorted(by_type.items())) or 'no topics'
+
+
+def pick_topic(available: dict[str, str], name: str, types: Iterable[str], *, role: str,
+               option: str, by_type: bool = True) -> str:
+    """The stored topic for ``name`` (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    available : dict
+        Stored topic -> message type.
+    name : str
+        Requested name (``cmd_vel``, ``/robot1/odom``).
+    types : iterable of str
+        Accepted message types.
+    role, option : str
+        For the messages: what the topic is (``'velocity commands'``) and the CLI
+        option that sets it (``'--cmd-topic'``).
+    by_type : bool
+        Fall back to the one topic of an accepted type when ``name`` is absent.
+    """
+    types = tuple(types)
+    want = ' or '.join(types)
+    stripped = name.strip('/')
+    exact = [t for t in (name, '/' + stripped) if t in available]
+    cands = exact[:1] or sorted(t for t in available
+                                if t.endswith('/' + stripped) and t != name)
+    if cands:
+        good = [t for t in cands if available[t] in types]
+        if not good:
+            raise MissingTopicsError(
+                f'{role}: topic {cands[0]} has type {available[cands[0]]}, expected {want}; '
+                f'pass the right topic with {option} (the bag has {_describe(available)})',
+                [name])
+        if len(good) > 1:
+            raise MissingTopicsError(
+                f'{role}: several topics match {name!r}: {", ".join(good)}; choose one with '
+                f'{option}', [name])
+        return good[0]
+    if by_type:
+        good = sorted(t for t, ty in available.items() if ty in types)
+        if len(good) == 1:
+            return good[0]
+        if len(good) > 1:
+            raise MissingTopicsError(
+                f'{role}: the bag has no topic {name!r} and several of type {want}: '
+                f'{", ".join(good)}; choose one with {option}', [name])
+    raise MissingTopicsError(
+        f'{role}: the bag has no topic {name!r}' + (f' and none of type {want}' if by_type
+                                                    else '') +
+        f'; it has {_describe(available)}. Record {name} ({want}) or name the topic with '
+        f'{option}', [name])
+
+
+def read_motion(path: str | os.PathLike, *, cmd_topic: str = topics.CMD_VEL,
+                odom_topic: str = topics.ODOM, cmd_time: str = 'auto') -> MotionData:
+    """Read velocity commands and odometry of a bag for :func:`identify_latency`.
+
+    Parameters
+    ----------
+    path : path-like
+        A rosbag2 bag directory (any storage rosbags reads: MCAP, sqlite3).
+    cmd_topic, odom_topic : str
+        Topic names (defaults ``cmd_vel``, ``odom``; see :func:`pick_topic`).
+    cmd_time : {'auto', 'receive', 'stamp'}
+        How commands are timed: ``auto`` = header stamp of a TwistStamped (receive
+        time if it is zero), receive time of a Twist.
+
+    Returns
+    -------
+    MotionData
+
+    Raises
+    ------
+    MissingTopicsError
+        A topic is absent, ambiguous or of the wrong type.
+    NotABagError, BagNotFoundError, BagTruncatedError
+        As :func:`nonfragile_tracker.bag.reader.open_reader`.
+    """
+    if cmd_time not in ('auto', 'receive', 'stamp'):
+        raise InputError(f"cmd_time must be 'auto', 'receive' or 'stamp', got {cmd_time!r}")
+    reader = open_reader(path)
+    try:
+        available: dict[str, str] = {}
+        for c in reader.connections:
+            available.setdefault(c.topic, c.msgtype)
+        ctopic = pick_topic(available, cmd_topic, CMD_TYPES, role='velocity commands',
+                            option='--cmd-topic', by_type=cmd_topic == topics.CMD_VEL)
+        otopic = pick_topic(available, odom_topic, ODOM_TYPES, role='odometry',
+                            option='--odom-topic', by_type=odom_topic == topics.ODOM)
+        ctype = available[ctopic]
+        if cmd_time == 'stamp' and ctype != TWIST_STAMPED:
+            raise MissingTopicsError(f'--cmd-time stamp needs a TwistStamped command topic; '
+                                     f'{ctopic} is {ctype}', [ctopic])
+        conns = [c for c in reader.connections if c.topic in (ctopic, otopic)
+                 and c.msgtype == available[c.topic]]
+        ts = jazzy_typestore()
+        crows: list[tuple[int, int, float, float]] = []
+        orows: list[tuple[int, int, float, float, float, float, float]] = []
+        try:
+            for conn, timestamp, raw in reader.messages(connections=conns):
+                msg = ts.deserialize_cdr(raw, conn.msgtype)
+                if conn.topic == ctopic:
+                    if ctype == TWIST_STAMPED:
+                        st = msg.header.stamp
+                        stamp = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+                        tw = msg.twist
+                    else:
+                        stamp, tw = 0, msg
+                    crows.append((timestamp, stamp, float(tw.linear.x), float(tw.angular.z)))
+                else:
+                    st = msg.header.stamp
+                    p = msg.pose.pose
+                    q = p.orientation
+                    orows.append((timestamp, int(st.sec) * 1_000_000_000 + int(st.nanosec),
+                                  float(p.position.x), float(p.position.y),
+                                  quaternion_to_yaw(q.x, q.y, q.z, q.w),
+                                  float(msg.twist.twist.linear.x),
+                                  float(msg.twist.twist.angular.z)))
+        except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
+            raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                               'damaged - try `nonfragile_tracker bag repair`') from None
+    finally:
+        reader.close()
+
+    for what, rows, topic in (('velocity commands', crows, ctopic), ('odometry', orows, otopic)):
+        if not rows:
+            raise MissingTopicsError(f'{what}: topic {topic} in {path} has no messages', [topic])
+
+    c = np.array(crows, dtype=np.float64).reshape(-1, 4)
+    c_recv = np.array([r[0] for r in crows], dtype=np.int64)
+    c_stamp = np.array([r[1] for r in crows], dtype=np.int64)
+    use_stamp = ctype == TWIST_STAMPED and cmd_time != 'receive' and bool(np.any(c_stamp > 0))
+    if cmd_time == 'stamp' and not use_stamp:
+        raise MissingTopicsError(f'--cmd-time stamp: {ctopic} has zero header stamps', [ctopic])
+    c_ns = c_stamp if use_stamp else c_recv
+    order = np.argsort(c_ns, kind='stable')
+    commands = CommandSamples((c_ns[order] * 1e-9), c[order, 2], c[order, 3])
+
+    o = np.array([r[2:] for r in orows], dtype=float).reshape(-1, 5)
+    o_recv = np.array([r[0] for r in orows], dtype=np.int64)
+    o_stamp = np.array([r[1] for r in orows], dtype=np.int64)
+    stamped = bool(np.any(o_stamp > 0))
+    o_ns = o_stamp if stamped else o_recv
+    order = np.argsort(o_ns, kind='stable')
+    o_ns, o, o_recv = o_ns[order], o[order], o_recv[order]
+    keep = np.concatenate([[True], np.diff(o_ns) > 0])
+    odometry = OdometrySamples(o_ns[keep] * 1e-9, o[keep, 0], o[keep, 1], o[keep, 2],
+                               o[keep, 3], o[keep, 4])
+    delay = float(np.median((o_recv - o_ns) * 1e-9)) if stamped else math.nan
+    return MotionData(path=Path(path), commands=commands, odometry=odometry, cmd_topic=ctopic,
+                      cmd_type=ctype, cmd_time='header stamp' if use_stamp else 'receive time',
+                      odom_topic=otopic, odom_time='header stamp' if stamped else 'receive time',
+                      odom_delay_s=delay, duplicates=int(np.count_nonzero(~keep)))

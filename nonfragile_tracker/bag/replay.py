@@ -1,0 +1,571 @@
+"""Replay a recorded run into a fresh tracker and compare its commands with the recorded ones.
+
+The recorded odometry and reference messages are fed, in bag order (the recorder's
+receive order), to :class:`TrackerInputs` - the tracker node's input rules without
+ROS - around the same step function as the node (:class:`control.loop.Tracker`):
+
+* odometry in another frame than ``odom``, or with a stamp that does not advance, is
+  ignored; a stamp jump above ``max_stamp_jump`` re-initialises the compensator;
+* lockstep bags (most odometry stamps equal a reference stamp): a command when the
+  odometry and the three reference parts with the same stamp are all in;
+* real-time bags: a command at each odometry message with the latest reference parts
+  (what the tracker had received by then).
+
+Its commands are compared (:func:`compare.compare_messages`) with the recorded
+``cmd_vel`` (Twist or TwistStamped) or with those of an ``expected`` bag: by index
+when both have as many, else by time.  What the node does on its wall clock (the
+real-time watchdog's stop commands after a silence) is not replayed: those recorded
+stops show up as unpaired commands.
+
+The DDS variant (through a real tracker node) is
+:func:`nonfragile_tracker.nodes.replayer.replay_over_dds`.  No rclpy here.
+"""
+from __future__ import annotations
+
+import bisect
+import copy
+import math
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .. import topics
+from ..control.gains import read_gain_file
+from ..control.loop import Command, Tracker, TrackerConfig
+from ..msgconv import pose_from_odom, reference_from_msgs, stamp_ns, tracker_config
+from ..resources import config_dir
+from ..runner import node_key
+from .compare import Comparison, compare_messages, format_differences
+from .reader import MissingTopicsError, open_reader, resolve_topics, typestore_for
+from .writer import BagError, jazzy_typestore
+
+__all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
+           'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
+           'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
+           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK']
+
+#: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
+#: a test keeps the two equal).
+TRACKER_DEFAULTS: dict[str, Any] = {
+    'K_shape': [2, 4], 'dt': 0.01, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
+    'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.5] * 8, 'Delta': [0.0] * 4,
+    'delay_compensation': False,
+    'A_tau': [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0],
+    'tau': 0.2, 'max_stamp_jump': 1.0,
+}
+_KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
+          topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
+REF_INDEX = {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}
+
+
+@dataclass(frozen=True)
+class ReplayEvent:
+    """One recorded input or command, in bag order."""
+
+    kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd
+    receive_ns: int
+    topic: str
+    msgtype: str
+    raw: bytes                 # CDR bytes as recorded (published as is over DDS)
+    msg: Any                   # deserialized (rosbags)
+
+
+@dataclass
+class ReplayResult:
+    """What a replay produced and how it compares."""
+
+    bag: Path
+    mode: str                                  # lockstep or realtime
+    commands: list[tuple[int, Any]]            # (receive ns of the triggering input, Twist)
+    recorded: list[tuple[int, Any]]            # the commands compared against
+    comparison: Comparison
+    inputs: dict[str, int] = field(default_factory=dict)   # events fed per kind
+    ignored: dict[str, int] = field(default_factory=dict)  # why inputs were ignored
+    reference: str = 'recorded'                # or the expected bag's path
+    via: str = 'in process'
+    plan: Any = None                           # the ReplayPlan behind it
+
+    @property
+    def max_abs_error(self) -> float:
+        return max(self.comparison.max_abs_error.values(), default=math.nan)
+
+
+def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
+                       ) -> list[ReplayEvent]:
+    """Odometry, reference parts and commands of a bag, in bag (receive) order."""
+    reader = open_reader(path)
+    try:
+        by_topic = {c.topic: c for c in reader.connections}
+        tmap = resolve_topics(by_topic, list(_KINDS), namespace)
+        missing = [n for n in (topics.ODOM, topics.REF_POSE, topics.REF_TWIST,
+                               topics.REF_ACCEL) if n not in tmap]
+        if missing:
+            raise MissingTopicsError(
+                f'bag {path} lacks {", ".join(missing)}: a replay feeds the recorded odometry '
+                f'and reference to the tracker (the bag has {sorted(by_topic) or "no topics"})',
+                missing)
+        kinds = {tmap[n]: k for n, k in _KINDS.items() if n in tmap}
+        ts = typestore_for(reader)
+        conns = [c for c in reader.connections if c.topic in kinds]
+        out = []
+        try:
+            for conn, t, raw in reader.messages(connections=conns):
+                out.append(ReplayEvent(kinds[conn.topic], int(t), conn.topic, conn.msgtype,
+                                       bytes(raw), ts.deserialize_cdr(raw, conn.msgtype)))
+        except (ValueError, IndexError, KeyError, AssertionError) as exc:
+            raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: {exc}); '
+                           'try `nonfragile_tracker bag repair`') from None
+    finally:
+        reader.close()
+    return out
+
+
+def bag_mode(events: Iterable[ReplayEvent]) -> str:
+    """``lockstep`` when at least half the odometry stamps equal a reference stamp."""
+    odom, ref = set(), set()
+    for e in events:
+        if e.kind == 'odom':
+            odom.add(stamp_ns(e.msg.header.stamp))
+        elif e.kind == 'ref_pose':
+            ref.add(stamp_ns(e.msg.header.stamp))
+    return 'lockstep' if odom and len(odom & ref) >= 0.5 * len(odom) else 'realtime'
+
+
+class TrackerInputs:
+    """The tracker node's input rules (frames, stamps, lockstep/real-time triggering), ROS-free.
+
+    ``odom(msg)`` and ``reference(i, msg)`` take messages (rclpy or rosbags) and return
+    the :class:`Command` the node would publish, or None.  ``ignored`` counts what was
+    ignored and why.
+    """
+
+    def __init__(self, config: TrackerConfig, mode: str = 'realtime',
+                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
+        if mode not in ('lockstep', 'realtime'):
+            raise BagError(f'mode must be lockstep or realtime, got {mode!r}')
+        self.tracker = Tracker(config)
+        self.mode = mode
+        self.max_jump_ns = max_stamp_jump * 1e9
+        self._odom = None
+        self._ref: list[Any] = [None, None, None]
+        self.last_stamp = -1
+        self.last_odom_stamp = -1
+        self.ignored: dict[str, int] = {}
+        self.jumps = 0
+
+    def _ignore(self, why: str) -> None:
+        self.ignored[why] = self.ignored.get(why, 0) + 1
+
+    def odom(self, msg) -> Command | None:
+        if msg.header.frame_id != topics.ODOM_FRAME:
+            return self._ignore(f'odom frame {msg.header.frame_id!r} is not '
+                                f'{topics.ODOM_FRAME!r}')
+        s = stamp_ns(msg.header.stamp)
+        if s <= self.last_odom_stamp:
+            return self._ignore('odom stamp not advancing') if s < self.last_odom_stamp \
+                else None
+        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > self.max_jump_ns:
+            self.jumps += 1
+            self.tracker.reset()
+        self._odom = msg
+        self.last_odom_stamp = s
+        return self._compute()
+
+    def reference(self, i: int, msg) -> Command | None:
+        if msg.header.frame_id != topics.ODOM_FRAME:
+            return self._ignore(f'reference frame {msg.header.frame_id!r}')
+        self._ref[i] = msg
+        return self._compute() if self.mode == 'lockstep' else None
+
+    def _compute(self) -> Command | None:
+        odom = self._odom
+        if odom is None or any(r is None for r in self._ref):
+            return None
+        s = stamp_ns(odom.header.stamp)
+        if self.mode == 'lockstep' and (s <= self.last_stamp or any(
+                stamp_ns(r.header.stamp) != s for r in self._ref)):
+            return None
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            return self._ignore(f'odom: {pose}')
+        ref = reference_from_msgs(stamp_ns(self._ref[0].header.stamp) * 1e-9, *self._ref)
+        if isinstance(ref, str):
+            return self._ignore(ref)
+        self.last_stamp = s
+        speed = odom.twist.twist.linear.x
+        return self.tracker.step(pose[0], pose[1], pose[2], ref,
+                                 measured_speed=speed if math.isfinite(speed) else 0.0)
+
+
+def _param_section(path: Path) -> dict:
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except OSError as exc:
+        raise BagError(f'cannot read parameter file {path}: {exc.strerror or exc}') from None
+    except yaml.YAMLError as exc:
+        raise BagError(f'{path} is not valid YAML: {exc}') from None
+    if not isinstance(data, dict):
+        raise BagError(f'{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)')
+    for key, section in data.items():
+        if node_key(str(key)) in ('tracker', '**') and isinstance(section, dict):
+            return dict(section.get('ros__parameters') or {})
+    return {}
+
+
+def load_tracker_parameters(gains: str | os.PathLike | None = None,
+                            params: str | os.PathLike | None = None
+                            ) -> tuple[TrackerConfig, dict]:
+    """Tracker config and parameter values from a gain file and a parameter file.
+
+    Defaults: ``config/tracker_gains.yaml`` and ``config/paper_scenario.yaml``; values
+    absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).
+    """
+    gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
+    params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
+    values = dict(TRACKER_DEFAULTS)
+    values.update(_param_section(params))
+    K = read_gain_file(gains)
+    values['K'] = [float(v) for v in np.asarray(K).ravel()]
+    values['K_shape'] = list(np.asarray(K).shape)
+    return tracker_config(values), values
+
+
+def _twist(msg) -> Any:
+    return msg.twist if hasattr(msg, 'header') else msg
+
+
+def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, Any]], *,
+                     atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+                     time_tolerance: float | None = None) -> Comparison:
+    """Replayed vs recorded commands (``cmd_vel``): by index when both have as many,
+    else by time (receive time of the triggering input vs the recorded receive time)."""
+    a = [(t, _twist(m)) for t, m in recorded]
+    align = 'index' if len(a) == len(commands) else 'time'
+    if time_tolerance is None:
+        tt = np.diff([t for t, _ in commands]) * 1e-9
+        time_tolerance = 0.5 * float(np.median(tt)) if tt.size else 0.005
+    return compare_messages({topics.CMD_VEL: a}, {topics.CMD_VEL: commands}, atol=atol,
+                            rtol=rtol, align=align, time_tolerance=time_tolerance,
+                            expected_start_ns=0, got_start_ns=0,
+                            max_differences=max_differences)
+
+
+@dataclass
+class ReplayPlan:
+    """What to feed the tracker, in which order, and what it should answer.
+
+    ``events`` are the inputs in the order the tracker saw them (bag order, with any
+    swap the recorded commands showed); ``commands`` the in-process answers, with the
+    time of the triggering input; ``initial_speed`` the compensator speed recovered
+    from the first recorded command (real-time bags), also written into the first
+    odometry event's twist so a tracker node starts from it.
+    """
+
+    mode: str
+    events: list[ReplayEvent]
+    commands: list[tuple[int, Any]]
+    recorded: list[tuple[int, Any]]
+    fed: dict[str, int]
+    ignored: dict[str, int]
+    initial_speed: float | None = None
+    skipped_inputs: int = 0          # inputs before the tracker's first recorded command
+    swaps: int = 0                   # odometry/reference pairs taken in the other order
+
+
+#: Receive-time window (s) within which the recorder and the tracker may have received an
+#: odometry and a reference message in different orders.
+ORDER_WINDOW = 0.002
+
+
+def _with_speed(e: ReplayEvent, v: float) -> ReplayEvent:
+    msg = copy.deepcopy(e.msg)
+    msg.twist.twist.linear.x = float(v)
+    raw = bytes(jazzy_typestore().serialize_cdr(msg, e.msgtype))
+    return ReplayEvent(e.kind, e.receive_ns, e.topic, e.msgtype, raw, msg)
+
+
+def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) -> float | None:
+    """The compensator speed v at which the tracker's command speed is ``target_v``.
+
+    The command speed ``(v + v_next) / 2`` is affine in v (``v_next = v + a dt`` with
+    ``a`` affine in v) unless saturated: two trials give the line, a third checks it.
+    """
+    def f(v):
+        trial = _snapshot(inputs)
+        trial.tracker.reset(v)
+        cmd = trial.odom(odom.msg)
+        return None if cmd is None else cmd.v
+    f0, f1 = f(0.0), f(1.0)
+    if f0 is None or f1 is None or f1 == f0:
+        return None
+    v = (target_v - f0) / (f1 - f0)
+    got = f(v)
+    return v if got is not None and abs(got - target_v) <= 1e-12 * max(1.0, abs(v)) else None
+
+
+def _snapshot(inputs: TrackerInputs) -> TrackerInputs:
+    """A copy whose tracker state can diverge (messages are shared, never mutated)."""
+    trial = copy.copy(inputs)
+    trial.tracker = copy.deepcopy(inputs.tracker)
+    trial._ref = list(inputs._ref)
+    trial.ignored = dict(inputs.ignored)
+    return trial
+
+
+def _twist_msg(cmd: Command) -> Any:
+    ts = jazzy_typestore()
+    Twist, Vector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
+    return Twist(Vector3(float(cmd.v), 0.0, 0.0), Vector3(0.0, 0.0, float(cmd.w)))
+
+
+def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
+    tw = _twist(rec)
+    return abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol
+
+
+#: How far back (s) before the first recorded command the tracker's first input may lie
+#: (a tracker may process a burst of queued inputs when it starts).
+START_SEARCH = 1.0
+#: Recorded commands that must be reproduced to accept a starting point.
+START_CHECK = 10
+
+
+def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
+                max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump'],
+                use_recorded: bool = True, atol: float = 1e-9) -> ReplayPlan:
+    """Run the tracker over the events in process and fix what the recorder cannot tell.
+
+    Lockstep bags, and any bag when comparing with another bag (``use_recorded``
+    False), are fed in bag order.  A real-time bag compared with its own commands is
+    fed as the tracker saw it, which the recorder (another reader, with its own timing)
+    shows only approximately:
+
+    * the start: the tracker may have started, or the recorder may have joined, after
+      the first inputs; the replay starts at the odometry (within :data:`START_SEARCH`
+      s before the first recorded command) from which :data:`START_CHECK` recorded
+      commands are reproduced, with the compensator speed recovered from the first;
+    * the reference at each odometry: the tracker uses the latest reference parts it
+      has; when the bag order's choice does not reproduce the recorded command, the
+      reference states received from :data:`ORDER_WINDOW` s before the odometry up to
+      the command are tried (a near-simultaneous pair seen in the other order, or a burst
+      of queued odometry processed late).
+
+    Every odometry after the start is paired with the next recorded command; once a
+    command cannot be reproduced this way, the rest is fed in bag order (and the
+    comparison shows the difference).
+    """
+    mode = bag_mode(events)
+    recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
+    fed: dict[str, int] = {}
+    for e in events:
+        fed[e.kind] = fed.get(e.kind, 0) + 1
+    data = [e for e in events if e.kind != 'cmd']
+    if use_recorded and mode == 'realtime' and recorded:
+        plan = _plan_realtime(events, data, recorded, config, max_stamp_jump, atol)
+        if plan is not None:
+            plan.fed = fed
+            return plan
+    inputs = TrackerInputs(config, mode, max_stamp_jump)
+    commands = []
+    for e in data:
+        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.reference(
+            REF_INDEX[e.kind], e.msg)
+        if cmd is not None:
+            commands.append((e.receive_ns, _twist_msg(cmd)))
+    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
+
+
+class _RefTimeline:
+    """Reference states: state ``s`` holds the latest parts after the first ``s`` ref events."""
+
+    def __init__(self, data: list[ReplayEvent]):
+        self.events = [e for e in data if e.kind in REF_INDEX]
+        self.times = [e.receive_ns for e in self.events]
+        self.before: dict[int, int] = {}         # id(odom event) -> state in bag order
+        n = 0
+        for e in data:
+            if e.kind in REF_INDEX:
+                n += 1
+            else:
+                self.before[id(e)] = n
+
+    def parts(self, s: int) -> list:
+        out: list = [None, None, None]
+        i = s - 1
+        while i >= 0 and any(p is None for p in out):
+            e = self.events[i]
+            if out[REF_INDEX[e.kind]] is None:
+                out[REF_INDEX[e.kind]] = e.msg
+            i -= 1
+        return out
+
+    def window(self, t_from: int, t_to: int) -> tuple[int, int]:
+        return bisect.bisect_left(self.times, t_from), bisect.bisect_right(self.times, t_to)
+
+
+def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerInputs,
+         applied: int, atol: float, limit: int | None = None):
+    """Pair odometry j with recorded command j, choosing the reference state that
+    reproduces it.  Returns (inputs, feed order, commands, swaps, reproduced)."""
+    window = int(ORDER_WINDOW * 1e9)
+    order: list[ReplayEvent] = []
+    commands: list[tuple[int, Any]] = []
+    swaps, matching, k = 0, True, 0
+    for od in odoms:
+        if limit is not None and k >= limit:
+            break
+        default = max(tl.before[id(od)], applied)
+        chosen = None
+        if matching and k < len(recorded):
+            t_o, t_c = od.receive_ns, recorded[k][0]
+            lo, hi = tl.window(t_o - window, max(t_c, t_o + window))
+            lo = max(lo, applied)
+            cands = [default] + list(range(default - 1, lo - 1, -1)) \
+                + list(range(default + 1, max(hi, default) + 1))
+            for s in cands[:64]:
+                trial = _snapshot(inputs)
+                for e in tl.events[applied:s]:
+                    trial.reference(REF_INDEX[e.kind], e.msg)
+                cmd = trial.odom(od.msg)
+                if cmd is None and s == default:
+                    chosen = (s, trial, None)        # an input the tracker ignores
+                    break
+                if cmd is not None and _agrees(cmd, recorded[k][1], atol):
+                    chosen = (s, trial, cmd)
+                    swaps += s != default
+                    break
+            if chosen is None:
+                matching = False
+        if chosen is None:
+            trial = _snapshot(inputs)
+            for e in tl.events[applied:default]:
+                trial.reference(REF_INDEX[e.kind], e.msg)
+            chosen = (default, trial, trial.odom(od.msg))
+        s, inputs, cmd = chosen
+        order.extend(tl.events[applied:s])
+        applied = s
+        order.append(od)
+        if cmd is not None:
+            commands.append((od.receive_ns, _twist_msg(cmd)))
+            k += 1
+    return inputs, order, commands, swaps, matching
+
+
+def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> ReplayPlan | None:
+    tl = _RefTimeline(data)
+    odoms = [e for e in data if e.kind == 'odom']
+    t_first = recorded[0][0]
+    first = bisect.bisect_right([e.receive_ns for e in odoms], t_first)
+    starts = [j for j in range(first - 1, -1, -1)
+              if t_first - odoms[j].receive_ns <= START_SEARCH * 1e9][:200]
+    v_target = float(_twist(recorded[0][1]).linear.x)
+    for j in starts:
+        od = odoms[j]
+        lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
+        default = tl.before[id(od)]
+        for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
+            base = TrackerInputs(config, 'realtime', max_stamp_jump)
+            base._ref = tl.parts(s)
+            if any(p is None for p in base._ref):
+                continue
+            v0 = _recover_speed(base, od, v_target)
+            if v0 is None:
+                continue
+            start = _with_speed(od, v0)
+            tl.before[id(start)] = tl.before[id(od)]
+            check = _run(tl, [start] + odoms[j + 1:], recorded, _snapshot(base), s, atol,
+                         limit=START_CHECK)
+            if not check[4]:
+                continue
+            inputs, order, commands, swaps, _ = _run(tl, [start] + odoms[j + 1:], recorded,
+                                                     _snapshot(base), s, atol)
+            head, seen = [], set()
+            for e in reversed(tl.events[:s]):
+                if e.kind not in seen:
+                    seen.add(e.kind)
+                    head.insert(0, e)
+                if len(seen) == 3:
+                    break
+            skipped = sum(1 for e in data if e.receive_ns < od.receive_ns) - len(head)
+            return ReplayPlan('realtime', head + order, commands, recorded, {},
+                              dict(inputs.ignored), v0, skipped, swaps)
+    return None
+
+
+def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
+           params: str | os.PathLike | None = None, expected: str | os.PathLike | None = None,
+           atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+           namespace: str | None = None) -> ReplayResult:
+    """Feed a bag's odometry and reference to a fresh tracker in process; compare commands.
+
+    Parameters
+    ----------
+    bag : path-like
+        A recorded run (lockstep or real time) with ``odom`` and the reference topics.
+    gains, params : path-like, optional
+        Gain file and parameter file with a tracker section (defaults: the shipped ones).
+    expected : path-like, optional
+        Compare with this bag's ``cmd_vel`` instead of the recorded one.
+    atol, rtol : float
+        Tolerance of the command comparison.
+
+    Returns
+    -------
+    ReplayResult
+        ``comparison.equal`` tells whether the commands are reproduced; ``plan`` what
+        was fed (see :func:`plan_replay`).
+    """
+    config, values = load_tracker_parameters(gains, params)
+    events = read_replay_events(bag, namespace=namespace)
+    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
+                       use_recorded=expected is None, atol=max(atol, 1e-9))
+    return finish_replay(bag, plan, plan.commands, expected=expected, atol=atol, rtol=rtol,
+                         max_differences=max_differences)
+
+
+def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, expected=None,
+                  atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+                  via: str = 'in process') -> ReplayResult:
+    """Compare replayed ``commands`` with the recorded (or ``expected``) ones."""
+    recorded, source = plan.recorded, 'recorded'
+    if expected is not None:
+        recorded = [(e.receive_ns, e.msg) for e in read_replay_events(expected)
+                    if e.kind == 'cmd']
+        source = str(expected)
+    if not recorded:
+        raise MissingTopicsError(f'{expected or bag} has no {topics.CMD_VEL} to compare the '
+                                 'replayed commands with', [topics.CMD_VEL])
+    cmp = compare_commands(commands, recorded, atol=atol, rtol=rtol,
+                           max_differences=max_differences)
+    return ReplayResult(Path(bag), plan.mode, commands, recorded, cmp, plan.fed,
+                        plan.ignored, source, via, plan)
+
+
+def format_replay(res: ReplayResult) -> str:
+    """Summary of a replay: inputs fed, commands produced and the comparison."""
+    fed = ', '.join(f'{k} {n}' for k, n in sorted(res.inputs.items()))
+    lines = [f'replay of {res.bag} ({res.mode}) {res.via}: fed {fed}',
+             f'commands: {len(res.commands)} replayed, {len(res.recorded)} '
+             f'{"recorded" if res.reference == "recorded" else "in " + res.reference}']
+    lines += [f'ignored: {why} ({n})' for why, n in res.ignored.items()]
+    plan = res.plan
+    if plan is not None and plan.skipped_inputs:
+        lines.append(f'started at the tracker\'s first recorded command ({plan.skipped_inputs} '
+                     'earlier inputs skipped), compensator speed recovered from it: '
+                     f'{plan.initial_speed!r} m/s')
+    if plan is not None and plan.swaps:
+        lines.append(f'{plan.swaps} odometry message(s) paired with another reference state '
+                     'than the bag order gives (the one the recorded command shows)')
+    if res.comparison.equal:
+        lines.append(f'commands reproduced: max |diff| {res.max_abs_error:.3g} '
+                     f'({res.comparison.summary[topics.CMD_VEL].align} alignment)')
+    else:
+        lines.append('commands differ:')
+        lines.append(format_differences(res.comparison))
+    return '\n'.join(lines)

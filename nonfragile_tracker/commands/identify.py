@@ -1,0 +1,137 @@
+"""``identify BAG``: command-to-motion latency and actuator lags from a recorded run."""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def _fmt_interval(lo: float, hi: float) -> str:
+    return f'[{lo:.4f}, {hi:.4f}]'
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    """Read the bag, identify, print the estimates and the next step, optionally write -o."""
+    from ..bag.motion import read_motion
+    from ..control.identify import (identify_latency, measurement_to_command_delay,
+                                    with_source, write_identification)
+    from ..errors import InputError
+    if args.output and Path(args.output).exists() and not args.force:
+        raise InputError(f'{args.output} exists; pass --force to overwrite it')
+    data = read_motion(args.bag, cmd_topic=args.cmd_topic, odom_topic=args.odom_topic,
+                       cmd_time=args.cmd_time)
+    res = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
+                           max_tau_s=args.max_tau, source=args.source,
+                           confidence=args.confidence, bootstrap=args.bootstrap,
+                           command_timeout_s=args.command_timeout, seed=args.seed)
+    res = with_source(res, args.bag)
+    cmd_period = float(np.median(np.diff(data.commands.t))) if len(data.commands) > 1 \
+        else math.nan
+    pct = f'{100 * res.confidence:.0f} %'
+    src = {'twist': 'odometry twist', 'pose': 'differenced poses'}
+    lines = [
+        f'bag {args.bag}: commands {data.cmd_topic} ({data.cmd_type.split("/")[-1]}, by '
+        f'{data.cmd_time}, {len(data.commands)} messages, period {cmd_period:.4g} s); '
+        f'odometry {data.odom_topic} ({res.odom_rate_hz:.4g} Hz by {data.odom_time}, '
+        f'{res.samples} samples fitted over {res.duration_s:.1f} s)',
+        f'latency  L     = {res.latency_s:.4f} s   {pct} interval '
+        f'{_fmt_interval(res.latency_low_s, res.latency_high_s)} s',
+        f'lag of v tau_v = {res.tau_v_s:.4f} s   {pct} interval '
+        f'{_fmt_interval(res.tau_v_low_s, res.tau_v_high_s)} s   (from {src[res.source_v]}; '
+        f'gain {res.gain_v:.3f}, residual rms {res.residual_rms_v:.3g} m/s, '
+        f'explains {100 * res.r2_v:.1f} %)',
+        f'lag of w tau_w = {res.tau_w_s:.4f} s   {pct} interval '
+        f'{_fmt_interval(res.tau_w_low_s, res.tau_w_high_s)} s   (from {src[res.source_w]}; '
+        f'gain {res.gain_w:.3f}, residual rms {res.residual_rms_w:.3g} rad/s, '
+        f'explains {100 * res.r2_w:.1f} %)',
+        f'each channel alone: latency {res.latency_v_s:.4f} s (v), {res.latency_w_s:.4f} s (w)',
+    ]
+    mc_delay = measurement_to_command_delay(data.commands, data.odometry)
+    if math.isfinite(mc_delay[1]):
+        lines.append(f'age of the newest odometry when a command is sent: median '
+                     f'{mc_delay[1]:.4f} s (1-99 %: {mc_delay[0]:.4f} ... {mc_delay[2]:.4f} s)')
+    if math.isfinite(data.odom_delay_s):
+        lines.append(f'odometry transport delay (bag receive time - header stamp): median '
+                     f'{data.odom_delay_s:.4f} s')
+        if data.odom_delay_s < -1e-3 or data.odom_delay_s > 0.5:
+            lines.append('warning: odometry stamps and bag times disagree by more than '
+                         'transport would explain; if the robot and the recorder clocks are '
+                         'not synchronized, the latency includes their offset')
+    for note in res.notes:
+        lines.append(f'note: {note}')
+    if args.cross_check and 'twist' in (res.source_v, res.source_w):
+        lines += _cross_check(args, data, res)
+    print('\n'.join(lines))
+    if args.output:
+        write_identification(args.output, res, overwrite=True)
+        print(f'wrote {args.output}')
+    step = cmd_period if math.isfinite(cmd_period) else 0.0
+    lag = max(res.tau_v_s, res.tau_w_s)
+    d_lo, _, d_hi = (0.0 if not math.isfinite(d) else d for d in mc_delay)
+    print('next: gains certified for the delay from measurement to motion and the lag '
+          '(h_min = latency low + command age low, h_max = latency high + command age high '
+          '+ one command period; README "Identify the latency"):\n'
+          f'  nonfragile_tracker latency-design PROBLEM --delay-interval '
+          f'{res.latency_low_s + d_lo:.4f} {res.latency_high_s + d_hi + step:.4f} '
+          f'--lag {lag:.4f}')
+    return 0
+
+
+def _cross_check(args: argparse.Namespace, data, res) -> list[str]:
+    """The latency from the poses alone, against the twist-based one.
+
+    A base whose twist echoes the command, or is stamped differently from the pose,
+    shows here: the poses are what the robot actually did.
+    """
+    from ..control.identify import IdentificationError, identify_latency
+    try:
+        pose = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
+                                max_tau_s=args.max_tau, source='pose', bootstrap=50,
+                                command_timeout_s=args.command_timeout, seed=args.seed)
+    except IdentificationError as exc:
+        return [f'cross-check from the poses alone: not possible ({exc})']
+    out = [f'cross-check from the poses alone: latency {pose.latency_s:.4f} s '
+           f'{_fmt_interval(pose.latency_low_s, pose.latency_high_s)}']
+    gap = max(pose.latency_low_s - res.latency_high_s, res.latency_low_s - pose.latency_high_s)
+    if gap > 0.01:
+        out.append(f'warning: the poses give a latency {gap:.3f} s outside the twist-based '
+                   'interval: does the odometry twist echo the command, or carry another '
+                   'stamp? Consider --source pose')
+    return out
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``identify``."""
+    p = sub.add_parser(
+        'identify', help='command-to-motion latency and actuator lags from a bag',
+        description='Estimate from a recorded run (cmd_vel as Twist or TwistStamped, '
+        'nav_msgs/Odometry) the command-to-motion latency and the first-order time constants '
+        'of v and w, with bootstrap intervals; write them for the latency-aware design.')
+    p.add_argument('bag', help='rosbag2 bag directory (any robot; lockstep or real time)')
+    p.add_argument('-o', '--output', help='identification YAML to write (e.g. latency.yaml; '
+                   'never overwritten without --force)')
+    p.add_argument('--force', action='store_true', help='overwrite --output if it exists')
+    p.add_argument('--cmd-topic', default='cmd_vel', help='velocity command topic (Twist or '
+                   'TwistStamped; default cmd_vel, else a namespaced one, else the one topic '
+                   'of that type)')
+    p.add_argument('--odom-topic', default='odom', help='odometry topic (nav_msgs/Odometry; '
+                   'default odom, found as for --cmd-topic)')
+    p.add_argument('--cmd-time', choices=['auto', 'receive', 'stamp'], default='auto',
+                   help='time of a command: auto = header stamp of a TwistStamped, bag receive '
+                   'time of a Twist')
+    p.add_argument('--source', choices=['auto', 'twist', 'pose'], default='auto',
+                   help='measure v, w from the odometry twist (auto: when not all zero) or '
+                   'from differenced poses')
+    p.add_argument('--no-cross-check', dest='cross_check', action='store_false',
+                   help='skip the check of a twist-based estimate against the poses alone')
+    p.add_argument('--max-latency', type=float, default=1.0, help='latency search limit (s)')
+    p.add_argument('--max-tau', type=float, default=1.0, help='time constant search limit (s)')
+    p.add_argument('--command-timeout', type=float, default=None,
+                   help="the base's cmd_vel watchdog (s): a command older than this counts "
+                   'as zero (default: held until the next)')
+    p.add_argument('--confidence', type=float, default=0.95, help='interval coverage')
+    p.add_argument('--bootstrap', type=int, default=300, help='bootstrap replicates')
+    p.add_argument('--seed', type=int, default=0, help='bootstrap seed')
+    p.set_defaults(func=cmd_identify)

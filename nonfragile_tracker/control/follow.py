@@ -1,0 +1,116 @@
+"""Following a timed trajectory to its end: the tracking law plus the end-of-trajectory rule.
+
+:class:`Follower` is the one step function of a tracker that samples its trajectory
+itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
+:class:`~control.trajectory.Trajectory` at ``t`` and calls :meth:`control.loop.Tracker.step`.
+Before the trajectory's first time the robot waits at rest (zero command).  After
+the trajectory's last time the sample holds the end point at rest; once the
+commanded speed has fallen below ``rest_speed`` the follower commands zero and stays
+at rest (``finished``) until it is given a new trajectory - near ``v = 0`` the
+linearizing law's ``w = (...)/v`` would otherwise keep turning the robot on the spot.
+
+:func:`simulate_following` is the in-process run with exactly the node's sequence,
+so a lockstep ROS run and it agree to round-off.  No ROS import.
+"""
+from __future__ import annotations
+
+import math
+
+
+from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
+                   step_time_ns)
+from .simulate import TrackingRun, run_loop
+from .trajectory import Trajectory
+
+__all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors']
+
+#: Default speed (m/s) below which, after the trajectory's end, the robot is at rest.
+REST_SPEED = 0.01
+
+
+def path_errors(x: float, y: float, th: float, ref) -> tuple[float, float, float]:
+    """Along-track, cross-track (m) and heading error (rad) of a pose against a reference.
+
+    In the reference point's frame (x along its heading, y to its left, REP-103):
+    along-track ``> 0`` means the robot is ahead, cross-track ``> 0`` that it is to the
+    left; the heading error is ``th - heading`` wrapped to ``[-pi, pi]``.
+    """
+    dx, dy = x - ref.x, y - ref.y
+    c, s = math.cos(ref.heading), math.sin(ref.heading)
+    return (c * dx + s * dy, -s * dx + c * dy, math.remainder(th - ref.heading, math.tau))
+
+
+class Follower:
+    """Track ``trajectory`` with ``tracker`` and stop at its end.
+
+    Parameters
+    ----------
+    tracker : Tracker
+        The tracking law (its compensator is reset on :meth:`set_trajectory`).
+    trajectory : Trajectory
+        What to follow; time ``t`` of :meth:`step` is trajectory time (s).
+    rest_speed : float
+        After ``t_end``, ``|cmd v|`` below this (m/s) ends the run with a zero command.
+    """
+
+    def __init__(self, tracker: Tracker, trajectory: Trajectory, rest_speed: float = REST_SPEED):
+        if not (math.isfinite(rest_speed) and rest_speed > 0):
+            raise ValueError(f'rest_speed must be a finite number > 0 m/s, got {rest_speed!r}')
+        self.tracker = tracker
+        self.rest_speed = float(rest_speed)
+        self.set_trajectory(trajectory)
+
+    def set_trajectory(self, trajectory: Trajectory) -> None:
+        """Start a new run on ``trajectory`` (compensator re-initialised from odometry)."""
+        self.trajectory = trajectory
+        self.finished = False
+        self.ended = False          # past t_end (still settling until finished)
+        self.finished_at: float | None = None
+        self.last_ref = None
+        self.tracker.reset()
+
+    def step(self, x: float, y: float, th: float, t: float,
+             measured_speed: float | None = None) -> Command:
+        """Command for the pose ``(x, y, th)`` at trajectory time ``t``."""
+        ref = self.trajectory.sample(t)
+        self.last_ref = ref
+        if self.finished:
+            return Command(v=0.0, w=0.0)
+        if t < self.trajectory.t_start:
+            # not started: wait at rest (holding a point with v = 0 would turn the robot
+            # on the spot); the compensator starts from the measured speed at t_start
+            self.tracker.reset()
+            return Command(v=0.0, w=0.0)
+        cmd = self.tracker.step(x, y, th, ref, measured_speed)
+        if t > self.trajectory.t_end:
+            self.ended = True
+            if abs(cmd.v) < self.rest_speed:
+                self.finished = True
+                self.finished_at = t
+                self.tracker.reset(0.0)
+                return Command(v=0.0, w=0.0, error=cmd.error)
+        return cmd
+
+
+def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
+                       trajectory: Trajectory, steps: int, *,
+                       rest_speed: float = REST_SPEED, origin_ns: int = 0) -> TrackingRun:
+    """In-process run of a :class:`Follower`, the ROS lockstep sequence step by step.
+
+    Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
+    ``(t_k - origin_ns) * 1e-9`` as the tracker node does.
+    """
+    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
+    if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
+        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
+                         f'({period} x plant dt {plant_config.dt}) in lockstep')
+    follower = Follower(Tracker(tracker_config), trajectory, rest_speed)
+    dt = plant_config.dt
+
+    def traj_time(k: int) -> float:
+        return (step_time_ns(k, dt) - origin_ns) * 1e-9
+
+    def command(meas, th: float, k: int, ref) -> Command:
+        return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v)
+
+    return run_loop(plant_config, steps, command, lambda k: trajectory.sample(traj_time(k)))

@@ -1,0 +1,967 @@
+"""Command-to-motion latency and actuator lag identified from recorded commands and odometry.
+
+Model (per channel ``c`` in ``v``, ``w``; first order plus dead time, FOPDT)::
+
+    tau_c y_c'(t) + y_c(t) = g_c u_c(t - L),      u_c = zero-order hold of the commands
+
+``u_c`` holds each command from its time stamp (receive time, or the header stamp
+of a TwistStamped) until the next one; ``L`` is the one command-to-motion latency
+shared by both channels, ``tau_v``, ``tau_w`` the actuator time constants and
+``g_c`` a static gain (odometry scale; 1 on an ideal base).  The initial state of
+each actuator is unknown and fitted too (a free-response term).
+
+Measurements (odometry stamped at measurement time, any rate, uneven sampling):
+
+* the odometry twist (``twist.linear.x``, ``twist.angular.z``) when it is present
+  (not all zero): point samples ``y_c(t_i)``;
+* otherwise the poses: over a window ``[t_a, t_b]`` of a few samples the heading
+  change is ``integral of w`` and the arc length (chord / sinc(dth / 2), exact for
+  a constant-curvature arc) is ``integral of v``.  The model is integrated over
+  the same window, so differencing the noisy poses adds no bias and no smoothing
+  lag (the window is a linear functional applied to both sides).
+
+Estimation: on a fine time grid (``resolution_s``, default 1 ms) the response to
+the held commands is computed exactly for a cell-averaged input (one ``lfilter``
+per time constant); a delay is a shift of that response, so the residual of the
+linear least-squares fit of ``(g_c, initial state)`` is evaluated for all delays at
+once.  ``L`` minimizes the sum of the two channels' residuals, each normalized by
+its own noise variance (from the channel's own best fit at the grid resolution; the
+channels have different units), first on a coarse grid (10 ms x 25 time constants),
+then at the grid resolution around it, and finally ``(L, tau_v, tau_w)`` are polished
+together by a bounded Nelder-Mead search (sub-step latency).
+
+Uncertainty: a non-overlapping block bootstrap over time (blocks of
+``clip(T / 20, 0.25 s, 2 s)``, both channels resampled with the same blocks) redoes
+the local grid fit ``bootstrap`` times; the intervals are its percentiles at the
+requested confidence, widened by the grid resolution and always containing the
+point estimate.  It covers noise and serially correlated model error; it does not
+cover a systematic convention offset (e.g. a base that stamps odometry at publish
+time: that transport delay is then part of ``L``).
+
+Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
+too few samples or too short an overlap of commands and odometry
+(:class:`NotEnoughDataError`), a channel whose command hardly varies
+(:class:`InsufficientExcitationError`), a model that explains less than half of the
+measured variation or an estimate at a search limit (:class:`PoorFitError`).
+
+The file the latency-aware design reads (:func:`write_identification`,
+:func:`read_identification`)::
+
+    identification:
+      source: runs/run_x/bag
+      latency_s: 0.100
+      latency_interval_s: [0.090, 0.110]
+      tau_v_s: 0.050
+      tau_v_interval_s: [0.045, 0.056]
+      tau_w_s: 0.050
+      tau_w_interval_s: [0.044, 0.057]
+      odom_rate_hz: 50.0
+      samples: 1234
+      residual_rms: {v: 0.0012, w: 0.0031}
+
+Nothing here imports ROS; numpy, scipy and PyYAML only.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy.optimize import minimize
+from scipy.signal import lfilter
+
+from ..errors import InputError
+
+__all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
+           'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',
+           'Identification', 'identify_latency', 'write_identification', 'read_identification',
+           'read_identification_text', 'with_source', 'measurement_to_command_delay',
+           'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
+
+#: Top-level key of the identification file.
+FILE_KEY = 'identification'
+#: Fewest odometry samples (after the overlap with the commands) a fit accepts.
+MIN_ODOM_SAMPLES = 30
+#: Fewest bootstrap blocks (time span / block length).
+MIN_BLOCKS = 8
+#: A channel's fit must explain at least this fraction of the measured variance.
+MIN_R2 = 0.5
+_CHANNELS = ('v', 'w')
+_UNITS = {'v': 'm/s', 'w': 'rad/s'}
+_NAMES = {'v': 'linear speed v', 'w': 'yaw rate w'}
+
+
+class IdentificationError(InputError):
+    """The run cannot give a latency estimate; the message says what is missing."""
+
+
+class NotEnoughDataError(IdentificationError):
+    """Too few samples, or commands and odometry overlap too briefly."""
+
+
+class InsufficientExcitationError(IdentificationError):
+    """A channel's command hardly varies, so its lag and the latency are not observable."""
+
+
+class PoorFitError(IdentificationError):
+    """The FOPDT model does not explain the measured motion, or hits a search limit."""
+
+
+class IdentificationFileError(IdentificationError):
+    """An identification file is malformed; the message names the field."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Data
+
+def _series(name: str, value: Any, n: int | None = None) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f'{name} must be a sequence of numbers, got {value!r}') from None
+    if arr.ndim != 1:
+        raise InputError(f'{name} must be one-dimensional, got shape {arr.shape}')
+    if n is not None and arr.size != n:
+        raise InputError(f'{name} has {arr.size} samples, expected {n} (one per time stamp)')
+    return arr
+
+
+@dataclass(frozen=True)
+class CommandSamples:
+    """Velocity commands: time ``t`` (s), ``v`` (m/s) and ``w`` (rad/s), held until the next.
+
+    ``t`` is the receive time (geometry_msgs/Twist) or the header stamp
+    (TwistStamped), on the same clock as the odometry stamps.
+    """
+
+    t: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+
+    def __post_init__(self):
+        t = _series('command t', self.t)
+        object.__setattr__(self, 't', t)
+        object.__setattr__(self, 'v', _series('command v', self.v, t.size))
+        object.__setattr__(self, 'w', _series('command w', self.w, t.size))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class OdometrySamples:
+    """Odometry by measurement time ``t`` (s): pose ``x``, ``y`` (m), ``yaw`` (rad).
+
+    ``v`` (m/s) and ``w`` (rad/s) are the body twist (``twist.linear.x``,
+    ``twist.angular.z``) or ``None`` when the source has none.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+    v: np.ndarray | None = None
+    w: np.ndarray | None = None
+
+    def __post_init__(self):
+        t = _series('odometry t', self.t)
+        object.__setattr__(self, 't', t)
+        for name in ('x', 'y', 'yaw', 'v', 'w'):
+            val = getattr(self, name)
+            if val is not None or name in ('x', 'y', 'yaw'):
+                object.__setattr__(self, name, _series(f'odometry {name}', val, t.size))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Identified latency and actuator lags with intervals (all times in s).
+
+    The first block is what the identification file holds; the fields after
+    ``source`` are diagnostics of :func:`identify_latency` (NaN, ``''`` or 0 when
+    read back from a file).
+    """
+
+    latency_s: float
+    latency_low_s: float
+    latency_high_s: float
+    tau_v_s: float
+    tau_v_low_s: float
+    tau_v_high_s: float
+    tau_w_s: float
+    tau_w_low_s: float
+    tau_w_high_s: float
+    odom_rate_hz: float
+    samples: int
+    residual_rms_v: float
+    residual_rms_w: float
+    source: str = ''
+    #: static gains g_v, g_w (measured / commanded at steady state)
+    gain_v: float = math.nan
+    gain_w: float = math.nan
+    #: fraction of the measured variance explained by the model
+    r2_v: float = math.nan
+    r2_w: float = math.nan
+    #: 'twist' or 'pose' (what each channel was measured from)
+    source_v: str = ''
+    source_w: str = ''
+    #: the latency each channel alone would give (a consistency check)
+    latency_v_s: float = math.nan
+    latency_w_s: float = math.nan
+    confidence: float = math.nan
+    resolution_s: float = math.nan
+    duration_s: float = math.nan
+    commands: int = 0
+    bootstrap: int = 0
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def latency_interval_s(self) -> tuple[float, float]:
+        return (self.latency_low_s, self.latency_high_s)
+
+    @property
+    def tau_v_interval_s(self) -> tuple[float, float]:
+        return (self.tau_v_low_s, self.tau_v_high_s)
+
+    @property
+    def tau_w_interval_s(self) -> tuple[float, float]:
+        return (self.tau_w_low_s, self.tau_w_high_s)
+
+
+# ---------------------------------------------------------------------------------------------
+# Model on the fine grid
+
+def _check_times(name: str, t: np.ndarray) -> np.ndarray:
+    if not np.all(np.isfinite(t)):
+        raise InputError(f'{name}: time stamps must be finite')
+    return np.argsort(t, kind='stable')
+
+
+def _held_integral(tc: np.ndarray, u: np.ndarray, s: np.ndarray,
+                   timeout: float | None) -> np.ndarray:
+    """Integral from tc[0] to s of the zero-order hold of (tc, u) (0 after a timeout)."""
+    if timeout is not None:
+        gaps = np.diff(tc)
+        ends = np.append(tc[:-1][gaps > timeout], tc[-1]) + timeout
+        tc = np.concatenate([tc, ends])
+        u = np.concatenate([u, np.zeros(ends.size)])
+        order = np.argsort(tc, kind='stable')
+        tc, u = tc[order], u[order]
+    cum = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(tc))])
+    j = np.clip(np.searchsorted(tc, s, side='right') - 1, 0, tc.size - 1)
+    return cum[j] + u[j] * (s - tc[j])
+
+
+class _Channel:
+    """One channel: cell-averaged input on the grid and its measurements.
+
+    ``pos`` are the grid positions (fractional steps) of the odometry times
+    used; a point measurement ``i`` reads position ``ia[i]``, a window
+    measurement the difference of the integral between ``ia[i]`` and ``ib[i]``
+    divided by ``width[i]`` (s).
+    """
+
+    def __init__(self, name: str, source: str, u_avg: np.ndarray, h: float, z: np.ndarray,
+                 pos: np.ndarray, ia: np.ndarray, ib: np.ndarray | None,
+                 width: np.ndarray | None, t_mid: np.ndarray):
+        self.name, self.source = name, source
+        self.u_avg, self.h = u_avg, h
+        self.z, self.pos, self.ia, self.ib = z, pos, ia, ib
+        self.width, self.t_mid = width, t_mid
+        self.sigma2 = 1.0
+
+    @classmethod
+    def build(cls, name, source, u_avg, h, z, pos_all, ia, ib, width, t_mid) -> '_Channel':
+        """Keep only the positions the measurements use."""
+        need = ia if ib is None else np.concatenate([ia, ib])
+        keep, inv = np.unique(need, return_inverse=True)
+        ja = inv[:ia.size]
+        jb = None if ib is None else inv[ia.size:]
+        return cls(name, source, u_avg, h, z, pos_all[keep], ja, jb, width, t_mid)
+
+    def subset(self, stride: int) -> '_Channel':
+        """Every ``stride``-th measurement (for the coarse search)."""
+        sl = slice(None, None, stride)
+        return _Channel.build(self.name, self.source, self.u_avg, self.h, self.z[sl], self.pos,
+                              self.ia[sl], None if self.ib is None else self.ib[sl],
+                              None if self.width is None else self.width[sl], self.t_mid[sl])
+
+    def signals(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        """Forced (zero initial state) and free (unit initial state) responses on the grid."""
+        n = self.u_avg.size + 1
+        a = math.exp(-self.h / tau) if tau > 0 else 0.0
+        forced = np.empty(n)
+        forced[0] = 0.0
+        forced[1:] = lfilter([1.0 - a], [1.0, -a], self.u_avg)
+        if a > 0:
+            k = np.arange(n, dtype=float)
+            with np.errstate(under='ignore'):
+                free = np.exp(k * math.log(a))
+        else:
+            free = np.zeros(n)
+            free[0] = 1.0
+        if self.ib is not None:                 # window measurements: integrate on the grid
+            forced = _cumtrapz(forced, self.h)
+            free = _cumtrapz(free, self.h)
+        return forced, free
+
+    def regressors(self, sig: np.ndarray, shifts: np.ndarray, n: int | None = None
+                   ) -> np.ndarray:
+        """The measurement functional of ``sig`` delayed by ``shifts`` (grid steps), (nd, ns).
+
+        With ``n``, only for the first ``n`` measurements.
+        """
+        ia = self.ia if n is None else self.ia[:n]
+        ib = None if self.ib is None else (self.ib if n is None else self.ib[:n])
+        last = int(max(ia.max(initial=-1), -1 if ib is None else ib.max(initial=-1))) + 1
+        vals = _interp_shifted(sig, self.pos[:last], shifts)
+        if ib is None:
+            return vals[:, ia]
+        width = self.width if n is None else self.width[:n]
+        return (vals[:, ib] - vals[:, ia]) / width
+
+
+def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
+    out = np.empty_like(y)
+    out[0] = 0.0
+    np.cumsum(0.5 * h * (y[1:] + y[:-1]), out=out[1:])
+    return out
+
+
+def _interp_shifted(sig: np.ndarray, pos: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """``sig`` linearly interpolated at ``pos - shift`` for every shift: (nd, ns)."""
+    whole = np.floor(shifts)
+    if np.all(whole == shifts):                      # integer shifts: one fraction per sample
+        base = np.floor(pos)
+        f = (pos - base)[None, :]
+        i0 = base.astype(np.int64)[None, :] - whole.astype(np.int64)[:, None]
+    else:
+        p = pos[None, :] - shifts[:, None]
+        i0 = np.floor(p)
+        f = p - i0
+        i0 = i0.astype(np.int64)
+    np.clip(i0, 0, sig.size - 2, out=i0)
+    lo = sig[i0]
+    return lo + (sig[i0 + 1] - lo) * f
+
+
+def _stats(ch: _Channel, tau: float, shifts: np.ndarray, blocks: np.ndarray | None,
+           n_blocks: int) -> np.ndarray:
+    """Least-squares sufficient statistics per shift: (nd, 5[, n_blocks]).
+
+    Entries: S11, S12, S22, S1z, S2z (regressor 1 = forced, 2 = free response).
+    With ``blocks`` (block index per measurement, non-decreasing) they are summed per
+    bootstrap block (last axis).  The free response decays as exp(-t / tau): it is
+    evaluated only for the leading measurements where it is not yet below 1e-17.
+    """
+    forced, free = ch.signals(tau)
+    m1 = ch.regressors(forced, shifts)
+    k_cut = 1.0 if tau <= 0 else 40.0 * tau / ch.h        # exp(-40) ~ 4e-18
+    n_free = int(np.searchsorted(ch.pos[ch.ia], k_cut + float(np.max(shifts)), side='right'))
+    m2 = ch.regressors(free, shifts, n_free)
+    z = ch.z[None, :]
+    z2 = z[:, :n_free]
+    m1f = m1[:, :n_free]
+    prods = (m1 * m1, m1f * m2, m2 * m2, m1 * z, m2 * z2)
+    if blocks is None:
+        return np.stack([p.sum(axis=1) for p in prods], axis=1)
+    bounds = np.searchsorted(blocks, np.arange(n_blocks + 1), side='left')
+    return np.stack([_block_sums(p, np.minimum(bounds, p.shape[1])) for p in prods], axis=1)
+
+
+def _block_sums(p: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Sums of the columns of ``p`` between consecutive ``bounds``: (rows, len(bounds) - 1)."""
+    cs = np.zeros((p.shape[0], p.shape[1] + 1))
+    np.cumsum(p, axis=1, out=cs[:, 1:])
+    return cs[:, bounds[1:]] - cs[:, bounds[:-1]]
+
+
+def _sse(st: np.ndarray, zz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Residual sum of squares and gain of the 2-regressor fit from statistics (..., 5)."""
+    s11, s12, s22, s1z, s2z = (st[..., i] for i in range(5))
+    det = s11 * s22 - s12 * s12
+    ok = det > 1e-12 * np.maximum(s11 * s22, 1e-300)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        g2 = np.where(ok, (s22 * s1z - s12 * s2z) / np.where(ok, det, 1.0),
+                      s1z / np.maximum(s11, 1e-300))
+        c2 = np.where(ok, (s11 * s2z - s12 * s1z) / np.where(ok, det, 1.0), 0.0)
+    sse = zz - g2 * s1z - c2 * s2z
+    return np.maximum(sse, 0.0), g2
+
+
+def _parabola_min(values: np.ndarray, i: int) -> float:
+    """Sub-grid offset (in grid steps, within +-0.5) of the minimum at index ``i``."""
+    if i <= 0 or i >= values.size - 1:
+        return 0.0
+    a, b, c = values[i - 1], values[i], values[i + 1]
+    den = a - 2 * b + c
+    if not den > 0:
+        return 0.0
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+
+# ---------------------------------------------------------------------------------------------
+# Measurements
+
+def _window_measurements(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
+                         span: int) -> tuple[np.ndarray, ...]:
+    """Window start/end indices, mean speed and mean yaw rate over windows of ``span`` samples."""
+    th = np.unwrap(yaw)
+    a = np.arange(t.size - span)
+    b = a + span
+    width = t[b] - t[a]
+    dth = th[b] - th[a]
+    thm = 0.5 * (th[a] + th[b])
+    chord = (x[b] - x[a]) * np.cos(thm) + (y[b] - y[a]) * np.sin(thm)
+    arc = chord / np.sinc(dth / (2 * np.pi))
+    return a, b, width, arc / width, dth / width
+
+
+def _twist_present(val: np.ndarray | None) -> bool:
+    return val is not None and bool(np.all(np.isfinite(val))) and bool(np.any(val != 0.0))
+
+
+# ---------------------------------------------------------------------------------------------
+# Identification
+
+def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
+                     max_latency_s: float = 1.0, max_tau_s: float = 1.0,
+                     resolution_s: float = 0.001, source: str = 'auto',
+                     window_s: float = 0.05, confidence: float = 0.95, bootstrap: int = 300,
+                     seed: int = 0, command_timeout_s: float | None = None,
+                     min_excitation: tuple[float, float] = (0.01, 0.01)) -> Identification:
+    """Estimate the command-to-motion latency and the actuator time constants of a run.
+
+    Parameters
+    ----------
+    commands : CommandSamples
+        Velocity commands with their times (same clock as the odometry stamps).
+    odometry : OdometrySamples
+        Poses (and the body twist, if the source has one) by measurement time.
+    max_latency_s, max_tau_s : float
+        Search ranges ``[0, max]`` for the latency and the time constants.  The
+        first ``max_latency_s`` of odometry after the first command is not fitted
+        (its input is not known for every candidate latency).
+    resolution_s : float
+        Grid step of the model and of the latency search (sub-step refined).
+    source : {'auto', 'twist', 'pose'}
+        What the speeds are measured from: the odometry twist when present
+        (``auto``: per channel, if not all zero) or differences of poses over
+        windows of ``window_s``.
+    window_s : float
+        Shortest pose window (at least one odometry period) for ``source='pose'``.
+    confidence : float
+        Coverage of the bootstrap intervals (0.5 ... 0.999).
+    bootstrap : int
+        Number of block-bootstrap replicates (>= 50).
+    seed : int
+        Seed of the bootstrap resampling (the result is reproducible).
+    command_timeout_s : float, optional
+        If given, a command stops being held (input 0) this long after it was
+        sent without a newer one, as a base with a cmd_vel watchdog does.
+    min_excitation : (float, float)
+        Smallest peak-to-peak command of ``v`` (m/s) and ``w`` (rad/s) accepted.
+
+    Returns
+    -------
+    Identification
+        Estimates, intervals, fit residuals, samples used and odometry rate.
+
+    Raises
+    ------
+    NotEnoughDataError
+        Fewer than :data:`MIN_ODOM_SAMPLES` odometry samples overlap the commands
+        (after the first ``max_latency_s``), or the overlap is too short for
+        :data:`MIN_BLOCKS` bootstrap blocks.
+    InsufficientExcitationError
+        A channel's command varies less than ``min_excitation``.
+    PoorFitError
+        The model explains less than :data:`MIN_R2` of a channel's measured
+        variance, or an estimate lies at a search limit.
+    InputError
+        Bad arguments (non-finite values, mismatched lengths, bad options).
+    """
+    for name, val, lo in (('max_latency_s', max_latency_s, 0.0), ('max_tau_s', max_tau_s, 0.0),
+                          ('resolution_s', resolution_s, 0.0), ('window_s', window_s, 0.0)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > lo):
+            raise InputError(f'{name} must be a finite number > {lo:g}, got {val!r}')
+    if not 0.5 <= confidence <= 0.999:
+        raise InputError(f'confidence must be in [0.5, 0.999], got {confidence!r}')
+    if int(bootstrap) < 50:
+        raise InputError(f'bootstrap must be at least 50 replicates, got {bootstrap!r}')
+    if source not in ('auto', 'twist', 'pose'):
+        raise InputError(f"source must be 'auto', 'twist' or 'pose', got {source!r}")
+    if command_timeout_s is not None and not (math.isfinite(command_timeout_s)
+                                              and command_timeout_s > 0):
+        raise InputError(f'command_timeout_s must be > 0 s, got {command_timeout_s!r}')
+    if resolution_s > 0.02:
+        raise InputError(f'resolution_s must be at most 0.02 s, got {resolution_s!r}')
+    notes: list[str] = []
+
+    # -- commands
+    if len(commands) < 10:
+        raise NotEnoughDataError(f'the run has {len(commands)} velocity commands; at least 10 '
+                                 'are needed (record cmd_vel while the robot moves)')
+    order = _check_times('command t', commands.t)
+    tc = commands.t[order]
+    cmd = {'v': commands.v[order], 'w': commands.w[order]}
+    for c in _CHANNELS:
+        if not np.all(np.isfinite(cmd[c])):
+            raise InputError(f'command {c} has non-finite values')
+
+    # -- odometry
+    o = odometry
+    order = _check_times('odometry t', o.t)
+    to = o.t[order]
+    keep = np.concatenate([[True], np.diff(to) > 0])     # repeated stamps: keep the first
+    idx = order[keep]
+    to = o.t[idx]
+    x, y, yaw = o.x[idx], o.y[idx], o.yaw[idx]
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(yaw))):
+        raise InputError('odometry poses have non-finite values')
+    twist = {'v': None if o.v is None else o.v[idx], 'w': None if o.w is None else o.w[idx]}
+    if to.size < MIN_ODOM_SAMPLES:
+        raise NotEnoughDataError(f'the run has {to.size} odometry samples; at least '
+                                 f'{MIN_ODOM_SAMPLES} are needed')
+    odom_period = float(np.median(np.diff(to)))
+    odom_rate = 1.0 / odom_period
+
+    h = float(resolution_s)
+    t_first = tc[0] + max_latency_s            # earliest measurement with a known input
+    t_last = tc[-1] + max(float(np.median(np.diff(tc))), 0.0)
+
+    # -- channels and their measurements
+    use = {}
+    for c in _CHANNELS:
+        if source == 'twist' and not _twist_present(twist[c]):
+            raise InputError(f'source twist: the odometry has no {_NAMES[c]} twist (missing or '
+                             "all zero); use source 'pose' or 'auto'")
+        use[c] = 'twist' if source != 'pose' and _twist_present(twist[c]) else 'pose'
+    span = max(1, int(math.ceil(window_s / odom_period - 1e-9)))
+    wa, wb, width, zv_pose, zw_pose = _window_measurements(to, x, y, yaw, span)
+
+    def measurement(c: str):
+        """(index a, index b or None, width or None, z, mid time) into the odometry."""
+        if use[c] == 'twist':
+            ia = np.flatnonzero((to >= t_first) & (to <= t_last))
+            return ia, None, None, twist[c][ia], to[ia]
+        sel = (to[wa] >= t_first) & (to[wb] <= t_last)
+        z = (zv_pose if c == 'v' else zw_pose)[sel]
+        return wa[sel], wb[sel], width[sel], z, 0.5 * (to[wa[sel]] + to[wb[sel]])
+
+    meas = {c: measurement(c) for c in _CHANNELS}
+    n_used = {c: meas[c][3].size for c in _CHANNELS}
+    if min(n_used.values()) < MIN_ODOM_SAMPLES:
+        raise NotEnoughDataError(
+            f'only {min(n_used.values())} odometry samples lie between {max_latency_s:g} s '
+            f'after the first command and the last command (t = {tc[0]:.3f} ... {tc[-1]:.3f} '
+            f's; odometry {to[0]:.3f} ... {to[-1]:.3f} s); at least {MIN_ODOM_SAMPLES} are '
+            'needed: record a longer run, or lower max_latency_s (--max-latency)')
+    t_end = max(float(to[np.max(m[1] if m[1] is not None else m[0])]) for m in meas.values())
+    t_begin = min(float(to[np.min(m[0])]) for m in meas.values())
+    duration = t_end - t_begin
+    block_len = float(np.clip(duration / 20.0, 0.25, 2.0))
+    n_blocks = int(duration // block_len) + 1
+    if duration < MIN_BLOCKS * block_len:
+        raise NotEnoughDataError(
+            f'commands and odometry overlap for {duration:.2f} s after the first '
+            f'{max_latency_s:g} s; at least {MIN_BLOCKS * 0.25:g} s are needed for the '
+            'uncertainty (block bootstrap): record a longer run')
+
+    # -- excitation (commands over the fitted span, including the latency range before it)
+    for c, lo in zip(_CHANNELS, min_excitation):
+        sel = (tc >= t_begin - max_latency_s) & (tc <= t_end)
+        u = cmd[c][sel]
+        ptp = float(np.ptp(u)) if u.size else 0.0
+        changes = int(np.count_nonzero(np.diff(u))) if u.size > 1 else 0
+        if ptp < lo or changes < 3:
+            raise InsufficientExcitationError(
+                f'the {_NAMES[c]} command hardly varies in the fitted span ({t_begin:.2f} ... '
+                f'{t_end:.2f} s): peak-to-peak {ptp:.3g} {_UNITS[c]} (need >= {lo:g}), '
+                f'{changes} changes; its lag and the latency cannot be seen. Record a run that '
+                'varies both v and w (e.g. the figure eight), not a straight line or a hold')
+
+    # -- the grid: cell averages of the held commands
+    n_cells = int(math.ceil((t_end - tc[0]) / h)) + 2
+    s = tc[0] + h * np.arange(n_cells + 1)
+    chans: dict[str, _Channel] = {}
+    for c in _CHANNELS:
+        ia, ib, wd, z, tm = meas[c]
+        u_avg = np.diff(_held_integral(tc, cmd[c], s, command_timeout_s)) / h
+        chans[c] = _Channel.build(c, use[c], u_avg, h, z, (to - tc[0]) / h, ia, ib, wd, tm)
+
+    d_max = int(round(max_latency_s / h))
+    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
+    # coarse: 10 ms steps, at most ~1500 samples per channel
+    step = max(1, int(round(0.01 / h)))
+    coarse = np.arange(0, d_max + 1, step, dtype=float)
+    sse_c = {}
+    for c, ch in chans.items():
+        stride = max(1, ch.z.size // 1500)
+        sub = ch.subset(stride)
+        zz = float(sub.z @ sub.z)
+        sse_c[c] = np.stack([_sse(_stats(sub, tau, coarse, None, 0), zz)[0] for tau in taus],
+                            axis=1) * stride                        # (nd, ntau)
+    # each channel's noise variance: its own best fit at the grid resolution (a coarse
+    # grid would inflate a noise-free channel's and let a noisy one dominate)
+    prof_c = {c: sse_c[c].min(axis=1) for c in _CHANNELS}
+    kbest = {c: np.argmin(sse_c[c], axis=1) for c in _CHANNELS}
+
+    def around(i: int) -> np.ndarray:
+        return np.arange(max(0, coarse[i] - 3 * step), min(d_max, coarse[i] + 3 * step) + 1,
+                         dtype=float)
+
+    def tau_range(k: int, n: int) -> np.ndarray:
+        return np.linspace(taus[max(0, k - 2)], taus[min(taus.size - 1, k + 2)], n)
+
+    for c, ch in chans.items():
+        i = int(np.argmin(prof_c[c]))
+        zz = float(ch.z @ ch.z)
+        best = min(float(_sse(_stats(ch, tau, around(i), None, 0), zz)[0].min())
+                   for tau in tau_range(int(kbest[c][i]), 17))
+        ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
+    j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
+    i_c = int(np.argmin(j_coarse))
+
+    # -- fine: grid resolution around the coarse minimum, local time-constant grids
+    def local_taus(c: str, centre: float, spread: float) -> np.ndarray:
+        lo = max(0.0, centre / spread - 2 * h * spread)
+        hi = min(max_tau_s, centre * spread + 2 * h * spread)
+        return np.linspace(lo, hi, 25)
+
+    tau_grid = {c: tau_range(int(kbest[c][i_c]), 25) for c in _CHANNELS}
+    fine = around(i_c)
+
+    def grid_fit(shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool):
+        """Block statistics (nd, ntau, 5, nb) per channel and zz per block."""
+        out = {}
+        for c, ch in chans.items():
+            bl = np.minimum(((ch.t_mid - t_begin) // block_len).astype(int), n_blocks - 1) \
+                if blocks else None
+            st = np.stack([_stats(ch, tau, shifts, bl, n_blocks) for tau in grids[c]], axis=1)
+            zzb = np.bincount(bl, weights=ch.z * ch.z, minlength=n_blocks) if blocks \
+                else float(ch.z @ ch.z)
+            out[c] = (st, zzb)
+        return out
+
+    def estimate(stats, weights: np.ndarray | None, shifts, grids):
+        """(latency grid pos, {c: tau}, {c: channel latency pos}) from (weighted) statistics."""
+        j = 0.0
+        tau_hat, lat_c = {}, {}
+        sse_all = {}
+        for c in _CHANNELS:
+            st, zz = stats[c]
+            if weights is not None:
+                st, zz = st @ weights, zz @ weights
+            sse = _sse(st, zz)[0]                              # (nd, ntau)
+            sse_all[c] = sse
+            prof = sse.min(axis=1)
+            j = j + prof / chans[c].sigma2
+            i = int(np.argmin(prof))
+            lat_c[c] = float(shifts[i]) + _parabola_min(prof, i)
+        i = int(np.argmin(j))
+        pos = float(shifts[i]) + _parabola_min(j, i)
+        for c in _CHANNELS:
+            row = sse_all[c][i]
+            k = int(np.argmin(row))
+            g = grids[c]
+            tau_hat[c] = float(g[k] + _parabola_min(row, k) * (g[1] - g[0]))
+        return pos, tau_hat, lat_c, j
+
+    fit = grid_fit(fine, tau_grid, False)
+    pos, tau0, lat_c, _ = estimate(fit, None, fine, tau_grid)
+
+    # -- polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps), then the
+    #    fit figures at the result
+    zzs = {c: float(ch.z @ ch.z) for c, ch in chans.items()}
+
+    def channel_sse(c: str, p: float, tau: float) -> np.ndarray:
+        return _sse(_stats(chans[c], tau, np.array([p]), None, 0), zzs[c])
+
+    def objective(x: np.ndarray) -> float:
+        p, tv, tw = (float(v) for v in x)
+        return sum(float(channel_sse(c, p, t * h)[0][0]) / chans[c].sigma2
+                   for c, t in (('v', tv), ('w', tw)))
+
+    x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
+    j0 = objective(x0)
+    simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
+    polish = minimize(objective, x0, method='Nelder-Mead',
+                      bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h), (0.0, max_tau_s / h)],
+                      options={'initial_simplex': simplex, 'xatol': 0.01,
+                               'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
+    if polish.fun <= j0:
+        pos, tau_hat = float(polish.x[0]), {'v': float(polish.x[1]) * h,
+                                            'w': float(polish.x[2]) * h}
+    else:
+        tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
+    latency = pos * h
+    gains, resid, r2 = {}, {}, {}
+    for c, ch in chans.items():
+        sse, g2 = channel_sse(c, pos, tau_hat[c])
+        gains[c] = float(g2[0])
+        resid[c] = math.sqrt(float(sse[0]) / ch.z.size)
+        var = float(np.var(ch.z))
+        r2[c] = 1.0 - float(sse[0]) / (ch.z.size * var) if var > 0 else 0.0
+
+    for c in _CHANNELS:
+        if r2[c] < MIN_R2:
+            raise PoorFitError(
+                f'the FOPDT model explains only {100 * max(r2[c], 0):.0f} % of the measured '
+                f'{_NAMES[c]} (from the odometry {use[c]}; need >= {100 * MIN_R2:.0f} %): '
+                'check that the topics belong to the same robot and clock, that odom is '
+                'stamped at measurement time, and try source pose/twist')
+    if pos >= d_max - 0.5:
+        raise PoorFitError(f'the latency estimate is at the search limit {max_latency_s:g} s; '
+                           'raise max_latency_s (--max-latency)')
+    for c in _CHANNELS:
+        if tau_hat[c] >= 0.999 * max_tau_s:
+            raise PoorFitError(f'the {_NAMES[c]} time constant is at the search limit '
+                               f'{max_tau_s:g} s; raise max_tau_s (--max-tau)')
+
+    # -- block bootstrap on a local grid (widened while estimates pile at an edge)
+    rng = np.random.default_rng(seed)
+    half = max(10, step)
+    spread = 1.6
+    for attempt in range(3):
+        centre = int(round(pos))
+        shifts = np.arange(max(0, centre - half), min(d_max, centre + half) + 1, dtype=float)
+        grids = {c: local_taus(c, tau_hat[c], spread) for c in _CHANNELS}
+        stats = grid_fit(shifts, grids, True)
+        pos_b, tau_b = np.empty(bootstrap), {c: np.empty(bootstrap) for c in _CHANNELS}
+        for b in range(bootstrap):
+            wts = np.bincount(rng.integers(0, n_blocks, n_blocks),
+                              minlength=n_blocks).astype(float)
+            p, t_, _, _ = estimate(stats, wts, shifts, grids)
+            pos_b[b] = p
+            for c in _CHANNELS:
+                tau_b[c][b] = t_[c]
+        edge = np.mean((pos_b <= shifts[0] + 0.5) & (shifts[0] > 0)) + \
+            np.mean((pos_b >= shifts[-1] - 0.5) & (shifts[-1] < d_max))
+        tedge = max(np.mean((tau_b[c] >= grids[c][-1] - 1e-12) & (grids[c][-1] < max_tau_s))
+                    + np.mean((tau_b[c] <= grids[c][0] + 1e-12) & (grids[c][0] > 0))
+                    for c in _CHANNELS)
+        if edge <= 0.01 and tedge <= 0.01:
+            break
+        if edge > 0.01:
+            half *= 3
+        if tedge > 0.01:
+            spread = spread ** 2
+    else:
+        notes.append('bootstrap estimates reach the edge of the local search grid: the '
+                     'intervals may be too narrow')
+
+    alpha = 0.5 * (1.0 - confidence)
+
+    def interval(values: np.ndarray, point: float, floor: float = 0.0) -> tuple[float, float]:
+        lo, hi = np.quantile(values, [alpha, 1.0 - alpha])
+        lo = max(floor, min(float(lo), point) - h)
+        return lo, max(float(hi), point) + h
+
+    lat_lo, lat_hi = interval(pos_b * h, latency)
+    tv_lo, tv_hi = interval(tau_b['v'], tau_hat['v'])
+    tw_lo, tw_hi = interval(tau_b['w'], tau_hat['w'])
+    if abs(lat_c['v'] - lat_c['w']) * h > max(lat_hi - lat_lo, 2 * h) * 2:
+        notes.append(f'the channels alone give different latencies (v {lat_c["v"] * h:.4f} s, '
+                     f'w {lat_c["w"] * h:.4f} s)')
+    return Identification(
+        latency_s=latency, latency_low_s=lat_lo, latency_high_s=lat_hi,
+        tau_v_s=tau_hat['v'], tau_v_low_s=tv_lo, tau_v_high_s=tv_hi,
+        tau_w_s=tau_hat['w'], tau_w_low_s=tw_lo, tau_w_high_s=tw_hi,
+        odom_rate_hz=odom_rate, samples=int(max(n_used.values())),
+        residual_rms_v=resid['v'], residual_rms_w=resid['w'],
+        gain_v=gains['v'], gain_w=gains['w'], r2_v=r2['v'], r2_w=r2['w'],
+        source_v=use['v'], source_w=use['w'],
+        latency_v_s=lat_c['v'] * h, latency_w_s=lat_c['w'] * h,
+        confidence=float(confidence), resolution_s=h, duration_s=duration,
+        commands=int(np.count_nonzero((tc >= t_begin - max_latency_s) & (tc <= t_end))),
+        bootstrap=int(bootstrap), notes=tuple(notes))
+
+
+def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySamples
+                                 ) -> tuple[float, float, float]:
+    """How old the newest odometry sample is when each command is sent: (low, median, high).
+
+    For each command, ``t_cmd - t_odom`` with ``t_odom`` the newest odometry stamp not
+    after it (commands before the first odometry are skipped); low and high are the 1st
+    and 99th percentiles.  A tracker triggered by odometry shows its transport and
+    computation time here; a timer-driven one up to an odometry period.  With the
+    latency ``L`` (from the command) the loop's delay from measurement to motion is
+    this plus ``L``, plus up to one command period while a command is held.
+
+    Returns
+    -------
+    (float, float, float)
+        Seconds; NaN if no command follows an odometry sample.
+    """
+    to = np.sort(odometry.t)
+    tc = np.asarray(commands.t, dtype=float)
+    j = np.searchsorted(to, tc, side='right') - 1
+    d = tc[j >= 0] - to[j[j >= 0]]
+    if d.size == 0:
+        return (math.nan, math.nan, math.nan)
+    lo, med, hi = np.percentile(d, [1, 50, 99])
+    return (float(lo), float(med), float(hi))
+
+
+# ---------------------------------------------------------------------------------------------
+# File
+
+def _num(x: float) -> str:
+    return f'{float(x):.6g}' if abs(x) >= 1e-4 or x == 0 else f'{float(x):.6e}'
+
+
+def write_identification(path: str | os.PathLike, result: Identification, *,
+                         overwrite: bool = True) -> Path:
+    """Write ``result`` as the identification file the latency-aware design reads.
+
+    Parameters
+    ----------
+    path : path-like
+        File to write (YAML; the format is in the module docstring).
+    result : Identification
+        What :func:`identify_latency` returned (``source`` set by the caller, e.g.
+        ``dataclasses.replace(result, source=str(bag))``).
+    overwrite : bool
+        If False, an existing file raises ``FileExistsError``.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
+    p = Path(path)
+    if not overwrite and p.exists():
+        raise FileExistsError(f'{p} exists; pass --force to overwrite it')
+    src = yaml.safe_dump(str(result.source), default_style=None).strip()
+    if src.endswith('...'):
+        src = src[:-3].strip()
+    lines = [
+        '# Command-to-motion latency and actuator lags identified by '
+        '`nonfragile_tracker identify`',
+        f'# (intervals: {100 * result.confidence:.0f} % block bootstrap; '
+        f'tau_v/tau_w: first-order lag of v/w; residual_rms in m/s and rad/s)'
+        if math.isfinite(result.confidence) else '# (intervals: as given)',
+        f'{FILE_KEY}:',
+        f'  source: {src}',
+        f'  latency_s: {_num(result.latency_s)}',
+        f'  latency_interval_s: [{_num(result.latency_low_s)}, {_num(result.latency_high_s)}]',
+        f'  tau_v_s: {_num(result.tau_v_s)}',
+        f'  tau_v_interval_s: [{_num(result.tau_v_low_s)}, {_num(result.tau_v_high_s)}]',
+        f'  tau_w_s: {_num(result.tau_w_s)}',
+        f'  tau_w_interval_s: [{_num(result.tau_w_low_s)}, {_num(result.tau_w_high_s)}]',
+        f'  odom_rate_hz: {_num(result.odom_rate_hz)}',
+        f'  samples: {int(result.samples)}',
+        f'  residual_rms: {{v: {_num(result.residual_rms_v)}, w: {_num(result.residual_rms_w)}}}',
+    ]
+    text = '\n'.join(lines) + '\n'
+    read_identification_text(text, str(p))            # never write what cannot be read back
+    p.write_text(text)
+    return p
+
+
+_FIELDS = ('source', 'latency_s', 'latency_interval_s', 'tau_v_s', 'tau_v_interval_s',
+           'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz', 'samples', 'residual_rms')
+
+
+def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value) or value < 0 or (positive and value == 0):
+        need = '> 0' if positive else '>= 0'
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a finite number '
+                                      f'{need}, got {value!r}')
+    return float(value)
+
+
+def _pair(where: str, key: str, value: Any, point: float) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a list [low, high] '
+                                      f'of two numbers, got {value!r}')
+    lo = _number(where, f'{key}[0]', value[0])
+    hi = _number(where, f'{key}[1]', value[1])
+    if not lo <= point <= hi:
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} = [{lo:g}, {hi:g}] must '
+                                      f'contain the estimate {point:g} (low <= value <= high)')
+    return lo, hi
+
+
+def read_identification_text(text: str, where: str = '<text>') -> Identification:
+    """Parse and validate the text of an identification file (see :func:`read_identification`)."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise IdentificationFileError(f'{where} is not valid YAML: {exc}') from None
+    if not isinstance(data, dict) or not isinstance(data.get(FILE_KEY), dict):
+        raise IdentificationFileError(f'{where}: expected a mapping with the key {FILE_KEY!r} '
+                                      '(written by `nonfragile_tracker identify BAG -o FILE`)')
+    d = data[FILE_KEY]
+    missing = [k for k in _FIELDS if k not in d]
+    if missing:
+        raise IdentificationFileError(f'{where}: {FILE_KEY} lacks the field(s) '
+                                      f'{", ".join(missing)}')
+    unknown = sorted(set(d) - set(_FIELDS))
+    if unknown:
+        raise IdentificationFileError(f'{where}: {FILE_KEY} has unknown field(s) '
+                                      f'{", ".join(map(str, unknown))}; known: '
+                                      f'{", ".join(_FIELDS)}')
+    if not isinstance(d['source'], str):
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.source must be a string (the bag '
+                                      f'path), got {d["source"]!r}')
+    lat = _number(where, 'latency_s', d['latency_s'])
+    lat_lo, lat_hi = _pair(where, 'latency_interval_s', d['latency_interval_s'], lat)
+    tv = _number(where, 'tau_v_s', d['tau_v_s'])
+    tv_lo, tv_hi = _pair(where, 'tau_v_interval_s', d['tau_v_interval_s'], tv)
+    tw = _number(where, 'tau_w_s', d['tau_w_s'])
+    tw_lo, tw_hi = _pair(where, 'tau_w_interval_s', d['tau_w_interval_s'], tw)
+    rate = _number(where, 'odom_rate_hz', d['odom_rate_hz'], positive=True)
+    n = d['samples']
+    if isinstance(n, bool) or not isinstance(n, int) or n <= 0:
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.samples must be a positive '
+                                      f'integer, got {n!r}')
+    rr = d['residual_rms']
+    if not isinstance(rr, dict) or set(rr) != {'v', 'w'}:
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.residual_rms must be a mapping '
+                                      f'{{v: ..., w: ...}}, got {rr!r}')
+    rv = _number(where, 'residual_rms.v', rr['v'])
+    rw = _number(where, 'residual_rms.w', rr['w'])
+    return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
+                          rv, rw, source=d['source'])
+
+
+def read_identification(path: str | os.PathLike) -> Identification:
+    """Read and validate an identification file written by :func:`write_identification`.
+
+    Parameters
+    ----------
+    path : path-like
+        The YAML file.
+
+    Returns
+    -------
+    Identification
+        The stored fields; diagnostics not stored in the file are NaN/empty.
+
+    Raises
+    ------
+    IdentificationFileError
+        Naming the field that is missing, unknown, of the wrong type, negative,
+        non-finite, or an interval that does not contain its estimate.
+    FileNotFoundError
+        If ``path`` does not exist.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise IdentificationFileError(f'{p} is a directory; pass the identification YAML file '
+                                      '(e.g. latency.yaml written by `identify -o`)')
+    return read_identification_text(p.read_text(), str(p))
+
+
+def with_source(result: Identification, source: str | os.PathLike) -> Identification:
+    """``result`` with its ``source`` (the bag path) set."""
+    return replace(result, source=str(source))

@@ -1,0 +1,828 @@
+r"""Non-fragile state feedback certified for an input (command) latency in an interval.
+
+Closed loop (the command computed from the state acts ``h(t)`` seconds later)::
+
+    x'(t) = A x(t) + A_tau x(t - tau) + B (K + E D(t) F) x(t - h(t)),
+    h_min <= h(t) <= h_max,   D(t)^T D(t) <= I,
+
+``A_tau x(t - tau)`` is the problem's own (constant) state delay; it is included when
+``A_tau != 0`` (``state_delay=None``) and handled delay-independently, as in Theorem 1
+(:mod:`.lmi`).  ``h(t)`` may vary in time arbitrarily fast inside ``[h_min, h_max]``
+(no bound on ``h'`` is used; a constant latency is a special case), ``D(t)`` may vary
+in time arbitrarily.
+
+Source
+------
+E. Fridman, *Introduction to Time-Delay Systems: Analysis and Control*, Birkhaeuser
+2014, Sections 3.6 and 4.x (descriptor method; interval time-varying delay with the
+functional below; the exponential weights ``e^{2 alpha (s - t)}`` for a decay rate;
+``P3 = eps P2`` and the congruence with ``X = P2^{-1}`` that makes the state feedback
+synthesis an LMI for fixed ``eps``); P. Park, J. W. Ko, C. Jeong, "Reciprocally convex
+approach to stability of systems with time-varying delays", Automatica 47(1):235-238,
+2011 (the reciprocally convex combination lemma).  Taken from the sources: the
+functional, Jensen's inequality, the reciprocally convex lemma, the descriptor identity
+and the ``P3 = eps P2`` device.  Derived here (self-contained, checked by
+:func:`verify_input_delay` and by the exact delay-loop analysis in the tests): the
+block entries with the state delay and the Petersen rows for ``E D F`` acting on the
+*delayed* state, the congruence, the normalization and the gain bound for a
+non-symmetric ``X`` (as in :mod:`.delay_dependent`).
+
+Functional (``h0 = h_min``, ``h1 = h_max``, ``h10 = h1 - h0``, ``alpha >= 0``)::
+
+    V = x^T P x + int_{t-tau}^t e^{2a(s-t)} x^T Q x ds
+        + int_{t-h0}^t e^{2a(s-t)} x^T S0 x ds + int_{t-h1}^{t-h0} e^{2a(s-t)} x^T S1 x ds
+        + h0  int_{-h0}^0    int_{t+th}^t e^{2a(s-t)} x'^T R0 x' ds dth
+        + h10 int_{-h1}^{-h0} int_{t+th}^t e^{2a(s-t)} x'^T R1 x' ds dth.
+
+Derivation
+----------
+With ``w0 = e^{-2 a h0}``, ``w1 = e^{-2 a h1}``, ``wt = e^{-2 a tau}`` and
+``eta = (x, x', x(t-h0), x(t-h), x(t-h1), x(t-tau))``:
+
+1. ``V' + 2 a V <= 2 x^T P x' + 2a x^T P x + x^T (S0 + Q) x - w0 x0^T (S0 - S1) x0
+   - w1 x1^T S1 x1 - wt xt^T Q xt + x'^T (h0^2 R0 + h10^2 R1) x'
+   - w0 h0 int_{t-h0}^t x'^T R0 x' - w1 h10 int_{t-h1}^{t-h0} x'^T R1 x'``.
+2. Jensen: ``h0 int_{t-h0}^t x'^T R0 x' >= (x - x0)^T R0 (x - x0)``.  Splitting the
+   second integral at ``t - h(t)`` and applying Jensen to both parts gives
+   ``(h10/(h-h0)) a^T R1 a + (h10/(h1-h)) b^T R1 b`` with ``a = x0 - xh``,
+   ``b = xh - x1``; the reciprocally convex lemma bounds it below by
+   ``[a; b]^T [[R1, S12], [S12^T, R1]] [a; b]`` whenever that matrix is ``>= 0``
+   (for ``h = h0`` or ``h1`` one of ``a, b`` is 0 and the bound still holds).
+3. Descriptor identity, ``P2, P3`` free::
+   ``0 = 2 (x^T P2^T + x'^T P3^T) (-x' + A x + A_tau xt + A1 xh)``,
+   ``A1 = B (K + E D F)``.
+4. Hence ``V' + 2 a V <= eta^T Phi eta`` with (``He(M) = M + M^T``)::
+
+       Phi11 = He(P2^T A) + 2a P + S0 + Q - w0 R0   Phi12 = P - P2^T + A^T P3
+       Phi13 = w0 R0      Phi14 = P2^T A1          Phi16 = P2^T A_tau
+       Phi22 = -He(P3) + h0^2 R0 + h10^2 R1
+       Phi24 = P3^T A1    Phi26 = P3^T A_tau
+       Phi33 = w0 (S1 - S0 - R0) - w1 R1   Phi34 = w1 (R1 - S12)   Phi35 = w1 S12
+       Phi44 = w1 (He(S12) - 2 R1)         Phi45 = w1 (R1 - S12)
+       Phi55 = -w1 (S1 + R1)               Phi66 = -wt Q
+
+   (other blocks 0).  ``Phi < 0`` with ``P, Q, S0, S1, R0, R1 > 0`` gives
+   ``V' <= -2 a V``, so ``|x(t)| <= c e^{-a t} ||x_0||``: exponential stability with
+   decay rate ``alpha`` (``alpha = 0``: asymptotic stability with a strict margin).
+5. Uncertainty: ``Phi = Phi_0 + He(U D V)``, ``U = [P2^T B E; P3^T B E; 0; 0; 0; 0]``,
+   ``V = [0, 0, 0, F, 0, 0]`` (the perturbation multiplies the *delayed* state).
+   Petersen's lemma: ``Phi < 0`` for all ``||D|| <= 1`` if ``Phi_0 + lam U U^T +
+   V^T V / lam < 0`` for some ``lam > 0``; Schur::
+
+       Psi = [[Phi_0, lam U, V^T], [*, -lam I, 0], [*, *, -lam I]] < 0.
+
+   :func:`verify_input_delay` evaluates ``Psi`` and every side condition with numpy
+   from the returned matrices only.
+6. Synthesis: ``P3 = eps P2`` (``eps > 0`` fixed; ``Phi22 < 0`` gives ``He(P3) > 0``
+   so ``P2`` is invertible), ``X = P2^{-1}``, ``Y = K X``, congruence with
+   ``diag(X, ..., X, I, I)`` and ``Mb = X^T M X`` for ``M`` in
+   ``P, Q, S0, S1, R0, R1, S12``.  Linear in ``(X, Y, Pb, Qb, S0b, S1b, R0b, R1b,
+   S12b, lam)``::
+
+       b11 = He(A X) + 2a Pb + S0b + Qb - w0 R0b   b12 = Pb - X + eps (A X)^T
+       b13 = w0 R0b   b14 = B Y   b16 = A_tau X
+       b22 = -eps He(X) + h0^2 R0b + h10^2 R1b    b24 = eps B Y   b26 = eps A_tau X
+       b33..b66 as Phi33..Phi66 with barred matrices
+       Petersen columns: lam [B E; eps B E; 0; 0; 0; 0] and [0; 0; 0; (F X)^T; 0; 0]
+
+   plus ``[[R1b, S12b], [S12b^T, R1b]] >= t I``.  Back: ``K = Y X^{-1}``,
+   ``P2 = X^{-1}``, ``P3 = eps P2``, ``M = X^{-T} Mb X^{-1}``.
+7. Monotone in ``h_max``: the ``w1`` terms of ``Phi33..Phi55`` are
+   ``-w1 ([a; b]^T [[R1, S12], [S12^T, R1]] [a; b] + x1^T S1 x1) <= 0`` and ``h1`` enters
+   only through them and ``+h10^2 R1``.  For ``h0 <= h1' < h1``, ``w1' >= w1`` and
+   ``h10'^2 <= h10^2``, so ``Phi(h1') <= Phi(h1)``: a point feasible for ``h1`` is
+   feasible for ``h1'`` (same matrices), and bisection on ``h_max`` is sound.  The decay
+   rate is searched by bisection too, but feasibility is not proven monotone in
+   ``alpha``: the returned rate is a verified lower bound, not the optimum.
+
+Normalization, gain bound and ``eps`` search are those of :mod:`.delay_dependent`:
+``maximize t`` with ``LMI <= -t I``, every Lyapunov matrix ``>= t I``, ``lam >= t``
+and either a trace bound or, with ``||K||_2 <= kappa``, ``He(X)/2 >= I``,
+``[[kappa^2 (He(X) - I), Y^T], [Y, I]] >= 0``, ``t <= 1``; ``eps`` from a log grid
+refined by golden section (heuristic; every returned point is verified).
+
+Caveats
+-------
+* ``D(t)`` and ``h(t)`` time-varying: the exact analysis in :mod:`.delay` covers
+  constant ``D`` and constant delays only, so it can only refute, never confirm, a
+  certificate; the tests check that the exact delay margin of every certified gain
+  (constant ``D`` at ``0`` and at the vertices) exceeds the certified ``h_max``.
+* The state delay ``A_tau`` is treated delay-independently (as Theorem 1 does).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from .problem import Problem
+from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
+                  cached_program, solve, sym)
+from .search import golden_section_max, largest_feasible
+
+__all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
+           'InputDelayResult', 'InputDelayCertification', 'certify_input_delay',
+           'certified_input_delay_of_gain', 'input_delay_verification_matrix', 'verify_input_delay',
+           'synthesize_input_delay', 'max_certified_input_delay', 'max_input_delay_decay_rate']
+
+DEFAULT_EPS_GRID: tuple[float, ...] = tuple(float(e) for e in np.logspace(-3, 2, 21))
+DEFAULT_REFINE = 8
+
+
+# ---------------------------------------------------------------------------------------------
+# records
+
+@dataclass(frozen=True)
+class InputDelayVerification:
+    """Outcome of :func:`verify_input_delay` (eigenvalues in original coordinates)."""
+
+    ok: bool
+    max_eig_Psi: float          # must be < -tolerance * scale
+    min_eig_lyapunov: float     # smallest eigenvalue over P, S0, S1, R0, R1 (and Q): > 0
+    min_eig_rc: float           # smallest eigenvalue of [[R1, S12], [S12^T, R1]]: > 0
+    lam: float | None           # Petersen scalar (> 0; None: nominal)
+    tolerance: float
+    scale: float                # spectral norm of Psi
+
+    @property
+    def worst_eigenvalue(self) -> float:
+        """Largest eigenvalue of the certificate matrix (negative when it holds)."""
+        return self.max_eig_Psi
+
+
+@dataclass(frozen=True)
+class InputDelayCertificate:
+    """Lyapunov-Krasovskii certificate (original coordinates), module docstring step 4/5.
+
+    ``Q is None``: no state-delay term; ``lam is None``: nominal (``D = 0``).
+    """
+
+    P: np.ndarray
+    P2: np.ndarray
+    P3: np.ndarray
+    S0: np.ndarray
+    S1: np.ndarray
+    R0: np.ndarray
+    R1: np.ndarray
+    S12: np.ndarray
+    Q: np.ndarray | None
+    lam: float | None
+
+
+@dataclass(frozen=True)
+class InputDelayResult:
+    """A gain certified for input delays in ``[h_min, h_max]`` with decay rate ``alpha``."""
+
+    K: np.ndarray
+    h_min: float
+    h_max: float
+    alpha: float
+    eps: float
+    certificate: InputDelayCertificate
+    verification: InputDelayVerification
+    margin_required: float
+    margin_achieved: float
+    status: str
+    solver: str
+    solve_time: float
+    wall_time: float
+    nominal: bool
+    state_delay: bool
+    gain_bound: float | None
+    eps_scan: tuple[tuple[float, float], ...] = ()
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def gain_norm(self) -> float:
+        """Spectral norm ``||K||_2`` of the gain."""
+        return float(np.linalg.norm(self.K, 2))
+
+
+# ---------------------------------------------------------------------------------------------
+# independent verification (numpy only)
+
+def _phi_rows(A, A1, A_tau, tau, h_min, h_max, alpha, P, P2, P3, S0, S1, R0, R1, S12, Q
+              ) -> list[list[Any]]:
+    """Block rows of ``Phi_0`` (module docstring step 4); numpy arrays or cvxpy expressions."""
+    n = A.shape[0]
+    h0, h1, a = float(h_min), float(h_max), float(alpha)
+    w0, w1 = math.exp(-2 * a * h0), math.exp(-2 * a * h1)
+    Z = np.zeros((n, n))
+    h10 = h1 - h0
+    b11 = P2.T @ A + A.T @ P2 + 2 * a * P + S0 - w0 * R0
+    b12 = P - P2.T + A.T @ P3
+    b22 = -(P3 + P3.T) + h0 * h0 * R0 + h10 * h10 * R1
+    rows = [
+        [b11, b12, w0 * R0, P2.T @ A1, Z],
+        [b12.T, b22, Z, P3.T @ A1, Z],
+        [w0 * R0, Z, w0 * (S1 - S0 - R0) - w1 * R1, w1 * (R1 - S12), w1 * S12],
+        [(P2.T @ A1).T, (P3.T @ A1).T, w1 * (R1 - S12).T, w1 * (S12 + S12.T - 2 * R1),
+         w1 * (R1 - S12)],
+        [Z, Z, w1 * S12.T, w1 * (R1 - S12).T, -w1 * (S1 + R1)],
+    ]
+    if Q is not None:
+        wt = math.exp(-2 * a * float(tau))
+        rows[0][0] = rows[0][0] + Q
+        cols = [P2.T @ A_tau, P3.T @ A_tau, Z, Z, Z]
+        for r, c in zip(rows, cols):
+            r.append(c)
+        rows.append([c.T for c in cols] + [-wt * Q])
+    return rows
+
+
+def input_delay_verification_matrix(A, B, A_tau, tau, E, F, K, h_min, h_max, alpha,
+                                    cert: InputDelayCertificate) -> np.ndarray:
+    """``Psi`` of the module docstring (``Phi_0`` alone when ``cert.lam is None``).
+
+    ``A_tau`` is ignored (no state-delay block) when ``cert.Q is None``.
+    """
+    n = A.shape[0]
+    c = cert
+    rows = _phi_rows(A, B @ K, A_tau, tau, h_min, h_max, alpha, c.P, c.P2, c.P3, c.S0, c.S1,
+                     c.R0, c.R1, c.S12, c.Q)
+    phi = sym(np.block(rows))
+    if cert.lam is None:
+        return phi
+    lam = float(cert.lam)
+    k = len(rows)
+    q, p = E.shape[1], F.shape[0]
+    BE = B @ E
+    U = np.vstack([c.P2.T @ BE, c.P3.T @ BE] + [np.zeros((n, q))] * (k - 2))
+    V = np.hstack([np.zeros((p, 3 * n)), F] + [np.zeros((p, n))] * (k - 4))
+    psi = np.block([[phi, lam * U, V.T],
+                    [lam * U.T, -lam * np.eye(q), np.zeros((q, p))],
+                    [V, np.zeros((p, q)), -lam * np.eye(p)]])
+    return sym(psi)
+
+
+def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
+                       certificate: InputDelayCertificate, *, alpha: float = 0.0,
+                       tol: float = 1e-9) -> InputDelayVerification:
+    """Check the input-delay condition from ``K``, the interval, ``alpha`` and the matrices.
+
+    Passes iff ``P, S0, S1, R0, R1 (, Q) > 0``, ``[[R1, S12], [S12^T, R1]] > 0``,
+    ``lam > 0`` (unless nominal) and ``max eig(Psi) < -tol * ||Psi||``.  Uses nothing
+    from the solver but the matrices in ``certificate``.  Never raises for a failed
+    check: see ``ok``.
+    """
+    K = np.asarray(K, float)
+    if K.shape != (problem.m, problem.n):
+        raise InputError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    _check_interval(h_min, h_max)
+    c = certificate
+    Psi = input_delay_verification_matrix(problem.A, problem.B, problem.A_tau, problem.tau,
+                                          problem.E, problem.F, K, h_min, h_max, alpha, c)
+    lyap = [c.P, c.S0, c.S1, c.R0, c.R1] + ([] if c.Q is None else [c.Q])
+    rc = np.block([[c.R1, c.S12], [c.S12.T, c.R1]])
+    if not (np.all(np.isfinite(Psi)) and np.all(np.isfinite(rc))):
+        return InputDelayVerification(False, math.inf, -math.inf, -math.inf, c.lam, tol,
+                                      math.inf)
+    ev = np.linalg.eigvalsh(Psi)
+    top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
+    min_l = min(float(np.linalg.eigvalsh(sym(M))[0]) for M in lyap)
+    min_rc = float(np.linalg.eigvalsh(sym(rc))[0])
+    ok = (top < -tol * scale and min_l > 0 and min_rc > 0
+          and (c.lam is None or c.lam > 0))
+    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, tol, scale)
+
+
+# ---------------------------------------------------------------------------------------------
+# the SDP (one per shape/options, re-solved with new data through DPP parameters)
+
+@dataclass(frozen=True)
+class _Point:
+    status: str
+    t: float | None
+    solve_time: float
+    eps: float
+    values: dict[str, Any] | None = None
+
+    @property
+    def strictness(self) -> float:
+        if self.status not in OK_STATUSES or self.t is None or self.values is None:
+            return -math.inf
+        return float(self.t)
+
+
+class _InputDelayProgram:
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool,
+                 state_delay: bool):
+        import cvxpy as cp
+        par, var = cp.Parameter, cp.Variable
+        self.nominal, self.state_delay = nominal, state_delay
+        self.A, self.B, self.Ad = par((n, n)), par((n, m)), par((n, n))
+        self.eA, self.eB, self.eAd = par((n, n)), par((n, m)), par((n, n))
+        self.eps, self.two_a = par(nonneg=True), par(nonneg=True)
+        self.w0, self.w1, self.wt = par(nonneg=True), par(nonneg=True), par(nonneg=True)
+        self.h0sq, self.h10sq = par(nonneg=True), par(nonneg=True)
+        self.X, self.Y = var((n, n)), var((m, n))
+        sv = {k: var((n, n), symmetric=True) for k in ('Pb', 'S0b', 'S1b', 'R0b', 'R1b', 'Qb')}
+        self.sv = sv
+        self.S12b = var((n, n))
+        self.t = var()
+        X, Y = self.X, self.Y
+        Pb, S0b, S1b, R0b, R1b, Qb = (sv[k] for k in ('Pb', 'S0b', 'S1b', 'R0b', 'R1b', 'Qb'))
+        S12b = self.S12b
+        Z = np.zeros((n, n))
+        AX = self.A @ X
+        b11 = AX + AX.T + self.two_a * Pb + S0b - self.w0 * R0b
+        b12 = Pb - X + (self.eA @ X).T
+        b22 = -self.eps * (X + X.T) + self.h0sq * R0b + self.h10sq * R1b
+        BY, eBY = self.B @ Y, self.eB @ Y
+        w1 = self.w1
+        rows = [
+            [b11, b12, self.w0 * R0b, BY, Z],
+            [b12.T, b22, Z, eBY, Z],
+            [self.w0 * R0b, Z, self.w0 * (S1b - S0b - R0b) - w1 * R1b, w1 * (R1b - S12b),
+             w1 * S12b],
+            [BY.T, eBY.T, w1 * (R1b - S12b).T, w1 * (S12b + S12b.T - 2 * R1b),
+             w1 * (R1b - S12b)],
+            [Z, Z, w1 * S12b.T, w1 * (R1b - S12b).T, -w1 * (S1b + R1b)],
+        ]
+        lyap = [Pb, S0b, S1b, R0b, R1b]
+        if state_delay:
+            rows[0][0] = rows[0][0] + Qb
+            cols = [self.Ad @ X, self.eAd @ X, Z, Z, Z]
+            for r, c in zip(rows, cols):
+                r.append(c)
+            rows.append([c.T for c in cols] + [-self.wt * Qb])
+            lyap.append(Qb)
+        k = len(rows)
+        size = k * n
+        extra = []
+        if nominal:
+            self.lam = None
+        else:
+            self.BE, self.eBE, self.F = par((n, q)), par((n, q)), par((p, n))
+            self.lam = lam = var()
+            U = [lam * self.BE, lam * self.eBE] + [np.zeros((n, q))] * (k - 2)
+            FX = (self.F @ X).T
+            V = [np.zeros((n, p))] * 3 + [FX] + [np.zeros((n, p))] * (k - 4)
+            for r, u, v in zip(rows, U, V):
+                r.extend([u, v])
+            rows.append([u.T for u in U] + [-lam * np.eye(q), np.zeros((q, p))])
+            rows.append([v.T for v in V] + [np.zeros((p, q)), -lam * np.eye(p)])
+            size += q + p
+            extra = [lam >= self.t]
+        L = cp.bmat(rows)
+        L = 0.5 * (L + L.T)
+        In = np.eye(n)
+        RC = cp.bmat([[R1b, S12b], [S12b.T, R1b]])
+        cons = [L << -self.t * np.eye(size), 0.5 * (RC + RC.T) >> self.t * np.eye(2 * n)]
+        cons += [M >> self.t * In for M in lyap] + extra
+        if gain_bound:
+            self.kappa2 = par(nonneg=True)
+            He = X + X.T
+            Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
+            cons += [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
+        else:
+            self.kappa2 = None
+            norm = sum(cp.trace(M) for M in lyap) + cp.trace(X)
+            if self.lam is not None:
+                norm = norm + self.lam
+            cons += [norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+
+    def set_data(self, problem: Problem, kappa: float | None) -> None:
+        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
+        if not self.nominal:
+            self.BE.value = problem.B @ problem.E
+            self.F.value = problem.F
+        if self.kappa2 is not None:
+            self.kappa2.value = float(kappa) ** 2
+
+    def solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
+              solver: str) -> _Point:
+        self.eps.value = eps
+        self.two_a.value = 2.0 * alpha
+        self.w0.value = math.exp(-2 * alpha * h0)
+        self.w1.value = math.exp(-2 * alpha * h1)
+        self.wt.value = math.exp(-2 * alpha * problem.tau)
+        self.h0sq.value, self.h10sq.value = h0 * h0, (h1 - h0) ** 2
+        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
+        self.eAd.value = eps * problem.A_tau
+        if not self.nominal:
+            self.eBE.value = eps * (problem.B @ problem.E)
+        try:
+            out = solve(self.problem, solver, what='the input-delay LMI', quiet_inaccurate=True)
+        except SolverFailure as exc:
+            return _Point(f'solver_error: {exc}', None, 0.0, eps)
+        t = self.t.value
+        t = None if t is None else float(t)
+        if out.status in OK_STATUSES and self.X.value is not None:
+            vals = {k: np.array(v.value) for k, v in self.sv.items()}
+            vals.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
+                        S12b=np.array(self.S12b.value),
+                        lam=None if self.lam is None else float(self.lam.value))
+            return _Point(out.status, t, out.solve_time, eps, vals)
+        return _Point(out.status, t, out.solve_time, eps)
+
+
+def _uses_state_delay(problem: Problem, state_delay: bool | None) -> bool:
+    return bool(np.any(problem.A_tau)) if state_delay is None else bool(state_delay)
+
+
+def _program(problem: Problem, nominal: bool, gain_bound: bool, state_delay: bool
+             ) -> _InputDelayProgram:
+    shape = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal,
+             gain_bound, state_delay)
+    return cached_program(('input_delay',) + shape, lambda: _InputDelayProgram(*shape))
+
+
+def _back(point: _Point, state_delay: bool) -> tuple[np.ndarray, InputDelayCertificate]:
+    v = point.values
+    assert v is not None
+    Xi = np.linalg.inv(v['X'])
+
+    def orig(M: np.ndarray) -> np.ndarray:
+        return Xi.T @ M @ Xi
+
+    K = v['Y'] @ Xi
+    cert = InputDelayCertificate(
+        P=sym(orig(sym(v['Pb']))), P2=Xi, P3=point.eps * Xi, S0=sym(orig(sym(v['S0b']))),
+        S1=sym(orig(sym(v['S1b']))), R0=sym(orig(sym(v['R0b']))),
+        R1=sym(orig(sym(v['R1b']))), S12=orig(v['S12b']),
+        Q=sym(orig(sym(v['Qb']))) if state_delay else None, lam=v['lam'])
+    return K, cert
+
+
+# ---------------------------------------------------------------------------------------------
+# argument checks
+
+def _check_interval(h_min: Any, h_max: Any) -> tuple[float, float]:
+    try:
+        h0, h1 = float(h_min), float(h_max)
+    except (TypeError, ValueError):
+        raise InputError(f'delay interval must be two numbers (seconds), got '
+                         f'[{h_min!r}, {h_max!r}]') from None
+    if not (math.isfinite(h0) and math.isfinite(h1) and 0 <= h0 <= h1 and h1 > 0):
+        raise InputError(f'delay interval must satisfy 0 <= h_min <= h_max, h_max > 0 '
+                         f'(seconds, finite), got [{h_min!r}, {h_max!r}]')
+    return h0, h1
+
+
+def _check(gain_bound: Any, alpha: Any, grid: Sequence[float]) -> None:
+    if gain_bound is not None and not (isinstance(gain_bound, (int, float))
+                                       and math.isfinite(gain_bound) and gain_bound > 0):
+        raise InputError(f'gain bound must be a finite number > 0, got {gain_bound!r}')
+    if not (isinstance(alpha, (int, float)) and math.isfinite(alpha) and alpha >= 0):
+        raise InputError(f'decay rate alpha must be a finite number >= 0, got {alpha!r}')
+    if not len(grid) or not all(math.isfinite(e) and e > 0 for e in grid):
+        raise InputError(f'eps grid must be non-empty numbers > 0, got {grid!r}')
+
+
+def _describe(problem: Problem, h0: float, h1: float, alpha: float, nominal: bool,
+              gain_bound: float | None) -> str:
+    kind = 'nominal' if nominal else 'non-fragile'
+    bound = '' if gain_bound is None else f', ||K||_2 <= {gain_bound:g}'
+    rate = f', decay rate {alpha:g}' if alpha else ''
+    return (f'input-delay design ({kind}{bound}{rate}) for problem {problem.name!r} with '
+            f'h in [{h0:g}, {h1:g}] s')
+
+
+# ---------------------------------------------------------------------------------------------
+# synthesis
+
+def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
+                           alpha: float = 0.0, eps: float | None = None,
+                           eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
+                           refine: int = DEFAULT_REFINE, nominal: bool = False,
+                           gain_bound: float | None = None, state_delay: bool | None = None,
+                           margin: float = DEFAULT_MARGIN, solver: str = DEFAULT_SOLVER,
+                           verify_tol: float = 1e-9, stop_at_first: bool = False
+                           ) -> InputDelayResult:
+    """A gain certified for every input delay ``h(t)`` in ``[h_min, h_max]``.
+
+    Parameters
+    ----------
+    problem : Problem
+        ``A, B, E, F`` (and ``A_tau, tau`` for the state-delay term).
+    h_min, h_max : float
+        Latency interval in seconds, ``0 <= h_min <= h_max``, ``h_max > 0``.
+    alpha : float
+        Certified decay rate (1/s), ``>= 0``.
+    eps : float, optional
+        Tuning scalar ``P3 = eps P2``; default: grid ``eps_grid`` then ``refine``
+        golden-section steps in ``log eps`` maximizing the strictness ``t``.
+    nominal : bool
+        Drop the ``E D F`` terms.
+    gain_bound : float, optional
+        Impose ``||K||_2 <= gain_bound``.
+    state_delay : bool, optional
+        Include ``A_tau x(t - tau)``; default: iff ``A_tau != 0``.
+    stop_at_first : bool
+        Return the first ``eps`` giving a verified certificate (bisection uses this).
+
+    Returns
+    -------
+    InputDelayResult
+        Gain, certificate and its independent verification (always ``ok``).
+
+    Raises
+    ------
+    InputError
+        Bad interval, bound, rate or grid.
+    InfeasibleError
+        No ``eps`` tried gives ``t >= margin`` with a verified certificate.
+    SolverFailure
+        The solver failed for every ``eps`` tried.
+    CertificateError
+        The best point fails :func:`verify_input_delay`.
+    """
+    t0 = time.perf_counter()
+    h0, h1 = _check_interval(h_min, h_max)
+    grid = [float(eps)] if eps is not None else [float(e) for e in eps_grid]
+    _check(gain_bound, alpha, grid)
+    alpha = float(alpha)
+    sd = _uses_state_delay(problem, state_delay)
+    prog = _program(problem, nominal, gain_bound is not None, sd)
+    prog.set_data(problem, gain_bound)
+    points: list[_Point] = []
+    found: list[tuple[_Point, np.ndarray, InputDelayCertificate, InputDelayVerification]] = []
+
+    class _Stop(Exception):
+        pass
+
+    def verified(pt: _Point):
+        try:
+            K, cert = _back(pt, sd)
+        except np.linalg.LinAlgError:
+            return None
+        ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
+        return K, cert, ver
+
+    def run(e: float) -> float:
+        pt = prog.solve(problem, h0, h1, alpha, e, solver)
+        points.append(pt)
+        t = pt.strictness
+        if stop_at_first and t >= margin:
+            v = verified(pt)
+            if v is not None and v[2].ok:
+                found.append((pt,) + v)
+                raise _Stop
+        return t
+
+    try:
+        ts = [run(e) for e in grid]
+        if eps is None and refine > 0 and len(grid) > 1 and max(ts) > -math.inf:
+            order = sorted(range(len(grid)), key=lambda i: grid[i])
+            k = max(range(len(order)), key=lambda j: ts[order[j]])
+            lo = math.log(grid[order[max(k - 1, 0)]])
+            hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
+            if hi > lo:
+                golden_section_max(lambda u: run(math.exp(u)), lo, hi, refine)
+    except _Stop:
+        pass
+    solve_time = sum(p.solve_time for p in points)
+    scan = tuple((p.eps, p.strictness) for p in points)
+    what = _describe(problem, h0, h1, alpha, nominal, gain_bound)
+    if found:
+        best, K, cert, ver = found[-1]
+    else:
+        best = max(points, key=lambda p: p.strictness)
+        if best.strictness < margin:
+            if not any(p.status in OK_STATUSES + INFEASIBLE_STATUSES for p in points):
+                raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
+                                    f'(statuses {sorted({p.status for p in points})}); no '
+                                    'gain was produced. Check that the solver is installed.')
+            txt = ('no feasible point' if best.strictness == -math.inf
+                   else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
+            raise InfeasibleError(
+                f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
+                'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
+                'smaller decay rate, a smaller F, or nominal=True.')
+        v = verified(best)
+        if v is None:
+            raise CertificateError(f'{solver} returned a singular X for the {what}; no gain '
+                                   'can be recovered')
+        K, cert, ver = v
+        if not ver.ok:
+            raise CertificateError(
+                f'{solver} returned a point for the {what} (eps = {best.eps:.3g}) that fails '
+                f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig of '
+                f'the Lyapunov matrices = {ver.min_eig_lyapunov:.3g}, reciprocally convex '
+                f'block = {ver.min_eig_rc:.3g}. Use CLARABEL or raise the margin.')
+    return InputDelayResult(
+        K=K, h_min=h0, h_max=h1, alpha=alpha, eps=best.eps, certificate=cert,
+        verification=ver, margin_required=margin, margin_achieved=float(best.strictness),
+        status=best.status, solver=solver, solve_time=solve_time,
+        wall_time=time.perf_counter() - t0, nominal=nominal, state_delay=sd,
+        gain_bound=gain_bound, eps_scan=scan, extra={'solves': len(points)})
+
+
+@dataclass(frozen=True)
+class InputDelayCertification:
+    """Whether a fixed ``K`` is certified for input delays in ``[h_min, h_max]``."""
+
+    certified: bool
+    margin_achieved: float                   # best t (normalized units); -inf: no point
+    certificate: InputDelayCertificate | None
+    verification: InputDelayVerification | None
+    status: str
+
+
+def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
+                        alpha: float = 0.0, nominal: bool = False,
+                        state_delay: bool | None = None, margin: float = DEFAULT_MARGIN,
+                        solver: str = DEFAULT_SOLVER, verify_tol: float = 1e-9
+                        ) -> InputDelayCertification:
+    """Decide whether the input-delay condition holds for the fixed gain ``K``.
+
+    With ``K`` fixed, ``Psi < 0`` is an LMI in ``(P, P2, P3, S0, S1, R0, R1, S12, Q)`` and
+    ``d = 1/lam`` after the Schur complement
+    ``[[Phi_0 + d V^T V, U], [U^T, -d I]] < 0`` (no tuning scalar is needed); solved as
+    ``maximize t`` with every block ``<= -t I`` / ``>= t I`` and a trace bound, and
+    certified iff ``t >= margin`` and :func:`verify_input_delay` passes.
+    """
+    import cvxpy as cp
+    h0, h1 = _check_interval(h_min, h_max)
+    _check(None, alpha, [1.0])
+    K = np.asarray(K, float)
+    if K.shape != (problem.m, problem.n):
+        raise InputError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    sd = _uses_state_delay(problem, state_delay)
+    n = problem.n
+    sv = {k: cp.Variable((n, n), symmetric=True) for k in ('P', 'S0', 'S1', 'R0', 'R1', 'Q')}
+    P2, P3, S12, t = cp.Variable((n, n)), cp.Variable((n, n)), cp.Variable((n, n)), cp.Variable()
+    rows = _phi_rows(problem.A, problem.B @ K, problem.A_tau, problem.tau, h0, h1, alpha,
+                     sv['P'], P2, P3, sv['S0'], sv['S1'], sv['R0'], sv['R1'], S12,
+                     sv['Q'] if sd else None)
+    lyap = [sv[k] for k in ('P', 'S0', 'S1', 'R0', 'R1')] + ([sv['Q']] if sd else [])
+    norm = sum(cp.trace(M) for M in lyap)
+    cons = []
+    d = None
+    k = len(rows)
+    if not nominal:
+        q = problem.E.shape[1]
+        d = cp.Variable()
+        FtF = problem.F.T @ problem.F
+        rows[3][3] = rows[3][3] + d * FtF
+        BE = problem.B @ problem.E
+        U = [P2.T @ BE, P3.T @ BE] + [np.zeros((n, q))] * (k - 2)
+        for r, u in zip(rows, U):
+            r.append(u)
+        rows.append([u.T for u in U] + [-d * np.eye(q)])
+        norm = norm + d
+        cons.append(d >= t)
+    L = cp.bmat(rows)
+    L = 0.5 * (L + L.T)
+    RC = cp.bmat([[sv['R1'], S12], [S12.T, sv['R1']]])
+    cons += [L << -t * np.eye(L.shape[0]), 0.5 * (RC + RC.T) >> t * np.eye(2 * n), norm <= 1]
+    cons += [M >> t * np.eye(n) for M in lyap]
+    prob = cp.Problem(cp.Maximize(t), cons)
+    out = solve(prob, solver, what='the input-delay certification LMI for K',
+                quiet_inaccurate=True)
+    if out.status not in OK_STATUSES or t.value is None or sv['P'].value is None:
+        return InputDelayCertification(False, -math.inf, None, None, out.status)
+    tv = float(t.value)
+    if tv < margin:
+        return InputDelayCertification(False, tv, None, None, out.status)
+    cert = InputDelayCertificate(
+        P=sym(sv['P'].value), P2=np.array(P2.value), P3=np.array(P3.value),
+        S0=sym(sv['S0'].value), S1=sym(sv['S1'].value), R0=sym(sv['R0'].value),
+        R1=sym(sv['R1'].value), S12=np.array(S12.value),
+        Q=sym(sv['Q'].value) if sd else None,
+        lam=None if d is None else 1.0 / float(d.value))
+    ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
+    return InputDelayCertification(ver.ok, tv, cert, ver, out.status)
+
+
+def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
+                                  alpha: float = 0.0, nominal: bool = False,
+                                  state_delay: bool | None = None, h_hi: float = 2.0,
+                                  tol: float = 1e-3, solver: str = DEFAULT_SOLVER) -> float:
+    """Largest ``h_max`` for which :func:`certify_input_delay` certifies ``K`` (bisection).
+
+    Returns ``h_min`` if not even ``[h_min, max(h_min, tol)]`` is certified and
+    ``h_hi`` if ``h_hi`` is.  Monotone in ``h_max`` (docstring step 7).
+    """
+    def ok(h1: float) -> bool:
+        return certify_input_delay(problem, K, h_min, h1, alpha=alpha, nominal=nominal,
+                                   state_delay=state_delay, solver=solver).certified
+
+    lo = max(float(h_min), tol)
+    if not ok(lo):
+        return float(h_min)
+    if ok(h_hi):
+        return float(h_hi)
+    hi = h_hi
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _try(problem: Problem, h0: float, h1: float, **kw) -> InputDelayResult | None:
+    try:
+        return synthesize_input_delay(problem, h0, h1, **kw)
+    except (InfeasibleError, CertificateError, SolverFailure):
+        return None
+
+
+def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
+                              gain_bound: float | None = None, alpha: float = 0.0,
+                              nominal: bool = False, state_delay: bool | None = None,
+                              h_hi: float = 2.0, tol: float = 1e-3,
+                              eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
+                              refine: int = DEFAULT_REFINE, margin: float = DEFAULT_MARGIN,
+                              solver: str = DEFAULT_SOLVER) -> InputDelayResult:
+    """Largest certified ``h_max`` for the given ``h_min``, by bisection (docstring step 7).
+
+    Each trial stops at the first ``eps`` with a verified certificate; the result at
+    the final ``h_max`` is the full ``eps`` search there (strictest point).  The
+    returned ``h_max`` is within ``tol`` of the largest the LMI family certifies for
+    the ``eps`` tried (a lower bound: ``eps`` is searched heuristically).  Returns the
+    result at ``h_max`` (``result.h_max``); ``h_hi`` itself if it is certified.
+
+    Raises
+    ------
+    InfeasibleError
+        Not even ``h_max = h_min`` (or ``tol`` when ``h_min = 0``) is certified.
+    """
+    h0 = _check_interval(h_min, max(float(h_min), tol))[0]
+    if not (math.isfinite(h_hi) and h_hi > h0 and tol > 0):
+        raise InputError(f'need h_hi > h_min and tol > 0, got h_hi={h_hi!r}, tol={tol!r}')
+    kw = dict(gain_bound=gain_bound, alpha=alpha, nominal=nominal, state_delay=state_delay,
+              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    last: list[float] = []
+
+    def trial(h1: float) -> InputDelayResult | None:
+        grid = list(eps_grid)
+        if last:
+            c = math.log(last[-1])
+            grid = [last[-1]] + sorted(grid, key=lambda e: abs(math.log(e) - c))
+        r = _try(problem, h0, h1, **{**kw, 'eps_grid': grid}, stop_at_first=True)
+        if r is not None:
+            last.append(r.eps)
+        return r
+
+    lo = max(h0, tol)
+    base = trial(lo)
+    if base is None:
+        raise InfeasibleError(f'{_describe(problem, h0, lo, alpha, nominal, gain_bound)} is '
+                              'infeasible: no input delay interval is certified. Try a looser '
+                              'gain bound, a smaller decay rate or a smaller F.')
+    # doubling then bisection to the absolute tolerance ``tol``
+    lo_h, hi_h = lo, None
+    h = max(2 * lo, lo + tol)
+    while True:
+        h = min(h, h_hi)
+        r = trial(h)
+        if r is None:
+            hi_h = h
+            break
+        lo_h = h
+        if h >= h_hi:
+            break
+        h = 2 * h
+    if hi_h is not None:
+        while hi_h - lo_h > tol:
+            mid = 0.5 * (lo_h + hi_h)
+            if trial(mid) is None:
+                hi_h = mid
+            else:
+                lo_h = mid
+    full = _try(problem, h0, lo_h, **kw)
+    if full is None:
+        full = synthesize_input_delay(problem, h0, lo_h, eps=last[-1], **{
+            k: v for k, v in kw.items() if k != 'eps_grid'})
+    return full
+
+
+def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
+                               gain_bound: float | None = None, nominal: bool = False,
+                               state_delay: bool | None = None, rel_tol: float = 1e-2,
+                               hi_limit: float = 50.0,
+                               eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
+                               refine: int = DEFAULT_REFINE, margin: float = DEFAULT_MARGIN,
+                               solver: str = DEFAULT_SOLVER) -> InputDelayResult:
+    """Largest certified decay rate ``alpha`` for input delays in ``[h_min, h_max]``.
+
+    Doubling then bisection on ``alpha`` (:func:`.search.largest_feasible`);
+    feasibility is not proven monotone in ``alpha``, so the result is a verified lower
+    bound of the best rate.  Returns the full-``eps``-search result at that rate.
+
+    Raises
+    ------
+    InfeasibleError
+        Not even ``alpha = 0`` is certified.
+    """
+    kw = dict(gain_bound=gain_bound, nominal=nominal, state_delay=state_delay,
+              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    base = _try(problem, h_min, h_max, alpha=0.0, **kw)
+    if base is None:
+        synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
+    a, best, _ = largest_feasible(
+        lambda a: _try(problem, h_min, h_max, alpha=a, stop_at_first=True, **kw),
+        0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit, lo_result=base)
+    if a == 0.0:
+        return base  # type: ignore[return-value]
+    full = _try(problem, h_min, h_max, alpha=a, **kw)
+    return full if full is not None else best  # type: ignore[return-value]

@@ -1,0 +1,253 @@
+"""From "my robot has this latency" to a certified tracker gain with its figures.
+
+:func:`design_for_latency` runs the input-delay synthesis of :mod:`.input_delay` for a
+latency interval ``[h_min, h_max]`` (and an optional first-order actuator lag), then
+measures the returned gain with the exact delay-loop analysis of :mod:`.delay` and
+returns everything a gain file should record (:meth:`LatencyDesign.metadata`).
+
+Actuator lag ``T`` (``u_act' = (u(t - h) - u_act) / T``): the synthesis runs on the
+widened interval ``[h_min, h_max + T]`` (a lag's low-frequency phase is that of a
+delay ``T``: a heuristic for the synthesis only); the *claim* is then certified on the
+exact lagged loop - the augmented state ``(xi, u_act)`` of :func:`lagged_problem` with
+the fixed gain ``[K, 0]`` - by :func:`.input_delay.certify_input_delay`.  A gain whose
+lagged loop is not certified for ``[h_min, h_max]`` is never returned.
+
+The exact figures (true delay margin, abscissa at ``h_max``) are for constant
+perturbations ``D`` in ``{0, the problem's listed perturbations, +-I}`` and constant
+delays, on the input-delay loop ``x' = A x + B (K + E D F) x(t - h)``; the problem's
+state delay ``A_tau`` is left out of them (the exact analysis handles one delay) and
+``state_delay_in_exact_check`` says so.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InfeasibleError, InputError
+from .delay import delay_margin, spectral_abscissa
+from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
+                          max_certified_input_delay, max_input_delay_decay_rate,
+                          synthesize_input_delay)
+from .problem import Problem
+
+__all__ = ['OBJECTIVES', 'LatencyDesign', 'lagged_problem', 'perturbation_set',
+           'design_for_latency', 'latency_figures']
+
+OBJECTIVES = ('decay', 'max-delay')
+
+
+@dataclass(frozen=True)
+class LatencyDesign:
+    """A certified latency design and the figures that describe it."""
+
+    problem: str
+    objective: str
+    K: np.ndarray
+    gain_bound: float | None
+    h_min: float
+    h_max: float                  # the latency interval asked for
+    lag: float                    # actuator time constant (s), 0: none
+    certified_h_max: float        # largest h_max certified for this K (alpha = 0, no lag)
+    decay_rate: float             # certified decay rate on [h_min, h_max] (1/s)
+    lag_certified_h_max: float | None   # largest h_max certified with the lag (None: no lag)
+    true_delay_margin: float      # exact, min over the perturbation set
+    abscissa_at_h_max: float      # exact worst spectral abscissa at h = h_max
+    state_delay: bool             # A_tau included in the certificate
+    synthesis: InputDelayResult
+
+    @property
+    def gain_norm(self) -> float:
+        """Spectral norm ``||K||_2`` of the gain."""
+        return float(np.linalg.norm(self.K, 2))
+
+    def metadata(self) -> dict[str, Any]:
+        """Flat, ROS-parameter-compatible description (numbers, strings, bools, lists)."""
+        out: dict[str, Any] = {
+            'method': 'input-delay LMI (descriptor, Jensen + reciprocally convex)',
+            'problem': self.problem, 'objective': self.objective,
+            'latency_interval': [self.h_min, self.h_max], 'actuator_lag': self.lag,
+            'gain_norm': self.gain_norm,
+            'certified_h_max': self.certified_h_max,
+            'certified_decay_rate': self.decay_rate,
+            'true_delay_margin': self.true_delay_margin,
+            'abscissa_at_h_max': self.abscissa_at_h_max,
+            'state_delay_in_certificate': self.state_delay,
+            'state_delay_in_exact_check': False,
+            'verification_max_eig': self.synthesis.verification.max_eig_Psi,
+        }
+        if self.gain_bound is not None:
+            out['gain_bound'] = float(self.gain_bound)
+        if self.lag_certified_h_max is not None:
+            out['lag_certified_h_max'] = self.lag_certified_h_max
+        return {k: (float(v) if isinstance(v, (float, np.floating)) else v)
+                for k, v in out.items()}
+
+    def summary(self) -> str:
+        """Human-readable lines (also written as the gain file's comment)."""
+        lines = [
+            f'input-delay design ({self.objective}) for problem {self.problem!r}: latency '
+            f'h(t) in [{self.h_min:g}, {self.h_max:g}] s'
+            + (f', actuator lag {self.lag:g} s' if self.lag else ''),
+            f'K =\n{np.array2string(self.K, precision=6, suppress_small=True)}',
+            f'||K||_2 = {self.gain_norm:.6g}'
+            + (f' (bound {self.gain_bound:g})' if self.gain_bound is not None else ''),
+            f'certified: every latency in [{self.h_min:g}, {self.certified_h_max:.4g}] s '
+            f'(time-varying), ||Delta|| <= 1; decay rate {self.decay_rate:.4g} 1/s on '
+            f'[{self.h_min:g}, {self.h_max:g}] s',
+        ]
+        if self.lag_certified_h_max is not None:
+            lines.append(f'with the actuator lag {self.lag:g} s: certified up to '
+                         f'{self.lag_certified_h_max:.4g} s of latency')
+        lines.append(f'exact (constant delay and Delta): delay margin {self.true_delay_margin:.4g}'
+                     f' s, worst spectral abscissa at h_max {self.abscissa_at_h_max:.4g}')
+        lines.append(f'verification: max eig Psi = '
+                     f'{self.synthesis.verification.max_eig_Psi:.4g} -> OK')
+        return '\n'.join(lines)
+
+
+def lagged_problem(problem: Problem, lag: float) -> Problem:
+    """The loop with a first-order actuator lag: state ``(xi, u_act)``, gain ``[K, 0]``.
+
+    ``A = [[A, B], [0, -I/T]]``, ``B = [0; I/T]``, ``A_tau = diag(A_tau, 0)``,
+    ``E`` unchanged, ``F = [F, 0]``.
+    """
+    T = float(lag)
+    if not (math.isfinite(T) and T > 0):
+        raise InputError(f'actuator lag must be a finite time constant > 0 (s), got {lag!r}')
+    n, m = problem.n, problem.m
+    A = np.block([[problem.A, problem.B], [np.zeros((m, n)), -np.eye(m) / T]])
+    B = np.vstack([np.zeros((n, m)), np.eye(m) / T])
+    Ad = np.zeros((n + m, n + m))
+    Ad[:n, :n] = problem.A_tau
+    F = np.hstack([problem.F, np.zeros((problem.F.shape[0], m))])
+    return Problem(A=A, B=B, A_tau=Ad, tau=problem.tau, E=problem.E, F=F,
+                   name=f'{problem.name}+lag{T:g}', perturbations=dict(problem.perturbations),
+                   options=dict(problem.options))
+
+
+def perturbation_set(problem: Problem) -> list[np.ndarray]:
+    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow)."""
+    q, p = problem.E.shape[1], problem.F.shape[0]
+    out = [np.zeros((q, p))] + [np.asarray(D, float) for D in problem.perturbations.values()]
+    if q == p:
+        out += [np.eye(q), -np.eye(q)]
+    return out
+
+
+def _exact(problem: Problem, K: np.ndarray, h: float) -> tuple[float, float]:
+    margins, absc = [], []
+    for D in perturbation_set(problem):
+        A1 = problem.B @ (K + problem.E @ D @ problem.F)
+        margins.append(delay_margin(problem.A, A1))
+        absc.append(spectral_abscissa(problem.A, A1, h))
+    return float(min(margins)), float(max(absc))
+
+
+def _number(value: Any, name: str, *, positive: bool = False, allow_zero: bool = True) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f'{name} must be a number, got {value!r}') from None
+    if not math.isfinite(x) or x < 0 or (positive and x == 0) or (not allow_zero and x == 0):
+        raise InputError(f'{name} must be a finite number {"> 0" if positive else ">= 0"}, '
+                         f'got {value!r}')
+    return x
+
+
+def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
+                       gain_bound: float | None = None, objective: str = 'decay',
+                       lag: float = 0.0, tol: float = 2e-3) -> LatencyDesign:
+    """A gain certified for command latencies in ``[h_min, h_max]``, with its figures.
+
+    Parameters
+    ----------
+    problem : Problem
+        Plant ``A, B``, perturbation ``E, F`` (and state delay ``A_tau, tau``).
+    h_min, h_max : float
+        Latency interval (s) the gain must be certified for.
+    gain_bound : float, optional
+        ``||K||_2`` bound (default ``problem.options['gain_bound']``, if any).
+    objective : {'decay', 'max-delay'}
+        ``'decay'``: largest certified decay rate on ``[h_min, h_max]``;
+        ``'max-delay'``: largest certified ``h_max`` (at least the one asked for).
+    lag : float
+        First-order actuator time constant (s); 0 for none.
+    tol : float
+        Bisection tolerance for the certified ``h_max`` (s).
+
+    Raises
+    ------
+    InputError
+        Bad numbers or objective.
+    InfeasibleError
+        Nothing certifies the interval (with the lag, if given).
+    """
+    h0 = _number(h_min, 'h_min')
+    h1 = _number(h_max, 'h_max', positive=True)
+    if h0 > h1:
+        raise InputError(f'delay interval must have h_min <= h_max, got [{h_min!r}, {h_max!r}]')
+    T = _number(lag, 'lag')
+    if objective not in OBJECTIVES:
+        raise InputError(f'objective must be one of {OBJECTIVES}, got {objective!r}')
+    bound = problem.options.get('gain_bound') if gain_bound is None else gain_bound
+    if bound is not None:
+        bound = _number(bound, 'gain bound', positive=True)
+    syn_h1 = h1 + T
+    if objective == 'decay':
+        res = max_input_delay_decay_rate(problem, h0, syn_h1, gain_bound=bound)
+        certified = certified_input_delay_of_gain(problem, res.K, h0, h_hi=max(4 * h1, 1.0),
+                                                  tol=tol)
+        certified = max(certified, syn_h1)
+        decay = res.alpha
+    else:
+        try:        # the interval asked for first: an infeasible request fails fast
+            synthesize_input_delay(problem, h0, syn_h1, gain_bound=bound, stop_at_first=True)
+            res = max_certified_input_delay(problem, h0, gain_bound=bound, tol=tol,
+                                            h_hi=max(4 * syn_h1, 1.0))
+        except InfeasibleError:
+            res = None
+        if res is None or res.h_max < syn_h1:
+            best = ' is' if res is None else f' is {res.h_max:.4g} s (from h_min = {h0:g} s),'
+            raise InfeasibleError(
+                f'the latency certified for problem {problem.name!r}'
+                + (f' with ||K||_2 <= {bound:g}' if bound is not None else '')
+                + f'{best} below the {syn_h1:g} s '
+                'asked for. Loosen the gain bound, reduce the latency (a predictor in the '
+                'tracker removes the known part of it) or shrink the interval.')
+        certified = res.h_max
+        decay = 0.0
+    lag_h = None
+    if T > 0:
+        lp = lagged_problem(problem, T)
+        K_aug = np.hstack([res.K, np.zeros((problem.m, problem.m))])
+        if not certify_input_delay(lp, K_aug, h0, h1).certified:
+            raise InfeasibleError(
+                f'the gain designed for problem {problem.name!r} is not certified with the '
+                f'actuator lag {T:g} s on [{h0:g}, {h1:g}] s; try a smaller gain bound, the '
+                "'max-delay' objective, or a shorter latency interval.")
+        lag_h = certified_input_delay_of_gain(lp, K_aug, h0, h_hi=max(4 * h1, 1.0), tol=tol)
+    margin, absc = _exact(problem, res.K, h1)
+    return LatencyDesign(problem=problem.name, objective=objective, K=res.K, gain_bound=bound,
+                         h_min=h0, h_max=h1, lag=T, certified_h_max=float(certified),
+                         decay_rate=float(decay), lag_certified_h_max=lag_h,
+                         true_delay_margin=margin, abscissa_at_h_max=absc,
+                         state_delay=res.state_delay, synthesis=res)
+
+
+def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
+                    ) -> dict[str, float]:
+    """Command-latency figures of any gain ``K`` (e.g. a Theorem 1 design).
+
+    ``certified_latency``: largest ``h_max`` with ``[0, h_max]`` certified by
+    :func:`.input_delay.certify_input_delay` (non-fragile, state delay included when
+    ``A_tau != 0``); ``true_latency_margin``: exact delay margin of the input-delay loop,
+    minimum over :func:`perturbation_set` (constant delay and ``D``, ``A_tau`` left out).
+    """
+    K = np.asarray(K, float)
+    margin = min(delay_margin(problem.A, problem.B @ (K + problem.E @ D @ problem.F))
+                 for D in perturbation_set(problem))
+    cert = certified_input_delay_of_gain(problem, K, 0.0, tol=tol, h_hi=h_hi)
+    return {'certified_latency': float(cert), 'true_latency_margin': float(margin)}

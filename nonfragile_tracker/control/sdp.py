@@ -1,0 +1,154 @@
+"""Shared SDP plumbing for the LMI syntheses (Theorem 1, delay-dependent, input delay).
+
+One place for what every synthesis module needs around cvxpy:
+
+* :func:`sym` - the symmetric part of a matrix (numpy);
+* the solver defaults :data:`DEFAULT_SOLVER` and :data:`DEFAULT_MARGIN` and the
+  accepted status sets :data:`OK_STATUSES` / :data:`INFEASIBLE_STATUSES`;
+* :func:`solve` - solve a cvxpy problem, map a solver exception to
+  :class:`~nonfragile_tracker.errors.SolverFailure`, return the status and the time
+  spent inside the solver;
+* :func:`classify` - decide from ``(status, t, margin)`` whether a point is usable,
+  an infeasibility or a solver failure (the synthesis modules turn that into
+  :class:`~nonfragile_tracker.errors.InfeasibleError` / ``SolverFailure`` with their
+  own message);
+* ONE bounded program cache: parametrized (DPP) cvxpy problems are expensive to build
+  and cheap to re-solve with new parameter values, so each module builds a program
+  once per shape/option key through :func:`cached_program`.  The cache is an LRU of
+  at most :data:`CACHE_SIZE` programs shared by all modules; :func:`clear_cache`
+  drops them (benchmarks use it to measure a cold build), :func:`cached_programs`
+  lists them (diagnostics).
+
+No ROS import; cvxpy is imported lazily by the programs themselves.
+"""
+from __future__ import annotations
+
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any, Callable, Hashable, TypeVar
+
+import numpy as np
+
+from ..errors import SolverFailure
+
+__all__ = ['DEFAULT_MARGIN', 'DEFAULT_SOLVER', 'OK_STATUSES', 'INFEASIBLE_STATUSES',
+           'CACHE_SIZE', 'SolveOutcome', 'sym', 'solve', 'classify', 'cached_program',
+           'cached_programs', 'clear_cache']
+
+#: Required strictness ``t`` (normalized units) unless a problem or caller says otherwise.
+DEFAULT_MARGIN = 1e-6
+#: cvxpy solver used unless a problem or caller says otherwise.
+DEFAULT_SOLVER = 'CLARABEL'
+#: Statuses whose point is read (and then verified independently).
+OK_STATUSES: tuple[str, ...] = ('optimal', 'optimal_inaccurate')
+#: Statuses that prove (up to the solver's accuracy) that no point exists.
+INFEASIBLE_STATUSES: tuple[str, ...] = ('infeasible', 'infeasible_inaccurate')
+#: Largest number of programs kept by the shared cache (least recently used dropped first).
+CACHE_SIZE = 32
+
+T = TypeVar('T')
+
+
+def sym(M: np.ndarray) -> np.ndarray:
+    """Symmetric part ``(M + M^T) / 2`` of a square array."""
+    M = np.asarray(M, float)
+    return 0.5 * (M + M.T)
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    """Status of one solve and the seconds spent inside the solver."""
+
+    status: str
+    solve_time: float
+
+
+def solve(problem: Any, solver: str, *, what: str = 'the LMI',
+          quiet_inaccurate: bool = False) -> SolveOutcome:
+    """Solve the cvxpy ``problem`` with ``solver``.
+
+    Parameters
+    ----------
+    problem : cvxpy.Problem
+        The (possibly cached, re-parametrized) problem.
+    solver : str
+        cvxpy solver name.
+    what : str
+        Description used in the error message.
+    quiet_inaccurate : bool
+        Suppress cvxpy's "Solution may be inaccurate" warning (the status says it and
+        the point is verified independently anyway).
+
+    Raises
+    ------
+    SolverFailure
+        The solver raised (missing, crashed).
+    """
+    import cvxpy as cp
+    try:
+        with warnings.catch_warnings():
+            if quiet_inaccurate:
+                warnings.filterwarnings('ignore', message='Solution may be inaccurate')
+            problem.solve(solver=solver)
+    except cp.error.SolverError as exc:
+        raise SolverFailure(f'solver {solver} failed on {what}: {exc}. Check that the solver '
+                            'is installed (pip install clarabel).') from None
+    stats = problem.solver_stats
+    st = float(stats.solve_time or 0.0) if stats is not None else 0.0
+    return SolveOutcome(status=str(problem.status), solve_time=st)
+
+
+def classify(status: str, t: float | None, margin: float) -> str:
+    """``'ok'`` (usable point with ``t >= margin``), ``'infeasible'`` or ``'failed'``.
+
+    A solved problem whose best strictness is below ``margin`` counts as infeasible
+    (no point with the required margin exists), as do the infeasible statuses; any
+    other status (unbounded, solver error, no value) is a failure.
+    """
+    if status in INFEASIBLE_STATUSES:
+        return 'infeasible'
+    if status in OK_STATUSES:
+        if t is None:
+            return 'infeasible'
+        return 'ok' if t >= margin else 'infeasible'
+    return 'failed'
+
+
+class _LruCache:
+    def __init__(self, size: int):
+        self.size = size
+        self.items: OrderedDict[Hashable, Any] = OrderedDict()
+
+    def get(self, key: Hashable, factory: Callable[[], T]) -> T:
+        if key in self.items:
+            self.items.move_to_end(key)
+            return self.items[key]
+        value = factory()
+        self.items[key] = value
+        while len(self.items) > self.size:
+            self.items.popitem(last=False)
+        return value
+
+
+_CACHE = _LruCache(CACHE_SIZE)
+
+
+def cached_program(key: Hashable, factory: Callable[[], T]) -> T:
+    """The program cached under ``key``, built with ``factory()`` on a miss.
+
+    ``key`` must name the module and everything that changes the program's structure
+    (shapes, options), e.g. ``('theorem1', n, m, q, p, nominal, gain_bound)``.
+    """
+    return _CACHE.get(key, factory)
+
+
+def cached_programs() -> list[tuple[Hashable, Any]]:
+    """``(key, program)`` pairs in the cache, least recently used first (diagnostics)."""
+    return list(_CACHE.items.items())
+
+
+def clear_cache() -> None:
+    """Drop every cached program (the next synthesis builds and compiles again)."""
+    _CACHE.items.clear()
+

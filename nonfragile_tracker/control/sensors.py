@@ -1,0 +1,82 @@
+"""Odometry as a real base delivers it: late, at a lower rate than the plant, noisy.
+
+:class:`Odometer` is called by :class:`control.loop.UnicyclePlant` once per plant step
+``k`` (in order).  At every ``period``-th step (``k % period == 0``) it takes a
+measurement of the true state - pose plus Gaussian noise drawn from a seeded
+``numpy.random.Generator`` (three draws ``x, y, yaw`` per measurement, always in that
+order, so changing one standard deviation leaves the others' sequence alone) - and
+releases it ``latency`` steps later.  The sample keeps the step (hence the stamp) of
+the measurement time, as real odometry does: a message published at step
+``k + latency`` carries the stamp of step ``k``.  Plain floats; no ROS.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ['OdometryModel', 'OdometrySample', 'Odometer']
+
+
+@dataclass(frozen=True)
+class OdometryModel:
+    """Odometry timing and noise in plant steps (built and validated by ``PlantConfig``)."""
+
+    latency_steps: int = 0             # a measurement of step k is published at step k + this
+    period_steps: int = 1              # measure at every period-th step
+    noise: tuple = (0.0, 0.0, 0.0)     # standard deviation of x (m), y (m), yaw (rad)
+    seed: int = 0
+
+    @property
+    def ideal(self) -> bool:
+        """True for the paper's plant: every step, at once, exact."""
+        return self.latency_steps == 0 and self.period_steps == 1 and not any(self.noise)
+
+
+class OdometrySample(NamedTuple):
+    """One odometry measurement: taken at plant step ``step``; speeds are the actual ones."""
+
+    step: int
+    x: float
+    y: float
+    th: float
+    v: float
+    w: float
+
+
+class Odometer:
+    """Delay line, decimation and noise between the true state and the odometry messages."""
+
+    def __init__(self, model: OdometryModel):
+        self.model = model
+        self._noisy = any(model.noise)
+        self.reset()
+
+    def reset(self) -> None:
+        self._pending: deque = deque()
+        self._rng = np.random.default_rng(self.model.seed) if self._noisy else None
+
+    def measure(self, k: int, x: float, y: float, th: float, v: float, w: float) -> None:
+        """Record the true state of step ``k`` (call once per step, in order)."""
+        m = self.model
+        pending = self._pending
+        while pending and pending[0].step + m.latency_steps < k:
+            pending.popleft()                    # released at an earlier step
+        if k % m.period_steps:
+            return
+        if self._noisy:
+            nx, ny, nth = self._rng.standard_normal(3)
+            sx, sy, sth = m.noise
+            x, y = x + sx * float(nx), y + sy * float(ny)
+            th = math.remainder(th + sth * float(nth), math.tau)
+        pending.append(OdometrySample(k, x, y, th, v, w))
+
+    def due(self, k: int) -> OdometrySample | None:
+        """The sample to publish at step ``k`` (measured at ``k - latency``), if any."""
+        pending = self._pending
+        if pending and pending[0].step + self.model.latency_steps == k:
+            return pending[0]
+        return None

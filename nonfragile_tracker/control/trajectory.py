@@ -1,0 +1,635 @@
+"""Timed trajectories: position, velocity, acceleration and heading at any time.
+
+One type, :class:`Trajectory`, with two kinds behind it:
+
+* **analytic** - a :class:`control.reference.Path` (circle, figure eight).  ``sample(t)``
+  returns exactly ``path.sample(t)`` (same floats), so lockstep runs and golden bags are
+  unchanged; its time range is unbounded.
+* **piecewise polynomial** - built from timed points (a waypoint file, a nav_msgs/Path,
+  a trajectory_msgs/MultiDOFJointTrajectory; the node layer turns messages into arrays):
+
+  - positions only (``t, x, y``): an interpolating **cubic spline**
+    (:class:`scipy.interpolate.CubicSpline`).  A cubic spline is the lowest-order
+    interpolant that is twice continuously differentiable (C2), which is exactly what the
+    tracker needs: the law uses position, velocity and the acceleration feed-forward
+    ``xi_d''``; a C2 curve has no velocity or acceleration jumps at the waypoints.  Ends
+    are *clamped* to the given end velocities (default zero: a trajectory starts and ends
+    at rest, so holding the end point afterwards does not jump the velocity); with
+    ``ends='natural'`` the second derivative is zero at the ends instead (for a piece of
+    a longer motion).
+  - ``smoothing > 0`` (noisy planner or recorded output): a cubic **smoothing spline**
+    (:func:`scipy.interpolate.make_smoothing_spline`, penalised second derivative with
+    weight ``lam = smoothing``) - still C2 but it does not pass through every noisy
+    point (interpolating noise gives large accelerations).
+  - positions, velocities and accelerations at every point (MultiDOFJointTrajectory,
+    nav2_msgs/Trajectory): the quintic Hermite interpolant
+    (:meth:`scipy.interpolate.BPoly.from_derivatives`), which matches all three at every
+    point and is therefore C2 with the planner's own velocities and accelerations.
+
+  Before the first time the trajectory holds its first point at rest, after the last
+  time it holds the last point at rest (:attr:`Trajectory.t_end`: the tracker stops).
+
+The representation is close to nav2_msgs/Trajectory (Kilted and later; Jazzy's nav_msgs
+has no Trajectory message): per point ``time_from_start``, pose ``(x, y, yaw)``,
+velocity and acceleration in the trajectory frame (``odom``).
+
+**Heading and driving backwards.**  The heading is the direction of travel:
+``atan2(vy, vx)`` forwards and ``atan2(-vy, -vx)`` when the point's direction is
+backwards.  The direction per point comes from a signed ``speed`` column (negative:
+backwards), or from a given ``yaw`` (backwards when the velocity points against it).
+The tracking law itself uses ``xi_d = [x, vx, y, vy]`` and the signed speed, so a robot
+facing along the heading drives backwards with ``v < 0``.
+
+Bad input raises :class:`TrajectoryError` (an :class:`InputError`) naming the source
+(file or topic), the index and the value.
+"""
+from __future__ import annotations
+
+import bisect
+import csv
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path as FsPath
+
+import numpy as np
+
+from ..errors import InputError
+from .reference import Path, RefSample
+
+__all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
+           'from_waypoints', 'from_states', 'from_poses', 'load_waypoints',
+           'read_waypoint_file', 'time_law', 'check_frame', 'describe', 'Waypoints']
+
+#: Points a curve needs: the spline's order and clamped ends need at least 2 distinct times.
+MIN_POINTS = 2
+
+
+class TrajectoryError(InputError):
+    """A trajectory cannot be built from the given points.
+
+    The message names the source, the index and the value.
+    """
+
+
+@dataclass(frozen=True)
+class TrajectorySamples:
+    """Vectorised samples: one entry per requested time (SI units, trajectory frame)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    heading: np.ndarray
+
+
+@dataclass(frozen=True)
+class Waypoints:
+    """Timed waypoints as read from a file: ``t, x, y`` and optional ``yaw``/``speed``."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray | None = None
+    speed: np.ndarray | None = None
+    source: str = 'waypoints'
+
+
+class Trajectory:
+    """A timed planar trajectory ``t -> (x, y, vx, vy, ax, ay, heading)``.
+
+    Build it with :meth:`analytic`, :func:`from_waypoints`, :func:`from_states`,
+    :func:`from_poses` or :func:`load_waypoints`; do not call the constructor directly.
+    """
+
+    def __init__(self, *, path: Path | None = None, pp=None, knots: np.ndarray | None = None,
+                 direction: np.ndarray | None = None, source: str = 'trajectory',
+                 kind: str = 'analytic'):
+        self.path = path
+        self.source = source
+        self.kind = kind
+        self._pp = pp
+        if pp is not None:
+            # scalar fast path: local power-basis coefficients, highest power first
+            self._bp = [float(b) for b in knots]
+            c = np.asarray(pp.c)                 # shape (k+1, segments, 2)
+            self._cx = [tuple(map(float, c[:, i, 0])) for i in range(c.shape[1])]
+            self._cy = [tuple(map(float, c[:, i, 1])) for i in range(c.shape[1])]
+            self._knots = np.asarray(knots, float)
+            self._dir = np.asarray(direction, float)
+            self._dir_list = [float(d) for d in self._dir]
+            self.t_start = float(knots[0])
+            self.t_end = float(knots[-1])
+            self._start = self._eval_scalar(self.t_start, 0)
+            self._end = self._eval_scalar(self.t_end, len(self._cx) - 1)
+        else:
+            self.t_start = -math.inf
+            self.t_end = math.inf
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def analytic(cls, path: Path) -> 'Trajectory':
+        """The trajectory of an analytic path; ``sample`` returns ``path.sample`` exactly."""
+        return cls(path=path, source=f'path {path.name}', kind='analytic')
+
+    @property
+    def is_analytic(self) -> bool:
+        """True for the exact analytic paths (unbounded in time)."""
+        return self.path is not None
+
+    @property
+    def knots(self) -> np.ndarray:
+        """Times of the defining points (empty for analytic paths)."""
+        return self._knots if self._pp is not None else np.zeros(0)
+
+    @property
+    def duration(self) -> float:
+        """``t_end - t_start`` (s); infinite for analytic paths."""
+        return self.t_end - self.t_start
+
+    # ------------------------------------------------------------------ evaluation
+    def _eval_scalar(self, t: float, i: int) -> tuple[float, ...]:
+        s = t - self._bp[i]
+        out = []
+        for c in (self._cx[i], self._cy[i]):
+            p = d = a = 0.0
+            for cj in c:                         # Horner for p, p', p''
+                a = a * s + 2.0 * d
+                d = d * s + p
+                p = p * s + cj
+            out.append((p, d, a))
+        (x, vx, ax), (y, vy, ay) = out
+        return x, y, vx, vy, ax, ay
+
+    def _heading(self, vx: float, vy: float, i: int) -> float:
+        d = self._dir_list[i]
+        if vx * vx + vy * vy > 1e-24:
+            return math.atan2(d * vy, d * vx)
+        return math.nan
+
+    def sample(self, t: float) -> RefSample:
+        """Desired state at time ``t`` (s).
+
+        Outside ``[t_start, t_end]`` the first/last point at rest (zero velocity and
+        acceleration, heading of the nearest motion).
+        """
+        if self.path is not None:
+            return self.path.sample(t)
+        if t < self.t_start:
+            x, y = self._start[0], self._start[1]
+            return RefSample(t, x, y, 0.0, 0.0, 0.0, 0.0, self._rest_heading(0))
+        if t > self.t_end:
+            x, y = self._end[0], self._end[1]
+            return RefSample(t, x, y, 0.0, 0.0, 0.0, 0.0,
+                             self._rest_heading(len(self._bp) - 1))
+        i = bisect.bisect_right(self._bp, t) - 1
+        i = min(max(i, 0), len(self._cx) - 1)
+        x, y, vx, vy, ax, ay = self._eval_scalar(t, i)
+        h = self._heading(vx, vy, i)
+        if math.isnan(h):               # at rest inside: heading of the nearer knot
+            h = self._rest_heading(i + 1 if 2 * t >= self._bp[i] + self._bp[i + 1] else i)
+        return RefSample(t, x, y, vx, vy, ax, ay, h)
+
+    def _rest_heading(self, i: int) -> float:
+        """Heading at rest near knot ``i``: the direction of travel of the nearest motion."""
+        return self._rest_headings[i]
+
+    @property
+    def _rest_headings(self) -> list[float]:
+        cached = self.__dict__.get('_rh')
+        if cached is not None:
+            return cached
+        n = len(self._bp)
+        # direction of travel just inside each knot interval, else the chord to the next
+        # distinct point; carried forward/backward over stops
+        h = [math.nan] * n
+        for i in range(n):
+            seg = min(i, len(self._cx) - 1)
+            lo, hi = self._bp[seg], self._bp[seg + 1]
+            for frac in (1e-6, 1e-3, 0.5):
+                tt = lo + frac * (hi - lo) if i < n - 1 else hi - frac * (hi - lo)
+                _, _, vx, vy, _, _ = self._eval_scalar(tt, seg)
+                hh = self._heading(vx, vy, seg)
+                if not math.isnan(hh):
+                    h[i] = hh
+                    break
+        last = next((v for v in h if not math.isnan(v)), 0.0)
+        for i in range(n):
+            if math.isnan(h[i]):
+                h[i] = last
+            last = h[i]
+        self.__dict__['_rh'] = h
+        return h
+
+    def evaluate(self, t) -> TrajectorySamples:
+        """Vectorised :meth:`sample` over an array of times (same values as ``sample``)."""
+        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        if self.path is not None:
+            rows = np.array([self.path.sample(float(s)) for s in tt]).reshape(-1, 8)
+            return TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
+        pp = self._pp
+        inside = (tt >= self.t_start) & (tt <= self.t_end)
+        tc = np.clip(tt, self.t_start, self.t_end)
+        pos = pp(tc)
+        vel = pp(tc, 1)
+        acc = pp(tc, 2)
+        vel[~inside] = 0.0
+        acc[~inside] = 0.0
+        seg = np.clip(np.searchsorted(self._knots, tc, side='right') - 1, 0,
+                      len(self._cx) - 1)
+        d = self._dir[seg]
+        moving = vel[:, 0] ** 2 + vel[:, 1] ** 2 > 1e-24
+        heading = np.arctan2(d * vel[:, 1], d * vel[:, 0])
+        kb = self._knots
+        nearer = seg + (2 * tc >= kb[seg] + kb[seg + 1])
+        rest_idx = np.where(tt < self.t_start, 0,
+                            np.where(tt > self.t_end, len(self._bp) - 1, nearer))
+        rh = np.asarray(self._rest_headings)[rest_idx]
+        heading = np.where(moving, heading, rh)
+        return TrajectorySamples(tt, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1], acc[:, 0],
+                                 acc[:, 1], heading)
+
+    def poses(self, times=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(t, x, y, heading)`` at ``times`` (default: the knots) - e.g. for a nav_msgs/Path."""
+        if times is None:
+            if self.path is not None:
+                raise TrajectoryError(f'{self.source}: an analytic path has no knots; '
+                                      'give the sample times')
+            times = self._knots
+        s = self.evaluate(times)
+        return s.t, s.x, s.y, s.heading
+
+    def __repr__(self) -> str:
+        if self.path is not None:
+            return f'Trajectory(analytic {self.path.name} {dict(self.path.params)})'
+        return (f'Trajectory({self.kind} from {self.source}, {len(self._bp)} points, '
+                f't = {self.t_start:g}..{self.t_end:g} s)')
+
+
+# ------------------------------------------------------------------------- validation
+
+def _array(name: str, values, n: int | None, source: str) -> np.ndarray:
+    try:
+        arr = np.asarray(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise TrajectoryError(f'{source}: {name} must be numbers, got {values!r}') from None
+    if n is not None and arr.size != n:
+        raise TrajectoryError(f'{source}: {name} has {arr.size} values, expected {n} '
+                              '(one per point)')
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        i = int(bad[0])
+        raise TrajectoryError(f'{source}: point {i}: {name} = {arr[i]} is not finite; '
+                              'every value must be a finite number')
+    return arr
+
+
+def _check_times(t: np.ndarray, source: str) -> None:
+    if t.size < MIN_POINTS:
+        raise TrajectoryError(f'{source}: {t.size} point(s); a trajectory needs at least '
+                              f'{MIN_POINTS} points with increasing times')
+    dt = np.diff(t)
+    bad = np.flatnonzero(~(dt > 0))
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise TrajectoryError(f'{source}: point {i}: time t = {float(t[i])!r} s is not after the '
+                              f'previous point\'s t = {float(t[i - 1])!r} s; times must increase '
+                              'strictly')
+
+
+def _direction(vx, vy, yaw, speed, n) -> np.ndarray:
+    d = np.ones(n)
+    if speed is not None:
+        d = np.where(speed < 0, -1.0, 1.0)
+    elif yaw is not None:
+        dot = vx * np.cos(yaw) + vy * np.sin(yaw)
+        d = np.where(dot < 0, -1.0, 1.0)
+    return d
+
+
+def _direction_from_yaw_chord(t, x, y, yaw, speed) -> np.ndarray:
+    n = t.size
+    if speed is not None:
+        return np.where(speed < 0, -1.0, 1.0)
+    if yaw is None:
+        return np.ones(n)
+    # chord direction of each segment (last point: previous segment) against the yaw
+    dx = np.diff(x)
+    dy = np.diff(y)
+    dx = np.append(dx, dx[-1])
+    dy = np.append(dy, dy[-1])
+    return _direction(dx, dy, yaw, None, n)
+
+
+# ------------------------------------------------------------------------- builders
+
+def from_waypoints(t, x, y, yaw=None, speed=None, *, ends: str = 'rest',
+                   smoothing: float = 0.0, source: str = 'waypoints') -> Trajectory:
+    """Twice-differentiable trajectory through timed waypoints.
+
+    Parameters
+    ----------
+    t, x, y : array_like
+        Times (s, strictly increasing) and positions (m) in the odometry frame.
+    yaw : array_like, optional
+        Heading at each point (rad); decides forward/backward travel (see module doc).
+    speed : array_like, optional
+        Signed speed at each point (m/s): its sign gives the direction; with ``ends='rest'``
+        the first and last speeds are the clamped end speeds (along ``yaw`` if given, else
+        along the end chord).
+    ends : {'rest', 'natural'}
+        ``'rest'``: clamped ends (velocity = end speed, default 0); ``'natural'``: zero
+        second derivative at the ends.
+    smoothing : float
+        0 interpolates; ``> 0`` fits a cubic smoothing spline with this penalty ``lam``.
+    source : str
+        File or topic name for error messages.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    TrajectoryError
+        Fewer than 2 points, non-increasing times, non-finite values, bad options.
+    """
+    from scipy.interpolate import CubicSpline, PPoly, make_smoothing_spline
+    t = _array('t', t, None, source)
+    n = t.size
+    x = _array('x', x, n, source)
+    y = _array('y', y, n, source)
+    yaw = None if yaw is None else _array('yaw', yaw, n, source)
+    speed = None if speed is None else _array('speed', speed, n, source)
+    _check_times(t, source)
+    if ends not in ('rest', 'natural'):
+        raise TrajectoryError(f'{source}: ends must be rest or natural, got {ends!r}')
+    if not (isinstance(smoothing, (int, float)) and math.isfinite(smoothing)
+            and smoothing >= 0):
+        raise TrajectoryError(f'{source}: smoothing must be a finite number >= 0, '
+                              f'got {smoothing!r}')
+    P = np.column_stack([x, y])
+    if smoothing > 0:
+        if n < 5:
+            raise TrajectoryError(f'{source}: {n} points; a smoothing spline needs at '
+                                  'least 5')
+        spl = [make_smoothing_spline(t, P[:, j], lam=float(smoothing)) for j in range(2)]
+        ppx, ppy = (PPoly.from_spline(s) for s in spl)
+        # the B-spline's breakpoints include repeated end knots: keep the data range
+        c = np.stack([ppx.c, ppy.c], axis=-1)
+        brk = ppx.x
+        keep = np.flatnonzero(np.diff(brk) > 0)
+        pp = PPoly(c[:, keep, :], np.append(brk[keep], brk[keep[-1] + 1]))
+        knots = pp.x
+        kind = 'smoothing spline'
+    else:
+        if ends == 'rest':
+            v0 = np.zeros(2)
+            v1 = np.zeros(2)
+            if speed is not None:
+                for v, i, j in ((v0, 0, 1), (v1, n - 1, n - 2)):
+                    if yaw is not None:       # signed speed along the given heading
+                        v[:] = speed[i] * np.array([math.cos(yaw[i]), math.sin(yaw[i])])
+                    else:                     # |speed| along the end chord (direction of travel)
+                        ch = P[max(i, j)] - P[min(i, j)]
+                        nrm = float(np.hypot(*ch))
+                        v[:] = abs(speed[i]) * ch / nrm if nrm > 0 else 0.0
+            bc = ((1, v0), (1, v1))
+        else:
+            bc = 'natural'
+        if n == 2 and bc == 'natural':
+            bc = 'not-a-knot'           # two points: the straight line
+        pp = CubicSpline(t, P, bc_type=bc)
+        knots = t
+        kind = 'cubic spline'
+    seg_t = knots
+    direction = _direction_from_yaw_chord(t, x, y, yaw, speed)
+    if seg_t.size != t.size:             # smoothing spline: direction of the nearest point
+        idx = np.clip(np.searchsorted(t, seg_t, side='right') - 1, 0, n - 1)
+        direction = direction[idx]
+    return Trajectory(pp=pp, knots=knots, direction=direction, source=source, kind=kind)
+
+
+def from_states(t, x, y, vx, vy, ax=None, ay=None, yaw=None, *,
+                source: str = 'trajectory') -> Trajectory:
+    """C2 trajectory matching given positions, velocities (and accelerations) at each time.
+
+    The quintic Hermite interpolant (``BPoly.from_derivatives``) matches position,
+    velocity and acceleration at every point (cubic Hermite if no accelerations are given,
+    then only C1).  This is the form of trajectory_msgs/MultiDOFJointTrajectory and
+    nav2_msgs/Trajectory points; velocities and accelerations are in the trajectory frame.
+    """
+    from scipy.interpolate import BPoly, PPoly
+    t = _array('t', t, None, source)
+    n = t.size
+    x = _array('x', x, n, source)
+    y = _array('y', y, n, source)
+    vx = _array('vx', vx, n, source)
+    vy = _array('vy', vy, n, source)
+    have_acc = ax is not None and ay is not None
+    if have_acc:
+        ax = _array('ax', ax, n, source)
+        ay = _array('ay', ay, n, source)
+    yaw = None if yaw is None else _array('yaw', yaw, n, source)
+    _check_times(t, source)
+    cols = []
+    for p, v, a in ((x, vx, ax), (y, vy, ay)):
+        ys = np.column_stack([p, v, a]) if have_acc else np.column_stack([p, v])
+        cols.append(PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ys)))
+    c = np.stack([cols[0].c, cols[1].c], axis=-1)
+    pp = PPoly(c, t)
+    direction = _direction(vx, vy, yaw, None, n)
+    return Trajectory(pp=pp, knots=t, direction=direction, source=source,
+                      kind='quintic Hermite' if have_acc else 'cubic Hermite')
+
+
+def time_law(x, y, cruise_speed: float, max_accel: float, *,
+             source: str = 'path') -> np.ndarray:
+    """Times for untimed points: trapezoidal speed profile along the polyline's arc length.
+
+    Accelerates at ``max_accel`` from rest to ``cruise_speed``, cruises, and brakes to rest
+    at the last point (a triangle if the path is too short to reach the cruise speed).
+    Consecutive duplicate points must be removed first.
+    """
+    for name, v in (('cruise_speed', cruise_speed), ('max_accel', max_accel)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise TrajectoryError(f'{source}: {name} must be a finite number > 0, got {v!r}')
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    seg = np.hypot(np.diff(x), np.diff(y))
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    L = float(s[-1])
+    v, a = float(cruise_speed), float(max_accel)
+    s_acc = v * v / (2 * a)
+    if 2 * s_acc > L:                     # triangle profile
+        v = math.sqrt(a * L)
+        s_acc = L / 2
+    t_acc = v / a
+    t_cruise = (L - 2 * s_acc) / v
+    out = np.empty_like(s)
+    for i, si in enumerate(s):
+        if si <= s_acc:
+            out[i] = math.sqrt(2 * si / a)
+        elif si <= L - s_acc:
+            out[i] = t_acc + (si - s_acc) / v
+        else:
+            rem = max(L - si, 0.0)
+            out[i] = 2 * t_acc + t_cruise - math.sqrt(2 * rem / a)
+    return out
+
+
+def from_poses(t, x, y, yaw, *, cruise_speed: float | None = None,
+               max_accel: float | None = None, source: str = 'path') -> Trajectory:
+    """Trajectory from the poses of a nav_msgs/Path (times from its stamps).
+
+    ``t`` are the poses' stamps relative to the first (s).  If all stamps are zero the
+    times come from :func:`time_law` with ``cruise_speed`` and ``max_accel`` (then
+    consecutive duplicate points are dropped).  The yaw decides forward/backward.
+    """
+    t = _array('stamp', t, None, source)
+    n = t.size
+    x = _array('x', x, n, source)
+    y = _array('y', y, n, source)
+    yaw = _array('yaw', yaw, n, source)
+    if n and np.all(t == 0):
+        if cruise_speed is None or max_accel is None:
+            raise TrajectoryError(f'{source}: all pose stamps are zero; give cruise_speed and '
+                                  'max_accel for a time law, or stamp the poses')
+        keep = np.concatenate([[True], np.hypot(np.diff(x), np.diff(y)) > 0])
+        x, y, yaw = x[keep], y[keep], yaw[keep]
+        if x.size < MIN_POINTS:
+            raise TrajectoryError(f'{source}: {x.size} distinct point(s); a trajectory '
+                                  f'needs at least {MIN_POINTS}')
+        t = time_law(x, y, cruise_speed, max_accel, source=source)
+    return from_waypoints(t, x, y, yaw=yaw, source=source)
+
+
+# ------------------------------------------------------------------------- files
+
+_COLUMNS = ('t', 'x', 'y', 'yaw', 'speed')
+
+
+def _rows_to_waypoints(rows: list[dict], source: str) -> Waypoints:
+    if not rows:
+        raise TrajectoryError(f'{source}: no waypoints')
+    cols: dict[str, list[float]] = {}
+    names = set(rows[0])
+    for req in ('t', 'x', 'y'):
+        if req not in names:
+            raise TrajectoryError(f'{source}: missing column {req!r}; waypoints need t, x, y '
+                                  f'(optional yaw, speed), got {sorted(names)}')
+    unknown = names - set(_COLUMNS)
+    if unknown:
+        raise TrajectoryError(f'{source}: unknown column(s) {sorted(unknown)}; expected '
+                              f'{", ".join(_COLUMNS)}')
+    for i, row in enumerate(rows):
+        if set(row) != names:
+            raise TrajectoryError(f'{source}: point {i}: has fields {sorted(row)}, the first '
+                                  f'point has {sorted(names)}')
+        for k, v in row.items():
+            try:
+                if isinstance(v, bool):
+                    raise ValueError
+                f = float(v)
+            except (TypeError, ValueError):
+                raise TrajectoryError(f'{source}: point {i}: {k} = {v!r} is not a number') \
+                    from None
+            if not math.isfinite(f):
+                raise TrajectoryError(f'{source}: point {i}: {k} = {v!r} is not finite')
+            cols.setdefault(k, []).append(f)
+    arr = {k: np.asarray(v) for k, v in cols.items()}
+    return Waypoints(arr['t'], arr['x'], arr['y'], arr.get('yaw'), arr.get('speed'), source)
+
+
+def read_waypoint_file(path) -> Waypoints:
+    """Read timed waypoints from CSV (header ``t,x,y[,yaw][,speed]``) or YAML.
+
+    YAML: a list of mappings ``{t: .., x: .., y: ..}`` or a mapping with key
+    ``waypoints`` holding that list (optional ``frame_id``, which must be ``odom``).
+    Lines starting with ``#`` in CSV are comments.
+    """
+    p = FsPath(path)
+    source = str(p)
+    try:
+        text = p.read_text()
+    except UnicodeDecodeError:
+        raise TrajectoryError(f'{source}: not a text file') from None
+    suffix = p.suffix.lower()
+    if suffix in ('.yaml', '.yml'):
+        import yaml
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise TrajectoryError(f'{source}: not valid YAML: {exc}') from None
+        if isinstance(data, dict):
+            frame = data.get('frame_id', 'odom')
+            if frame != 'odom':
+                raise TrajectoryError(f'{source}: frame_id {frame!r}; waypoints must be in the '
+                                      'odometry frame \'odom\'')
+            data = data.get('waypoints')
+        if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
+            raise TrajectoryError(f'{source}: expected a list of {{t, x, y}} mappings (or '
+                                  '`waypoints:` holding one)')
+        return _rows_to_waypoints(data, source)
+    if suffix == '.csv':
+        lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith('#')]
+        reader = csv.reader(io.StringIO('\n'.join(lines)))
+        try:
+            table = [[c.strip() for c in r] for r in reader]
+        except csv.Error as exc:
+            raise TrajectoryError(f'{source}: not valid CSV: {exc}') from None
+        if not table:
+            raise TrajectoryError(f'{source}: empty file; expected a header t,x,y[,yaw][,speed]')
+        head = table[0]
+        rows = []
+        for i, r in enumerate(table[1:]):
+            if len(r) != len(head):
+                raise TrajectoryError(f'{source}: point {i}: {len(r)} values, the header has '
+                                      f'{len(head)} ({",".join(head)})')
+            rows.append(dict(zip(head, r)))
+        return _rows_to_waypoints(rows, source)
+    raise TrajectoryError(f'{source}: unknown waypoint file type {suffix!r}; use .csv or .yaml')
+
+
+def load_waypoints(path, *, ends: str = 'rest', smoothing: float = 0.0) -> Trajectory:
+    """Read a waypoint file (:func:`read_waypoint_file`) and build its trajectory."""
+    w = read_waypoint_file(path)
+    return from_waypoints(w.t, w.x, w.y, yaw=w.yaw, speed=w.speed, ends=ends,
+                          smoothing=smoothing, source=w.source)
+
+
+def check_frame(frame_id: str, expected: str, source: str) -> None:
+    """Raise :class:`TrajectoryError` unless ``frame_id == expected``."""
+    if frame_id != expected:
+        raise TrajectoryError(f'{source}: frame_id {frame_id!r}; the trajectory must be in the '
+                              f'odometry frame {expected!r} (no tf here)')
+
+
+def describe(traj: Trajectory, samples: int = 2001) -> dict:
+    """Summary of a bounded trajectory: points, duration, peaks and direction.
+
+    Returns a dict with ``points``, ``kind``, ``t_start``, ``t_end``, ``duration`` (s),
+    ``length`` (m, path length), ``peak_speed`` (m/s), ``peak_accel`` (m/s^2),
+    ``peak_turn_rate`` (rad/s, heading rate while moving faster than 1 cm/s),
+    ``backwards`` (fraction of the time driven in reverse), start and end pose.
+    """
+    if traj.is_analytic:
+        raise TrajectoryError(f'{traj.source}: analytic paths are unbounded; nothing to '
+                              'summarise')
+    ts = np.linspace(traj.t_start, traj.t_end, samples)
+    s = traj.evaluate(ts)
+    speed = np.hypot(s.vx, s.vy)
+    moving = speed[1:] > 0.01
+    rate = np.abs(np.diff(np.unwrap(s.heading)) / np.diff(ts))
+    seg = np.clip(np.searchsorted(traj.knots, ts, side='right') - 1, 0, len(traj.knots) - 2)
+    back = float(np.mean(traj._dir[seg] < 0))
+    return dict(points=len(traj.knots), kind=traj.kind, t_start=traj.t_start,
+                t_end=traj.t_end, duration=traj.duration,
+                length=float(np.sum(np.hypot(np.diff(s.x), np.diff(s.y)))),
+                peak_speed=float(speed.max()), peak_accel=float(np.hypot(s.ax, s.ay).max()),
+                peak_turn_rate=float(rate[moving].max()) if moving.any() else 0.0,
+                backwards=back, start=(float(s.x[0]), float(s.y[0]), float(s.heading[0])),
+                end=(float(s.x[-1]), float(s.y[-1]), float(s.heading[-1])))

@@ -1,0 +1,144 @@
+"""Replay a bag over DDS into a real tracker node and compare its commands.
+
+:func:`replay_over_dds` starts the tracker node (its own process, the bag's mode,
+the given gain and parameter files), publishes the recorded odometry and reference
+messages - their recorded CDR bytes, unchanged - in bag order, and collects the
+node's ``cmd_vel``.  It keeps the node's view of the order exactly: after a message
+that makes the tracker compute (predicted by the same input rules,
+:class:`~nonfragile_tracker.bag.replay.TrackerInputs`) it waits for that command
+before publishing the next; other messages go out in order (one participant's samples
+arrive in publish order and the node's events executor handles them in arrival order).  The
+node's real-time watchdog is disabled (``input_timeout`` huge): replay pacing is
+not the robot's timing.
+"""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import rclpy
+from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+
+from .. import topics
+from ..bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
+                          load_tracker_parameters, plan_replay, read_replay_events)
+from ..bag.writer import jazzy_typestore
+from ..errors import RunError
+from ..resources import config_dir
+from ..runner import isolated_env, scenario_parameters, write_parameter_file
+from .common import DATA_QOS
+
+__all__ = ['replay_over_dds']
+
+_TYPES = {'odom': (Odometry, topics.ODOM), 'ref_pose': (PoseStamped, topics.REF_POSE),
+          'ref_twist': (TwistStamped, topics.REF_TWIST),
+          'ref_accel': (AccelStamped, topics.REF_ACCEL)}
+#: input_timeout given to the node: replay pacing must not trigger its watchdog.
+NO_WATCHDOG = 1e5
+#: Seconds to let discovery settle after the node is matched, and after the first inputs.
+SETTLE = 1.0
+
+
+def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float = 1e-9,
+                    rtol: float = 0.0, max_differences: int = 20, namespace: str | None = None,
+                    env: dict | None = None, timeout: float = 10.0) -> ReplayResult:
+    """Like :func:`nonfragile_tracker.bag.replay.replay`, through a tracker node over DDS.
+
+    The inputs are those of :func:`~nonfragile_tracker.bag.replay.plan_replay` (same start,
+    recovered initial speed and order as the in-process replay).
+
+    ``timeout`` bounds the wait for the node (start-up, discovery, each command).
+    Raises :class:`~nonfragile_tracker.errors.RunError` if the node dies or stays silent.
+    """
+    gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
+    params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
+    config, values = load_tracker_parameters(gains, params)     # bad files: exit 2 first
+    events = read_replay_events(bag, namespace=namespace)
+    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
+                       use_recorded=expected is None)
+    mode = plan.mode
+    predict = TrackerInputs(config, mode, float(values['max_stamp_jump']))
+    env = isolated_env(env)
+    ts = jazzy_typestore()
+    RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
+    with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
+        pfile = write_parameter_file(scenario_parameters(params, gains), Path(tmp) / 'p.yaml')
+        cmd = [sys.executable, '-m', 'nonfragile_tracker.nodes.tracker', '--ros-args',
+               '--params-file', str(pfile), '-p', f'mode:={mode}', '-p',
+               f'input_timeout:={NO_WATCHDOG}']
+        log = open(Path(tmp) / 'tracker.log', 'w+')
+        proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
+        node = rclpy.create_node('bag_replayer', context=ctx)
+        got: list[Twist] = []
+        sub = node.create_subscription(Twist, topics.CMD_VEL, got.append, DATA_QOS)
+        pubs = {k: node.create_publisher(t, name, DATA_QOS) for k, (t, name) in _TYPES.items()}
+        ex = rclpy.executors.SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+
+        def wait(pred, what: str) -> None:
+            end = time.monotonic() + timeout
+            while not pred():
+                if proc.poll() is not None:
+                    log.seek(0)
+                    raise RunError(f'the tracker node exited ({proc.returncode}) during the '
+                                   f'replay; its log:\n{log.read()[-2000:]}')
+                if time.monotonic() > end:
+                    raise RunError(f'replay over DDS: no {what} within {timeout} s')
+                ex.spin_once(timeout_sec=0.005)
+
+        commands = []
+        try:
+            # matched both ways (our writers -> its readers, its writer -> our reader): a
+            # command published before the match would be lost
+            wait(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
+                 and sub.get_publisher_count() >= 1, 'tracker node matched on every topic')
+            # a reliable reader may take a moment to accept a newly matched writer (its first
+            # samples then come late, after a repair): let discovery settle both ways
+            settle = time.monotonic() + SETTLE
+            while time.monotonic() < settle:
+                ex.spin_once(timeout_sec=0.01)
+            first_odom = True
+            for e in plan.events:
+                if e.kind == 'odom' and first_odom:
+                    first_odom = False
+                    settle = time.monotonic() + 0.2 * SETTLE    # the state before the start
+                    while time.monotonic() < settle:
+                        ex.spin_once(timeout_sec=0.01)
+                before = len(got)
+                out = predict.odom(e.msg) if e.kind == 'odom' else predict.reference(
+                    REF_INDEX[e.kind], e.msg)
+                pub = pubs[e.kind]
+                pub.publish(e.raw)
+                if out is not None:
+                    wait(lambda: len(got) > before, f'command after {e.kind} at '
+                         f'{e.receive_ns} ns')
+                    c = got[before]
+                    commands.append((e.receive_ns, RTwist(RVector3(c.linear.x, 0.0, 0.0),
+                                                          RVector3(0.0, 0.0, c.angular.z))))
+                else:
+                    # no command expected: the node's events executor handles messages in
+                    # arrival order, and one participant's samples arrive in publish order
+                    ex.spin_once(timeout_sec=0.0)
+                    if len(got) > before:
+                        raise RunError(f'the tracker node published a command after {e.kind} '
+                                       f'at {e.receive_ns} ns where the replay expects none')
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown(context=ctx)
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+            log.close()
+    return finish_replay(bag, plan, commands, expected=expected, atol=atol, rtol=rtol,
+                         max_differences=max_differences, via='over DDS (tracker node)')

@@ -1,0 +1,144 @@
+"""Replay: a late recorder and a near-simultaneous pair seen in another order are handled;
+the CLI; the replay's tracker defaults are the node's."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import pytest
+
+from conftest import ROOT
+from nonfragile_tracker import cli, golden
+from nonfragile_tracker.bag.replay import (TRACKER_DEFAULTS, TrackerInputs,
+                                           load_tracker_parameters, replay)
+from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
+from nonfragile_tracker.control.loop import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.reference import make_path
+
+GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'
+GAINS = ['--gains', str(golden.golden_gains())]      # the gain the golden bags were made with
+TS = jazzy_typestore()
+T = TS.types
+T0 = 1_800_000_000 * 10 ** 9
+MS = 1_000_000
+
+
+def _hdr(ns):
+    return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+        sec=ns // 10 ** 9, nanosec=ns % 10 ** 9), frame_id='odom')
+
+
+def _vec(x=0.0, y=0.0):
+    return T['geometry_msgs/msg/Vector3'](x=x, y=y, z=0.0)
+
+
+def _pose(x, y, th):
+    return T['geometry_msgs/msg/Pose'](
+        position=T['geometry_msgs/msg/Point'](x=x, y=y, z=0.0),
+        orientation=T['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=math.sin(th / 2),
+                                                      w=math.cos(th / 2)))
+
+
+def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60):
+    """A real-time run simulated in process and written as the recorder would see it.
+
+    Odometry k is stamped T0 + 10k ms; reference j 5 ms later, except reference
+    ``swapped`` which the tracker received 0.5 ms *after* odometry ``swapped`` and the
+    recorder 0.2 ms *before* it.  The tracker (the node's input rules) runs in the true
+    order; the recorder missed the tracker's first ``late`` commands.
+    """
+    config, _ = load_tracker_parameters()
+    tracker = TrackerInputs(config, 'realtime')
+    plant = UnicyclePlant(PlantConfig())
+    ref_path = make_path('circle', radius=0.5, rate=0.01)
+    cov = np.zeros(36)
+    true_order, bag = [], []            # (time, kind, msg) for the tracker / the recorder
+    for k in range(steps):
+        odom_ns = T0 + k * 10 * MS
+        odom = T['nav_msgs/msg/Odometry'](
+            header=_hdr(odom_ns), child_frame_id='base_link',
+            pose=T['geometry_msgs/msg/PoseWithCovariance'](
+                pose=_pose(plant.x, plant.y, plant.th), covariance=cov),
+            twist=T['geometry_msgs/msg/TwistWithCovariance'](
+                twist=T['geometry_msgs/msg/Twist'](linear=_vec(plant.v), angular=_vec()),
+                covariance=cov))
+        ref_ns = odom_ns - 5 * MS if k != swapped else odom_ns
+        r = ref_path.sample((ref_ns - T0) * 1e-9)
+        refs = [('ref_pose', T['geometry_msgs/msg/PoseStamped'](
+                    header=_hdr(ref_ns), pose=_pose(r.x, r.y, r.heading))),
+                ('ref_twist', T['geometry_msgs/msg/TwistStamped'](
+                    header=_hdr(ref_ns), twist=T['geometry_msgs/msg/Twist'](
+                        linear=_vec(r.vx, r.vy), angular=_vec()))),
+                ('ref_accel', T['geometry_msgs/msg/AccelStamped'](
+                    header=_hdr(ref_ns), accel=T['geometry_msgs/msg/Accel'](
+                        linear=_vec(r.ax, r.ay), angular=_vec())))]
+        recv = odom_ns + MS
+        if k != swapped:
+            seq = [(recv - 5 * MS + i, kind, m) for i, (kind, m) in enumerate(refs)]
+            seq += [(recv, 'odom', odom)]
+            true_order += seq
+            bag += seq
+        else:
+            true_order += [(recv, 'odom', odom)] + [(recv + MS // 2 + i, kind, m)
+                                                      for i, (kind, m) in enumerate(refs)]
+            bag += [(recv - MS // 5 + i, kind, m) for i, (kind, m) in enumerate(refs)]
+            bag += [(recv, 'odom', odom)]
+        # the tracker, in its order, for this step
+        cmd = None
+        for _, kind, m in true_order[-4:]:
+            out = tracker.odom(m) if kind == 'odom' else tracker.reference(
+                {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}[kind], m)
+            cmd = out if out is not None else cmd
+        plant.step(cmd.v, cmd.w)
+        if k >= late:
+            bag.append((recv + 2 * MS, 'cmd', T['geometry_msgs/msg/Twist'](
+                linear=_vec(cmd.v), angular=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0,
+                                                                             z=cmd.w))))
+    topic = {'odom': ('/odom', 'nav_msgs/msg/Odometry'),
+             'ref_pose': ('/reference/pose', 'geometry_msgs/msg/PoseStamped'),
+             'ref_twist': ('/reference/twist', 'geometry_msgs/msg/TwistStamped'),
+             'ref_accel': ('/reference/accel', 'geometry_msgs/msg/AccelStamped'),
+             'cmd': ('/cmd_vel', 'geometry_msgs/msg/Twist')}
+    with BagWriter(path, connections=dict(topic.values())) as w:
+        for t, kind, m in sorted(bag, key=lambda b: b[0]):
+            name, msgtype = topic[kind]
+            w.write(name, t, bytes(TS.serialize_cdr(m, msgtype)))
+    return steps - late
+
+
+def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
+    n = simulated_realtime_bag(tmp_path / 'rt')
+    res = replay(tmp_path / 'rt')
+    assert res.mode == 'realtime'
+    assert res.comparison.equal, res.comparison.differences[:3]
+    assert len(res.commands) == len(res.recorded) == n
+    assert res.max_abs_error <= 1e-9
+    assert res.plan.swaps == 1
+    assert res.plan.skipped_inputs == 4 * 20               # the 20 steps before the record
+    assert res.plan.initial_speed is not None
+    # without the order fix the swapped step (and what follows) would differ
+    res_other = replay(tmp_path / 'rt', expected=tmp_path / 'rt')
+    assert not res_other.comparison.equal
+
+
+def test_replay_cli(tmp_path, capsys):
+    assert cli.main(['bag', 'replay', str(GOLDEN), *GAINS]) == 0
+    out = capsys.readouterr().out
+    assert 'commands reproduced: max |diff| 0' in out and '(lockstep)' in out
+    delta2 = ROOT / 'test' / 'data' / 'golden_delta2'
+    assert cli.main(['bag', 'replay', str(GOLDEN), *GAINS, '--expected', str(delta2),
+                     '--max-diffs', '2']) == 1
+    out = capsys.readouterr().out
+    assert 'cmd_vel[0] linear.x: expected' in out and '... and' in out
+    (tmp_path / 'bad.yaml').write_text('tracker: {ros__parameters: {K: [1.0, 2.0]}}\n')
+    assert cli.main(['bag', 'replay', str(GOLDEN), '--gains', str(tmp_path / 'bad.yaml')]) == 2
+    assert 'K has 2 entries' in capsys.readouterr().err
+
+
+@pytest.mark.ros
+def test_replay_defaults_are_the_nodes():
+    from nonfragile_tracker.nodes.tracker import PARAMS
+    node = {p.name: p.default for p in PARAMS}
+    for name, value in TRACKER_DEFAULTS.items():
+        assert node[name] == value, name

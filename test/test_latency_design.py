@@ -1,0 +1,144 @@
+"""latency-design: library figures, lagged loop, gain file design record, CLI exit codes."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from nonfragile_tracker.cli import main
+from nonfragile_tracker.control.delay import delay_margin
+from nonfragile_tracker.control.gains import (DESIGN_SECTION, read_gain_design, read_gain_file,
+                                              write_gain_file)
+from nonfragile_tracker.control.input_delay import certify_input_delay
+from nonfragile_tracker.control.latency_design import (design_for_latency, lagged_problem,
+                                                       perturbation_set)
+from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.errors import InputError
+
+from conftest import CONFIG, ROOT
+
+PAPER = str(CONFIG / 'paper_problem.yaml')
+
+DI_PROBLEM = """
+name: di
+A: [[0.0, 1.0], [0.0, 0.0]]
+B: [[0.0], [1.0]]
+A_tau: [[0.0, 0.0], [0.0, 0.0]]
+tau: 0.1
+E: [[1.0]]
+F: [[0.2, 0.2]]
+perturbations: {minus: [[-1.0]], plus: [[1.0]]}
+options: {gain_bound: 3.0}
+"""
+
+
+@pytest.fixture(scope='module')
+def di(tmp_path_factory):
+    path = tmp_path_factory.mktemp('di') / 'di.yaml'
+    path.write_text(DI_PROBLEM)
+    return path
+
+
+def di_problem():
+    return Problem(A=np.array([[0.0, 1.0], [0.0, 0.0]]), B=np.array([[0.0], [1.0]]),
+                   A_tau=np.zeros((2, 2)), tau=0.1, E=np.eye(1), F=np.array([[0.2, 0.2]]),
+                   name='di', perturbations={'minus': -np.eye(1), 'plus': np.eye(1)})
+
+
+def test_lagged_problem_structure():
+    p = di_problem()
+    lp = lagged_problem(p, 0.05)
+    assert lp.A.shape == (3, 3) and lp.B.shape == (3, 1) and lp.F.shape == (1, 3)
+    np.testing.assert_array_equal(lp.A[:2, 2:], p.B)
+    assert lp.A[2, 2] == pytest.approx(-20.0) and lp.B[2, 0] == pytest.approx(20.0)
+    with pytest.raises(InputError):
+        lagged_problem(p, 0.0)
+
+
+def test_max_delay_design_with_lag_is_checked_exactly():
+    p = di_problem()
+    r = design_for_latency(p, 0.02, 0.1, gain_bound=3.0, objective='max-delay', lag=0.05,
+                           tol=0.01)
+    assert r.certified_h_max >= 0.15 and r.lag_certified_h_max >= 0.1
+    assert r.gain_norm <= 3.0 * (1 + 1e-9) and r.synthesis.verification.ok
+    # exact delay margins exceed the certified figures, without and with the lag
+    lp = lagged_problem(p, 0.05)
+    K_aug = np.hstack([r.K, np.zeros((1, 1))])
+    for D in perturbation_set(p):
+        assert delay_margin(p.A, p.B @ (r.K + p.E @ D @ p.F)) > r.certified_h_max
+        assert delay_margin(lp.A, lp.B @ (K_aug + lp.E @ D @ lp.F)) > r.lag_certified_h_max
+    assert r.true_delay_margin > r.certified_h_max and r.abscissa_at_h_max < 0
+    # the lagged certificate is a real one (verified in numpy)
+    c = certify_input_delay(lp, K_aug, 0.02, 0.1)
+    assert c.certified and c.verification.ok
+
+
+def test_design_record_round_trip(tmp_path):
+    K = np.array([[-1.0, -2.0]])
+    meta = {'latency_interval': [0.0, 0.1], 'certified_h_max': 0.3, 'objective': 'decay',
+            'state_delay_in_certificate': False}
+    out = write_gain_file(tmp_path / 'g.yaml', K, comment='hello', design=meta)
+    np.testing.assert_array_equal(read_gain_file(out), K)
+    assert read_gain_design(out) == meta
+    data = yaml.safe_load(out.read_text())
+    assert set(data) == {'/**/tracker', DESIGN_SECTION}
+    assert read_gain_design(CONFIG / 'paper_problem.yaml') is None
+    with pytest.raises(InputError):
+        write_gain_file(tmp_path / 'h.yaml', K, design={'bad': None})
+
+
+@pytest.mark.ros
+def test_gain_file_with_design_record_loads_as_ros_params_file(tmp_path):
+    out = write_gain_file(tmp_path / 'g.yaml', np.array([[-1.0, -2.0]]),
+                          design={'certified_h_max': 0.3, 'latency_interval': [0.0, 0.1]})
+    code = ('import sys, rclpy\nfrom rclpy.node import Node\n'
+            "rclpy.init(args=['--ros-args', '--params-file', sys.argv[1]])\n"
+            "n = Node('tracker')\nn.declare_parameter('K', [0.0])\n"
+            "print(n.get_parameter('K').value)\nn.destroy_node()\nrclpy.shutdown()\n")
+    proc = subprocess.run([sys.executable, '-c', code, str(out)], capture_output=True,
+                          text=True, timeout=60, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == '[-1.0, -2.0]'
+
+
+def test_cli_writes_gain_file_with_record(tmp_path, di, capsys):
+    out = tmp_path / 'gains.yaml'
+    assert main(['latency-design', str(di), '--delay-interval', '0', '0.1', '--objective',
+                 'max-delay', '-o', str(out)]) == 0
+    text = capsys.readouterr().out
+    assert 'certified: every latency in [0,' in text and '-> OK' in text
+    meta = read_gain_design(out)
+    K = np.array(yaml.safe_load(out.read_text())['/**/tracker']['ros__parameters']['K'])
+    assert meta['latency_interval'] == [0.0, 0.1] and meta['objective'] == 'max-delay'
+    assert meta['certified_h_max'] >= 0.1 and meta['gain_bound'] == 3.0
+    assert meta['true_delay_margin'] > meta['certified_h_max']
+    assert np.linalg.norm(K.reshape(1, 2), 2) == pytest.approx(meta['gain_norm'])
+    assert main(['latency-design', str(di), '--delay-interval', '0', '0.1', '-o',
+                 str(out)]) == 2                                     # never overwrites
+    assert 'pass --force' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('args', [
+    ['--delay-interval', '0.2', '0.1'], ['--delay-interval', 'nan', '0.1'],
+    ['--delay-interval', '0', '0'], ['--delay-interval', '0', 'inf'],
+    ['--delay-interval', '0', '0.1', '--gain-bound', '-1'],
+    ['--delay-interval', '0', '0.1', '--gain-bound', 'nan'],
+    ['--delay-interval', '0', '0.1', '--lag', '-0.1'],
+    ['--delay-interval', '0', '0.1', '--objective', 'fast'],
+    ['--delay-interval', '0', 'x'], []])
+def test_cli_bad_numbers_exit_2(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        rc = main(['latency-design', PAPER] + args)
+        raise SystemExit(rc)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert 'error' in err and 'Traceback' not in err
+
+
+def test_cli_infeasible_exits_3(tmp_path, di, capsys):
+    out = tmp_path / 'g.yaml'
+    rc = main(['latency-design', str(di), '--delay-interval', '0', '5',
+               '--objective', 'max-delay', '-o', str(out)])
+    assert rc == 3 and not out.exists()
+    assert 'below the 5 s asked for' in capsys.readouterr().err

@@ -1,0 +1,77 @@
+"""Launch files (launch/launch_ros are not installable here): they compile, declare the
+arguments a ROS user expects, use every argument they declare and only those, and
+the RViz configuration they start is installed."""
+import ast
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+LAUNCH = ROOT / 'launch'
+
+
+def calls(tree, name):
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call)
+            and getattr(n.func, 'id', getattr(n.func, 'attr', None)) == name]
+
+
+def first_str(call):
+    return call.args[0].value if call.args and isinstance(call.args[0], ast.Constant) else None
+
+
+def arguments(path):
+    src = path.read_text()
+    tree = ast.parse(src)
+    compile(src, str(path), 'exec')
+    declared = {first_str(c) for c in calls(tree, 'DeclareLaunchArgument')}
+    used = {first_str(c) for c in calls(tree, 'LaunchConfiguration')}
+    return tree, declared, used
+
+
+@pytest.mark.parametrize('name,expected', [
+    ('tracking.launch.py', {'mode', 'record', 'bag', 'namespace', 'gains', 'scenario',
+                            'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
+    ('robot.launch.py', {'cmd_vel', 'odom', 'namespace', 'gains', 'scenario', 'trajectory',
+                         'trajectory_topic', 'enable_stamped_cmd_vel', 'odom_frame',
+                         'base_frame', 'use_sim_time'}),
+])
+def test_launch_arguments(name, expected):
+    tree, declared, used = arguments(LAUNCH / name)
+    assert declared == expected
+    assert used == declared                       # nothing declared and unused, or undeclared
+    funcs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert 'generate_launch_description' in funcs
+
+
+def test_tracking_launch_modes_and_nodes():
+    tree, _, _ = arguments(LAUNCH / 'tracking.launch.py')
+    decl = {first_str(c): c for c in calls(tree, 'DeclareLaunchArgument')}
+    choices = {kw.arg: ast.literal_eval(kw.value) for kw in decl['mode'].keywords
+               if kw.arg in ('choices', 'default_value')}
+    assert choices == {'choices': ['lockstep', 'realtime'], 'default_value': 'lockstep'}
+    exes = {kw.value.value for c in calls(tree, 'Node') for kw in c.keywords
+            if kw.arg == 'executable'}
+    assert exes == {'reference', 'tracker', 'plant', 'recorder', 'rviz2'}
+    assert calls(tree, 'PushRosNamespace')
+
+
+def test_robot_launch_starts_tracker_and_reference_with_remappable_topics():
+    tree, _, _ = arguments(LAUNCH / 'robot.launch.py')
+    exes = {kw.value.value for c in calls(tree, 'Node') for kw in c.keywords
+            if kw.arg == 'executable'}
+    assert exes == {'reference', 'tracker'}
+    remaps = [t for t in ast.walk(tree) if isinstance(t, ast.Tuple) and len(t.elts) == 2
+              and isinstance(t.elts[0], ast.Constant) and t.elts[0].value in ('cmd_vel', 'odom')]
+    assert {t.elts[0].value for t in remaps} == {'cmd_vel', 'odom'}
+
+
+def test_rviz_config_is_installed_and_shows_the_topics():
+    cfg = yaml.safe_load((ROOT / 'rviz' / 'tracking.rviz').read_text())
+    vm = cfg['Visualization Manager']
+    assert vm['Global Options']['Fixed Frame'] == 'odom'
+    topics = {d['Topic']['Value'] for d in vm['Displays'] if 'Topic' in d}
+    assert topics == {'reference/path', 'tracker/path', 'odom', 'tracker/reference_marker'}
+    setup = (ROOT / 'setup.py').read_text()
+    assert "'/rviz', glob('rviz/*.rviz')" in setup
+    assert "'/config/trajectories', glob('config/trajectories/*')" in setup
