@@ -1,6 +1,9 @@
-"""Shared ROS plumbing of the nodes: QoS, parameters with descriptors, message conversion,
-the nodes' base class (constructor shape, parameter flow) and the Jazzy shutdown pattern.
-No control math lives here."""
+"""Shared ROS plumbing of the nodes.
+
+QoS, parameters with descriptors, message conversion (re-exported from
+:mod:`nonfragile_tracker.msgconv`), the nodes' base class (constructor shape, parameter
+flow) and the Jazzy shutdown pattern.  No control math lives here.
+"""
 from __future__ import annotations
 
 import os
@@ -231,6 +234,7 @@ class AdapterNode(Node):
         """Hook: release resources (idempotent); called on every way out."""
 
     def destroy_node(self) -> None:
+        """Close (:meth:`close`), then destroy the rclpy node."""
         self.close()
         super().destroy_node()
 

@@ -314,6 +314,7 @@ class PlantNode(AdapterNode):
 
 
 def main(args=None) -> int:
+    """Console entry point of the plant node; returns the exit code (see :func:`common.run`)."""
     return run(PlantNode, args)
 
 

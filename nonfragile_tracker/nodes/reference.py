@@ -210,6 +210,7 @@ class ReferenceNode(AdapterNode):
 
 
 def main(args=None) -> int:
+    """Console entry point of the reference node; returns the exit code (see :func:`common.run`)."""
     return run(ReferenceNode, args)
 
 

@@ -510,6 +510,7 @@ class TrackerNode(AdapterNode):
 
 
 def main(args=None) -> int:
+    """Console entry point of the tracker node; returns the exit code (see :func:`common.run`)."""
     return run(TrackerNode, args)
 
 
