@@ -32,6 +32,9 @@ def generate_launch_description():
     trajectory = LaunchConfiguration('trajectory')
     stamped = LaunchConfiguration('enable_stamped_cmd_vel')
     lockstep = PythonExpression(["'", mode, "' == 'lockstep'"])
+    # with a recorder every lockstep publisher waits for it too (runner.lockstep_handshake)
+    subscribers = ParameterValue(PythonExpression(["2 if '", record, "' == 'true' else 0"]),
+                                 value_type=int)
     has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
@@ -60,16 +63,19 @@ def generate_launch_description():
             PushRosNamespace(LaunchConfiguration('namespace')),
             Node(package='nonfragile_tracker', executable='reference', name='reference',
                  parameters=[scenario, common, {
-                     'trajectory_file': ParameterValue(trajectory, value_type=str)}],
+                     'trajectory_file': ParameterValue(trajectory, value_type=str),
+                     'lockstep_subscribers': subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='tracker', name='tracker',
                  parameters=[scenario, gains, common, cmd, {
-                     'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool)}],
+                     'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool),
+                     'lockstep_subscribers': subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='plant', name='plant',
                  parameters=[scenario, common, cmd, {
                      'lockstep_subscribers': ParameterValue(PythonExpression(
-                         ["2 if '", record, "' == 'true' else 1"]), value_type=int)}],
+                         ["2 if '", record, "' == 'true' else 1"]), value_type=int),
+                     'lockstep_recorder': ParameterValue(record, value_type=bool)}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='recorder', name='recorder',
                  condition=IfCondition(record),

@@ -85,6 +85,34 @@ def write_parameter_file(params: dict, path: Path) -> Path:
     return path
 
 
+def lockstep_handshake(record: bool) -> dict[str, dict]:
+    """Start-up handshake parameters of a lockstep run, per node (``{node: {name: value}}``).
+
+    With a recorder every lockstep publisher waits for two matched subscribers (the
+    plant's odom: tracker and recorder; the tracker's cmd_vel: plant and recorder; the
+    reference topics: tracker and recorder), the recorder announces when its own
+    subscriptions have matched (``lockstep_gate``) and the plant waits for that
+    (``lockstep_recorder``): DDS matching is per side, so both sides are checked and the
+    bag gets every step from the first.  Without a recorder the plant waits for its one
+    subscriber and the tracker and reference answer at once (a lost first sample there is
+    made good by the plant's republished step).
+    """
+    n = 2 if record else 0
+    out = {'plant': {'lockstep_subscribers': max(n, 1), 'lockstep_recorder': record},
+           'tracker': {'lockstep_subscribers': n}, 'reference': {'lockstep_subscribers': n}}
+    if record:
+        out['recorder'] = {'lockstep_gate': True}
+    return out
+
+
+def _ros_args(values: dict) -> list[str]:
+    """``-p name:=value`` arguments (booleans and integers only)."""
+    out: list[str] = []
+    for k, v in values.items():
+        out += ['-p', f'{k}:={str(v).lower() if isinstance(v, bool) else v}']
+    return out
+
+
 @dataclass
 class RunResult:
     """Outcome of a run: its directory, bag (if recorded), exit code per node, wall time, steps."""
@@ -141,16 +169,17 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
             if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
                 progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
 
+    hand = lockstep_handshake(record)
     try:
         if record:
-            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true', '-p',
-                     'lockstep_gate:=true']
+            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true',
+                     *_ros_args(hand['recorder'])]
             if recorder_topics:
                 extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
             start('recorder', extra)
-        start('tracker')
-        start('reference')
-        start('plant', ['-p', f'lockstep_subscribers:={2 if record else 1}'])
+        start('tracker', _ros_args(hand['tracker']))
+        start('reference', _ros_args(hand['reference']))
+        start('plant', _ros_args(hand['plant']))
         plant = procs['plant']
         with open(run_dir / 'plant.log') as reader:
             while plant.poll() is None:
@@ -216,19 +245,22 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes = []
     bag = None
+    hand = lockstep_handshake(record)
     try:
         if record:
             from .nodes.recorder import Recorder
             bag = run_dir / 'bag'
-            rec_params = {'output': str(bag), 'use_sim_time': True, 'lockstep_gate': True}
+            rec_params = {'output': str(bag), 'use_sim_time': True, **hand['recorder']}
             rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
             nodes.append(Recorder(context=ctx, parameter_overrides=overrides(**rec_params)))
-        nodes.append(TrackerNode(parameter_overrides=node_overrides('tracker'), context=ctx))
-        nodes.append(ReferenceNode(parameter_overrides=node_overrides('reference'), context=ctx))
-        plant = PlantNode(context=ctx, parameter_overrides=node_overrides(
-            'plant', {'lockstep_subscribers': 2 if record else 1}))
+        nodes.append(TrackerNode(parameter_overrides=node_overrides('tracker', hand['tracker']),
+                                 context=ctx))
+        nodes.append(ReferenceNode(parameter_overrides=node_overrides(
+            'reference', hand['reference']), context=ctx))
+        plant = PlantNode(context=ctx, parameter_overrides=node_overrides('plant',
+                                                                          hand['plant']))
         nodes.append(plant)
         ex = make_executor(ctx)
         for n in nodes:

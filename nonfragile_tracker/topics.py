@@ -24,6 +24,10 @@ TRAVELLED_PATH = 'tracker/path'
 TRACKING_ERROR = 'tracker/error'
 REF_MARKER = 'tracker/reference_marker'
 DIAGNOSTICS = '/diagnostics'
+#: The recorder's lockstep readiness (std_msgs/UInt64, transient-local): published once
+#: every recorded lockstep topic's subscription has matched its publisher; the plant
+#: (``lockstep_recorder``) starts the run only after it.  Not recorded.
+RECORDER_READY = 'recorder/ready'
 
 #: topic -> ROS 2 message type, for every topic a run records.
 TYPES: dict[str, str] = {

@@ -26,7 +26,7 @@ import pytest
 
 from conftest import CONFIG, ROOT, unique_domain_id
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag
-from nonfragile_tracker.runner import scenario_parameters, write_parameter_file
+from nonfragile_tracker.runner import lockstep_handshake, scenario_parameters, write_parameter_file
 
 NODES = ('recorder', 'tracker', 'reference', 'plant')
 #: (pattern, mode, trials): 20 trials in all
@@ -41,10 +41,10 @@ class Launch:
     def __init__(self, run_dir: Path, mode: str, env: dict):
         self.dir = run_dir
         self.bag = run_dir / 'bag'
-        ov = {'plant': {'ros__parameters': {'mode': mode, 'duration': 600.0,
-                                            'lockstep_subscribers': 2}},
-              'tracker': {'ros__parameters': {'mode': mode}},
-              'reference': {'ros__parameters': {'mode': mode}}}
+        hand = lockstep_handshake(record=True)
+        ov = {node: {'ros__parameters': {'mode': mode, **hand[node]}}
+              for node in ('plant', 'tracker', 'reference')}
+        ov['plant']['ros__parameters']['duration'] = 600.0
         params = write_parameter_file(scenario_parameters(
             CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov),
             run_dir / 'params.yaml')

@@ -62,6 +62,9 @@ PARAMS = [
     Param('lockstep_retry', 0.25, 'lockstep: republish the current step after this long (s, wall)',
           low=0.001, high=1e6),
     Param('lockstep_subscribers', 1, 'lockstep: wait until odom has this many subscribers'),
+    Param('lockstep_recorder', False, 'lockstep: also wait until a recorder (lockstep_gate) '
+          'has announced on recorder/ready that its subscriptions are matched (and pose has a '
+          'matched subscriber if the graph shows one)', read_only=True),
     Param('enable_stamped_cmd_vel', False, 'subscribe cmd_vel as geometry_msgs/TwistStamped '
           '(Nav2 name) instead of Twist', read_only=True),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of odom and pose (REP-105)', read_only=True),
@@ -105,6 +108,7 @@ class PlantSettings:
     startup_timeout: float
     lockstep_retry: float
     lockstep_subscribers: int
+    lockstep_recorder: bool
     cmd_timeout: float
     stamped: bool
     odom_frame: str
@@ -139,6 +143,7 @@ def plant_settings(values: dict) -> PlantSettings:
                          startup_timeout=values['startup_timeout'],
                          lockstep_retry=values['lockstep_retry'],
                          lockstep_subscribers=values['lockstep_subscribers'],
+                         lockstep_recorder=values['lockstep_recorder'],
                          cmd_timeout=values['cmd_timeout'],
                          stamped=values['enable_stamped_cmd_vel'],
                          odom_frame=values['odom_frame'], base_frame=values['base_frame'])
@@ -187,6 +192,10 @@ class PlantNode(AdapterNode):
             self.pub_clock = self.create_publisher(Clock, topics.CLOCK, DATA_QOS)
             self.pub_done = self.create_publisher(UInt64, topics.RUN_DONE, LATCHED_QOS)
             self._clock_msg = Clock()
+            self.recorder_ready = not self.config.lockstep_recorder
+            if self.config.lockstep_recorder:
+                self.create_subscription(UInt64, topics.RECORDER_READY, self._on_recorder_ready,
+                                         LATCHED_QOS)
             self.started = False
             self.waiting_since = time.monotonic()
             self.last_publish = 0.0
@@ -218,10 +227,27 @@ class PlantNode(AdapterNode):
         return meas is not None
 
     # ------------------------------------------------------------------ lockstep
+    def _on_recorder_ready(self, msg: UInt64) -> None:
+        if not self.recorder_ready:
+            self.get_logger().info('recorder ready: its subscriptions are matched')
+        self.recorder_ready = True
+
     def _peers_ready(self) -> bool:
-        return (self.sub_cmd.get_publisher_count() >= 1
+        """Both sides matched: our publishers count their subscribers, the recorder says so.
+
+        A publisher matching a subscription does not mean the subscription has matched the
+        publisher (DDS discovery is per side); until it has, samples are dropped there.  The
+        tracker and reference recover from that by the republished step; a recorder would
+        lose the first steps, so with ``lockstep_recorder`` it has to announce its side.
+        """
+        if not (self.sub_cmd.get_publisher_count() >= 1
                 and self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers
-                and self.pub_clock.get_subscription_count() >= 1)
+                and self.pub_clock.get_subscription_count() >= 1):
+            return False
+        if not self.config.lockstep_recorder:
+            return True
+        pose_wanted = min(1, self.count_subscribers(self.pub_pose.topic_name))   # recorded?
+        return self.recorder_ready and self.pub_pose.get_subscription_count() >= pose_wanted
 
     def _lockstep_watchdog(self) -> None:
         if self.finished:

@@ -59,6 +59,8 @@ __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rc
 
 #: Topics whose S+1 samples the recorder waits for after ``run_done`` = S.
 LOCKSTEP_TOPICS = topics.LOCKSTEP_TOPICS
+#: Topics whose subscriptions must have matched a publisher before the gate opens.
+_GATED = frozenset(topics.LOCKSTEP_TOPICS) | {topics.CLOCK}
 _STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
 _RUNS_ROOT = 'runs'
 
@@ -76,11 +78,13 @@ PARAMS = [
           'bytes (1 .. 1048576)', read_only=True),
     Param('flush_period', DEFAULT_FLUSH_PERIOD, 'write pending messages to disk at least this '
           'often (wall s)', low=0.01, high=3600.0, read_only=True),
-    Param('lockstep_gate', False, 'lockstep start gate: subscribe to odom only once every other '
-          'recorded topic has a matched publisher (the plant waits for odom subscribers, so the '
-          'run starts only when nothing can be missed)', read_only=True),
-    Param('gate_timeout', 30.0, 'lockstep_gate: subscribe to odom anyway after this long (wall s)',
-          low=0.0, high=3600.0, read_only=True),
+    Param('lockstep_gate', False, 'lockstep start gate: publish recorder/ready once the '
+          'subscription of every recorded lockstep topic has matched its publisher (a plant '
+          'with lockstep_recorder starts the run only then, so nothing is missed)',
+          read_only=True),
+    Param('gate_timeout', 30.0, 'lockstep_gate: announce readiness anyway after this long '
+          '(wall s), with a warning naming the unmatched topics', low=0.0, high=3600.0,
+          read_only=True),
 ]
 
 _DATA_QOS, _LATCHED_QOS = DATA_QOS, LATCHED_QOS        # the same profiles as the publishers
@@ -182,6 +186,7 @@ class Recorder(AdapterNode):
         self.counts: dict[str, int] = {}
         self.stamps: dict[str, set[int]] = {}
         self.final_step: int | None = None
+        self.repeats = 0                  # lockstep_gate: republished steps not written again
         self._drain_deadline: float | None = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
 
@@ -199,17 +204,15 @@ class Recorder(AdapterNode):
             raise StartupError(f'recorder: {exc}') from None
         self._subs = {}
         self._resolved: dict[str, str] = {}
-        gated = cfg.lockstep_gate and topics.ODOM in names
         for name in names:
             self.counts[name] = 0
             if name in _STAMPED:
                 self.stamps[name] = set()
-            if gated and name == topics.ODOM:
-                self._resolved[name] = self.resolve_topic_name(name)
-                continue
             self._subscribe(name)
-        self._gate_timer = None
-        if gated:
+        self._gate_timer = self.pub_ready = None
+        self.ready = not cfg.lockstep_gate
+        if cfg.lockstep_gate:
+            self.pub_ready = self.create_publisher(UInt64, topics.RECORDER_READY, _LATCHED_QOS)
             self._gate_started = self._steady.now()
             self._gate_timer = self.create_timer(0.02, self._check_gate, clock=self._steady)
         # run_done: recorded and handled by one subscription (so it is in the bag before the
@@ -230,18 +233,25 @@ class Recorder(AdapterNode):
         self._resolved[name] = sub.topic_name
 
     def _check_gate(self) -> None:
-        """Open the lockstep gate: subscribe to odom once the other topics are matched."""
-        waiting = [n for n, sub in self._subs.items()
-                   if n not in (topics.CLOCK, topics.RUN_DONE, topics.POSE)
-                   and sub.get_publisher_count() < 1]
+        """Open the lockstep gate: announce readiness once our subscriptions are matched.
+
+        DDS matching is per side: a publisher counting our subscription (what the plant
+        sees) does not mean that our subscription has matched the publisher - until it
+        has, its samples are dropped here.  So the recorder says when its own side is
+        matched, for every recorded lockstep topic, and the plant waits for that.
+        """
+        waiting = [self._resolved[n] for n, sub in self._subs.items()
+                   if n in _GATED and sub.get_publisher_count() < 1]
         elapsed = (self._steady.now() - self._gate_started).nanoseconds * 1e-9
         if waiting and elapsed < self.config.gate_timeout:
             return
         if waiting:
-            self.get_logger().warn(f'gate timeout: no publisher yet on {", ".join(waiting)}; '
-                                   'recording odom anyway')
+            self.get_logger().warn(f'gate timeout: no publisher matched yet on '
+                                   f'{", ".join(waiting)}; announcing readiness anyway')
         self._gate_timer.cancel()
-        self._subscribe(topics.ODOM)
+        self.ready = True
+        self.pub_ready.publish(UInt64(data=len(self._subs)))
+        self.get_logger().info('lockstep gate open: every recorded lockstep topic matched')
 
     @staticmethod
     def _output_path(output: str) -> Path:
@@ -258,10 +268,15 @@ class Recorder(AdapterNode):
     def _make_callback(self, name: str):
         topic_stamps = self.stamps.get(name)
         is_done = name == topics.RUN_DONE
+        skip_repeats = self.config.lockstep_gate and topic_stamps is not None
 
         def callback(raw: bytes) -> None:
             writer = self.writer
             if writer is None or writer.closed:
+                return
+            stamp = _header_stamp_ns(raw) if topic_stamps is not None else None
+            if skip_repeats and stamp in topic_stamps:
+                self.repeats += 1          # a lockstep step republished: recorded once
                 return
             topic = self._resolved[name]
             if not writer.has_connection(topic):
@@ -269,10 +284,8 @@ class Recorder(AdapterNode):
                 self.get_logger().info(f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
-            if topic_stamps is not None:
-                stamp = _header_stamp_ns(raw)
-                if stamp is not None:
-                    topic_stamps.add(stamp)
+            if stamp is not None:
+                topic_stamps.add(stamp)
             if is_done:
                 self._on_run_done(deserialize_message(raw, UInt64))
             elif self.final_step is not None and self._drained():
@@ -336,7 +349,8 @@ class Recorder(AdapterNode):
             self.get_logger().warn(f'run_done {self.final_step}: drain timeout '
                                    f'({self.config.drain_timeout} s) with {miss}; got {got}')
         else:
-            self.get_logger().info(f'run_done {self.final_step}: all samples received ({got})')
+            self.get_logger().info(f'run_done {self.final_step}: all samples received ({got}; '
+                                   f'{self.repeats} republished samples not written again)')
         self.close()
 
     # ------------------------------------------------------------------ closing

@@ -50,6 +50,10 @@ PARAMS = [
     Param('phase', 0.0, 'phase of the path parameter at t = 0 (rad)', read_only=True),
     Param('publish_rate', 100.0, 'realtime: samples per second (Hz)', low=1e-3, high=1e5,
           read_only=True),
+    Param('lockstep_subscribers', 0, 'lockstep: publish a step\'s sample only once each '
+          'reference topic has this many matched subscribers (tracker and recorder: 2); '
+          'until then the step is left for the plant to republish; 0 = publish at once',
+          read_only=True),
     Param('trajectory_file', '', 'waypoint file (CSV or YAML: t, x, y[, yaw][, speed]) to '
           'follow instead of the built-in path; "" = built-in path', read_only=True),
     Param('trajectory_topic', '', 'relay nav_msgs/Path trajectories from this topic '
@@ -73,6 +77,7 @@ class ReferenceSettings:
     mode: str
     path: Path
     publish_rate: float
+    lockstep_subscribers: int
     trajectory_file: str
     trajectory_topic: str
     smoothing: float
@@ -90,9 +95,13 @@ def reference_settings(values: dict) -> ReferenceSettings:
         raise StartupError(f'center needs [x, y], got {center}')
     path = make_path(values['path'], radius=values['radius'], rate=values['rate'],
                      center_x=center[0], center_y=center[1], phase=values['phase'])
+    if values['lockstep_subscribers'] < 0:
+        raise StartupError(f'lockstep_subscribers must be 0 or more, got '
+                           f'{values["lockstep_subscribers"]}')
     if values['display_points'] < 2:
         raise StartupError(f'display_points must be at least 2, got {values["display_points"]}')
     return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'],
+                             lockstep_subscribers=values['lockstep_subscribers'],
                              trajectory_file=values['trajectory_file'],
                              trajectory_topic=values['trajectory_topic'],
                              smoothing=values['smoothing'],
@@ -200,6 +209,11 @@ class ReferenceNode(AdapterNode):
         self.pub_accel.publish(accel)
 
     def _on_clock(self, msg: Clock) -> None:
+        need = self.config.lockstep_subscribers
+        if need and any(p.get_subscription_count() < need
+               for p in (self.pub_pose, self.pub_twist, self.pub_accel)):
+            return                         # not every subscriber matched: the plant
+                                           # republishes the step (its lockstep_retry)
         t_ns = stamp_ns(msg.clock)
         self.publish_sample(t_ns, (t_ns - self.origin_ns) * 1e-9)
 

@@ -94,6 +94,9 @@ PARAMS = [
           '0 = none', low=0.0, high=10.0, read_only=True),
     Param('predict_lag_w', 0.0, 'assumed time constant of the base\'s angular speed (s); '
           '0 = none', low=0.0, high=10.0, read_only=True),
+    Param('lockstep_subscribers', 0, 'lockstep: answer an odometry step only once cmd_vel has '
+          'this many matched subscribers (plant and recorder: 2); until then the step is left '
+          'for the plant to republish; 0 = answer at once', read_only=True),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
@@ -130,6 +133,7 @@ class TrackerSettings:
     tracker: TrackerConfig
     input_timeout: float
     max_stamp_jump: float
+    lockstep_subscribers: int
     frame: str
     cruise_speed: float
     max_accel: float
@@ -151,11 +155,16 @@ def tracker_settings(values: dict) -> TrackerSettings:
     if values['K'] is None:
         raise StartupError('parameter K is not set; pass a gain file, e.g. '
                            '--ros-args --params-file config/tracker_gains.yaml')
+    if values['lockstep_subscribers'] < 0:
+        raise StartupError(f'lockstep_subscribers must be 0 or more, got '
+                           f'{values["lockstep_subscribers"]}')
     if values['max_path_poses'] < 1:
         raise StartupError(f'max_path_poses must be at least 1, got {values["max_path_poses"]}')
     return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
                            input_timeout=values['input_timeout'],
-                           max_stamp_jump=values['max_stamp_jump'], frame=values['odom_frame'],
+                           max_stamp_jump=values['max_stamp_jump'],
+                           lockstep_subscribers=values['lockstep_subscribers'],
+                           frame=values['odom_frame'],
                            cruise_speed=values['cruise_speed'], max_accel=values['max_accel'],
                            wait_for_trajectory=values['wait_for_trajectory'],
                            stamped_cmd_vel=values['enable_stamped_cmd_vel'],
@@ -275,6 +284,10 @@ class TrackerNode(AdapterNode):
         if msg.header.frame_id != self.frame:
             return self._reject(f'odom in frame {msg.header.frame_id!r} (expected '
                                 f'{self.frame!r})')
+        if self.mode == 'lockstep' and \
+                self.pub_cmd.get_subscription_count() < self.config.lockstep_subscribers:
+            return                         # not every cmd_vel subscriber matched: the plant
+                                           # republishes the step (its lockstep_retry)
         s = stamp_ns(msg.header.stamp)
         if s <= self.last_odom_stamp:
             if s < self.last_odom_stamp:
