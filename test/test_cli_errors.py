@@ -170,7 +170,7 @@ def test_a_bug_is_one_internal_error_line_and_ctrl_c_is_130(capsys, monkeypatch,
 
     def boom(args):
         raise ZeroDivisionError('division by zero')
-    monkeypatch.setattr(bag, 'cmd_bag_report', boom)
+    monkeypatch.setattr(bag, 'cmd_report', boom)
     monkeypatch.delenv('NONFRAGILE_DEBUG', raising=False)
     code, _, err = run_main(['bag', 'report', bad['root']], capsys)
     assert code == 1 and err.startswith('internal error: ZeroDivisionError: division by zero')
@@ -178,7 +178,7 @@ def test_a_bug_is_one_internal_error_line_and_ctrl_c_is_130(capsys, monkeypatch,
 
     def interrupted(args):
         raise KeyboardInterrupt
-    monkeypatch.setattr(bag, 'cmd_bag_report', interrupted)
+    monkeypatch.setattr(bag, 'cmd_report', interrupted)
     code, out, err = run_main(['bag', 'report', bad['root']], capsys)
     assert code == EXIT_INTERRUPTED and err == ''
 
@@ -207,7 +207,7 @@ def test_the_real_entry_point(bad, tmp_path, args, message):
 
 def test_debug_switch_shows_the_traceback_of_a_bug(tmp_path):
     code = ('import sys; from nonfragile_tracker import cli; from nonfragile_tracker.commands '
-            'import bag; bag.cmd_bag_report = lambda a: 1 / 0; '
+            'import bag; bag.cmd_report = lambda a: 1 / 0; '
             "sys.exit(cli.main(['bag', 'report', 'x']))")
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop('NONFRAGILE_DEBUG', None)
