@@ -50,7 +50,7 @@ from .problem import Problem
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
            'Verification', 'SynthesisResult', 'CertifyResult', 'verify_certificate',
            'synthesize', 'certify_gain', 'certified_perturbation_scale',
-           'UntrustedGainWarning', 'gain_trust_message']
+           'UntrustedGainWarning', 'gain_trust_message', 'decoupled_blocks']
 
 DEFAULT_MARGIN = 1e-6
 DEFAULT_SOLVER = 'CLARABEL'
@@ -519,9 +519,111 @@ def gain_trust_message(problem: Problem, K, P) -> str | None:
             'options.gain_bound).')
 
 
+def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                     np.ndarray]]:
+    """Independent sub-problems of Theorem 1: index sets ``(states, inputs, q, p)``.
+
+    States, inputs, the columns of ``E`` (``q``) and the rows of ``F`` (``p``) are
+    nodes of a graph; a nonzero ``A[i, j]``, ``A_tau[i, j]``, ``B[i, k]``, ``E[k, l]``
+    or ``F[r, j]`` joins two of them.  Each connected component with at least one of
+    each kind is a block; one block (or a component without inputs or perturbation)
+    means no decoupling and returns ``[]``.
+    """
+    n, m = problem.n, problem.m
+    q, p = problem.E.shape[1], problem.F.shape[0]
+    parent = list(range(n + m + q + p))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def join(rows: np.ndarray, cols: np.ndarray) -> None:
+        for a, b in zip(rows.tolist(), cols.tolist()):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[ra] = rb
+
+    for M in (problem.A, problem.A_tau):
+        i, j = np.nonzero(M)
+        join(i, j)
+    i, k = np.nonzero(problem.B)
+    join(i, n + k)
+    k, l_ = np.nonzero(problem.E)
+    join(n + k, n + m + l_)
+    r, j = np.nonzero(problem.F)
+    join(n + m + q + r, j)
+    comps: dict[int, list[int]] = {}
+    for a in range(n + m + q + p):
+        comps.setdefault(find(a), []).append(a)
+    if len(comps) < 2:
+        return []
+    blocks = []
+    for nodes in comps.values():
+        idx = np.array(nodes)
+        st = idx[idx < n]
+        inp = idx[(idx >= n) & (idx < n + m)] - n
+        qq = idx[(idx >= n + m) & (idx < n + m + q)] - n - m
+        pp = idx[idx >= n + m + q] - n - m - q
+        if min(st.size, inp.size, qq.size, pp.size) == 0:
+            return []
+        blocks.append((st, inp, qq, pp))
+    return blocks
+
+
+def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: float,
+                       **kw) -> SynthesisResult | None:
+    """Solve each decoupled block, assemble, verify the whole; ``None`` if that fails.
+
+    With block-diagonal data and a common ``eps`` the matrix ``V`` of the module
+    docstring is a permutation of ``diag(V_i)``.  Scaling a block's ``(P_i, Q_i)`` by
+    ``c`` is equivalent to replacing its ``eps_i`` by ``c eps_i`` (divide the Schur
+    complement of ``V_i`` by ``c``), so ``(eps_i P_i, eps_i Q_i)`` with ``eps = 1``
+    certifies every block at once.  ``||K||_2 = max ||K_i||_2``.
+    """
+    n, m = problem.n, problem.m
+    K = np.zeros((m, n))
+    P = np.zeros((n, n))
+    Q = np.zeros((n, n))
+    parts = []
+    for st, inp, qq, pp in blocks:
+        sub = problem.replace(A=problem.A[np.ix_(st, st)], B=problem.B[np.ix_(st, inp)],
+                              A_tau=problem.A_tau[np.ix_(st, st)],
+                              E=problem.E[np.ix_(inp, qq)], F=problem.F[np.ix_(pp, st)],
+                              perturbations={}, name=f'{problem.name}[block {len(parts)}]')
+        r = synthesize(sub, nominal=nominal, verify_tol=verify_tol, **kw)
+        c = 1.0 if nominal else float(r.eps)
+        K[np.ix_(inp, st)] = r.K
+        P[np.ix_(st, st)] = c * r.P
+        Q[np.ix_(st, st)] = c * r.Q
+        parts.append(r)
+    eps = None if nominal else 1.0
+    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
+    if not ver.ok:
+        return None
+    cert = Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
+    first = parts[0]
+    extra = dict(first.extra, blocks=[int(b[0].size) for b in blocks])
+    for key in ('t_max', 'stage1_norm'):
+        if all(key in r.extra for r in parts):
+            extra[key] = (min if key == 't_max' else max)(r.extra[key] for r in parts)
+    warn = [r.extra['warning'] for r in parts if 'warning' in r.extra]
+    if warn:
+        extra['warning'] = warn[0]
+    else:
+        extra.pop('warning', None)
+    return SynthesisResult(K=K, certificate=cert, margin_required=first.margin_required,
+                           margin_achieved=min(r.margin_achieved for r in parts),
+                           status=first.status, solver=first.solver,
+                           solve_time=sum(r.solve_time for r in parts), wall_time=0.0,
+                           nominal=nominal, extra=extra)
+
+
 def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None = None,
                solver: str | None = None, gain_bound: float | None = None,
-               verify_tol: float = 1e-9, moderate: bool = True) -> SynthesisResult:
+               verify_tol: float = 1e-9, moderate: bool = True,
+               decouple: bool = True) -> SynthesisResult:
     """Solve Theorem 1 (or its nominal form) and return a verified gain.
 
     Parameters
@@ -547,6 +649,11 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
         stage-1 norm.  ``False``: stage 1 only (the behaviour before).
     verify_tol : float
         Relative tolerance of :func:`verify_certificate`.
+    decouple : bool
+        If the data split into independent blocks (:func:`decoupled_blocks`, e.g. several
+        robots), solve each block and assemble a block-diagonal certificate (see
+        :func:`_synthesize_blocks`), verified on the whole problem; on failure the whole
+        problem is solved as one.  ``extra['blocks']`` lists the block sizes.
 
     Returns
     -------
@@ -569,6 +676,17 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
     if gain_bound is not None and not gain_bound > 0:
         raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
     t0 = time.perf_counter()
+    blocks = decoupled_blocks(problem) if decouple else []
+    if blocks:
+        with warnings.catch_warnings():        # warned once below for the whole gain
+            warnings.simplefilter('ignore', UntrustedGainWarning)
+            res = _synthesize_blocks(problem, blocks, nominal=nominal, verify_tol=verify_tol,
+                                     margin=margin, solver=solver, gain_bound=gain_bound,
+                                     moderate=moderate)
+        if res is not None:
+            if 'warning' in res.extra:
+                warnings.warn(res.extra['warning'], UntrustedGainWarning, stacklevel=2)
+            return replace(res, wall_time=time.perf_counter() - t0)
     kw = dict(nominal=nominal, margin=margin, solver=solver, gain_bound=gain_bound,
               verify_tol=verify_tol)
     res = _verified(problem, **kw)

@@ -1,0 +1,68 @@
+"""Faster synthesis by structure (issue 15, item 4): Theorem 1 on data that decouple into
+independent blocks is solved block by block and certified on the whole problem.
+
+No timing here: ``benchmarks/synthesis_scaling.py`` measures the speed."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg as sla
+
+from nonfragile_tracker.control.delay import closed_loop_matrix, spectral_abscissa
+from nonfragile_tracker.control.lmi import decoupled_blocks, synthesize, verify_certificate
+from nonfragile_tracker.control.problem import load_problem
+
+PAPER = load_problem(Path(__file__).resolve().parents[1] / 'config' / 'paper_problem.yaml')
+
+
+def stacked(k: int, perm: np.ndarray | None = None):
+    bd = lambda M: sla.block_diag(*([M] * k))  # noqa: E731
+    p = PAPER.replace(A=bd(PAPER.A), B=bd(PAPER.B), A_tau=bd(PAPER.A_tau), E=bd(PAPER.E),
+                      F=bd(PAPER.F), perturbations={}, name=f'paper_x{k}')
+    if perm is None:
+        return p
+    S = np.eye(p.n)[perm]                 # xi_new = S xi: a relabelling of the states
+    return p.replace(A=S @ p.A @ S.T, B=S @ p.B, A_tau=S @ p.A_tau @ S.T, F=p.F @ S.T)
+
+
+def test_blocks_found_also_when_the_states_are_shuffled():
+    assert decoupled_blocks(PAPER) == []
+    perm = np.random.default_rng(3).permutation(12)
+    blocks = decoupled_blocks(stacked(3, perm))
+    assert sorted(b[0].size for b in blocks) == [4, 4, 4]
+    assert sorted(np.concatenate([b[0] for b in blocks]).tolist()) == list(range(12))
+    # a component without inputs or perturbation: no decoupling
+    p = stacked(2)
+    assert decoupled_blocks(p.replace(B=p.B[:, :2], E=p.E[:2, :2])) == []
+
+
+def test_block_synthesis_is_certified_on_the_whole_problem():
+    perm = np.random.default_rng(5).permutation(12)
+    p = stacked(3, perm)
+    res = synthesize(p, gain_bound=8.67)
+    assert res.extra['blocks'] == [4, 4, 4]
+    ver = verify_certificate(p, res.K, res.P, res.Q, res.eps)
+    assert ver.ok and res.certificate.verification.ok
+    assert np.linalg.norm(res.K, 2) <= 8.67 * (1 + 1e-9)
+    # the gain only feeds back each robot's own states
+    for st, inp, _, _ in decoupled_blocks(p):
+        other = np.setdiff1d(np.arange(12), st)
+        assert np.all(res.K[np.ix_(inp, other)] == 0.0)
+    # and the delay loop is stable for Delta = 0, +-I
+    for D in (np.zeros((6, 6)), np.eye(6), -np.eye(6)):
+        A0 = closed_loop_matrix(p.A, p.B, res.K, p.E, p.F, D)
+        assert spectral_abscissa(A0, p.A_tau, p.tau) < -0.05
+
+
+def test_block_and_whole_solves_agree_on_feasibility():
+    p = stacked(2)
+    whole = synthesize(p, gain_bound=8.67, decouple=False)
+    blocks = synthesize(p, gain_bound=8.67)
+    assert 'blocks' not in whole.extra and blocks.extra['blocks'] == [4, 4]
+    for r in (whole, blocks):
+        assert verify_certificate(p, r.K, r.P, r.Q, r.eps).ok
+    # the nominal design decouples too
+    nom = synthesize(p, nominal=True, gain_bound=8.67)
+    assert nom.eps is None and nom.extra['blocks'] == [4, 4]
+    assert verify_certificate(p, nom.K, nom.P, nom.Q, None).ok
