@@ -249,6 +249,101 @@ class _Theorem1Program:
                 float(stats.solve_time or 0.0) if stats is not None else 0.0)
 
 
+class _CompactProgram(_Theorem1Program):
+    """Theorem 1 with ``S = X Q X`` instead of ``W = Q^-1``: LMI of size ``2n + q + p``.
+
+    Congruence of ``V`` (module docstring) with ``diag(X, X, eps I)`` and Schur on
+    ``F`` give the equivalent (``S > 0`` <-> ``Q = P S P > 0``) ::
+
+        [ He(A X + B R) + S   A_tau X   eps B E   X F^T  ]
+        [  *                  -S        0         0      ]  < 0
+        [  *                   *        -eps I    0      ]
+        [  *                   *         *        -eps I ]
+
+    one ``n``-block smaller than the paper's form (size ``3n + q + p``), which the
+    interior-point solver pays for cubically in the cone size.  Same objective and
+    normalization (``S`` in place of ``W``); ``W`` is returned as ``S^-1``-consistent
+    ``X S^-1 X`` so that ``Q = W^-1 = P S P``.
+    """
+
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
+        import cvxpy as cp
+        self.cp = cp
+        self.nominal = nominal
+        self.A = cp.Parameter((n, n), name='A')
+        self.B = cp.Parameter((n, m), name='B')
+        self.Ad = cp.Parameter((n, n), name='A_tau')
+        self.X = cp.Variable((n, n), symmetric=True, name='X')
+        self.S = cp.Variable((n, n), symmetric=True, name='S')
+        self.W = self.S                        # the normalization's second matrix
+        self.R = cp.Variable((m, n), name='R')
+        self.t = cp.Variable(name='t')
+        AX = self.A @ self.X + self.B @ self.R
+        Z = np.zeros
+        AdX = self.Ad @ self.X
+        if nominal:
+            blocks = [[AX + AX.T + self.S, AdX], [AdX.T, -self.S]]
+            size, self.eps, extra = 2 * n, None, []
+            norm = cp.trace(self.X) + cp.trace(self.S)
+        else:
+            self.BE = cp.Parameter((n, q), name='BE')
+            self.F = cp.Parameter((p, n), name='F')
+            self.eps = cp.Variable(name='eps')
+            XFt = self.X @ self.F.T
+            blocks = [
+                [AX + AX.T + self.S, AdX, self.eps * self.BE, XFt],
+                [AdX.T, -self.S, Z((n, q)), Z((n, p))],
+                [(self.eps * self.BE).T, Z((q, n)), -self.eps * np.eye(q), Z((q, p))],
+                [XFt.T, Z((p, n)), Z((p, q)), -self.eps * np.eye(p)],
+            ]
+            size = 2 * n + q + p
+            norm = cp.trace(self.X) + cp.trace(self.S) + self.eps
+            extra = [self.eps >= self.t]
+        L = cp.bmat(blocks)
+        L = 0.5 * (L + L.T)
+        cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
+                self.S >> self.t * np.eye(n)] + extra
+        if gain_bound:
+            self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
+            G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
+                         [self.R, np.eye(m)]])
+            cons += [self.X >> np.eye(n), 0.5 * (G + G.T) >> 0, self.t <= 1]
+        else:
+            self.kappa2 = None
+            cons += [norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+        status, t, X, S, R, eps, st = super().solve(problem, solver, kappa)
+        if X is None or S is None:
+            return status, t, X, S, R, eps, st
+        # W = Q^-1 with Q = P S P:  W = X S^-1 X
+        Xs = 0.5 * (X + X.T)
+        try:
+            W = Xs @ np.linalg.solve(0.5 * (S + S.T), Xs)
+        except np.linalg.LinAlgError:
+            W = None
+        return status, t, X, W, R, eps, st
+
+
+COMPACT_FROM_N = 8    # Theorem 1 uses _CompactProgram for n >= this (smaller SDP)
+_COMPACT: dict[tuple, _CompactProgram] = {}
+
+
+def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
+    """The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact
+    one (same feasible set, cached per shape)."""
+    if problem.n < COMPACT_FROM_N:
+        return _program(problem, nominal, gain_bound)
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    prog = _COMPACT.get(key)
+    if prog is None:
+        if len(_COMPACT) > 32:
+            _COMPACT.clear()
+        prog = _COMPACT[key] = _CompactProgram(*key)
+    return prog
+
+
 _PROGRAMS: dict[tuple, _Theorem1Program] = {}
 
 
@@ -294,7 +389,7 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
     if gain_bound is not None and not gain_bound > 0:
         raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
     t0 = time.perf_counter()
-    prog = _program(problem, nominal, gain_bound is not None)
+    prog = _program_for(problem, nominal, gain_bound is not None)
     status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
     kind = 'nominal' if nominal else 'non-fragile'
     if status in ('infeasible', 'infeasible_inaccurate') or (
@@ -354,7 +449,8 @@ class _MinNormProgram:
     def __init__(self, n: int, m: int, q: int, p: int, nominal: bool):
         import cvxpy as cp
         self.cp = cp
-        self.base = _Theorem1Program(n, m, q, p, nominal, False)
+        form = _CompactProgram if n >= COMPACT_FROM_N else _Theorem1Program
+        self.base = form(n, m, q, p, nominal, False)
         b = self.base
         self.t_req = cp.Parameter(nonneg=True, name='t_req')
         self.s = cp.Variable(name='s')
@@ -375,7 +471,11 @@ class _MinNormProgram:
             raise SolverFailure(f'solver {solver} failed on the minimum-norm stage for '
                                 f'problem {problem.name!r}: {exc}') from None
         stats = self.problem.solver_stats
-        return (self.problem.status, b.t.value, b.X.value, b.W.value, b.R.value,
+        W = b.W.value
+        if isinstance(b, _CompactProgram) and W is not None and b.X.value is not None:
+            Xs = _sym(b.X.value)                     # W = X S^-1 X (see _CompactProgram)
+            W = Xs @ np.linalg.solve(_sym(W), Xs)
+        return (self.problem.status, b.t.value, b.X.value, W, b.R.value,
                 None if b.eps is None else b.eps.value,
                 float(stats.solve_time or 0.0) if stats is not None else 0.0)
 
