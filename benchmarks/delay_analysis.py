@@ -167,8 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             warm.append(time.perf_counter() - t)
         cold = []
         for _ in range(args.reps):
-            delay._N_USED.clear()
-            delay._K_USED.clear()
+            delay.clear_caches()
             t = time.perf_counter()
             delay.spectral_abscissa(A0, A1, tau)
             cold.append(time.perf_counter() - t)

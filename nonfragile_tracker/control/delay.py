@@ -38,7 +38,7 @@ from .validate import as_matrix, as_square
 
 __all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
            'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',
-           'fragility_margin']
+           'fragility_margin', 'clear_caches']
 
 N_MIN = 16          # smallest discretization degree used by the adaptive rule
 N_MAX = 192         # largest discretization degree the adaptive rule will use
@@ -416,6 +416,12 @@ def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float]
 
 # degree that converged last time, per (n, tau, count): the start of the adaptive rule
 _N_USED: dict[tuple[int, float, int], int] = {}
+
+def clear_caches() -> None:
+    """Forget the remembered degrees and Arnoldi sizes (the next call starts afresh)."""
+    _N_USED.clear()
+    _K_USED.clear()
+
 
 # k that covered the needed disc last time, per (n, N, count): margin and worst-case
 # searches evaluate many nearby loops of one shape, so the first call learns it
