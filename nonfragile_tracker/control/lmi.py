@@ -249,6 +249,89 @@ class _Theorem1Program:
                 float(stats.solve_time or 0.0) if stats is not None else 0.0)
 
 
+_PROGRAMS: dict[tuple, _Theorem1Program] = {}
+
+
+def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    prog = _PROGRAMS.get(key)
+    if prog is None:
+        prog = _PROGRAMS[key] = _Theorem1Program(*key)
+    return prog
+
+
+def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
+                     solver: str | None = None, gain_bound: float | None = None,
+                     verify_tol: float = 1e-9) -> SynthesisResult:
+    """One solve of Theorem 1 (or its nominal form), verified (see :func:`synthesize`).
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
+        delay-independent).
+    nominal : bool
+        Drop the ``E, F`` terms (the paper's "normal state feedback").
+    margin : float
+        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
+        or 1e-6.
+    solver : str
+        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
+    gain_bound : float, optional
+        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
+
+    Raises
+    ------
+    InfeasibleError
+        No point with ``t >= margin`` exists; nothing is returned.
+    SolverFailure
+        The solver is missing or returned no solution.
+    CertificateError
+        The solver's point failed :func:`verify_certificate`.
+    """
+    margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
+    solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
+    if gain_bound is not None and not gain_bound > 0:
+        raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
+    t0 = time.perf_counter()
+    prog = _program_for(problem, nominal, gain_bound is not None)
+    status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
+    kind = 'nominal' if nominal else 'non-fragile'
+    if status in ('infeasible', 'infeasible_inaccurate') or (
+            status in ('optimal', 'optimal_inaccurate') and (t is None or t < margin)):
+        best = 'no feasible point' if t is None else f'best margin t = {t:.3g}'
+        bound = '' if gain_bound is None else f' with ||K||_2 <= {gain_bound:g}'
+        raise InfeasibleError(
+            f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
+            f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
+            'nominal design, or the delay-dependent design.')
+    if status not in ('optimal', 'optimal_inaccurate') or X is None:
+        raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
+                            f'{problem.name!r}; no gain was produced')
+    P = np.linalg.inv(_sym(X))
+    Q = np.linalg.inv(_sym(W))
+    K = R @ P
+    eps_val = None if nominal else float(eps)
+    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
+    if not ver.ok:
+        err = CertificateError(
+            f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
+            f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
+            f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
+            f't = {t:.3g}). Use CLARABEL or raise the margin.')
+        err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
+        raise err
+    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
+    return SynthesisResult(K=K, certificate=cert, margin_required=margin,
+                           margin_achieved=float(t), status=status, solver=solver,
+                           solve_time=solve_time, wall_time=time.perf_counter() - t0,
+                           nominal=nominal,
+                           extra={} if gain_bound is None else {'gain_bound': gain_bound})
+
+
+# ---------------------------------------------------------------------------------------------
+# Compact form of Theorem 1 for larger n.
+
 class _CompactProgram(_Theorem1Program):
     """Theorem 1 with ``S = X Q X`` instead of ``W = Q^-1``: LMI of size ``2n + q + p``.
 
@@ -342,86 +425,6 @@ def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1
             _COMPACT.clear()
         prog = _COMPACT[key] = _CompactProgram(*key)
     return prog
-
-
-_PROGRAMS: dict[tuple, _Theorem1Program] = {}
-
-
-def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
-    prog = _PROGRAMS.get(key)
-    if prog is None:
-        prog = _PROGRAMS[key] = _Theorem1Program(*key)
-    return prog
-
-
-def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
-                     solver: str | None = None, gain_bound: float | None = None,
-                     verify_tol: float = 1e-9) -> SynthesisResult:
-    """One solve of Theorem 1 (or its nominal form), verified (see :func:`synthesize`).
-
-    Parameters
-    ----------
-    problem : Problem
-        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
-        delay-independent).
-    nominal : bool
-        Drop the ``E, F`` terms (the paper's "normal state feedback").
-    margin : float
-        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
-        or 1e-6.
-    solver : str
-        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
-    gain_bound : float, optional
-        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
-
-    Raises
-    ------
-    InfeasibleError
-        No point with ``t >= margin`` exists; nothing is returned.
-    SolverFailure
-        The solver is missing or returned no solution.
-    CertificateError
-        The solver's point failed :func:`verify_certificate`.
-    """
-    margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
-    solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
-    if gain_bound is not None and not gain_bound > 0:
-        raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
-    t0 = time.perf_counter()
-    prog = _program_for(problem, nominal, gain_bound is not None)
-    status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
-    kind = 'nominal' if nominal else 'non-fragile'
-    if status in ('infeasible', 'infeasible_inaccurate') or (
-            status in ('optimal', 'optimal_inaccurate') and (t is None or t < margin)):
-        best = 'no feasible point' if t is None else f'best margin t = {t:.3g}'
-        bound = '' if gain_bound is None else f' with ||K||_2 <= {gain_bound:g}'
-        raise InfeasibleError(
-            f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
-            f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
-            'nominal design, or the delay-dependent design.')
-    if status not in ('optimal', 'optimal_inaccurate') or X is None:
-        raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
-                            f'{problem.name!r}; no gain was produced')
-    P = np.linalg.inv(_sym(X))
-    Q = np.linalg.inv(_sym(W))
-    K = R @ P
-    eps_val = None if nominal else float(eps)
-    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
-    if not ver.ok:
-        err = CertificateError(
-            f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
-            f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
-            f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
-            f't = {t:.3g}). Use CLARABEL or raise the margin.')
-        err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
-        raise err
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
-    return SynthesisResult(K=K, certificate=cert, margin_required=margin,
-                           margin_achieved=float(t), status=status, solver=solver,
-                           solve_time=solve_time, wall_time=time.perf_counter() - t0,
-                           nominal=nominal,
-                           extra={} if gain_bound is None else {'gain_bound': gain_bound})
 
 
 # ---------------------------------------------------------------------------------------------
