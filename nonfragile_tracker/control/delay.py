@@ -202,8 +202,25 @@ class _Char:
         self.I = np.eye(self.n)
         self.nrm0 = float(np.linalg.norm(A0, 2)) if self.n else 0.0
         self.nrm1 = float(np.linalg.norm(A1, 2)) if self.n else 0.0
-        self.hmax = float(np.linalg.eigvalsh(0.5 * (A0 + A0.T))[-1]) if self.n else 0.0
-        self.skew = float(np.linalg.norm(0.5 * (A0 - A0.T), 2)) if self.n else 0.0
+        self._bounds: tuple[float, float] | None = None
+
+    @property
+    def hmax(self) -> float:
+        """``lambda_max((A0 + A0^T) / 2)`` (computed on first use)."""
+        return self._numerical_range()[0]
+
+    @property
+    def skew(self) -> float:
+        """``||(A0 - A0^T) / 2||_2`` (computed on first use)."""
+        return self._numerical_range()[1]
+
+    def _numerical_range(self) -> tuple[float, float]:
+        if self._bounds is None:
+            A0 = self.A0
+            self._bounds = ((float(np.linalg.eigvalsh(0.5 * (A0 + A0.T))[-1]),
+                             float(np.linalg.norm(0.5 * (A0 - A0.T), 2)))
+                            if self.n else (0.0, 0.0))
+        return self._bounds
 
     def T(self, s: complex) -> np.ndarray:
         return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
