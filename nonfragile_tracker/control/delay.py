@@ -616,7 +616,10 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
     smaller of ``||A0|| + ||A1|| e`` and the farthest corner of the rectangle
     ``a <= Re s <= lambda_max(He A0 / 2) + ||A1|| e``,
     ``|Im s| <= ||(A0 - A0^T) / 2|| + ||A1|| e`` (``e = exp(-a tau)``; numerical-range
-    bounds).  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for ``|s| <= R`` by
+    bounds), and of the discs ``|s - lambda_i| <= e r_i`` around the eigenvalues of
+    ``A0`` that reach ``Re s >= a`` (``r_i`` Gershgorin or Bauer-Fike radii of
+    ``V^-1 A1 V``, ``V`` the eigenvectors of ``A0``), which keeps fast stable modes of
+    stiff loops out of the degree.  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for ``|s| <= R`` by
     ``N >= 12 + 1.2 R tau`` (at least 16), and only discretized eigenvalues inside that
     disc are used (the discretization also has spurious ones of large modulus).  The
     degree starts from ``R(a0)``, ``a0`` a guess from the eigenvalues of ``A0 + A1`` and
