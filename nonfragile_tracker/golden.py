@@ -62,8 +62,12 @@ def data_dir() -> Path | None:
 
 
 def golden_gains() -> Path:
-    """The gain file of the package's golden scenarios: ``test/data/golden_gains.yaml`` when
-    the checkout pins one next to the golden bags, else ``config/tracker_gains.yaml``."""
+    """The gain file of the package's golden scenarios.
+
+    ``test/data/golden_gains.yaml`` when the checkout pins one next to the golden bags (the
+    golden bags pin behaviour, not the shipped default, which may change to a better
+    certified design), else ``config/tracker_gains.yaml``.
+    """
     base = data_dir()
     pinned = base / 'golden_gains.yaml' if base is not None else None
     return pinned if pinned is not None and pinned.is_file() \
@@ -89,13 +93,6 @@ def _overrides(scenario: Scenario, duration: float) -> dict:
     return ov
 
 
-def golden_gains() -> Path:
-    """The gain file the golden scenarios run with, pinned next to the golden bags.
-
-    The golden bags pin behaviour, not the shipped default: ``config/tracker_gains.yaml``
-    may change (a better certified design) without touching them.
-    """
-    return data_dir() / 'golden_gains.yaml'
 
 
 def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:

@@ -474,7 +474,8 @@ def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
 
 def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
     """A reference from a nav_msgs/Path: positions at the poses' stamps, velocities and
-    accelerations by finite differences (numpy.gradient, second order inside)."""
+    accelerations by finite differences (numpy.gradient, second order inside).
+    """
     stamps, xs, ys = [], [], []
     for ps in msg.poses:
         s = _stamp_ns(ps.header)

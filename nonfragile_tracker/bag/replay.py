@@ -244,7 +244,8 @@ def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, 
                      atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
                      time_tolerance: float | None = None) -> Comparison:
     """Replayed vs recorded commands (``cmd_vel``): by index when both have as many,
-    else by time (receive time of the triggering input vs the recorded receive time)."""
+    else by time (receive time of the triggering input vs the recorded receive time).
+    """
     a = [(t, _twist(m)) for t, m in recorded]
     align = 'index' if len(a) == len(commands) else 'time'
     if time_tolerance is None:
@@ -412,7 +413,8 @@ class _RefTimeline:
 def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerInputs,
          applied: int, atol: float, limit: int | None = None):
     """Pair odometry j with recorded command j, choosing the reference state that
-    reproduces it.  Returns (inputs, feed order, commands, swaps, reproduced)."""
+    reproduces it.  Returns (inputs, feed order, commands, swaps, reproduced).
+    """
     window = int(ORDER_WINDOW * 1e9)
     order: list[ReplayEvent] = []
     commands: list[tuple[int, Any]] = []

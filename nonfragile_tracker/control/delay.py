@@ -223,7 +223,8 @@ class _Char:
         Gershgorin row and column sums of ``|M|`` and Bauer-Fike ``||M||_2``, each plus a
         round-off allowance
         ``1e-12 cond(V) (||A0|| + ||A1||)``; no radii if ``V`` is numerically singular
-        (computed on first use)."""
+        (computed on first use).
+        """
         if self._eigen is None:
             radii: list[np.ndarray] = []
             lam = np.zeros(0, complex)

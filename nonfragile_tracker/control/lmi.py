@@ -398,7 +398,8 @@ _COMPACT: dict[tuple, _CompactProgram] = {}
 
 def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
     """The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact
-    one (same feasible set, cached per shape)."""
+    one (same feasible set, cached per shape).
+    """
     if problem.n < COMPACT_FROM_N:
         return _program(problem, nominal, gain_bound)
     key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)

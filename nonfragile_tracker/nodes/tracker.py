@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
@@ -56,10 +55,9 @@ from rclpy.parameter import Parameter
 
 from .. import topics
 from ..control.follow import REST_SPEED, Follower, path_errors
-from ..control.gains import gain_from_parameters
-from ..control.loop import LoopConfigError, Tracker, TrackerConfig
+from ..control.loop import LoopConfigError, Tracker
 from ..control.trajectory import TrajectoryError
-from ..msgconv import PREDICT_PARAMS, tracker_config
+from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare,
                      fill_pose, get, ns_to_stamp, pose_from_odom, reference_from_msgs, run,
                      stamp_ns)
