@@ -117,7 +117,8 @@ def record_realtime(latency: float, seed: int, tmp: Path, duration: float = 20.0
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes = []
     try:
-        nodes.append(Recorder(context=ctx, output=str(tmp / 'bag')))
+        nodes.append(Recorder(context=ctx, parameter_overrides=[
+            Parameter('output', value=str(tmp / 'bag'))]))
         nodes.append(TrackerNode(parameter_overrides=over('tracker'), context=ctx))
         nodes.append(ReferenceNode(parameter_overrides=over('reference'), context=ctx))
         plant = PlantNode(parameter_overrides=over('plant'), context=ctx)

@@ -64,9 +64,10 @@ def data_dir() -> Path | None:
 def golden_gains() -> Path:
     """The gain file of the package's golden scenarios.
 
-    ``test/data/golden_gains.yaml`` when the checkout pins one next to the golden bags (the
-    golden bags pin behaviour, not the shipped default, which may change to a better
-    certified design), else ``config/tracker_gains.yaml``.
+    ``test/data/golden_gains.yaml`` when the checkout pins one next to the golden bags,
+    else ``config/tracker_gains.yaml``.  The golden bags pin behaviour, not the shipped
+    default: ``config/tracker_gains.yaml`` may change (a better certified design)
+    without touching them.
     """
     base = data_dir()
     pinned = base / 'golden_gains.yaml' if base is not None else None
@@ -91,8 +92,6 @@ def _overrides(scenario: Scenario, duration: float) -> dict:
         ov.setdefault(node, {}).setdefault('ros__parameters', {}).update(
             section.get('ros__parameters', {}))
     return ov
-
-
 
 
 def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:

@@ -26,6 +26,7 @@ def stamp_ns(stamp) -> int:
 
 
 def ns_to_stamp(ns: int, stamp) -> None:
+    """Integer nanoseconds -> builtin_interfaces/Time ``stamp`` (in place)."""
     stamp.sec, stamp.nanosec = divmod(int(ns), 1_000_000_000)
 
 
@@ -49,6 +50,7 @@ def pose_from_odom(pose) -> tuple[float, float, float] | str:
 
 
 def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
+    """Fill the three reference messages (pose, twist, accel) from a sample."""
     fill_pose(pose_msg.pose, ref.x, ref.y, ref.heading)
     tw = twist_msg.twist.linear
     tw.x, tw.y, tw.z = ref.vx, ref.vy, 0.0

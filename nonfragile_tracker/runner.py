@@ -197,17 +197,16 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
                  timeout: float = 600.0, recorder_topics: list[str] | None = None) -> RunResult:
     """Run the scenario with all nodes in this process on one executor."""
     import rclpy
-    from rclpy.parameter import Parameter
 
-    from .nodes.common import make_executor
+    from .nodes.common import make_executor, overrides
     from .nodes.plant import PlantNode
     from .nodes.reference import ReferenceNode
     from .nodes.tracker import TrackerNode
 
-    def overrides(name: str, extra: dict | None = None) -> list:
+    def node_overrides(name: str, extra: dict | None = None) -> list:
         vals = dict(params.get(name, {}).get('ros__parameters', {}))
         vals.update(extra or {})
-        return [Parameter(k, value=v) for k, v in vals.items()]
+        return overrides(**vals)
 
     t0 = time.monotonic()
     # a private context on a domain of our own (localhost discovery): no cross-talk
@@ -225,10 +224,10 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             if recorder_topics:
                 rec_params['topics'] = list(recorder_topics)
-            nodes.append(Recorder(context=ctx, **rec_params))
-        nodes.append(TrackerNode(parameter_overrides=overrides('tracker'), context=ctx))
-        nodes.append(ReferenceNode(parameter_overrides=overrides('reference'), context=ctx))
-        plant = PlantNode(context=ctx, parameter_overrides=overrides(
+            nodes.append(Recorder(context=ctx, parameter_overrides=overrides(**rec_params)))
+        nodes.append(TrackerNode(parameter_overrides=node_overrides('tracker'), context=ctx))
+        nodes.append(ReferenceNode(parameter_overrides=node_overrides('reference'), context=ctx))
+        plant = PlantNode(context=ctx, parameter_overrides=node_overrides(
             'plant', {'lockstep_subscribers': 2 if record else 1}))
         nodes.append(plant)
         ex = make_executor(ctx)

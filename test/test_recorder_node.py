@@ -236,17 +236,18 @@ def test_run_done_shortfall_times_out_with_a_warning(session):
 
 
 def test_recorder_in_process(tmp_path, monkeypatch):
-    """Recorder(**overrides) in a shared executor: done completes after run_done."""
+    """Recorder(**node_kwargs) in a shared executor: done completes after run_done."""
     from rclpy.executors import SingleThreadedExecutor
 
+    from nonfragile_tracker.nodes.common import overrides
     from nonfragile_tracker.nodes.recorder import Recorder
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = Context()
     rclpy.init(context=ctx, domain_id=_domain(5))
     rec = node = None
     try:
-        rec = Recorder(context=ctx, output=str(tmp_path / 'bag'),
-                       topics=['cmd_vel', 'run_done'], drain_timeout=5.0)
+        rec = Recorder(context=ctx, parameter_overrides=overrides(
+            output=str(tmp_path / 'bag'), topics=['cmd_vel', 'run_done'], drain_timeout=5.0))
         node = Node('feeder', context=ctx)
         pub = node.create_publisher(Twist, topics.CMD_VEL, DATA_QOS)
         done = node.create_publisher(UInt64, topics.RUN_DONE, LATCHED)

@@ -37,7 +37,8 @@ from .writer import BagError, jazzy_typestore
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
            'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag',
-           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS', 'MCAP_MAGIC']
+           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
+           'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
@@ -473,8 +474,10 @@ def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
 
 
 def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
-    """A reference from a nav_msgs/Path: positions at the poses' stamps, velocities and
-    accelerations by finite differences (numpy.gradient, second order inside).
+    """A reference from a nav_msgs/Path.
+
+    Positions at the poses' stamps, velocities and accelerations by finite differences
+    (numpy.gradient, second order inside).
     """
     stamps, xs, ys = [], [], []
     for ps in msg.poses:

@@ -92,6 +92,7 @@ class ReplayResult:
 
     @property
     def max_abs_error(self) -> float:
+        """Largest absolute command difference over the compared fields (nan if none)."""
         return max(self.comparison.max_abs_error.values(), default=math.nan)
 
 
@@ -162,6 +163,7 @@ class TrackerInputs:
         self.ignored[why] = self.ignored.get(why, 0) + 1
 
     def odom(self, msg) -> Command | None:
+        """Take an odometry message; the command it triggers, if any."""
         if msg.header.frame_id != topics.ODOM_FRAME:
             return self._ignore(f'odom frame {msg.header.frame_id!r} is not '
                                 f'{topics.ODOM_FRAME!r}')
@@ -177,6 +179,7 @@ class TrackerInputs:
         return self._compute()
 
     def reference(self, i: int, msg) -> Command | None:
+        """Take reference part ``i`` (pose, twist, accel); the command it triggers, if any."""
         if msg.header.frame_id != topics.ODOM_FRAME:
             return self._ignore(f'reference frame {msg.header.frame_id!r}')
         self._ref[i] = msg
@@ -243,8 +246,10 @@ def _twist(msg) -> Any:
 def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, Any]], *,
                      atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
                      time_tolerance: float | None = None) -> Comparison:
-    """Replayed vs recorded commands (``cmd_vel``): by index when both have as many,
-    else by time (receive time of the triggering input vs the recorded receive time).
+    """Replayed vs recorded commands (``cmd_vel``).
+
+    By index when both have as many, else by time (receive time of the triggering input
+    vs the recorded receive time).
     """
     a = [(t, _twist(m)) for t, m in recorded]
     align = 'index' if len(a) == len(commands) else 'time'
@@ -412,8 +417,9 @@ class _RefTimeline:
 
 def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerInputs,
          applied: int, atol: float, limit: int | None = None):
-    """Pair odometry j with recorded command j, choosing the reference state that
-    reproduces it.  Returns (inputs, feed order, commands, swaps, reproduced).
+    """Pair odometry j with recorded command j, choosing the reference state that reproduces it.
+
+    Returns (inputs, feed order, commands, swaps, reproduced).
     """
     window = int(ORDER_WINDOW * 1e9)
     order: list[ReplayEvent] = []

@@ -219,7 +219,8 @@ class _Char:
         return self._numerical_range()[1]
 
     def eigen(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Eigenvalues of A0 and disc radii for ``M = V^-1 A1 V`` (``V`` its eigenvectors):
+        """Eigenvalues of A0 and disc radii for ``M = V^-1 A1 V`` (``V`` its eigenvectors).
+
         Gershgorin row and column sums of ``|M|`` and Bauer-Fike ``||M||_2``, each plus a
         round-off allowance
         ``1e-12 cond(V) (||A0|| + ||A1||)``; no radii if ``V`` is numerically singular
@@ -623,7 +624,8 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
     bounds), and of the discs ``|s - lambda_i| <= e r_i`` around the eigenvalues of
     ``A0`` that reach ``Re s >= a`` (``r_i`` Gershgorin or Bauer-Fike radii of
     ``V^-1 A1 V``, ``V`` the eigenvectors of ``A0``), which keeps fast stable modes of
-    stiff loops out of the degree.  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for ``|s| <= R`` by
+    stiff loops out of the degree.  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for
+    ``|s| <= R`` by
     ``N >= 12 + 1.2 R tau`` (at least 16), and only discretized eigenvalues inside that
     disc are used (the discretization also has spurious ones of large modulus).  The
     degree starts from ``R(a0)``, ``a0`` a guess from the eigenvalues of ``A0 + A1`` and

@@ -223,14 +223,17 @@ class Identification:
 
     @property
     def latency_interval_s(self) -> tuple[float, float]:
+        """(low, high) of the latency interval (s)."""
         return (self.latency_low_s, self.latency_high_s)
 
     @property
     def tau_v_interval_s(self) -> tuple[float, float]:
+        """(low, high) of the linear-speed time constant's interval (s)."""
         return (self.tau_v_low_s, self.tau_v_high_s)
 
     @property
     def tau_w_interval_s(self) -> tuple[float, float]:
+        """(low, high) of the angular-speed time constant's interval (s)."""
         return (self.tau_w_low_s, self.tau_w_high_s)
 
 

@@ -397,8 +397,10 @@ _COMPACT: dict[tuple, _CompactProgram] = {}
 
 
 def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
-    """The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact
-    one (same feasible set, cached per shape).
+    """The Theorem 1 program for ``problem``.
+
+    The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact one
+    (same feasible set, cached per shape).
     """
     if problem.n < COMPACT_FROM_N:
         return _program(problem, nominal, gain_bound)

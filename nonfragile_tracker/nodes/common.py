@@ -1,22 +1,27 @@
-"""Shared ROS plumbing of the nodes: QoS, parameters with descriptors, message conversion,
-spinning and the Jazzy shutdown pattern.  No control math lives here."""
+"""Shared ROS plumbing of the nodes.
+
+QoS, parameters with descriptors, message conversion (re-exported from
+:mod:`nonfragile_tracker.msgconv`), the nodes' base class (constructor shape, parameter
+flow) and the Jazzy shutdown pattern.  No control math lives here.
+"""
 from __future__ import annotations
 
 import os
 import signal
 import sys
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .. import topics
-
 from ..errors import InputError
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
@@ -24,7 +29,7 @@ from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
            'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
-           'make_executor', 'run', 'StartupError']
+           'make_executor', 'run', 'StartupError', 'AdapterNode', 'overrides', 'check_mode']
 
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
@@ -42,7 +47,10 @@ class StartupError(InputError):
 
 @dataclass(frozen=True)
 class Param:
-    """A parameter declaration: name, default, description and optional range."""
+    """A parameter declaration: name, default, description and optional range.
+
+    ``default=None`` (with ``type``) declares a parameter without a value (read as ``None``).
+    """
 
     name: str
     default: Any
@@ -74,16 +82,20 @@ def declare(node: Node, params: Iterable[Param]) -> None:
             desc.floating_point_range = [FloatingPointRange(
                 from_value=float(p.low), to_value=float(p.high if p.high is not None else 1e300),
                 step=0.0)]
-        node.declare_parameter(p.name, p.default, desc)
+        # no default: a statically typed parameter that must come from a file or -p
+        node.declare_parameter(p.name, Parameter.Type(ptype) if p.default is None else p.default,
+                               desc)
 
 
 def get(node: Node, name: str) -> Any:
     return node.get_parameter(name).value
 
 
-def check_mode(value: str, node_name: str) -> str:
+def check_mode(value: str, node_name: str | None = None) -> str:
+    """``value`` if it is one of :data:`MODES`, else :class:`StartupError`."""
     if value not in MODES:
-        raise StartupError(f'{node_name}: parameter mode is {value!r}; use one of {MODES}')
+        prefix = f'{node_name}: ' if node_name else ''
+        raise StartupError(f'{prefix}parameter mode is {value!r}; use one of {MODES}')
     return value
 
 
@@ -97,64 +109,196 @@ def make_executor(context=None):
 
 def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
     """Spin with a finite timeout (the EventsExecutor needs one) until ``done()``."""
-    while rclpy.ok() and not done():
+    while executor.context.ok() and not done():
         executor.spin_once(timeout_sec=period)
 
 
-def _on_signal(signum, frame) -> None:            # noqa: ARG001
-    """Python-level SIGINT/SIGTERM handler: no exception in the middle of a callback.
+def overrides(**values: Any) -> list[Parameter]:
+    """Parameter overrides from values: ``XNode(parameter_overrides=overrides(dt=0.02))``."""
+    return [Parameter(k, value=v) for k, v in values.items()]
 
-    Installed *before* ``rclpy.init`` so rclpy's own handler (which shuts the
-    context down and wakes the executor) chains to it; the node is then closed
-    in :func:`run`'s ``finally`` between callbacks (the recorder closes its bag).
+
+C = TypeVar('C')
+
+
+class AdapterNode(Node):
+    """Base of the package's nodes: one constructor shape, one parameter flow, one way to end.
+
+    Every node is built the same way (rclpy ``Node`` keyword arguments pass through)::
+
+        class XNode(AdapterNode):
+            def __init__(self, node_name: str = 'x', **node_kwargs):
+                super().__init__(node_name, **node_kwargs)
+                self.config = self.bind_parameters(PARAMS, x_config)   # declare, read, validate
+                ...                                                     # then create interfaces
+
+    ``x_config(values) -> XConfig`` is a plain function of the parameter values (a dict by
+    name) that validates them and raises :class:`~nonfragile_tracker.errors.InputError`.
+    :meth:`bind_parameters` uses it three times: at start-up (a refusal is a
+    :class:`StartupError`, exit code 2), in the *on-set* callback to validate a proposed
+    runtime change (a refusal keeps the old values and says why), and in the *post-set*
+    callback to apply an accepted change (``self.config`` is replaced, then
+    :meth:`apply_config` runs) - the ros2 demos' split of validation and side effects.
+
+    Run protocol (used by :func:`run`): ``finished`` ends the spin, ``exit_code`` is the
+    process exit code, :meth:`drain` runs after a finished spin (blocking work such as
+    waiting for acknowledgements belongs there, never in a callback), :meth:`close`
+    releases resources on every path (also from :meth:`destroy_node`).
+
+    Callbacks registered with :meth:`create_subscription` and :meth:`create_timer` are
+    guarded: if a signal shuts the context down while one runs (rclpy does that from its
+    own thread), whatever fails in it because of the shutdown (a publish, a count of
+    matched endpoints) ends that callback quietly instead of raising out of the executor.
     """
-    rclpy.try_shutdown()
+
+    def __init__(self, node_name: str, **node_kwargs: Any):
+        super().__init__(node_name, **node_kwargs)
+        self.finished = False
+        self.exit_code = 0
+
+    # ------------------------------------------------------------------ parameters
+    def bind_parameters(self, params: Sequence[Param], configure: Callable[[dict], C]) -> C:
+        """Declare ``params``, build the node's configuration, validate/apply runtime sets.
+
+        Returns ``configure(values)``; raises :class:`StartupError` (``'<node>: why'``) if
+        the values are refused.  Afterwards a set of a writable parameter is validated by
+        ``configure`` with the proposed values (on-set callback) and applied (post-set
+        callback: ``self.config = configure(values)``, then :meth:`apply_config`).
+        """
+        params = list(params)
+        declare(self, params)
+        self._bound = {p.name for p in params}
+        self._configure = configure
+        try:
+            config = configure(self.parameter_values())
+        except ValueError as exc:                  # InputError and its domain subclasses
+            raise StartupError(f'{self.get_name()}: {exc}') from None
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        return config
+
+    def parameter_values(self, changes: dict | None = None) -> dict:
+        """Current values of the bound parameters (``None`` if unset), updated by ``changes``."""
+        values = {n: self.get_parameter_or(n).value for n in self._bound}
+        values.update(changes or {})
+        return values
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        changes = {p.name: p.value for p in params if p.name in self._bound}
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            self._configure(self.parameter_values(changes))
+        except ValueError as exc:
+            reason = f'{exc}; keeping the old value'
+            self.get_logger().error(f'rejected parameter set: {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        changed = sorted(p.name for p in params if p.name in self._bound)
+        if not changed:
+            return
+        old, self.config = self.config, self._configure(self.parameter_values())
+        self.apply_config(old, self.config)
+        self.get_logger().info(f'accepted parameter set: {changed}')
+
+    def apply_config(self, old: Any, new: Any) -> None:
+        """Hook: make derived state follow an accepted runtime change (default: nothing)."""
+
+    # ------------------------------------------------------------------ guarded callbacks
+    def _guarded(self, callback: Callable[..., Any]) -> Callable[..., Any]:
+        context = self.context
+
+        def guarded(*args: Any) -> Any:
+            try:
+                return callback(*args)
+            except Exception:
+                if context.ok():
+                    raise
+                return None           # the context was shut down under this callback: done
+        return guarded
+
+    def create_subscription(self, msg_type, topic, callback, *args, **kwargs):  # noqa: D102
+        return super().create_subscription(msg_type, topic, self._guarded(callback),
+                                           *args, **kwargs)
+
+    def create_timer(self, timer_period_sec, callback, *args, **kwargs):  # noqa: D102
+        return super().create_timer(timer_period_sec, self._guarded(callback), *args, **kwargs)
+
+    # ------------------------------------------------------------------ ending
+    def drain(self) -> None:
+        """Hook: blocking work after the spin ended because the node finished (not on a signal)."""
+
+    def close(self) -> None:
+        """Hook: release resources (idempotent); called on every way out."""
+
+    def destroy_node(self) -> None:
+        """Close (:meth:`close`), then destroy the rclpy node."""
+        self.close()
+        super().destroy_node()
 
 
-def run(factory: Callable[[], Node], args: list[str] | None = None) -> int:
-    """Node main: init, build, spin until the node is finished, Jazzy-style shutdown.
+def _fatal(text: str) -> int:
+    print(f'[FATAL] {text}', file=sys.stderr)
+    return 2
 
-    SIGINT and SIGTERM end the spin cleanly (``close()`` and ``destroy_node()`` run).
-    Returns the process exit code: 0, the node's ``exit_code`` attribute if set,
-    or 2 when the node refuses to start (:class:`StartupError`, ``ValueError``, a
-    bad parameter or arguments rcl cannot parse).
+
+def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) -> int:
+    """Process main of a node: the Jazzy pattern (init, spin, destroy, try_shutdown).
+
+    Exit code: 0 after SIGINT/SIGTERM or a normal end, the node's ``exit_code`` if it set
+    one (5: lockstep abort), 2 when it refuses to start (a :class:`StartupError` or other
+    ``ValueError``, a bad parameter, arguments rcl cannot parse) with a ``[FATAL]`` line.
+
+    Signals: rclpy's own handlers (installed by ``rclpy.init`` for SIGINT and SIGTERM)
+    shut the context down from rclpy's signal thread; the executor then raises
+    ``ExternalShutdownException`` between callbacks and the node is destroyed (the
+    recorder closes its bag).  Python's KeyboardInterrupt is switched off first (SIGINT
+    ignored at Python level, so rclpy's handler has nothing to chain to): it would be
+    raised wherever the interpreter happens to be - in a callback writing the bag, or in
+    the clean-up when ``ros2 launch`` forwards a second SIGINT after the terminal's -
+    and print a traceback.  Repeated signals during the clean-up are therefore harmless.
+    Exceptions that are only the consequence of the shutdown racing the main thread
+    (rclpy 7.1: ros2/rclpy#1352, fixed upstream after Jazzy) are not reported.
     """
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        return _run(factory, args)
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
-def _run(factory: Callable[[], Node], args: list[str] | None) -> int:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         rclpy.init(args=args)
     except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments/params files so
-        print(f'[FATAL] cannot start: {exc}'.split(', at /')[0], file=sys.stderr)
-        return 2
+        return _fatal(f'cannot start: {exc}'.split(', at /')[0])
+    context = rclpy.get_default_context()
     node = None
     try:
         try:
-            node = factory()
-        except (StartupError, ValueError) as exc:
-            print(f'[FATAL] {exc}', file=sys.stderr)
-            return 2
-        except ParameterException as exc:
-            hint = (' Write doubles as 1.0, not 1, in parameter files.'
-                    if isinstance(exc, InvalidParameterTypeException) else '')
-            print(f'[FATAL] invalid parameter: {exc}.{hint}', file=sys.stderr)
-            return 2
+            node = node_class()
+        except Exception as exc:  # noqa: BLE001
+            if not context.ok():
+                return 0                            # a signal during start-up
+            if isinstance(exc, ParameterException):
+                hint = (' Write doubles as 1.0, not 1, in parameter files.'
+                        if isinstance(exc, InvalidParameterTypeException) else '')
+                return _fatal(f'invalid parameter: {exc}.{hint}')
+            if isinstance(exc, ValueError):         # StartupError, InputError
+                return _fatal(str(exc))
+            raise
         executor = make_executor()
         executor.add_node(node)
-        spin_until(executor, lambda: getattr(node, 'finished', False))
-        return int(getattr(node, 'exit_code', 0) or 0)
+        node.get_logger().info('started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
+        spin_until(executor, lambda: node.finished)
+        if node.finished and context.ok():
+            node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
-        return int(getattr(node, 'exit_code', 0) or 0)
+        pass
+    except Exception:
+        if context.ok():
+            raise                                   # a real error, not the shutdown
     finally:
         if node is not None:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+            node.destroy_node()                     # close() first: the recorder's bag
+        try:
+            rclpy.try_shutdown()
+        except Exception:  # noqa: BLE001 - rclpy's signal thread shut it down meanwhile
+            if context.ok():
+                raise
+    return int(node.exit_code or 0)

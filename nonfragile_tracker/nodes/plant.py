@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
@@ -36,8 +36,8 @@ from .. import topics
 from ..control.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
                             odometry_period_steps, step_time_ns)
 from ..control.validate import as_matrix
-from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode,
-                     declare, fill_pose, get, ns_to_stamp, run)
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_pose, ns_to_stamp, run)
 
 LATENCY_PARAMS = ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
                   'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed')
@@ -94,25 +94,64 @@ PARAMS = [
 MAX_FREE_STEPS = 50
 
 
-class PlantNode(Node):
+@dataclass(frozen=True)
+class PlantSettings:
+    """The plant node's validated parameters (see :data:`PARAMS`)."""
+
+    mode: str
+    plant: PlantConfig
+    final_step: int
+    lockstep_timeout: float
+    startup_timeout: float
+    lockstep_retry: float
+    lockstep_subscribers: int
+    cmd_timeout: float
+    stamped: bool
+    odom_frame: str
+    base_frame: str
+
+
+def plant_settings(values: dict) -> PlantSettings:
+    """Validate the plant's parameter values (start-up and runtime sets); InputError if bad."""
+    mode = check_mode(values['mode'])
+    pose0 = list(values['initial_pose'])
+    if len(pose0) != 3:
+        raise StartupError(f'initial_pose needs [x, y, yaw], got {pose0}')
+    if values['lockstep_subscribers'] < 1:
+        raise StartupError(f'lockstep_subscribers must be at least 1, got '
+                           f'{values["lockstep_subscribers"]}')
+    cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
+                      A_tau=as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True,
+                                      error=LoopConfigError),
+                      x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'],
+                      **{n: values[n] for n in LATENCY_PARAMS})
+    odo = cfg.odometry
+    if mode == 'lockstep' and max(odo.latency_steps, odo.period_steps) > MAX_FREE_STEPS:
+        raise StartupError(
+            f'odom_latency ({odo.latency_steps} steps) and the odometry period '
+            f'({odo.period_steps} steps) must each be at most {MAX_FREE_STEPS} plant steps '
+            'in lockstep (the plant steps on without waiting in between and the topics '
+            'keep the last 100 messages); use a larger dt, a smaller odom_latency or a higher '
+            'odom_rate')
+    return PlantSettings(mode=mode, plant=cfg,
+                         final_step=int(round(values['duration'] / cfg.dt)),
+                         lockstep_timeout=values['lockstep_timeout'],
+                         startup_timeout=values['startup_timeout'],
+                         lockstep_retry=values['lockstep_retry'],
+                         lockstep_subscribers=values['lockstep_subscribers'],
+                         cmd_timeout=values['cmd_timeout'],
+                         stamped=values['enable_stamped_cmd_vel'],
+                         odom_frame=values['odom_frame'], base_frame=values['base_frame'])
+
+
+class PlantNode(AdapterNode):
     """ROS adapter around :class:`UnicyclePlant`."""
 
-    def __init__(self, **kwargs):
-        super().__init__('plant', **kwargs)
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'plant')
-        pose0 = list(get(self, 'initial_pose'))
-        if len(pose0) != 3:
-            raise StartupError(f'plant: initial_pose needs [x, y, yaw], got {pose0}')
-        try:
-            cfg = PlantConfig(dt=get(self, 'dt'), tau=get(self, 'tau'),
-                              A_tau=as_matrix(get(self, 'A_tau'), 'A_tau', (4, 4), flat=True,
-                                              error=LoopConfigError),
-                              x0=pose0[0], y0=pose0[1], th0=pose0[2],
-                              v0=get(self, 'initial_speed'),
-                              **{n: get(self, n) for n in LATENCY_PARAMS})
-        except LoopConfigError as exc:
-            raise StartupError(f'plant: {exc}') from None
+    def __init__(self, node_name: str = 'plant', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = self.bind_parameters(PARAMS, plant_settings)
+        self.mode = self.config.mode
+        cfg = self.config.plant
         for name in ('tau', 'cmd_latency', 'odom_latency'):
             value = getattr(cfg, name)
             n = delay_steps(value, cfg.dt)[0]
@@ -125,32 +164,22 @@ class PlantNode(Node):
             self.get_logger().warn(f'odom_rate = {cfg.odom_rate} Hz does not divide the plant '
                                    f'rate {1 / cfg.dt:g} Hz: odometry every {period} steps '
                                    f'= {rate:.6g} Hz')
-        odo = cfg.odometry
-        if self.mode == 'lockstep' and max(odo.latency_steps, odo.period_steps) > MAX_FREE_STEPS:
-            raise StartupError(
-                f'plant: odom_latency ({odo.latency_steps} steps) and the odometry period '
-                f'({odo.period_steps} steps) must each be at most {MAX_FREE_STEPS} plant steps '
-                'in lockstep (the plant steps on without waiting in between and the topics '
-                'keep the last 100 messages); use a larger dt, a smaller odom_latency or a higher '
-                'odom_rate')
         self.plant = UnicyclePlant(cfg)
         self.dt = cfg.dt
         self.dt_ns = step_time_ns(1, cfg.dt)
-        self.final_step = int(round(get(self, 'duration') / cfg.dt))
-        self.finished = False
-        self.exit_code = 0
+        self.final_step = self.config.final_step
         self.progress_every = max(1, self.final_step // 10)
 
         self.pub_odom = self.create_publisher(Odometry, topics.ODOM, DATA_QOS)
         self.pub_pose = self.create_publisher(PoseStamped, topics.POSE, DATA_QOS)
-        self.stamped = get(self, 'enable_stamped_cmd_vel')
+        self.stamped = self.config.stamped
         self.last_cmd_header = None
         self.sub_cmd = self.create_subscription(
             TwistStamped if self.stamped else Twist, topics.CMD_VEL,
             self._on_stamped_cmd if self.stamped else self._on_cmd, DATA_QOS)
         self._odom, self._pose = Odometry(), PoseStamped()
-        self._odom.header.frame_id = self._pose.header.frame_id = get(self, 'odom_frame')
-        self._odom.child_frame_id = get(self, 'base_frame')
+        self._odom.header.frame_id = self._pose.header.frame_id = self.config.odom_frame
+        self._odom.child_frame_id = self.config.base_frame
         self.cmd = (cfg.v0, 0.0)
         self.commands = 0
         if self.mode == 'lockstep':
@@ -191,7 +220,7 @@ class PlantNode(Node):
     # ------------------------------------------------------------------ lockstep
     def _peers_ready(self) -> bool:
         return (self.sub_cmd.get_publisher_count() >= 1
-                and self.pub_odom.get_subscription_count() >= get(self, 'lockstep_subscribers')
+                and self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers
                 and self.pub_clock.get_subscription_count() >= 1)
 
     def _lockstep_watchdog(self) -> None:
@@ -205,26 +234,30 @@ class PlantNode(Node):
                                        f'{self.final_step} steps (dt = {self.dt} s)')
                 self.waiting_since = now
                 self._publish_step()
-            elif now - self.waiting_since > get(self, 'startup_timeout'):
+            elif now - self.waiting_since > self.config.startup_timeout:
                 self._abort('no tracker/reference discovered', 'startup_timeout')
             return
-        if now - self.waiting_since > get(self, 'lockstep_timeout'):
+        if now - self.waiting_since > self.config.lockstep_timeout:
             self._abort(f'no command for step {self.plant.k}')
-        elif now - self.last_publish > get(self, 'lockstep_retry'):
+        elif now - self.last_publish > self.config.lockstep_retry:
             self._publish_state(step_time_ns(self.plant.k, self.dt))   # same sample again
 
     def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
         self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
-                                f'{get(self, limit)} s ({limit}); is the tracker running '
-                                'on the same ROS_DOMAIN_ID and namespace?')
+                                f'{getattr(self.config, limit)} s ({limit}); is the tracker '
+                                'running on the same ROS_DOMAIN_ID and namespace?')
         self.exit_code = 5
         self._finish()
 
     def _finish(self) -> None:
         if self.mode == 'lockstep':
             self.pub_done.publish(UInt64(data=self.plant.k))
+        self.finished = True          # run() stops spinning, then drain() waits for the acks
+
+    def drain(self) -> None:
+        """After the run: give ``run_done`` up to 2 s to reach its subscribers."""
+        if self.mode == 'lockstep':
             self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
-        self.finished = True
 
     def _on_stamped_cmd(self, msg: TwistStamped) -> None:
         self.last_cmd_header = msg.header
@@ -272,7 +305,7 @@ class PlantNode(Node):
     # ------------------------------------------------------------------ real time
     def _realtime_step(self) -> None:
         stale = self.last_cmd_time is None or \
-            time.monotonic() - self.last_cmd_time > get(self, 'cmd_timeout')
+            time.monotonic() - self.last_cmd_time > self.config.cmd_timeout
         v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
         self._publish_state(self.get_clock().now().nanoseconds)
         self.plant.step(v, w)
@@ -281,6 +314,7 @@ class PlantNode(Node):
 
 
 def main(args=None) -> int:
+    """Console entry point of the plant node; returns the exit code (see :func:`common.run`)."""
     return run(PlantNode, args)
 
 

@@ -27,11 +27,12 @@ got (a warning lists shortfalls), closes the bag and exits 0.  Chunks are
 flushed to disk every ``chunk_size`` bytes or ``flush_period`` s, so a killed
 recorder loses at most that much (``nonfragile_tracker bag repair``).
 
-In-process use: ``Recorder(node_name='recorder', **overrides)`` (parameter values by
-name, e.g. ``output=str(path)``, and/or ``parameter_overrides=[Parameter(...)]``) is an
-rclpy ``Node`` (``namespace=`` and ``context=`` are passed on); add it to an
-executor, watch ``recorder.done`` (a Future whose result is the message count per
-recorded topic, by logical name) or ``recorder.finished``, and call
+In-process use: ``Recorder(node_name='recorder', **node_kwargs)`` takes the rclpy ``Node``
+keyword arguments like every node of the package, e.g.
+``Recorder(context=ctx, parameter_overrides=overrides(output=str(path)))``
+(:func:`nodes.common.overrides`); add it to an executor, watch ``recorder.done`` (a
+Future whose result is the message count per recorded topic, by logical name) or
+``recorder.finished``, and call
 ``recorder.close()`` (also done by ``destroy_node()``).
 """
 from __future__ import annotations
@@ -40,13 +41,11 @@ import importlib
 import struct
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_msgs.msg import UInt64
@@ -54,7 +53,7 @@ from std_msgs.msg import UInt64
 from .. import topics
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
                           default_qos, make_qos, new_run_dir)
-from .common import DATA_QOS, LATCHED_QOS, Param, StartupError, declare, get, run
+from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -120,22 +119,57 @@ def _header_stamp_ns(raw: bytes) -> int | None:
     return sec * 1_000_000_000 + nsec
 
 
-class Recorder(Node):
+@dataclass(frozen=True)
+class RecorderSettings:
+    """The recorder's validated parameters (see :data:`PARAMS`)."""
+
+    topics: tuple[str, ...]
+    output: str
+    chunk_size: int
+    flush_period: float
+    drain_timeout: float
+    lockstep_gate: bool
+    gate_timeout: float
+    stamped_cmd_vel: bool
+
+
+def recorder_settings(values: dict) -> RecorderSettings:
+    """Validate the recorder's parameter values; InputError if bad."""
+    chunk = values['chunk_size']
+    if not 1 <= chunk <= 2 ** 20:
+        raise StartupError(f'chunk_size must be 1 .. 1048576 bytes, got {chunk}')
+    return RecorderSettings(topics=tuple(_topic_list(values['topics'])), output=values['output'],
+                            chunk_size=chunk, flush_period=values['flush_period'],
+                            drain_timeout=values['drain_timeout'],
+                            lockstep_gate=values['lockstep_gate'],
+                            gate_timeout=values['gate_timeout'],
+                            stamped_cmd_vel=values['enable_stamped_cmd_vel'])
+
+
+def _topic_list(values) -> list[str]:
+    names: list[str] = []
+    for raw in values:
+        name = raw if raw in topics.TYPES else raw.lstrip('/')
+        if name not in topics.TYPES:
+            raise StartupError(f'unknown topic {raw!r} in parameter topics; known '
+                               f'topics: {", ".join(topics.TYPES)}')
+        if name not in names:
+            names.append(name)
+    if not names:
+        raise StartupError('parameter topics is empty; name at least one topic')
+    return names
+
+
+class Recorder(AdapterNode):
     """Raw-CDR recorder node; ``done`` completes after a ``run_done`` drain (or on close)."""
 
-    def __init__(self, node_name: str = 'recorder', *, namespace: str | None = None,
-                 context=None, parameter_overrides: list[Parameter] | None = None,
-                 **overrides: Any):
-        params = list(parameter_overrides or [])
-        params += [Parameter(k, value=v) for k, v in overrides.items()]
-        kwargs: dict[str, Any] = {'parameter_overrides': params}
-        if namespace is not None:
-            kwargs['namespace'] = namespace
-        if context is not None:
-            kwargs['context'] = context
-        super().__init__(node_name, **kwargs)
+    def __init__(self, node_name: str = 'recorder', **node_kwargs: Any):
+        super().__init__(node_name, **node_kwargs)
         self.writer: BagWriter | None = None
+        self._flush_timer = self._drain_timer = None
+        self.done: Future = Future()
         try:
+            self.config = self.bind_parameters(PARAMS, recorder_settings)
             self._setup()
         except BaseException:
             if self.writer is not None:
@@ -144,35 +178,28 @@ class Recorder(Node):
             raise
 
     def _setup(self) -> None:
-        declare(self, PARAMS)
-        self.done: Future = Future()
-        self.finished = False
-        self.exit_code = 0
+        cfg = self.config
         self.counts: dict[str, int] = {}
         self.stamps: dict[str, set[int]] = {}
         self.final_step: int | None = None
         self._drain_deadline: float | None = None
-        self._drain_timer = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
 
-        names = self._topic_list(get(self, 'topics'))
-        chunk = get(self, 'chunk_size')
-        if not 1 <= chunk <= 2 ** 20:
-            raise StartupError(f'recorder: chunk_size must be 1 .. 1048576 bytes, got {chunk}')
-        self.bag_path = self._output_path(get(self, 'output'))
+        names = list(cfg.topics)
+        self.bag_path = self._output_path(cfg.output)
         self._msgtypes = dict(topics.TYPES)
-        if get(self, 'enable_stamped_cmd_vel'):
+        if cfg.stamped_cmd_vel:
             self._msgtypes[topics.CMD_VEL] = topics.CMD_VEL_STAMPED_TYPE
         self._types = {n: import_message(self._msgtypes[n]) for n in names}
         try:
-            self.writer = BagWriter(self.bag_path, chunk_size=chunk,
-                                    flush_period=get(self, 'flush_period'),
+            self.writer = BagWriter(self.bag_path, chunk_size=cfg.chunk_size,
+                                    flush_period=cfg.flush_period,
                                     custom_data={'recorder': self.get_fully_qualified_name()})
         except BagError as exc:
             raise StartupError(f'recorder: {exc}') from None
         self._subs = {}
         self._resolved: dict[str, str] = {}
-        gated = get(self, 'lockstep_gate') and topics.ODOM in names
+        gated = cfg.lockstep_gate and topics.ODOM in names
         for name in names:
             self.counts[name] = 0
             if name in _STAMPED:
@@ -189,8 +216,7 @@ class Recorder(Node):
         # drain can close it); a deserialized one if it is not recorded
         self._done_sub = None if topics.RUN_DONE in names else self.create_subscription(
             UInt64, topics.RUN_DONE, self._on_run_done, _LATCHED_QOS)
-        self._flush_timer = self.create_timer(get(self, 'flush_period'), self._flush,
-                                              clock=self._steady)
+        self._flush_timer = self.create_timer(cfg.flush_period, self._flush, clock=self._steady)
         self.get_logger().info(f'recording {len(names)} topics to {self.bag_path}: '
                                f'{", ".join(self._resolved[n] for n in names)}')
 
@@ -209,27 +235,13 @@ class Recorder(Node):
                    if n not in (topics.CLOCK, topics.RUN_DONE, topics.POSE)
                    and sub.get_publisher_count() < 1]
         elapsed = (self._steady.now() - self._gate_started).nanoseconds * 1e-9
-        if waiting and elapsed < get(self, 'gate_timeout'):
+        if waiting and elapsed < self.config.gate_timeout:
             return
         if waiting:
             self.get_logger().warn(f'gate timeout: no publisher yet on {", ".join(waiting)}; '
                                    'recording odom anyway')
         self._gate_timer.cancel()
         self._subscribe(topics.ODOM)
-
-    @staticmethod
-    def _topic_list(values) -> list[str]:
-        names: list[str] = []
-        for raw in values:
-            name = raw if raw in topics.TYPES else raw.lstrip('/')
-            if name not in topics.TYPES:
-                raise StartupError(f'recorder: unknown topic {raw!r} in parameter topics; known '
-                                   f'topics: {", ".join(topics.TYPES)}')
-            if name not in names:
-                names.append(name)
-        if not names:
-            raise StartupError('recorder: parameter topics is empty; name at least one topic')
-        return names
 
     @staticmethod
     def _output_path(output: str) -> Path:
@@ -254,6 +266,7 @@ class Recorder(Node):
             topic = self._resolved[name]
             if not writer.has_connection(topic):
                 writer.add_connection(topic, self._msgtypes[name], self._offered_qos(name))
+                self.get_logger().info(f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
             if topic_stamps is not None:
@@ -298,7 +311,7 @@ class Recorder(Node):
         if self.final_step is not None or self.finished:
             return
         self.final_step = int(msg.data)
-        timeout = get(self, 'drain_timeout')
+        timeout = self.config.drain_timeout
         self._drain_deadline = time.monotonic() + timeout
         self.get_logger().info(f'run_done: last step {self.final_step}; waiting up to {timeout} s '
                                f'for {self.final_step + 1} samples per lockstep topic')
@@ -321,7 +334,7 @@ class Recorder(Node):
         if short:
             miss = ', '.join(f'{self._resolved[n]} short by {k}' for n, k in short.items())
             self.get_logger().warn(f'run_done {self.final_step}: drain timeout '
-                                   f'({get(self, "drain_timeout")} s) with {miss}; got {got}')
+                                   f'({self.config.drain_timeout} s) with {miss}; got {got}')
         else:
             self.get_logger().info(f'run_done {self.final_step}: all samples received ({got})')
         self.close()
@@ -352,10 +365,6 @@ class Recorder(Node):
             print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
         if not self.done.done():
             self.done.set_result(dict(self.counts))
-
-    def destroy_node(self) -> None:
-        self.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

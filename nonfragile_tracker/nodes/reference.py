@@ -25,19 +25,19 @@ and the previous trajectory stays.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from nav_msgs.msg import Path as PathMsg
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from .. import topics
-from ..control.reference import PathError, make_path
+from ..control.reference import Path, make_path
 from ..control.trajectory import Trajectory, TrajectoryError, load_waypoints
-from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare,
-                     fill_reference, get, ns_to_stamp, run, stamp_ns)
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_reference, ns_to_stamp, run, stamp_ns)
 from .trajectory_io import path_to_trajectory, trajectory_to_path
 
 PARAMS = [
@@ -62,27 +62,54 @@ PARAMS = [
           '(m/s^2)', low=1e-6, high=1e3, read_only=True),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of the trajectory (the odometry frame)',
           read_only=True),
-    Param('display_points', 400, 'points of the reference/path shown for a built-in path'),
+    Param('display_points', 400, 'points of the reference/path shown (at least 2)'),
 ]
 
 
-class ReferenceNode(Node):
-    """ROS adapter around :class:`control.reference.Path`."""
+@dataclass(frozen=True)
+class ReferenceSettings:
+    """The reference node's validated parameters (see :data:`PARAMS`)."""
 
-    def __init__(self, **kwargs):
-        super().__init__('reference', **kwargs)
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'reference')
-        center = list(get(self, 'center'))
-        if len(center) != 2:
-            raise StartupError(f'reference: center needs [x, y], got {center}')
-        try:
-            self.path = make_path(get(self, 'path'), radius=get(self, 'radius'),
-                                  rate=get(self, 'rate'), center_x=center[0],
-                                  center_y=center[1], phase=get(self, 'phase'))
-        except PathError as exc:
-            raise StartupError(f'reference: {exc}') from None
-        self.frame = get(self, 'odom_frame')
+    mode: str
+    path: Path
+    publish_rate: float
+    trajectory_file: str
+    trajectory_topic: str
+    smoothing: float
+    cruise_speed: float
+    max_accel: float
+    frame: str
+    display_points: int
+
+
+def reference_settings(values: dict) -> ReferenceSettings:
+    """Validate the reference's parameter values; InputError (e.g. PathError) if bad."""
+    mode = check_mode(values['mode'])
+    center = list(values['center'])
+    if len(center) != 2:
+        raise StartupError(f'center needs [x, y], got {center}')
+    path = make_path(values['path'], radius=values['radius'], rate=values['rate'],
+                     center_x=center[0], center_y=center[1], phase=values['phase'])
+    if values['display_points'] < 2:
+        raise StartupError(f'display_points must be at least 2, got {values["display_points"]}')
+    return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'],
+                             trajectory_file=values['trajectory_file'],
+                             trajectory_topic=values['trajectory_topic'],
+                             smoothing=values['smoothing'],
+                             cruise_speed=values['cruise_speed'],
+                             max_accel=values['max_accel'], frame=values['odom_frame'],
+                             display_points=values['display_points'])
+
+
+class ReferenceNode(AdapterNode):
+    """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`."""
+
+    def __init__(self, node_name: str = 'reference', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = cfg = self.bind_parameters(PARAMS, reference_settings)
+        self.mode = cfg.mode
+        self.path = cfg.path
+        self.frame = cfg.frame
         self.pub_pose = self.create_publisher(PoseStamped, topics.REF_POSE, DATA_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, topics.REF_TWIST, DATA_QOS)
         self.pub_accel = self.create_publisher(AccelStamped, topics.REF_ACCEL, DATA_QOS)
@@ -91,7 +118,6 @@ class ReferenceNode(Node):
         self._msgs = (PoseStamped(), TwistStamped(), AccelStamped())
         for m in self._msgs:
             m.header.frame_id = self.frame
-        self.finished = False
         self.traj: Trajectory = Trajectory.analytic(self.path)
         self.origin_ns = 0
         self.last_refusal = ''
@@ -101,23 +127,30 @@ class ReferenceNode(Node):
                                                       DATA_QOS)
         else:
             self.t0_ns = self.get_clock().now().nanoseconds   # path time 0 = node start
-            self.timer = self.create_timer(1.0 / get(self, 'publish_rate'), self._on_timer)
+            self.timer = self.create_timer(1.0 / cfg.publish_rate, self._on_timer)
         start_ns = 0 if self.mode == 'lockstep' else self.t0_ns
-        file = get(self, 'trajectory_file')
+        self._display_origin = start_ns
+        file = cfg.trajectory_file
         if file:
             try:
-                traj = load_waypoints(file, smoothing=get(self, 'smoothing'))
+                traj = load_waypoints(file, smoothing=cfg.smoothing)
             except (TrajectoryError, OSError) as exc:
                 raise StartupError(f'reference: trajectory_file: {exc}') from None
             self._follow(trajectory_to_path(traj, start_ns, self.frame), file)
         else:
             self._display(self.traj, start_ns)
-        relay = get(self, 'trajectory_topic')
+        relay = cfg.trajectory_topic
         if relay:
             self.create_subscription(PathMsg, relay, self._on_relay, 10)
 
+    def apply_config(self, old: ReferenceSettings, new: ReferenceSettings) -> None:
+        """An accepted runtime set (post-set callback): show the path with the new points."""
+        if new.display_points != old.display_points:
+            self._display(self.traj, self._display_origin)
+
     def _display(self, traj: Trajectory, origin_ns: int) -> None:
-        n = max(2, int(get(self, 'display_points')))
+        self._display_origin = origin_ns
+        n = self.config.display_points
         if traj.is_analytic:
             w = abs(self.path.params['rate'])
             span = 2 * math.pi / w if w > 0 else 1.0
@@ -142,13 +175,13 @@ class ReferenceNode(Node):
     def _relay(self, msg: PathMsg, source: str) -> None:
         """Validate a Path (time law if untimed) and follow its timed form."""
         traj, origin = path_to_trajectory(msg, frame=self.frame, source=source,
-                                          cruise_speed=get(self, 'cruise_speed'),
-                                          max_accel=get(self, 'max_accel'),
+                                          cruise_speed=self.config.cruise_speed,
+                                          max_accel=self.config.max_accel,
                                           now_ns=self.get_clock().now().nanoseconds)
         self._follow(trajectory_to_path(traj, origin, self.frame), source)
 
     def _on_relay(self, msg: PathMsg) -> None:
-        source = f'topic {get(self, "trajectory_topic")}'
+        source = f'topic {self.config.trajectory_topic}'
         try:
             self._relay(msg, source)
         except TrajectoryError as exc:
@@ -177,6 +210,7 @@ class ReferenceNode(Node):
 
 
 def main(args=None) -> int:
+    """Console entry point of the reference node; returns the exit code (see :func:`common.run`)."""
     return run(ReferenceNode, args)
 
 

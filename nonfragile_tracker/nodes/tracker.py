@@ -42,28 +42,29 @@ ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``)
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
+from rcl_interfaces.msg import ParameterType
+from rclpy.parameter import Parameter
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from .. import topics
 from ..control.follow import REST_SPEED, Follower, path_errors
-from ..control.loop import LoopConfigError, Tracker
+from ..control.loop import Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
-from .common import (DATA_QOS, LATCHED_QOS, Param, StartupError, check_mode, declare,
-                     fill_pose, get, ns_to_stamp, pose_from_odom, reference_from_msgs, run,
-                     stamp_ns)
+from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
+                     fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)
 from .trajectory_io import multidof_to_trajectory, path_to_trajectory
 
 PARAMS = [
+    Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
+          '`nonfragile_tracker synthesize`', type=ParameterType.PARAMETER_DOUBLE_ARRAY),
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
           read_only=True),
     Param('K_shape', [2, 4], 'shape [rows, cols] of K', read_only=True),
@@ -111,7 +112,7 @@ PARAMS = [
           read_only=True),
     Param('viz_period', 0.2, 'period (s, stamp time) of the travelled path and the reference '
           'marker', low=1e-3, high=1e6, read_only=True),
-    Param('max_path_poses', 5000, 'travelled path: keep the last this many poses'),
+    Param('max_path_poses', 5000, 'travelled path: keep the last this many poses (>= 1)'),
     Param('diagnostics_period', 1.0, 'period (s, node clock) of the status on /diagnostics',
           low=1e-3, high=1e6, read_only=True),
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
@@ -119,39 +120,65 @@ PARAMS = [
 ]
 #: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
 REF_BUFFER = 1000
-RUNTIME = {'K', 'max_linear_speed', 'max_angular_speed', 'min_speed', 'E', 'F', 'Delta',
-           'input_timeout', 'max_stamp_jump'}
 
 
-class TrackerNode(Node):
-    """ROS adapter around :class:`control.loop.Tracker`."""
+@dataclass(frozen=True)
+class TrackerSettings:
+    """The tracker node's validated parameters (see :data:`PARAMS`)."""
 
-    def __init__(self, **kwargs):
-        super().__init__('tracker', **kwargs)
-        from rcl_interfaces.msg import ParameterDescriptor
-        self.declare_parameter('K', Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
-            description='gain K, row-major doubles (see K_shape); from a gain file written '
-                        'by `nonfragile_tracker synthesize`'))
-        declare(self, PARAMS)
-        self.mode = check_mode(get(self, 'mode'), 'tracker')
-        try:
-            k_value = self.get_parameter('K').value
-        except Exception:  # noqa: BLE001 - ParameterUninitializedException
-            k_value = None
-        if k_value is None:
-            raise StartupError('tracker: parameter K is not set; pass a gain file, e.g. '
-                               '--ros-args --params-file config/tracker_gains.yaml')
-        try:
-            self.tracker = Tracker(tracker_config(self._values()))
-        except LoopConfigError as exc:
-            raise StartupError(f'tracker: {exc}') from None
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+    mode: str
+    tracker: TrackerConfig
+    input_timeout: float
+    max_stamp_jump: float
+    frame: str
+    cruise_speed: float
+    max_accel: float
+    wait_for_trajectory: bool
+    stamped_cmd_vel: bool
+    base_frame: str
+    viz_period: float
+    max_path_poses: int
+    diagnostics_period: float
+    rest_speed: float
+
+
+def tracker_settings(values: dict) -> TrackerSettings:
+    """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad.
+
+    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` (shared
+    with bag replay); the rest are the node's own settings.
+    """
+    if values['K'] is None:
+        raise StartupError('parameter K is not set; pass a gain file, e.g. '
+                           '--ros-args --params-file config/tracker_gains.yaml')
+    if values['max_path_poses'] < 1:
+        raise StartupError(f'max_path_poses must be at least 1, got {values["max_path_poses"]}')
+    return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
+                           input_timeout=values['input_timeout'],
+                           max_stamp_jump=values['max_stamp_jump'], frame=values['odom_frame'],
+                           cruise_speed=values['cruise_speed'], max_accel=values['max_accel'],
+                           wait_for_trajectory=values['wait_for_trajectory'],
+                           stamped_cmd_vel=values['enable_stamped_cmd_vel'],
+                           base_frame=values['base_frame'], viz_period=values['viz_period'],
+                           max_path_poses=values['max_path_poses'],
+                           diagnostics_period=values['diagnostics_period'],
+                           rest_speed=values['rest_speed'])
+
+
+class TrackerNode(AdapterNode):
+    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`."""
+
+    def __init__(self, node_name: str = 'tracker', **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self.config = cfg = self.bind_parameters(PARAMS, tracker_settings)
+        self.mode = cfg.mode
+        self.tracker = Tracker(cfg.tracker)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
         self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
         self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
         self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel, DATA_QOS)
-        self.frame = get(self, 'odom_frame')
-        self.wait_for_trajectory = get(self, 'wait_for_trajectory')
+        self.frame = cfg.frame
+        self.wait_for_trajectory = cfg.wait_for_trajectory
         self.follower: Follower | None = None
         self.last_refusal = ''
         self.origin_ns = 0
@@ -168,14 +195,13 @@ class TrackerNode(Node):
         self.rejected = 0
         self.jumps = 0
         self.commands = 0
-        self.finished = False
         self._stopped = False
         self.saturated = self.stale_stops = self.deadline_misses = 0
         self._rejected_reported = 0
         self._odom_intervals, self._odom_interval_sum = 0, 0.0
         self._last_odom_rx = self._last_ref_rx = 0
-        self.base_frame = get(self, 'base_frame')
-        if get(self, 'enable_stamped_cmd_vel'):
+        self.base_frame = cfg.base_frame
+        if cfg.stamped_cmd_vel:
             self._cmd_msg = TwistStamped()
             self._cmd_msg.header.frame_id = self.base_frame
             self._cmd = self._cmd_msg.twist
@@ -190,45 +216,23 @@ class TrackerNode(Node):
         self._err_msg.header.frame_id = self.frame
         self._travelled = PathMsg()
         self._travelled.header.frame_id = self.frame
-        self.viz_period_ns = int(get(self, 'viz_period') * 1e9)
-        self.max_path_poses = int(get(self, 'max_path_poses'))
+        self.viz_period_ns = int(cfg.viz_period * 1e9)
+        self.max_path_poses = cfg.max_path_poses
         self._last_viz = -(1 << 62)
         mk = self._marker = Marker()
         mk.header.frame_id = self.frame
         mk.ns, mk.id, mk.type, mk.action = 'reference', 0, Marker.ARROW, Marker.ADD
         mk.scale.x, mk.scale.y, mk.scale.z = 0.25, 0.04, 0.04
         mk.color.r, mk.color.g, mk.color.b, mk.color.a = 1.0, 0.3, 0.0, 1.0
-        self.create_timer(get(self, 'diagnostics_period'), self._diagnostics)
+        self.create_timer(cfg.diagnostics_period, self._diagnostics)
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
 
-    # ------------------------------------------------------------------ parameters
-    def _values(self, overrides: dict | None = None) -> dict:
-        names = ['K', 'K_shape'] + [p.name for p in PARAMS]
-        vals = {n: self.get_parameter(n).value for n in names}
-        vals.update(overrides or {})
-        return vals
-
-    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {p.name: p.value for p in params if p.name in RUNTIME}
-        if not changes:
-            return SetParametersResult(successful=True)
-        for p in params:
-            if p.name in ('K', 'E', 'F', 'Delta') and p.type_ != Parameter.Type.DOUBLE_ARRAY:
-                reason = (f'{p.name} must be a DOUBLE_ARRAY (write 1.0, not 1), got '
-                          f'{p.type_.name}; keeping the old value')
-                self.get_logger().error(f'rejected parameter set: {reason}')
-                return SetParametersResult(successful=False, reason=reason)
-        try:
-            cfg = tracker_config(self._values(changes))
-        except LoopConfigError as exc:
-            reason = f'{exc}; keeping the old value'
-            self.get_logger().error(f'rejected parameter set: {reason}')
-            return SetParametersResult(successful=False, reason=reason)
-        self.tracker.config = cfg
-        self.get_logger().info(f'accepted parameter set: {sorted(changes)}')
-        return SetParametersResult(successful=True)
+    def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
+        """An accepted runtime set (post-set callback): the law uses the new gains/limits."""
+        self.tracker.config = new.tracker
+        self.max_path_poses = new.max_path_poses
 
     # ------------------------------------------------------------------ inputs
     def _reject(self, what: str) -> None:
@@ -246,7 +250,7 @@ class TrackerNode(Node):
             self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
             return
         if self.follower is None:
-            self.follower = Follower(self.tracker, traj, get(self, 'rest_speed'))
+            self.follower = Follower(self.tracker, traj, self.config.rest_speed)
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
@@ -258,8 +262,8 @@ class TrackerNode(Node):
     def _on_path(self, msg: PathMsg) -> None:
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
         self._new_trajectory(lambda: path_to_trajectory(
-            msg, frame=self.frame, source=source, cruise_speed=get(self, 'cruise_speed'),
-            max_accel=get(self, 'max_accel'), now_ns=self.get_clock().now().nanoseconds),
+            msg, frame=self.frame, source=source, cruise_speed=self.config.cruise_speed,
+            max_accel=self.config.max_accel, now_ns=self.get_clock().now().nanoseconds),
             source)
 
     def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
@@ -277,7 +281,7 @@ class TrackerNode(Node):
                 self._reject(f'odom stamp going backwards ({s} < {self.last_odom_stamp} ns)')
             return                         # repeat of the current step: already handled
         jump = s - self.last_odom_stamp
-        if self.last_odom_stamp >= 0 and jump > get(self, 'max_stamp_jump') * 1e9:
+        if self.last_odom_stamp >= 0 and jump > self.config.max_stamp_jump * 1e9:
             self.jumps += 1
             self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
                                    'ahead: re-initialising the compensator from odom')
@@ -487,7 +491,7 @@ class TrackerNode(Node):
         if self._last_odom_wall is None or (self._last_ref_wall is None and not own):
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
-        limit = get(self, 'input_timeout') * 1e9
+        limit = self.config.input_timeout * 1e9
         inputs = [('odom', self._last_odom_wall)]
         if not own:
             inputs.append(('reference', self._last_ref_wall))
@@ -495,7 +499,7 @@ class TrackerNode(Node):
         if stale:
             if not self._stopped:
                 self.get_logger().warn(f'no {" or ".join(stale)} for more than '
-                                       f'{get(self, "input_timeout")} s: publishing stop')
+                                       f'{self.config.input_timeout} s: publishing stop')
                 self._stopped = True
                 self.stale_stops += 1
                 self.tracker.reset()
@@ -506,6 +510,7 @@ class TrackerNode(Node):
 
 
 def main(args=None) -> int:
+    """Console entry point of the tracker node; returns the exit code (see :func:`common.run`)."""
     return run(TrackerNode, args)
 
 

@@ -1,0 +1,215 @@
+"""Clean shutdown under the signal patterns of a terminal, ``ros2 launch``, systemd and a
+test harness: every node exits 0, no traceback anywhere, the bag is complete.
+
+The nodes are started as ``ros2 launch`` starts them: one process each, all in one process
+group (of their own, so pytest is not signalled).  Patterns:
+
+- ``launch``: Ctrl-C in a terminal running ``ros2 launch`` - the terminal sends SIGINT to
+  the whole foreground group, then launch forwards SIGINT to each node shortly after;
+- ``sigint``: one SIGINT to each node (a harness, ``kill -INT``);
+- ``sigterm``: SIGTERM to the group (systemd's ``KillMode=control-group``, ``docker stop``).
+
+The real ``ros2 launch`` is not installable here; this reproduces its signal pattern.
+"""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from conftest import CONFIG, ROOT, unique_domain_id
+from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag
+from nonfragile_tracker.runner import scenario_parameters, write_parameter_file
+
+NODES = ('recorder', 'tracker', 'reference', 'plant')
+#: (pattern, mode, trials): 20 trials in all
+PLAN = [('launch', 'lockstep', 4), ('launch', 'realtime', 4), ('sigint', 'lockstep', 3),
+        ('sigint', 'realtime', 3), ('sigterm', 'lockstep', 3), ('sigterm', 'realtime', 3)]
+BAD = ('Traceback', '[FATAL]', 'Error occurred at', 'failed to shutdown', 'context is invalid')
+
+
+class Launch:
+    """The four nodes as processes in one process group, logs in ``<dir>/<node>.log``."""
+
+    def __init__(self, run_dir: Path, mode: str, env: dict):
+        self.dir = run_dir
+        self.bag = run_dir / 'bag'
+        ov = {'plant': {'ros__parameters': {'mode': mode, 'duration': 600.0,
+                                            'lockstep_subscribers': 2}},
+              'tracker': {'ros__parameters': {'mode': mode}},
+              'reference': {'ros__parameters': {'mode': mode}}}
+        params = write_parameter_file(scenario_parameters(
+            CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov),
+            run_dir / 'params.yaml')
+        extra = {'recorder': ['-p', f'output:={self.bag}', '-p', 'flush_period:=0.2']
+                 + (['-p', 'use_sim_time:=true', '-p', 'lockstep_gate:=true']
+                    if mode == 'lockstep' else [])}
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.pgid = 0
+        for name in NODES:
+            cmd = [sys.executable, '-m', f'nonfragile_tracker.nodes.{name}', '--ros-args',
+                   '--params-file', str(params), *extra.get(name, [])]
+            with open(run_dir / f'{name}.log', 'w') as log:
+                p = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, process_group=self.pgid)
+            self.procs[name] = p
+            self.pgid = self.pgid or p.pid         # the first node leads the group
+
+    def log(self, name: str) -> str:
+        return (self.dir / f'{name}.log').read_text()
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        """Until the loop is closed: the recorder got the first odom and command."""
+        deadline = time.monotonic() + timeout
+        while not all(f'first message on /{t}' in self.log('recorder')
+                      for t in ('odom', 'cmd_vel')):
+            dead = {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
+            assert not dead, (dead, {n: self.log(n)[-1500:] for n in dead})
+            assert time.monotonic() < deadline, {n: self.log(n)[-800:] for n in NODES}
+            time.sleep(0.05)
+
+    def signal(self, pattern: str, rng: random.Random) -> None:
+        if pattern == 'launch':
+            os.killpg(self.pgid, signal.SIGINT)            # the terminal: the whole group
+            time.sleep(rng.uniform(0.0, 0.05))
+            for p in self.procs.values():                  # launch forwards it to each node
+                if p.poll() is None:
+                    p.send_signal(signal.SIGINT)
+        elif pattern == 'sigint':
+            for p in rng.sample(list(self.procs.values()), len(self.procs)):
+                p.send_signal(signal.SIGINT)
+                time.sleep(rng.uniform(0.0, 0.02))
+        else:
+            os.killpg(self.pgid, signal.SIGTERM)
+
+    def wait(self, timeout: float = 30.0) -> tuple[dict, dict]:
+        """Exit codes (``'hung'`` after ``timeout``) and exit times (s) per node."""
+        t0 = time.monotonic()
+        codes, times = {}, {}
+        while len(codes) < len(self.procs) and time.monotonic() - t0 < timeout:
+            for name, p in self.procs.items():
+                if name not in codes and p.poll() is not None:
+                    codes[name], times[name] = p.returncode, time.monotonic() - t0
+            time.sleep(0.01)
+        for name in self.procs:
+            codes.setdefault(name, 'hung')
+        return codes, times
+
+    def kill(self) -> None:
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+
+def _trial(tmp_path: Path, env: dict, pattern: str, mode: str, i: int, seed: int) -> dict:
+    """One trial: start, wait until the loop is closed, signal, collect codes/logs/bag."""
+    rng = random.Random(seed)
+    trial = f'{pattern}/{mode}/{i}'
+    run_dir = tmp_path / trial.replace('/', '_')
+    run_dir.mkdir()
+    t_start = time.monotonic()
+    launch = Launch(run_dir, mode, env)
+    try:
+        launch.wait_ready()
+        time.sleep(rng.uniform(0.0, 0.3))                # somewhere in the run
+        t0 = time.monotonic()
+        launch.signal(pattern, rng)
+        codes, exit_times = launch.wait()
+    finally:
+        launch.kill()
+    print(f'{trial}: ready after {t0 - t_start:.1f} s, exited after ' + ', '.join(
+        f'{n} {t:.2f}' for n, t in exit_times.items()) + ' s', file=sys.stderr)
+    logs = {n: launch.log(n) for n in NODES}
+    return {'trial': trial, 'codes': codes, 'logs': logs, 'bag': launch.bag}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_signal_patterns_end_every_node_cleanly(tmp_path, ros_env):
+    """20 trials, four at a time (each on a domain of its own): they wait mostly on DDS."""
+    base = int(ros_env['ROS_DOMAIN_ID'])
+    jobs = [(pattern, mode, i) for pattern, mode, n in PLAN for i in range(n)]
+    assert len(jobs) == 20
+
+    def job(k: int):
+        env = dict(ros_env, ROS_DOMAIN_ID=str(100 + (base + k) % 100))
+        return _trial(tmp_path, env, *jobs[k], seed=1000 + k)
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        results = list(pool.map(job, range(len(jobs))))
+    failures = []
+    for r in results:
+        bad = {n: [w for w in BAD if w in text] for n, text in r['logs'].items()}
+        bad = {n: w for n, w in bad.items() if w}
+        if any(c != 0 for c in r['codes'].values()) or bad:
+            failures.append((r['trial'], r['codes'], bad,
+                             {n: r['logs'][n][-1500:] for n in bad or NODES}))
+    assert not failures, failures
+    for r in results:
+        # the recorder closed a complete, readable bag on every signal path
+        bag, rec_log = r['bag'], r['logs']['recorder']
+        assert (bag / 'metadata.yaml').exists(), (r['trial'], rec_log)
+        assert mcap_is_complete(next(bag.glob('*.mcap'))), r['trial']
+        data = read_bag(bag, strict=False)
+        assert data.counts.get('/cmd_vel', 0) > 0 and data.counts.get('/odom', 0) > 0, \
+            (r['trial'], data.counts, rec_log)
+        assert 'bag closed' in rec_log, r['trial']
+    # no node hung: each exited within Launch.wait's 30 s (a code, not 'hung', checked above);
+    # on a quiet machine they are gone within about 2 s, under heavy load it can take 15 s
+
+
+@pytest.mark.ros
+def test_sigkill_recorder_mid_run_then_repair(tmp_path, ros_env):
+    """The recorder is killed (SIGKILL) mid-run: ``bag repair`` recovers a readable bag."""
+    launch = Launch(tmp_path, 'realtime', ros_env)
+    try:
+        launch.wait_ready()
+        time.sleep(0.8)                                   # a few flushes (every 0.2 s)
+        launch.procs['recorder'].kill()
+        assert launch.procs['recorder'].wait(10) == -signal.SIGKILL
+        os.killpg(launch.pgid, signal.SIGINT)             # the others end as usual
+        codes, _ = launch.wait()
+    finally:
+        launch.kill()
+    assert {n: c for n, c in codes.items() if n != 'recorder'} == \
+        {'tracker': 0, 'reference': 0, 'plant': 0}
+    assert not (launch.bag / 'metadata.yaml').exists()
+    out = subprocess.run([sys.executable, '-m', 'nonfragile_tracker.cli', 'bag', 'repair',
+                          str(launch.bag)], capture_output=True, text=True, env=ros_env,
+                         cwd=ROOT, timeout=60)
+    assert out.returncode == 0 and 'Traceback' not in out.stderr, out.stderr
+    repaired = tmp_path / 'bag_repaired'
+    data = read_bag(repaired)
+    assert data.counts['/odom'] > 10 and data.counts['/cmd_vel'] > 10, data.counts
+    assert mcap_is_complete(next(repaired.glob('*.mcap')))
+
+
+@pytest.mark.ros
+def test_callback_running_into_a_shutdown_ends_quietly():
+    """rclpy's signal thread may shut the context down while a callback publishes: the
+    node's guarded callbacks end quietly (no exception out of the executor)."""
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.impl.implementation_singleton import rclpy_implementation as impl
+
+    from nonfragile_tracker.nodes.common import overrides
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=unique_domain_id("quietly"))
+    node = ReferenceNode(context=ctx, parameter_overrides=overrides(mode='realtime'))
+    try:
+        node.timer.callback()                       # publishes three messages: fine
+        ctx.try_shutdown()                          # what SIGINT/SIGTERM do, from a thread
+        with pytest.raises(impl.RCLError, match='context is invalid'):
+            node.pub_pose.publish(PoseStamped())    # a bare publish raises now ...
+        assert node.timer.callback() is None        # ... the guarded callback does not
+    finally:
+        node.destroy_node()
