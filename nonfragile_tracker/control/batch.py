@@ -581,7 +581,9 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     first_in = np.full(n, -1, dtype=np.int64)
     sq = np.zeros(n)
     steady = np.zeros(n)
-    steady_k = int(math.ceil(steady_from / (dt_ns * 1e-9) - 1e-9))
+    steady_k = max(0, int(steady_from / (dt_ns * 1e-9)) - 2)   # first k with t_k >= steady_from
+    while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < steady_from:
+        steady_k += 1
     peak_v = np.zeros(n)
     peak_w = np.zeros(n)
     finite = np.ones(n, dtype=bool)
@@ -641,7 +643,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     if due is not True:
                         first = first & due
                     if first.any():
-                        init = np.array((qx_, qvx, qy_, qvy, qvx, 0.0 * qvx, qvy, 0.0 * qvy))
+                        init = _stack((qx_, qvx, qy_, qvy, qvx, 0.0 * qvx, qvy, 0.0 * qvy), n)
                         cbuf_ref[:, :, first] = init[:, first][None]
                     cs = ccount % Lc
                     z = cbuf_ref[cs, :, idx].T          # (8, N): xi*, xi*'
@@ -649,8 +651,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     dd = [_dot4(cterms[i], z[4:8]) for i in range(4)]
                     xd = (qx_, qvx - d[0], qy_, qvy - d[2])
                     ud = (qax - dd[0] - d[1], qay - dd[2] - d[3])
-                    newrow = np.array((xd[0], xd[1], xd[2], xd[3], qvx, ud[0] + d[1], qvy,
-                                       ud[1] + d[3]))
+                    newrow = _stack((xd[0], xd[1], xd[2], xd[3], qvx, ud[0] + d[1], qvy,
+                                     ud[1] + d[3]), n)
                     if due is True:
                         cbuf_ref[cs, :, idx] = newrow.T
                         ccount += 1
@@ -817,6 +819,11 @@ def _arc_terms(th, half, c, s, exact: bool):
         sinc = np.where(big, np.sin(half) / np.where(big, half, 1.0), 1.0 - half * half / 6.0)
     mid = th + half
     return np.cos(mid), np.sin(mid), sinc
+
+
+def _stack(values, n: int) -> np.ndarray:
+    """Rows of scalars or arrays of ``n`` as one ``(len(values), n)`` array."""
+    return np.stack([np.broadcast_to(v, (n,)) for v in values])
 
 
 def _dot_terms(terms, xi, n):
