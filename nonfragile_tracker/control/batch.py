@@ -374,25 +374,29 @@ class _Reference:
                 raise BatchError(f'path must have sample(t) or be a PathBatch, got {path!r}')
             rows = [path.sample(step_time_ns(k, dt) * 1e-9) for k in range(steps + 1)]
             tab = np.array([(s.x, s.y, s.vx, s.vy, s.ax, s.ay) for s in rows], dtype=float)
-            self.table = tuple(tab[:, j].copy() for j in range(6))
+            # (steps + 1, 2, 1) each: position, velocity, acceleration as column pairs
+            self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
 
     def at(self, k):
-        """``(x, y, vx, vy, ax, ay)`` at step ``k`` (an int or an array of N ints)."""
+        """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
+
+        ``k`` is an int or an array of N ints (per-case odometry stamps).
+        """
         if self.table is not None:
             if np.ndim(k) == 0:
-                return tuple(float(col[k]) for col in self.table)
-            return tuple(col[k] for col in self.table)
+                return tuple(col[k] for col in self.table)
+            return tuple(col[k][:, :, 0].T for col in self.table)
         t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
         r, w, cx, cy = self.r, self.w, self.cx, self.cy
         a = w * t + self.ph
         if self.kind == 'circle':
             c, s = np.cos(a), np.sin(a)
-            return (cx + r * c, cy + r * s, -r * w * s, r * w * c, -r * w * w * c,
-                    -r * w * w * s)
+            return (np.stack((cx + r * c, cy + r * s)), np.stack((-r * w * s, r * w * c)),
+                    np.stack((-r * w * w * c, -r * w * w * s)))
         s1, c1 = np.sin(a), np.cos(a)
         s2, c2 = np.sin(2 * a), np.cos(2 * a)
-        return (cx + r * s1, cy + 0.5 * r * s2, r * w * c1, r * w * c2, -r * w * w * s1,
-                -2 * r * w * w * s2)
+        return (np.stack((cx + r * s1, cy + 0.5 * r * s2)), np.stack((r * w * c1, r * w * c2)),
+                np.stack((-r * w * w * s1, -2 * r * w * w * s2)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -491,20 +495,21 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     ref = _Reference(path, n, steps, dt)
     idx = np.arange(n)
 
-    # -- plant state
-    x, y, th, pv = s.x0.copy(), s.y0.copy(), s.th0.copy(), s.v0.copy()
+    # -- plant state; pairs (x, y) as (2, N) arrays
+    pos = np.stack((s.x0, s.y0))
+    th, pv = s.th0.copy(), s.v0.copy()
     pw = np.zeros(n)
-    ox = np.zeros(n)
-    oy = np.zeros(n)
+    off = np.zeros((2, n))                          # velocity offset (ox, oy)
     force_v, force_w = pv.copy(), np.zeros(n)       # command in force
     Nd = delay_steps(plant.tau, dt)[0]
     At = np.array(plant.A_tau, dtype=float)
     terms = [[(j, float(At[i, j])) for j in range(4) if At[i, j] != 0.0] for i in range(4)]
     use_delay = any(terms)
     if use_delay:
-        xi0 = (x.copy(), pv * np.cos(th), y.copy(), pv * np.sin(th))
-        hist = np.empty((Nd + 1, 4, n))
-        hist[:] = np.array(xi0)[None]
+        hist = np.empty((Nd + 1, 4, n))             # xi = (x, x', y, y') by step % (Nd + 1)
+        hist[:] = np.array((pos[0], pv * np.cos(th), pos[1], pv * np.sin(th)))[None]
+        dbuf = np.zeros((4, n))
+        dpos, dvel = dbuf[0::2], dbuf[1::2]
     # actuator
     lag_v, lag_w = s.lag_v, s.lag_w
     alv, alw = s.max_linear_accel, s.max_angular_accel
@@ -538,7 +543,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         take = (k % period) == 0
         if not take.any():
             return
-        mx, my, mth = x, y, th
+        mx, my, mth = pos[0], pos[1], th
         if any_noise:
             nz = take & noisy
             if nz.any():
@@ -547,8 +552,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     nbuf[i] = rngs[int(i)].standard_normal((blk, 3))
                 draw = nbuf[idx, j]
                 sx, sy, sth = s.noise[:, 0], s.noise[:, 1], s.noise[:, 2]
-                mx = np.where(nz, x + sx * draw[:, 0], x)
-                my = np.where(nz, y + sy * draw[:, 1], y)
+                mx = np.where(nz, mx + sx * draw[:, 0], mx)
+                my = np.where(nz, my + sy * draw[:, 1], my)
                 mth = np.where(nz, _wrap(th + sth * draw[:, 2]), th)
                 ncount[nz] += 1
         slot = k % Ro
@@ -566,6 +571,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     Kc = None
     tv = np.zeros(n)
     started = np.zeros(n, dtype=bool)
+    all_started = False
     tdt = s.tdt
     vmax, wmax, vmin = tracker.max_linear_speed, tracker.max_angular_speed, tracker.min_speed
     comp = tracker.delay_compensation
@@ -575,6 +581,9 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         Lc = s.comp_n
         cbuf_ref = np.zeros((int(Lc.max()), 8, n))
         ccount = np.zeros(n, dtype=np.int64)
+    reuse_error = ideal_odom and not comp           # tracker's position error = logged one
+    cs = np.empty((2, n))                           # cos, sin of the measured heading
+    mid = np.empty((2, n))
 
     # -- metrics
     last_out = np.full(n, -1, dtype=np.int64)
@@ -586,7 +595,6 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         steady_k += 1
     peak_v = np.zeros(n)
     peak_w = np.zeros(n)
-    finite = np.ones(n, dtype=bool)
     cmd_v_log, cmd_w_log = force_v.copy(), force_w.copy()
     if record:
         names = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
@@ -599,11 +607,12 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     with np.errstate(all='ignore'):
         for k in range(steps + 1):
             t_k = step_time_ns(k, dt) * 1e-9
-            rx, ry, rvx, rvy, rax, ray = ref.at(k)
+            rpos, rvel, racc = ref.at(k)
             # ---- odometry due at k
+            epos = None
             if ideal_odom:
                 due = True
-                mx, my, mth, mv = x, y, th, pv
+                mpos, mth, mv = pos, th, pv
                 mstep = k
             else:
                 ms = k - odom_d
@@ -614,22 +623,23 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     due = dmask if dmask.any() else False
                 if due is not False:
                     slot = ms % Ro
-                    mx, my, mth, mv = (obuf[slot, j, idx] for j in range(4))
+                    mpos = obuf[slot, 0:2, idx].T
+                    mth, mv = obuf[slot, 2, idx], obuf[slot, 3, idx]
                     mstep = ms if not uniform_odom else int(ms[0])
-            commanded = np.zeros(n) if due is False else (
-                np.ones(n) if due is True else due.astype(float))
             if due is not False:
                 if np.ndim(mstep) == 0 and mstep == k:
-                    qx_, qy_, qvx, qvy, qax, qay = rx, ry, rvx, rvy, rax, ray
+                    qpos, qvel, qacc = rpos, rvel, racc
                 else:
-                    qx_, qy_, qvx, qvy, qax, qay = ref.at(mstep)
+                    qpos, qvel, qacc = ref.at(mstep)
                 # ---- Tracker.step
-                new = ~started if due is True else (~started & due)
-                if new.any():
-                    v_init = np.where(np.isfinite(mv), mv, 0.0)
-                    v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
-                    tv = np.where(new, v_init, tv)
-                    started = started | new
+                if not all_started:
+                    new = ~started if due is True else (~started & due)
+                    if new.any():
+                        v_init = np.where(np.isfinite(mv), mv, 0.0)
+                        v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
+                        tv = np.where(new, v_init, tv)
+                        started = started | new
+                        all_started = bool(started.all())
                 v = tv
                 if exact:
                     # yaw through the message's quaternion (its qx = qy = 0 terms add exact
@@ -637,49 +647,28 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
                     mth = np.arctan2(2.0 * (qw * qz), qw * qw - qz * qz)
                 # (otherwise the yaw is used as measured: the same angle to round-off)
-                cth, sth = np.cos(mth), np.sin(mth)
+                np.cos(mth, out=cs[0])
+                np.sin(mth, out=cs[1])
                 if comp:
-                    first = ccount == 0
-                    if due is not True:
-                        first = first & due
-                    if first.any():
-                        init = _stack((qx_, qvx, qy_, qvy, qvx, 0.0 * qvx, qvy, 0.0 * qvy), n)
-                        cbuf_ref[:, :, first] = init[:, first][None]
-                    cs = ccount % Lc
-                    z = cbuf_ref[cs, :, idx].T          # (8, N): xi*, xi*'
-                    d = [_dot4(cterms[i], z[0:4]) for i in range(4)]
-                    dd = [_dot4(cterms[i], z[4:8]) for i in range(4)]
-                    xd = (qx_, qvx - d[0], qy_, qvy - d[2])
-                    ud = (qax - dd[0] - d[1], qay - dd[2] - d[3])
-                    newrow = _stack((xd[0], xd[1], xd[2], xd[3], qvx, ud[0] + d[1], qvy,
-                                     ud[1] + d[3]), n)
-                    if due is True:
-                        cbuf_ref[cs, :, idx] = newrow.T
-                        ccount += 1
-                    else:
-                        w_idx = np.flatnonzero(due)
-                        cbuf_ref[cs[w_idx], :, w_idx] = newrow[:, w_idx].T
-                        ccount[w_idx] += 1
+                    xdpos, xdvel, ud = _compensated(cbuf_ref, ccount, Lc, cterms, qpos, qvel,
+                                                    qacc, due, idx, n)
                 else:
-                    xd = (qx_, qvx, qy_, qvy)
-                    ud = (qax, qay)
-                e0 = mx - xd[0]
-                e1 = v * cth - xd[1]
-                e2 = my - xd[2]
-                e3 = v * sth - xd[3]
+                    xdpos, xdvel, ud = qpos, qvel, qacc
+                epos = mpos - xdpos
+                evel = v * cs - xdvel
                 sg = segment_index(k, dt, s.hold_ns, S) if S > 1 else 0
                 if sg != seg:
                     Ke = K + P[:, sg]
-                    Kc = [[Ke[:, r, c].copy() for c in range(4)] for r in range(2)]
+                    Kc = [Ke[:, :, j].T.copy() for j in range(4)]     # (2, N) per column
                     seg = sg
-                K0, K1 = Kc
-                u1 = ud[0] + K0[0] * e0 + K0[1] * e1 + K0[2] * e2 + K0[3] * e3
-                u2 = ud[1] + K1[0] * e0 + K1[1] * e1 + K1[2] * e2 + K1[3] * e3
+                u = ud + Kc[0] * epos[0] + Kc[1] * evel[0] + Kc[2] * epos[1] + Kc[3] * evel[1]
                 floored = np.abs(v) < vmin
                 vf = np.where(floored, np.where(v >= 0, vmin, -vmin), v) if floored.any() \
                     else v
-                a = u1 * cth + u2 * sth
-                w = (u2 * cth - u1 * sth) / vf
+                uc = u * cs                               # u1 cos, u2 sin
+                a = uc[0] + uc[1]
+                us = u * cs[::-1]                         # u1 sin, u2 cos
+                w = (us[1] - us[0]) / vf
                 w = np.minimum(np.maximum(w, -wmax), wmax)      # nan stays nan
                 v_next = v + a * tdt
                 v_next = np.minimum(np.maximum(v_next, -vmax), vmax)
@@ -709,14 +698,17 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                         cbuf[slot, 0] = np.where(due, cv, cbuf[slot, 0])
                         cbuf[slot, 1] = np.where(due, cw, cbuf[slot, 1])
                         cstep[slot] = np.where(due, k, cstep[slot])
+                elif due is True:
+                    force_v, force_w = cv, cw
                 else:
-                    if due is True:
-                        force_v, force_w = cv, cw
-                    else:
-                        force_v = np.where(due, cv, force_v)
-                        force_w = np.where(due, cw, force_w)
+                    force_v = np.where(due, cv, force_v)
+                    force_w = np.where(due, cw, force_w)
             # ---- log row k and metrics
-            err = np.hypot(x - rx, y - ry)
+            if reuse_error:
+                err = np.hypot(epos[0], epos[1])
+            else:
+                dp = pos - rpos
+                err = np.hypot(dp[0], dp[1])
             out = err > tolerance            # nan: never back within (it stays nan)
             np.copyto(last_out, k, where=out)
             if searching:
@@ -732,7 +724,9 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 np.fmax(peak_v, np.abs(cmd_v_log), out=peak_v)
                 np.fmax(peak_w, np.abs(cmd_w_log), out=peak_w)
             if record:
-                row = (t_k, x, y, th, pv, rx, ry, cmd_v_log, cmd_w_log, commanded)
+                commanded = 0.0 if due is False else (1.0 if due is True else due)
+                row = (t_k, pos[0], pos[1], th, pv, rpos[0], rpos[1], cmd_v_log, cmd_w_log,
+                       commanded)
                 for name, val in zip(names, row):
                     trace[name][k] = val
             if k == steps:
@@ -750,34 +744,32 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 v_end, v = _first_order(pv, v, lag_v, alv, em1_v, lagv_m, limv_m, dt)
                 w_end, w = _first_order(pw, w, lag_w, alw, em1_w, lagw_m, limw_m, dt)
             if ideal_odom and not exact:     # the tracker measured this very heading
-                c, sn = cth, sth
+                csp = cs
             elif use_delay:
-                c, sn = np.cos(th), np.sin(th)
+                csp = np.stack((np.cos(th), np.sin(th)))
             else:
-                c = sn = None
+                csp = None
             if use_delay:
-                xi_now = (x, v * c + ox, y, v * sn + oy)
+                vel = v * csp + off                  # xi_now = (x, vel_x, y, vel_y)
                 if Nd == 0:
-                    dxi = xi_now
+                    xi = (pos[0], vel[0], pos[1], vel[1])
+                    for i in range(4):
+                        dbuf[i] = _dot_terms(terms[i], xi, n)
                 else:
                     hs = k % (Nd + 1)
-                    dxi = tuple(hist[hs, j].copy() for j in range(4))
-                    hist[hs, 0] = xi_now[0]
-                    hist[hs, 1] = xi_now[1]
-                    hist[hs, 2] = xi_now[2]
-                    hist[hs, 3] = xi_now[3]
-                d = [_dot_terms(terms[i], dxi, n) for i in range(4)]
+                    old = hist[hs]                   # xi at step k - N
+                    for i in range(4):
+                        dbuf[i] = _dot_terms(terms[i], old, n)
+                    old[0::2] = pos
+                    old[1::2] = vel
             half = 0.5 * w * dt
-            cmid, smid, sinc = _arc_terms(th, half, c, sn, exact)
+            sinc = _arc_terms(th, half, csp, exact, mid)
             arc = v * dt * sinc
             if use_delay:
-                x = x + (arc * cmid + (d[0] + ox) * dt + 0.5 * d[1] * dt * dt)
-                y = y + (arc * smid + (d[2] + oy) * dt + 0.5 * d[3] * dt * dt)
-                ox = ox + d[1] * dt
-                oy = oy + d[3] * dt
-            else:
-                x = x + (arc * cmid + (0.0 + ox) * dt + 0.5 * 0.0 * dt * dt)
-                y = y + (arc * smid + (0.0 + oy) * dt + 0.5 * 0.0 * dt * dt)
+                pos = pos + (arc * mid + (dpos + off) * dt + 0.5 * dvel * dt * dt)
+                off = off + dvel * dt
+            else:                                    # the delay terms are exact zeros
+                pos = pos + arc * mid
             th = _wrap(th + w * dt)
             if act_on:
                 pv, pw = v_end, w_end
@@ -785,7 +777,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 pv, pw = v, w
             if not ideal_odom:
                 measure(k + 1)
-        finite = np.isfinite(x) & np.isfinite(y) & np.isfinite(th)
+        finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
 
     t_of = lambda kk: (kk * dt_ns) * 1e-9   # noqa: E731
     within_end = err <= tolerance
@@ -799,26 +791,65 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     trace=trace if record else None)
 
 
-def _arc_terms(th, half, c, s, exact: bool):
-    """``cos(th + half)``, ``sin(th + half)`` and ``sin(half) / half`` of the exact arc.
+def _compensated(buf, count, L, terms, qpos, qvel, qacc, due, idx, n):
+    """:meth:`control.loop.Tracker._compensated_reference` for every case that is due.
+
+    ``buf`` holds per case the last ``L`` pairs ``(xi*, xi*')`` (8 rows) in a ring
+    indexed by the case's call ``count``; returns ``xi*`` as position and velocity
+    pairs and ``u*`` (each ``(2, N)``).
+    """
+    rx, ry = np.broadcast_to(qpos[0], (n,)), np.broadcast_to(qpos[1], (n,))
+    vx, vy = np.broadcast_to(qvel[0], (n,)), np.broadcast_to(qvel[1], (n,))
+    ax, ay = qacc[0], qacc[1]
+    first = count == 0
+    if due is not True:
+        first = first & due
+    if first.any():
+        init = _stack((rx, vx, ry, vy, vx, 0.0 * vx, vy, 0.0 * vy), n)
+        buf[:, :, first] = init[:, first][None]
+    cs = count % L
+    z = buf[cs, :, idx].T                           # (8, N): xi*, xi*' at t - tau
+    d = [_dot4(terms[i], z[0:4]) for i in range(4)]
+    dd = [_dot4(terms[i], z[4:8]) for i in range(4)]
+    xs = (rx, vx - d[0], ry, vy - d[2])
+    us = (ax - dd[0] - d[1], ay - dd[2] - d[3])
+    row = _stack((xs[0], xs[1], xs[2], xs[3], vx, us[0] + d[1], vy, us[1] + d[3]), n)
+    if due is True:
+        buf[cs, :, idx] = row.T
+        count += 1
+    else:
+        w_idx = np.flatnonzero(due)
+        buf[cs[w_idx], :, w_idx] = row[:, w_idx].T
+        count[w_idx] += 1
+    return (_stack((xs[0], xs[2]), n), _stack((xs[1], xs[3]), n), _stack(us, n))
+
+
+def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
+    """``sin(half) / half`` of the exact arc; ``mid`` receives ``cos, sin (th + half)``.
 
     ``exact``: the plant's own operations.  Otherwise, for ``|half| <= 0.01``
     (``|w| dt <= 0.02``), ``sin(half) / half`` from its Taylor series (truncation below
-    1e-20) and, given ``c = cos th``, ``s = sin th``, the angle-addition formulas: up
-    to three transcendental calls per step fewer, the same values to round-off.
+    1e-20) and, given ``cs = (cos th, sin th)`` (else ``None``), the angle-addition
+    formulas: up to three transcendental calls per step fewer, the same values to
+    round-off.
     """
     if not exact and np.max(np.abs(half)) <= 1e-2:
         h2 = half * half
         sinc = 1.0 - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0))
-        if c is not None:
+        if cs is not None:
             sh = half * sinc
             ch = 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0 * (1.0 - h2 / 30.0))
-            return c * ch - s * sh, s * ch + c * sh, sinc
+            c, s = cs[0], cs[1]
+            np.subtract(c * ch, s * sh, out=mid[0])
+            np.add(s * ch, c * sh, out=mid[1])
+            return sinc
     else:
         big = np.abs(half) > 1e-8
         sinc = np.where(big, np.sin(half) / np.where(big, half, 1.0), 1.0 - half * half / 6.0)
-    mid = th + half
-    return np.cos(mid), np.sin(mid), sinc
+    a = th + half
+    np.cos(a, out=mid[0])
+    np.sin(a, out=mid[1])
+    return sinc
 
 
 def _stack(values, n: int) -> np.ndarray:
