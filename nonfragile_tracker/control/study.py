@@ -19,7 +19,9 @@ settle, steady error over the cases that stay finite.  No ROS import.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any, Mapping
@@ -254,7 +256,10 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path,
     else:
         bounds = np.linspace(0, n, jobs + 1).round().astype(int)
         chunks = [cases.batch.take(slice(a, b)) for a, b in zip(bounds[:-1], bounds[1:])]
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        # fork is fastest; with threads running in this process fork is unsafe: spawn
+        method = 'fork' if threading.active_count() == 1 and os.name == 'posix' else 'spawn'
+        with ProcessPoolExecutor(max_workers=jobs,
+                                 mp_context=multiprocessing.get_context(method)) as pool:
             futures = [pool.submit(_run_chunk, *args, c, spec.tolerance, spec.steady_from)
                        for c in chunks]
             run = _concat([f.result() for f in futures])
