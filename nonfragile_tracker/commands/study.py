@@ -49,6 +49,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     for out in (args.json, args.plot):
         if out and Path(out).exists() and not args.force:
             raise InputError(f'{out} exists; pass --force to overwrite it')
+        if out and not Path(out).resolve().parent.is_dir():
+            raise InputError(f'{out}: directory {Path(out).resolve().parent} does not exist')
     K = read_gain_file(args.gains)
     design = read_gain_design(args.gains)
     problem = load_problem(args.problem or config_dir() / 'paper_problem.yaml')
