@@ -246,11 +246,11 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     else:
         hold_ns = 1
     dt = plant.dt
-    cmd_d = np.array([delay_steps(v, dt)[0] for v in vals['cmd_latency']], dtype=np.int64)
-    odom_d = np.array([delay_steps(v, dt)[0] for v in vals['odom_latency']], dtype=np.int64)
+    cmd_d = _per_value(lambda v: delay_steps(v, dt)[0], vals['cmd_latency'], np.int64)
+    odom_d = _per_value(lambda v: delay_steps(v, dt)[0], vals['odom_latency'], np.int64)
     try:
-        period = np.array([odometry_period_steps(v, dt)[0] for v in vals['odom_rate']],
-                          dtype=np.int64)
+        period = _per_value(lambda v: odometry_period_steps(v, dt)[0], vals['odom_rate'],
+                            np.int64)
     except ValueError as exc:
         raise BatchError(f'odom_rate: {exc}') from None
     base_period = odometry_period_steps(plant.odom_rate, dt)[0]
@@ -259,10 +259,16 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
         raise BatchError(f'tracker dt ({tracker.dt}) must equal the odometry period '
                          f'({base_period} x plant dt {dt}) in lockstep')
     if tracker.delay_compensation:
-        comp_n = np.array([max(delay_steps(tracker.tau, t)[0], 1) for t in tdt], dtype=np.int64)
+        comp_n = _per_value(lambda t: max(delay_steps(tracker.tau, t)[0], 1), tdt, np.int64)
     else:
         comp_n = np.ones(n, dtype=np.int64)
     return _Settings(n, K, P, hold_ns, vals, noise, seed, cmd_d, odom_d, period, tdt, comp_n)
+
+
+def _per_value(fn, values: np.ndarray, dtype) -> np.ndarray:
+    """``[fn(v) for v in values]`` evaluated once per distinct value (scalar functions)."""
+    uniq, inv = np.unique(values, return_inverse=True)
+    return np.array([fn(float(v)) for v in uniq], dtype=dtype)[inv.reshape(-1)]
 
 
 def perturbation_schedule(E, F, deltas) -> np.ndarray:
@@ -514,8 +520,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     lag_v, lag_w = s.lag_v, s.lag_w
     alv, alw = s.max_linear_accel, s.max_angular_accel
     act_on = bool(np.any(lag_v) or np.any(lag_w) or np.any(alv) or np.any(alw))
-    em1_v = np.array([-math.expm1(-dt / T) if T > 0 else 0.0 for T in lag_v])
-    em1_w = np.array([-math.expm1(-dt / T) if T > 0 else 0.0 for T in lag_w])
+    em1_v = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_v, float)
+    em1_w = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_w, float)
     lagv_m, lagw_m, limv_m, limw_m = lag_v > 0, lag_w > 0, alv > 0, alw > 0
     # command latency
     cmd_d = s.cmd_d
