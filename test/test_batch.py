@@ -98,6 +98,17 @@ def test_latency_lag_and_decimated_noisy_odometry_cases_equal_single_runs(exact)
                            800, mixed, exact) < 1e-12
 
 
+def test_a_shared_waypoint_trajectory_to_rest_equals_single_runs():
+    """The lap of config/trajectories/lap.csv, started at rest and tracked to its end (where
+    the speed returns to 0 and w = ../v amplifies round-off): the default exact mode."""
+    from nonfragile_tracker.control.trajectory import load_waypoints
+    traj = load_waypoints(CONFIG / 'trajectories' / 'lap.csv')
+    s0 = traj.sample(traj.t_start)
+    pc = PlantConfig(x0=s0.x, y0=s0.y, th0=s0.heading)
+    cases = BatchCases(3, x0=s0.x + np.array([0.0, 0.05, -0.05]), th0=s0.heading + 0.1)
+    assert worst_deviation(pc, TrackerConfig(K=K()), traj, 1500, cases, True) < 1e-12
+
+
 def test_switching_perturbation_acts_from_its_switch_time():
     """Two segments: identical to the first constant perturbation until the switch, then
     not; identical segments are a constant perturbation."""

@@ -13,6 +13,8 @@ certified region:
 * no actuator lag, or lags at most the record's ``actuator_lag`` with the latency at
   most its ``lag_certified_h_max``.
 
+The batch runs with ``exact=False`` (cheaper forms of the same values, 3-4 x faster; a
+case agrees with its single run to about 1e-14, see :func:`control.batch.simulate_batch`).
 Percentiles are numpy's (linear interpolation): settling time over the cases that
 settle, steady error over the cases that stay finite.  No ROS import.
 """
@@ -194,8 +196,9 @@ def in_certified_region(cases: StudyCases, limits: Mapping[str, float],
 
 
 def _run_chunk(plant, tracker, path, steps, batch, tolerance, steady_from):
+    # statistics over many cases: the cheaper forms (``exact=False``) of simulate_batch
     return simulate_batch(plant, tracker, path, steps, batch, tolerance=tolerance,
-                          steady_from=steady_from)
+                          steady_from=steady_from, exact=False)
 
 
 @dataclass(frozen=True)
