@@ -123,7 +123,7 @@ def main(argv=None) -> int:
     rows.append((f'study {n_study:,} cases x 60 s, {jobs} processes', 's wall', tstudy, None,
                  '< 120 s'))
 
-    head = (f'{"row":<44}{"median":>11}{"min-max":>24}  {"unit":<13}'
+    head = (f'{"row":<44}{"median":>11} {"min-max":>25}  {"unit":<13}'
             f'{"x single (min-max)":>22}  target')
     print(head)
     print('-' * len(head))
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
             met = 'MET' if ratios and statistics.median(ratios) >= 100 else 'MISSED'
         elif target.startswith('<'):
             met = 'MET' if med < 120 else 'MISSED'
-        print(f'{name:<44}{med:>11.4g}{spread:>24}  {unit:<13}{ratio:>22}  {target} {met}')
+        print(f'{name:<44}{med:>11.4g} {spread:>25}  {unit:<13}{ratio:>22}  {target} {met}')
     print(f'# load average at end {os.getloadavg()[0]:.2f}', file=sys.stderr)
     return 0
 
