@@ -10,6 +10,7 @@ Sub-commands::
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
     run [options]                                                 the main job (see --help)
+    study GAINS [--cases N] [--latency LO HI] [--json OUT]        robustness study (batch)
     bag report|repair DIR                                         bag tools
     reproduce [--out DIR] [--docs [DIR]]                          the paper's Section IV
     golden [--write]                                              re-run the golden scenarios
@@ -29,11 +30,11 @@ import sys
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 from .commands import (bag, golden, identify, latency_design, reproduce, run,  # noqa: E402
-                       synthesis, trajectory)
+                       study, synthesis, trajectory)
 from .errors import NonfragileError, exit_code  # noqa: E402
 
 #: The command modules, in ``--help`` order; each exposes ``register(subparsers)``.
-COMMANDS = (synthesis, identify, latency_design, run, trajectory, bag, reproduce, golden)
+COMMANDS = (synthesis, identify, latency_design, run, study, trajectory, bag, reproduce, golden)
 
 
 def build_parser() -> argparse.ArgumentParser:

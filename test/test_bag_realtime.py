@@ -72,7 +72,12 @@ def test_report_of_a_realtime_run_matches_the_messages(realtime_bag, tmp_path):
     assert rep.mode == 'realtime' and rep.metrics is not None
     odom = _messages(realtime_bag, '/odom')
     cmds = _messages(realtime_bag, '/cmd_vel')
-    refs = _messages(realtime_bag, '/reference/pose')
+    # a reference sample is complete when pose, twist and accel of its stamp are all
+    # recorded (the recording may end between them)
+    parts = [{m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec: m
+              for _, m in _messages(realtime_bag, f'/reference/{k}')}
+             for k in ('pose', 'twist', 'accel')]
+    refs = [(None, parts[0][s]) for s in sorted(set(parts[0]) & set(parts[1]) & set(parts[2]))]
     stamps = np.array(sorted({m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec
                               for _, m in odom}))
     tm = rep.timing

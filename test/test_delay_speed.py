@@ -35,7 +35,7 @@ def reference_roots(A0, A1, tau: float, keep: int = 8) -> list[complex]:
     on det T(s) with step 1 / tr(T^-1 T') to |step| <= 1e-15 |s|."""
     n = A0.shape[0]
     R = np.linalg.norm(A0, 2) + np.linalg.norm(A1, 2)
-    N = int(max(48, 3 * R * tau))
+    N = int(min(max(48, 3 * R * tau), 160))
     M = sp.kron(sp.csr_matrix(_cheb(N) * (2.0 / tau)), sp.identity(n), format='lil')
     M[:n, :] = 0.0
     M[:n, :n] = A0
@@ -86,6 +86,20 @@ CASES = {**paper_loops(),
          'random n=32 tau=1': random_stable(32, 2) + (1.0,),
          'two states tau=5': (np.array([[0.0, 1.0], [-1.0, -0.5]]),
                               np.array([[0.0, 0.0], [-0.1, -0.1]]), 5.0)}
+
+
+def stiff_loop() -> tuple[np.ndarray, np.ndarray]:
+    """n = 6 with fast stable modes (-40 .. -200, ||A0|| ~ 1e3, as high-gain loops have)
+    and a slow oscillatory pair: tau ||A0|| in the hundreds, rightmost roots slow."""
+    rng = np.random.default_rng(4)
+    S = np.eye(6) + 0.3 * rng.standard_normal((6, 6))
+    J = np.zeros((6, 6))
+    J[:2, :2] = [[-0.4, 2.0], [-2.0, -0.4]]
+    J[2:, 2:] = np.diag([-40.0, -80.0, -120.0, -200.0])
+    return S @ J @ np.linalg.inv(S), 0.3 * rng.standard_normal((6, 6))
+
+
+CASES['stiff n=6 tau=1'] = stiff_loop() + (1.0,)
 
 
 @pytest.mark.parametrize('name', list(CASES))

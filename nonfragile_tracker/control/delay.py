@@ -38,7 +38,7 @@ from .validate import as_matrix, as_square
 
 __all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
            'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',
-           'fragility_margin']
+           'fragility_margin', 'clear_caches']
 
 N_MIN = 16          # smallest discretization degree used by the adaptive rule
 N_MAX = 192         # largest discretization degree the adaptive rule will use
@@ -205,8 +205,52 @@ class _Char:
         self.I = np.eye(self.n)
         self.nrm0 = float(np.linalg.norm(A0, 2)) if self.n else 0.0
         self.nrm1 = float(np.linalg.norm(A1, 2)) if self.n else 0.0
-        self.hmax = float(np.linalg.eigvalsh(0.5 * (A0 + A0.T))[-1]) if self.n else 0.0
-        self.skew = float(np.linalg.norm(0.5 * (A0 - A0.T), 2)) if self.n else 0.0
+        self._bounds: tuple[float, float] | None = None
+        self._eigen: tuple[np.ndarray, list[np.ndarray]] | None = None
+
+    @property
+    def hmax(self) -> float:
+        """``lambda_max((A0 + A0^T) / 2)`` (computed on first use)."""
+        return self._numerical_range()[0]
+
+    @property
+    def skew(self) -> float:
+        """``||(A0 - A0^T) / 2||_2`` (computed on first use)."""
+        return self._numerical_range()[1]
+
+    def eigen(self) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Eigenvalues of A0 and disc radii for ``M = V^-1 A1 V`` (``V`` its eigenvectors).
+
+        Gershgorin row and column sums of ``|M|`` and Bauer-Fike ``||M||_2``, each plus a
+        round-off allowance
+        ``1e-12 cond(V) (||A0|| + ||A1||)``; no radii if ``V`` is numerically singular
+        (computed on first use).
+        """
+        if self._eigen is None:
+            radii: list[np.ndarray] = []
+            lam = np.zeros(0, complex)
+            if self.n:
+                try:
+                    lam, V = np.linalg.eig(self.A0)
+                    cond = float(np.linalg.cond(V))
+                    if cond < 1e8:
+                        M = np.linalg.solve(V, self.A1 @ V)
+                        slack = 1e-12 * cond * (self.nrm0 + self.nrm1)
+                        Ma = np.abs(M)
+                        radii = [Ma.sum(axis=1) + slack, Ma.sum(axis=0) + slack,
+                                 np.full(self.n, np.linalg.norm(M, 2) + slack)]
+                except np.linalg.LinAlgError:
+                    pass
+            self._eigen = (lam, radii)
+        return self._eigen
+
+    def _numerical_range(self) -> tuple[float, float]:
+        if self._bounds is None:
+            A0 = self.A0
+            self._bounds = ((float(np.linalg.eigvalsh(0.5 * (A0 + A0.T))[-1]),
+                             float(np.linalg.norm(0.5 * (A0 - A0.T), 2)))
+                            if self.n else (0.0, 0.0))
+        return self._bounds
 
     def T(self, s: complex) -> np.ndarray:
         return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
@@ -314,11 +358,22 @@ def _radius(ch: _Char, re: float) -> float:
     the smaller of the disc and of the rectangle ``[re, Re max] x [-Im max, Im max]``'s
     farthest corner.
     """
-    e = ch.nrm1 * math.exp(min(-re * ch.tau, 700.0))
+    z = math.exp(min(-re * ch.tau, 700.0))
+    e = ch.nrm1 * z
     re_hi, im_hi = ch.hmax + e, ch.skew + e
     if re_hi < re:
         return 0.0
-    return min(ch.nrm0 + e, math.hypot(max(abs(re), abs(re_hi)), im_hi))
+    bound = min(ch.nrm0 + e, math.hypot(max(abs(re), abs(re_hi)), im_hi))
+    # V^-1 (A0 + z A1) V = L + z M (V the eigenvectors of A0, M = V^-1 A1 V): every root
+    # lies in a disc |s - lambda_i| <= |z| r_i, r_i the Gershgorin row (or column) sums of
+    # |M| or Bauer-Fike's ||M||_2; only discs reaching Re >= re matter, which keeps fast
+    # stable modes out
+    lam, radii = ch.eigen()
+    for r in radii:
+        rho = r * z
+        keep = lam.real + rho >= re
+        bound = min(bound, float(np.max(np.abs(lam[keep]) + rho[keep])) if keep.any() else 0.0)
+    return bound
 
 
 class _ShiftInvert:
@@ -420,6 +475,12 @@ def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float]
 # degree that converged last time, per (n, tau, count): the start of the adaptive rule
 _N_USED: dict[tuple[int, float, int], int] = {}
 
+def clear_caches() -> None:
+    """Forget the remembered degrees and Arnoldi sizes (the next call starts afresh)."""
+    _N_USED.clear()
+    _K_USED.clear()
+
+
 # k that covered the needed disc last time, per (n, N, count): margin and worst-case
 # searches evaluate many nearby loops of one shape, so the first call learns it
 _K_USED: dict[tuple[int, int, int], int] = {}
@@ -483,12 +544,11 @@ def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
         N = _N_USED.get(key)
         if N is None:
             # resolve R(a0), a0 a guess of the last wanted root's real part from the
-            # delay-free matrices A0 + A1 and A0 (only a start: the loop below checks);
+            # delay-free matrix A0 + A1 (only a start: the loop below checks);
             # capped because the loop raises N when needed
-            re = np.sort(np.concatenate([np.linalg.eigvals(A0 + A1).real,
-                                         np.linalg.eigvals(A0).real]))[::-1]
+            re = np.sort(np.linalg.eigvals(A0 + A1).real)[::-1]
             a0 = min(0.0, float(re[min(count, re.size) - 1]))
-            N = min(_n_needed(_radius(ch, 1.2 * a0), tau), 64)
+            N = min(_n_needed(_radius(ch, a0), tau), 64)
     N = int(N)
     retried = False
     while True:
@@ -561,7 +621,11 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
     smaller of ``||A0|| + ||A1|| e`` and the farthest corner of the rectangle
     ``a <= Re s <= lambda_max(He A0 / 2) + ||A1|| e``,
     ``|Im s| <= ||(A0 - A0^T) / 2|| + ||A1|| e`` (``e = exp(-a tau)``; numerical-range
-    bounds).  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for ``|s| <= R`` by
+    bounds), and of the discs ``|s - lambda_i| <= e r_i`` around the eigenvalues of
+    ``A0`` that reach ``Re s >= a`` (``r_i`` Gershgorin or Bauer-Fike radii of
+    ``V^-1 A1 V``, ``V`` the eigenvectors of ``A0``), which keeps fast stable modes of
+    stiff loops out of the degree.  ``exp(s theta)`` on ``[-tau, 0]`` is resolved for
+    ``|s| <= R`` by
     ``N >= 12 + 1.2 R tau`` (at least 16), and only discretized eigenvalues inside that
     disc are used (the discretization also has spurious ones of large modulus).  The
     degree starts from ``R(a0)``, ``a0`` a guess from the eigenvalues of ``A0 + A1`` and

@@ -53,7 +53,7 @@ from .sdp import sym as _sym
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',
            'Verification', 'SynthesisResult', 'CertifyResult', 'verify_certificate',
            'synthesize', 'certify_gain', 'certified_perturbation_scale',
-           'UntrustedGainWarning', 'gain_trust_message']
+           'UntrustedGainWarning', 'gain_trust_message', 'decoupled_blocks']
 
 
 @dataclass(frozen=True)
@@ -277,7 +277,7 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
     if gain_bound is not None and not gain_bound > 0:
         raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
     t0 = time.perf_counter()
-    prog = _program(problem, nominal, gain_bound is not None)
+    prog = _program_for(problem, nominal, gain_bound is not None)
     status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
     kind = 'nominal' if nominal else 'non-fragile'
     verdict = classify(status, t, margin)
@@ -313,6 +313,107 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
 
 
 # ---------------------------------------------------------------------------------------------
+# Compact form of Theorem 1 for larger n.
+
+class _CompactProgram(_Theorem1Program):
+    """Theorem 1 with ``S = X Q X`` instead of ``W = Q^-1``: LMI of size ``2n + q + p``.
+
+    Congruence of ``V`` (module docstring) with ``diag(X, X, eps I)`` and Schur on
+    ``F`` give the equivalent (``S > 0`` <-> ``Q = P S P > 0``) ::
+
+        [ He(A X + B R) + S   A_tau X   eps B E   X F^T  ]
+        [  *                  -S        0         0      ]  < 0
+        [  *                   *        -eps I    0      ]
+        [  *                   *         *        -eps I ]
+
+    one ``n``-block smaller than the paper's form (size ``3n + q + p``), which the
+    interior-point solver pays for cubically in the cone size.  Same objective and
+    normalization (``S`` in place of ``W``); ``W`` is returned as ``S^-1``-consistent
+    ``X S^-1 X`` so that ``Q = W^-1 = P S P``.
+    """
+
+    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
+        import cvxpy as cp
+        self.cp = cp
+        self.nominal = nominal
+        self.A = cp.Parameter((n, n), name='A')
+        self.B = cp.Parameter((n, m), name='B')
+        self.Ad = cp.Parameter((n, n), name='A_tau')
+        self.X = cp.Variable((n, n), symmetric=True, name='X')
+        self.S = cp.Variable((n, n), symmetric=True, name='S')
+        self.W = self.S                        # the normalization's second matrix
+        self.R = cp.Variable((m, n), name='R')
+        self.t = cp.Variable(name='t')
+        AX = self.A @ self.X + self.B @ self.R
+        Z = np.zeros
+        AdX = self.Ad @ self.X
+        if nominal:
+            blocks = [[AX + AX.T + self.S, AdX], [AdX.T, -self.S]]
+            size, self.eps, extra = 2 * n, None, []
+            norm = cp.trace(self.X) + cp.trace(self.S)
+        else:
+            self.BE = cp.Parameter((n, q), name='BE')
+            self.F = cp.Parameter((p, n), name='F')
+            self.eps = cp.Variable(name='eps')
+            XFt = self.X @ self.F.T
+            blocks = [
+                [AX + AX.T + self.S, AdX, self.eps * self.BE, XFt],
+                [AdX.T, -self.S, Z((n, q)), Z((n, p))],
+                [(self.eps * self.BE).T, Z((q, n)), -self.eps * np.eye(q), Z((q, p))],
+                [XFt.T, Z((p, n)), Z((p, q)), -self.eps * np.eye(p)],
+            ]
+            size = 2 * n + q + p
+            norm = cp.trace(self.X) + cp.trace(self.S) + self.eps
+            extra = [self.eps >= self.t]
+        L = cp.bmat(blocks)
+        L = 0.5 * (L + L.T)
+        cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
+                self.S >> self.t * np.eye(n)] + extra
+        if gain_bound:
+            self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
+            G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
+                         [self.R, np.eye(m)]])
+            cons += [self.X >> np.eye(n), 0.5 * (G + G.T) >> 0, self.t <= 1]
+        else:
+            self.kappa2 = None
+            cons += [norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+        status, t, X, S, R, eps, st = super().solve(problem, solver, kappa)
+        if X is None or S is None:
+            return status, t, X, S, R, eps, st
+        # W = Q^-1 with Q = P S P:  W = X S^-1 X
+        Xs = 0.5 * (X + X.T)
+        try:
+            W = Xs @ np.linalg.solve(0.5 * (S + S.T), Xs)
+        except np.linalg.LinAlgError:
+            W = None
+        return status, t, X, W, R, eps, st
+
+
+COMPACT_FROM_N = 8    # Theorem 1 uses _CompactProgram for n >= this (smaller SDP)
+_COMPACT: dict[tuple, _CompactProgram] = {}
+
+
+def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
+    """The Theorem 1 program for ``problem``.
+
+    The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact one
+    (same feasible set, cached per shape).
+    """
+    if problem.n < COMPACT_FROM_N:
+        return _program(problem, nominal, gain_bound)
+    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
+    prog = _COMPACT.get(key)
+    if prog is None:
+        if len(_COMPACT) > 32:
+            _COMPACT.clear()
+        prog = _COMPACT[key] = _CompactProgram(*key)
+    return prog
+
+
+# ---------------------------------------------------------------------------------------------
 # Moderate gains by default, recovery from failed verification, trust warning.
 
 MODERATE_FRACTION = 0.5   # unbounded synthesis: keep this fraction of the best margin t_max
@@ -337,7 +438,8 @@ class _MinNormProgram:
     def __init__(self, n: int, m: int, q: int, p: int, nominal: bool):
         import cvxpy as cp
         self.cp = cp
-        self.base = _Theorem1Program(n, m, q, p, nominal, False)
+        form = _CompactProgram if n >= COMPACT_FROM_N else _Theorem1Program
+        self.base = form(n, m, q, p, nominal, False)
         b = self.base
         self.t_req = cp.Parameter(nonneg=True, name='t_req')
         self.s = cp.Variable(name='s')
@@ -358,7 +460,11 @@ class _MinNormProgram:
             raise SolverFailure(f'solver {solver} failed on the minimum-norm stage for '
                                 f'problem {problem.name!r}: {exc}') from None
         stats = self.problem.solver_stats
-        return (self.problem.status, b.t.value, b.X.value, b.W.value, b.R.value,
+        W = b.W.value
+        if isinstance(b, _CompactProgram) and W is not None and b.X.value is not None:
+            Xs = _sym(b.X.value)                     # W = X S^-1 X (see _CompactProgram)
+            W = Xs @ np.linalg.solve(_sym(W), Xs)
+        return (self.problem.status, b.t.value, b.X.value, W, b.R.value,
                 None if b.eps is None else b.eps.value,
                 float(stats.solve_time or 0.0) if stats is not None else 0.0)
 
@@ -504,9 +610,111 @@ def gain_trust_message(problem: Problem, K, P) -> str | None:
             'options.gain_bound).')
 
 
+def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                     np.ndarray]]:
+    """Independent sub-problems of Theorem 1: index sets ``(states, inputs, q, p)``.
+
+    States, inputs, the columns of ``E`` (``q``) and the rows of ``F`` (``p``) are
+    nodes of a graph; a nonzero ``A[i, j]``, ``A_tau[i, j]``, ``B[i, k]``, ``E[k, l]``
+    or ``F[r, j]`` joins two of them.  Each connected component with at least one of
+    each kind is a block; one block (or a component without inputs or perturbation)
+    means no decoupling and returns ``[]``.
+    """
+    n, m = problem.n, problem.m
+    q, p = problem.E.shape[1], problem.F.shape[0]
+    parent = list(range(n + m + q + p))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def join(rows: np.ndarray, cols: np.ndarray) -> None:
+        for a, b in zip(rows.tolist(), cols.tolist()):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[ra] = rb
+
+    for M in (problem.A, problem.A_tau):
+        i, j = np.nonzero(M)
+        join(i, j)
+    i, k = np.nonzero(problem.B)
+    join(i, n + k)
+    k, l_ = np.nonzero(problem.E)
+    join(n + k, n + m + l_)
+    r, j = np.nonzero(problem.F)
+    join(n + m + q + r, j)
+    comps: dict[int, list[int]] = {}
+    for a in range(n + m + q + p):
+        comps.setdefault(find(a), []).append(a)
+    if len(comps) < 2:
+        return []
+    blocks = []
+    for nodes in comps.values():
+        idx = np.array(nodes)
+        st = idx[idx < n]
+        inp = idx[(idx >= n) & (idx < n + m)] - n
+        qq = idx[(idx >= n + m) & (idx < n + m + q)] - n - m
+        pp = idx[idx >= n + m + q] - n - m - q
+        if min(st.size, inp.size, qq.size, pp.size) == 0:
+            return []
+        blocks.append((st, inp, qq, pp))
+    return blocks
+
+
+def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: float,
+                       **kw) -> SynthesisResult | None:
+    """Solve each decoupled block, assemble, verify the whole; ``None`` if that fails.
+
+    With block-diagonal data and a common ``eps`` the matrix ``V`` of the module
+    docstring is a permutation of ``diag(V_i)``.  Scaling a block's ``(P_i, Q_i)`` by
+    ``c`` is equivalent to replacing its ``eps_i`` by ``c eps_i`` (divide the Schur
+    complement of ``V_i`` by ``c``), so ``(eps_i P_i, eps_i Q_i)`` with ``eps = 1``
+    certifies every block at once.  ``||K||_2 = max ||K_i||_2``.
+    """
+    n, m = problem.n, problem.m
+    K = np.zeros((m, n))
+    P = np.zeros((n, n))
+    Q = np.zeros((n, n))
+    parts = []
+    for st, inp, qq, pp in blocks:
+        sub = problem.replace(A=problem.A[np.ix_(st, st)], B=problem.B[np.ix_(st, inp)],
+                              A_tau=problem.A_tau[np.ix_(st, st)],
+                              E=problem.E[np.ix_(inp, qq)], F=problem.F[np.ix_(pp, st)],
+                              perturbations={}, name=f'{problem.name}[block {len(parts)}]')
+        r = synthesize(sub, nominal=nominal, verify_tol=verify_tol, **kw)
+        c = 1.0 if nominal else float(r.eps)
+        K[np.ix_(inp, st)] = r.K
+        P[np.ix_(st, st)] = c * r.P
+        Q[np.ix_(st, st)] = c * r.Q
+        parts.append(r)
+    eps = None if nominal else 1.0
+    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
+    if not ver.ok:
+        return None
+    cert = Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
+    first = parts[0]
+    extra = dict(first.extra, blocks=[int(b[0].size) for b in blocks])
+    for key in ('t_max', 'stage1_norm'):
+        if all(key in r.extra for r in parts):
+            extra[key] = (min if key == 't_max' else max)(r.extra[key] for r in parts)
+    warn = [r.extra['warning'] for r in parts if 'warning' in r.extra]
+    if warn:
+        extra['warning'] = warn[0]
+    else:
+        extra.pop('warning', None)
+    return SynthesisResult(K=K, certificate=cert, margin_required=first.margin_required,
+                           margin_achieved=min(r.margin_achieved for r in parts),
+                           status=first.status, solver=first.solver,
+                           solve_time=sum(r.solve_time for r in parts), wall_time=0.0,
+                           nominal=nominal, extra=extra)
+
+
 def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None = None,
                solver: str | None = None, gain_bound: float | None = None,
-               verify_tol: float = 1e-9, moderate: bool = True) -> SynthesisResult:
+               verify_tol: float = 1e-9, moderate: bool = True,
+               decouple: bool = True) -> SynthesisResult:
     """Solve Theorem 1 (or its nominal form) and return a verified gain.
 
     Parameters
@@ -532,6 +740,11 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
         stage-1 norm.  ``False``: stage 1 only (the behaviour before).
     verify_tol : float
         Relative tolerance of :func:`verify_certificate`.
+    decouple : bool
+        If the data split into independent blocks (:func:`decoupled_blocks`, e.g. several
+        robots), solve each block and assemble a block-diagonal certificate (see
+        :func:`_synthesize_blocks`), verified on the whole problem; on failure the whole
+        problem is solved as one.  ``extra['blocks']`` lists the block sizes.
 
     Returns
     -------
@@ -554,6 +767,17 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
     if gain_bound is not None and not gain_bound > 0:
         raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
     t0 = time.perf_counter()
+    blocks = decoupled_blocks(problem) if decouple else []
+    if blocks:
+        with warnings.catch_warnings():        # warned once below for the whole gain
+            warnings.simplefilter('ignore', UntrustedGainWarning)
+            res = _synthesize_blocks(problem, blocks, nominal=nominal, verify_tol=verify_tol,
+                                     margin=margin, solver=solver, gain_bound=gain_bound,
+                                     moderate=moderate)
+        if res is not None:
+            if 'warning' in res.extra:
+                warnings.warn(res.extra['warning'], UntrustedGainWarning, stacklevel=2)
+            return replace(res, wall_time=time.perf_counter() - t0)
     kw = dict(nominal=nominal, margin=margin, solver=solver, gain_bound=gain_bound,
               verify_tol=verify_tol)
     res = _verified(problem, **kw)

@@ -1,0 +1,965 @@
+"""Batch simulation: the tracking loop (and the linear delay loop) for N cases at once.
+
+:func:`simulate_batch` runs the lockstep sequence of :func:`control.simulate.run_loop`
+with :class:`control.loop.Tracker` and :class:`control.loop.UnicyclePlant` for ``N``
+cases in parallel, every quantity a numpy array over cases, with the operations of the
+scalar step functions in the same order (``exact=False`` allows a few cheaper forms of
+the same values: the yaw is not sent through a quaternion, the arc's sine and cosines
+come from series and angle addition).  Case ``i`` of a batch equals
+:func:`control.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
+round-off (the test checks 1e-12; bit for bit with ``exact=True``, about 1e-14 without,
+away from rest).
+Per case (:class:`BatchCases`; any field left ``None`` takes the base configuration's
+value):
+
+* the gain ``K`` and its perturbation schedule ``E Delta(t) F``: ``S`` matrices, the
+  one in force at a command computed at ``t`` being number ``floor(t / hold) mod S``
+  (``S = 1``: constant; ``S = 2``: periodic switching; ``S`` large with random
+  ``Delta``: random time-varying, see :func:`sample_deltas`);
+* command latency, actuator lag and acceleration limits of ``v`` and ``w``;
+* odometry latency, rate (the tracker's period is the odometry period) and noise
+  (the per-case seed draws the same sequence as :class:`control.sensors.Odometer`);
+* initial pose and speed;
+* the reference: a shared path (any object with ``sample(t) -> RefSample``, e.g. a
+  :class:`control.trajectory.Trajectory`, sampled once per step) or per-case
+  parameters of the analytic circle / figure eight (:class:`PathBatch`).
+
+Shared by all cases: the plant step ``dt``, the state delay ``tau`` and ``A_tau``,
+the tracker's speed limits and delay compensation.  Not vectorized (refused with
+:class:`BatchError`): the tracker's latency predictor.
+
+Per-case metrics are accumulated while running (no ``N x steps`` arrays unless
+``record=True``).  :func:`simulate_delay_loop_batch` is
+:func:`control.simulate.simulate_delay_loop` for ``N`` matrices ``A0`` at once.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps,
+                   step_time_ns)
+from .reference import Path, circle, figure_eight
+
+__all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
+           'perturbation_schedule', 'sample_deltas', 'simulate_delay_loop_batch',
+           'segment_index']
+
+_PI = math.pi
+_ATAN2 = np.frompyfunc(math.atan2, 2, 1)
+_TAU = math.tau
+
+
+class BatchError(InputError):
+    """A batch setting is invalid or not supported; the message names it."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Inputs
+
+@dataclass(frozen=True)
+class PathBatch:
+    """Per-case parameters of an analytic path (:mod:`control.reference`).
+
+    ``kind`` is ``'circle'`` or ``'figure_eight'``; each parameter is a scalar or an
+    array of ``N`` values (broadcast).
+    """
+
+    kind: str = 'circle'
+    radius: Any = 0.5
+    rate: Any = 0.01
+    center_x: Any = 0.0
+    center_y: Any = 0.0
+    phase: Any = 0.0
+
+    def path(self, i: int) -> Path:
+        """The single-run :class:`control.reference.Path` of case ``i``."""
+        factory = {'circle': circle, 'figure_eight': figure_eight}.get(self.kind)
+        if factory is None:
+            raise BatchError(f'path kind {self.kind!r}: choose circle or figure_eight')
+        return factory(**{name: float(_pick(getattr(self, name), i)) for name in _PATH_FIELDS})
+
+    def take(self, idx) -> 'PathBatch':
+        """The cases ``idx`` (index array) as a new :class:`PathBatch`."""
+        return replace(self, **{name: _pick(getattr(self, name), idx) for name in _PATH_FIELDS})
+
+
+_PATH_FIELDS = ('radius', 'rate', 'center_x', 'center_y', 'phase')
+
+
+def _pick(value, i):
+    """``value[i]`` for a per-case array, ``value`` for a scalar."""
+    arr = np.asarray(value, float)
+    return arr if arr.ndim == 0 else arr[i]
+
+
+@dataclass(frozen=True)
+class BatchCases:
+    """Per-case settings; ``None`` = the base configuration's value for every case.
+
+    Arrays have ``N`` entries (scalars broadcast).  ``perturbation`` is ``E Delta F``
+    per case and segment, shape ``(N, S, 2, 4)`` (or ``(N, 2, 4)`` for constant);
+    ``hold`` is the segment length (s).  ``odom_noise`` is ``(N, 3)``.
+    """
+
+    n: int
+    K: Any = None
+    perturbation: Any = None
+    hold: float = math.inf
+    x0: Any = None
+    y0: Any = None
+    th0: Any = None
+    v0: Any = None
+    cmd_latency: Any = None
+    lag_v: Any = None
+    lag_w: Any = None
+    max_linear_accel: Any = None
+    max_angular_accel: Any = None
+    odom_latency: Any = None
+    odom_rate: Any = None
+    odom_noise: Any = None
+    noise_seed: Any = None
+
+    def take(self, idx) -> 'BatchCases':
+        """The cases ``idx`` (an index array or slice) as a new :class:`BatchCases`."""
+        idx = np.arange(self.n)[idx]
+        kw = {}
+        for name, ndim in [(nm, 1) for nm in _PER_CASE] + [('K', 3), ('odom_noise', 2)]:
+            val = getattr(self, name)
+            if val is not None and np.ndim(val) == ndim:
+                val = np.asarray(val)[idx]
+            kw[name] = val
+        if self.perturbation is not None:
+            kw['perturbation'] = np.asarray(self.perturbation)[idx]
+        return replace(self, n=int(idx.size), **kw)
+
+    def configs(self, i: int, plant: PlantConfig, tracker: TrackerConfig
+                ) -> tuple[PlantConfig, TrackerConfig]:
+        """The single-run configurations of case ``i`` (constant perturbation only).
+
+        Raises :class:`BatchError` if case ``i`` has a time-varying perturbation.
+        """
+        s = _resolve(self, plant, tracker)
+        kw = {name: float(getattr(s, name)[i]) for name in _PER_CASE if name != 'noise_seed'}
+        kw['odom_noise'] = tuple(float(v) for v in s.noise[i])
+        kw['noise_seed'] = int(s.seed[i])
+        pc = replace(plant, **kw)
+        P = s.P[i]
+        if P.shape[0] > 1 and np.any(P != P[0]):
+            raise BatchError(f'case {i} has a time-varying perturbation; a single run has a '
+                             'constant one')
+        tc = replace(tracker, K=tuple(map(tuple, s.K[i].tolist())),
+                     perturbation=tuple(map(tuple, P[0].tolist())), dt=float(s.tdt[i]))
+        return pc, tc
+
+
+_PER_CASE = ('x0', 'y0', 'th0', 'v0', 'cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel',
+             'max_angular_accel', 'odom_latency', 'odom_rate', 'noise_seed')
+
+
+def _vector(value, name: str, n: int, *, low: float | None = None) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise BatchError(f'{name}: expected numbers, got {value!r}') from None
+    if arr.ndim > 1 or (arr.ndim == 1 and arr.size != n):
+        raise BatchError(f'{name}: expected a number or {n} numbers (one per case), got shape '
+                         f'{arr.shape}')
+    arr = np.broadcast_to(arr, (n,)).copy()
+    bad = ~np.isfinite(arr)
+    if low is not None:
+        bad |= arr < low
+    if bad.any():
+        i = int(np.argmax(bad))
+        need = 'finite' if low is None else f'finite and >= {low:g}'
+        raise BatchError(f'{name}[{i}] is {arr[i]!r}; every value must be {need}')
+    return arr
+
+
+@dataclass
+class _Settings:
+    """Resolved per-case arrays (internal)."""
+
+    n: int
+    K: np.ndarray          # (N, 2, 4)
+    P: np.ndarray          # (N, S, 2, 4)
+    hold_ns: int
+    vals: dict
+    noise: np.ndarray      # (N, 3)
+    seed: np.ndarray       # (N,) int
+    cmd_d: np.ndarray      # (N,) int steps
+    odom_d: np.ndarray
+    period: np.ndarray
+    tdt: np.ndarray        # tracker dt per case
+    comp_n: np.ndarray     # compensation history length per case
+
+    def __getattr__(self, name):
+        try:
+            return self.vals[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _Settings:
+    n = cases.n
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise BatchError(f'number of cases must be an integer >= 1, got {n!r}')
+    vals = {}
+    for name in _PER_CASE:
+        given = getattr(cases, name)
+        low = None if name in ('x0', 'y0', 'th0', 'v0') else 0.0
+        vals[name] = _vector(getattr(plant, name) if given is None else given, name, n, low=low)
+    seed = vals['noise_seed']
+    if np.any(seed != np.round(seed)):
+        raise BatchError('noise_seed: every seed must be an integer >= 0')
+    seed = seed.astype(np.int64)
+    noise = np.array(plant.odom_noise if cases.odom_noise is None else cases.odom_noise,
+                     dtype=float)
+    if noise.shape not in ((3,), (n, 3)) or not np.all(np.isfinite(noise)) or np.any(noise < 0):
+        raise BatchError('odom_noise: expected 3 standard deviations >= 0 or one row of 3 per '
+                         f'case ({n} x 3), got shape {noise.shape}')
+    noise = np.broadcast_to(noise, (n, 3)).copy()
+    K = np.array(tracker.K if cases.K is None else cases.K, dtype=float)
+    if K.shape == (2, 4):
+        K = np.broadcast_to(K, (n, 2, 4))
+    if K.shape != (n, 2, 4) or not np.all(np.isfinite(K)):
+        raise BatchError(f'K: expected a finite 2x4 gain or {n} of them, got shape {K.shape}')
+    if cases.perturbation is None:
+        P = np.zeros((2, 4)) if tracker.perturbation is None else np.array(tracker.perturbation)
+        P = np.broadcast_to(P, (n, 1, 2, 4))
+    else:
+        P = np.array(cases.perturbation, dtype=float)
+        if P.ndim == 3:
+            P = P[:, None]
+        if P.ndim != 4 or P.shape[0] != n or P.shape[2:] != (2, 4) or P.shape[1] < 1 \
+                or not np.all(np.isfinite(P)):
+            raise BatchError('perturbation: expected finite E Delta F of shape (N, S, 2, 4) '
+                             f'with N = {n}, got shape {P.shape}')
+    hold = cases.hold
+    if P.shape[1] > 1:
+        if not (isinstance(hold, (int, float)) and math.isfinite(hold) and hold > 0):
+            raise BatchError(f'hold: a perturbation with {P.shape[1]} segments needs a segment '
+                             f'length > 0 s, got {hold!r}')
+        hold_ns = int(round(hold * 1e9))
+        if hold_ns < 1:
+            raise BatchError(f'hold: {hold!r} s is shorter than 1 ns')
+    else:
+        hold_ns = 1
+    dt = plant.dt
+    cmd_d = _per_value(lambda v: delay_steps(v, dt)[0], vals['cmd_latency'], np.int64)
+    odom_d = _per_value(lambda v: delay_steps(v, dt)[0], vals['odom_latency'], np.int64)
+    try:
+        period = _per_value(lambda v: odometry_period_steps(v, dt)[0], vals['odom_rate'],
+                            np.int64)
+    except ValueError as exc:
+        raise BatchError(f'odom_rate: {exc}') from None
+    base_period = odometry_period_steps(plant.odom_rate, dt)[0]
+    tdt = np.where(period == base_period, tracker.dt, period * dt)
+    if np.any(np.abs(tdt - period * dt) > 1e-12 * tdt):
+        raise BatchError(f'tracker dt ({tracker.dt}) must equal the odometry period '
+                         f'({base_period} x plant dt {dt}) in lockstep')
+    if tracker.delay_compensation:
+        comp_n = _per_value(lambda t: max(delay_steps(tracker.tau, t)[0], 1), tdt, np.int64)
+    else:
+        comp_n = np.ones(n, dtype=np.int64)
+    return _Settings(n, K, P, hold_ns, vals, noise, seed, cmd_d, odom_d, period, tdt, comp_n)
+
+
+def _per_value(fn, values: np.ndarray, dtype) -> np.ndarray:
+    """``[fn(v) for v in values]`` evaluated once per distinct value (scalar functions)."""
+    uniq, inv = np.unique(values, return_inverse=True)
+    return np.array([fn(float(v)) for v in uniq], dtype=dtype)[inv.reshape(-1)]
+
+
+def perturbation_schedule(E, F, deltas) -> np.ndarray:
+    """``E Delta F`` for an array of ``Delta`` (``(..., p, q)``): shape ``(..., m, n)``."""
+    E = np.asarray(E, float)
+    F = np.asarray(F, float)
+    D = np.asarray(deltas, float)
+    if D.shape[-2:] != (E.shape[1], F.shape[0]):
+        raise BatchError(f'Delta must be {E.shape[1]}x{F.shape[0]} (E is {E.shape}, F is '
+                         f'{F.shape}), got {D.shape[-2:]}')
+    return np.einsum('ip,...pq,qj->...ij', E, D, F)
+
+
+def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[int, int],
+                  *, radius: tuple[float, float] = (0.0, 1.0)) -> np.ndarray:
+    """Random ``Delta`` with spectral norm in ``radius``: shape ``(n, segments, p, q)``.
+
+    Each matrix is a Gaussian matrix scaled to spectral norm ``r``, ``r`` uniform in
+    ``radius`` (``(1, 1)``: on the boundary ``||Delta||_2 = 1``).
+    """
+    lo, hi = (float(v) for v in radius)
+    if not (0 <= lo <= hi and math.isfinite(hi)):
+        raise BatchError(f'Delta norm range must satisfy 0 <= lo <= hi, got {radius!r}')
+    G = rng.standard_normal((n, segments) + tuple(shape))
+    norms = np.linalg.norm(G, ord=2, axis=(-2, -1))
+    r = rng.uniform(lo, hi, size=(n, segments))
+    return G * (r / np.maximum(norms, 1e-300))[..., None, None]
+
+
+def segment_index(k, dt: float, hold_ns: int, segments: int):
+    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``."""
+    return (step_time_ns(k, dt) // hold_ns) % segments
+
+
+# ---------------------------------------------------------------------------------------------
+# Vectorized step pieces (the same operations as the scalar functions)
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    """``math.remainder(x, tau)`` element-wise (exact: one subtraction, Sterbenz)."""
+    ax = np.abs(x)
+    over = ax > _PI
+    if not over.any():
+        return x
+    out = np.where(over, x - np.copysign(_TAU, x), x)
+    far = ax >= 3.0 * _PI
+    if far.any():
+        for i in np.flatnonzero(far):
+            out[i] = math.remainder(float(x[i]), _TAU)
+    return out
+
+
+def _first_order(s, c, T, amax, em1, has_lag, has_lim, h):
+    """:func:`control.actuator.first_order_step` element-wise: ``(end, mean)``."""
+    d = c - s
+    end = c.copy()
+    mean = c.copy()
+    if has_lag.any():
+        lag = has_lag & (d != 0.0)
+        e_end = c - d * (1.0 - em1)
+        e_mean = c - d * T * em1 / h
+        end = np.where(lag, e_end, end)
+        mean = np.where(lag, e_mean, mean)
+    if has_lim.any():
+        ad = np.abs(d)
+        ramp = has_lim & (ad > amax * T) & (d != 0.0)
+        if ramp.any():
+            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+                sign = np.where(d > 0, 1.0, -1.0)
+                t1 = (ad - amax * T) / amax
+                full = t1 >= h
+                f_end = s + sign * amax * h
+                f_mean = 0.5 * (s + f_end)
+                s1 = s + sign * amax * t1
+                area = 0.5 * (s + s1) * t1
+                rest = h - t1
+                em1r = -np.expm1(-rest / T)
+                p_end = np.where(T > 0.0, c + (s1 - c) * (1.0 - em1r), c)
+                area = np.where(T > 0.0, area + (c * rest + (s1 - c) * T * em1r),
+                                area + c * rest)
+                p_mean = area / h
+            end = np.where(ramp, np.where(full, f_end, p_end), end)
+            mean = np.where(ramp, np.where(full, f_mean, p_mean), mean)
+    return end, mean
+
+
+class _Reference:
+    """Reference samples at step indices: a shared table or per-case analytic formulas."""
+
+    def __init__(self, path, n: int, steps: int, dt: float):
+        self.n = n
+        self.dt_ns = int(round(dt * 1e9))
+        if isinstance(path, PathBatch) and all(np.ndim(getattr(path, f)) == 0
+                                               for f in _PATH_FIELDS):
+            path = path.path(0)             # the same path for every case: one table
+        if isinstance(path, PathBatch):
+            if path.kind not in ('circle', 'figure_eight'):
+                raise BatchError(f'path kind {path.kind!r}: choose circle or figure_eight')
+            self.table = None
+            self.kind = path.kind
+            self.r = _vector(path.radius, 'radius', n)
+            if np.any(self.r <= 0):
+                raise BatchError('radius: every radius must be > 0 m')
+            self.w = _vector(path.rate, 'rate', n)
+            self.cx = _vector(path.center_x, 'center_x', n)
+            self.cy = _vector(path.center_y, 'center_y', n)
+            self.ph = _vector(path.phase, 'phase', n)
+        else:
+            if not callable(getattr(path, 'sample', None)):
+                raise BatchError(f'path must have sample(t) or be a PathBatch, got {path!r}')
+            rows = [path.sample(step_time_ns(k, dt) * 1e-9) for k in range(steps + 1)]
+            tab = np.array([(s.x, s.y, s.vx, s.vy, s.ax, s.ay) for s in rows], dtype=float)
+            # (steps + 1, 2, 1) each: position, velocity, acceleration as column pairs
+            self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
+
+    def at(self, k):
+        """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
+
+        ``k`` is an int or an array of N ints (per-case odometry stamps).
+        """
+        if self.table is not None:
+            if np.ndim(k) == 0:
+                return tuple(col[k] for col in self.table)
+            return tuple(col[k][:, :, 0].T for col in self.table)
+        t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
+        r, w, cx, cy = self.r, self.w, self.cx, self.cy
+        a = w * t + self.ph
+        if self.kind == 'circle':
+            c, s = np.cos(a), np.sin(a)
+            return (np.stack((cx + r * c, cy + r * s)), np.stack((-r * w * s, r * w * c)),
+                    np.stack((-r * w * w * c, -r * w * w * s)))
+        s1, c1 = np.sin(a), np.cos(a)
+        s2, c2 = np.sin(2 * a), np.cos(2 * a)
+        return (np.stack((cx + r * s1, cy + 0.5 * r * s2)), np.stack((r * w * c1, r * w * c2)),
+                np.stack((-r * w * w * s1, -2 * r * w * w * s2)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Result
+
+@dataclass(frozen=True)
+class BatchRun:
+    """Per-case results of :func:`simulate_batch` (arrays of N; SI units).
+
+    Metrics follow :func:`control.metrics.tracking_metrics` on the position error
+    sampled at every step: ``settling_time`` (nan: not within ``tolerance`` at the end),
+    ``first_within``, ``final_error``, ``rms_error``, ``steady_error`` (max error over
+    ``t >= steady_from``), ``peak_abs_v``/``peak_abs_w`` (commands), ``finite`` (False if
+    the state became non-finite).  With ``record=True``, ``trace`` holds ``(steps + 1, N)``
+    arrays ``t, x, y, th, speed, xd, yd, cmd_v, cmd_w, commanded`` (rows as
+    :class:`control.simulate.TrackingRun`).
+    """
+
+    steps: int
+    dt: float
+    tolerance: float
+    steady_from: float
+    settling_time: np.ndarray
+    first_within: np.ndarray
+    final_error: np.ndarray
+    rms_error: np.ndarray
+    steady_error: np.ndarray
+    peak_abs_v: np.ndarray
+    peak_abs_w: np.ndarray
+    finite: np.ndarray
+    trace: dict | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of cases."""
+        return int(self.final_error.size)
+
+
+# ---------------------------------------------------------------------------------------------
+# The loop
+
+def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
+                   cases: BatchCases | None = None, *, tolerance: float = 0.01,
+                   steady_from: float | None = None, record: bool = False,
+                   exact: bool = True) -> BatchRun:
+    """Run the tracking loop for every case of ``cases`` for ``steps`` plant steps.
+
+    Parameters
+    ----------
+    plant, tracker : PlantConfig, TrackerConfig
+        Base configuration (shared settings and defaults of every per-case field).
+    path : Path-like or PathBatch
+        Shared reference (``sample(t)``) or per-case analytic path parameters.
+    steps : int
+        Plant steps (``steps + 1`` samples, as :func:`control.simulate.simulate_tracking`).
+    cases : BatchCases, optional
+        Per-case settings (default: one case, the base configuration).
+    tolerance : float
+        Error tolerance (m) of the settling time.
+    steady_from : float, optional
+        Start (s) of the window of ``steady_error`` (default: half the run).
+    record : bool
+        Keep the full per-step arrays (memory ``~ 80 N steps`` bytes).
+    exact : bool
+        True (default): every transcendental function evaluated as the single run does
+        (the yaw through a quaternion with libm's ``atan2`` element by element, the arc's
+        sine and cosines); a case equals :func:`control.simulate.simulate_tracking` bit
+        for bit in every configuration tested.  False: cheaper forms of the same values
+        (about 3-4 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
+        for some arguments), for statistics over many cases; their
+        round-off differences grow by up to ``1 / min_speed`` where the speed is near 0
+        (a robot coming to rest at a trajectory's end: about 2e-12; elsewhere 1e-14).
+
+    Returns
+    -------
+    BatchRun
+
+    Raises
+    ------
+    BatchError
+        A bad per-case value, or a feature that is not vectorized (the predictor).
+    """
+    if tracker.predicts:
+        raise BatchError('the batch simulation does not vectorize the latency predictor '
+                         '(predict_latency, predict_odom_latency, predict_lag_v, predict_lag_w); '
+                         'set them to 0 or use simulate_tracking for single runs')
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise BatchError(f'steps must be an integer >= 1, got {steps!r}')
+    if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
+        raise BatchError(f'tolerance must be a finite number > 0 m, got {tolerance!r}')
+    steps = int(steps)
+    cases = BatchCases(1) if cases is None else cases
+    s = _resolve(cases, plant, tracker)
+    n = s.n
+    dt = plant.dt
+    dt_ns = int(round(dt * 1e9))
+    t_end = steps * dt_ns * 1e-9
+    steady_from = 0.5 * t_end if steady_from is None else float(steady_from)
+    ref = _Reference(path, n, steps, dt)
+    idx = np.arange(n)
+
+    # -- plant state; pairs (x, y) as (2, N) arrays
+    pos = np.stack((s.x0, s.y0))
+    th, pv = s.th0.copy(), s.v0.copy()
+    pw = np.zeros(n)
+    off = np.zeros((2, n))                          # velocity offset (ox, oy)
+    force_v, force_w = pv.copy(), np.zeros(n)       # command in force
+    Nd = delay_steps(plant.tau, dt)[0]
+    At = np.array(plant.A_tau, dtype=float)
+    terms = [[(j, float(At[i, j])) for j in range(4) if At[i, j] != 0.0] for i in range(4)]
+    use_delay = any(terms)
+    if use_delay:
+        hist = np.empty((Nd + 1, 4, n))             # xi = (x, x', y, y') by step % (Nd + 1)
+        hist[:] = np.array((pos[0], pv * np.cos(th), pos[1], pv * np.sin(th)))[None]
+        dbuf = np.zeros((4, n))
+        dpos, dvel = dbuf[0::2], dbuf[1::2]
+    # actuator
+    lag_v, lag_w = s.lag_v, s.lag_w
+    alv, alw = s.max_linear_accel, s.max_angular_accel
+    act_on = bool(np.any(lag_v) or np.any(lag_w) or np.any(alv) or np.any(alw))
+    em1_v = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_v, float)
+    em1_w = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_w, float)
+    lagv_m, lagw_m, limv_m, limw_m = lag_v > 0, lag_w > 0, alv > 0, alw > 0
+    # command latency
+    cmd_d = s.cmd_d
+    cmd_delayed = bool(np.any(cmd_d))
+    if cmd_delayed:
+        R = int(cmd_d.max()) + 1
+        cbuf = np.zeros((R, 2, n))
+        cstep = np.full((R, n), np.iinfo(np.int64).min, dtype=np.int64)   # no command yet
+    # odometry
+    period, odom_d = s.period, s.odom_d
+    noisy = np.any(s.noise != 0.0, axis=1)
+    any_noise = bool(noisy.any())
+    uniform_odom = bool(np.all(period == period[0]) and np.all(odom_d == odom_d[0]))
+    ideal_odom = uniform_odom and period[0] == 1 and odom_d[0] == 0 and not any_noise
+    if not ideal_odom:
+        Ro = int(odom_d.max()) + 1
+        obuf = np.zeros((Ro, 4, n))                 # measured x, y, th, v by step % Ro
+        if any_noise:
+            rngs = {int(i): np.random.default_rng(int(s.seed[i])) for i in np.flatnonzero(noisy)}
+            blk = 256
+            nbuf = np.zeros((n, blk, 3))
+            ncount = np.zeros(n, dtype=np.int64)    # measurements taken per case
+
+    def measure(k: int) -> None:
+        take = (k % period) == 0
+        if not take.any():
+            return
+        mx, my, mth = pos[0], pos[1], th
+        if any_noise:
+            nz = take & noisy
+            if nz.any():
+                j = ncount % blk
+                for i in np.flatnonzero(nz & (j == 0)):
+                    nbuf[i] = rngs[int(i)].standard_normal((blk, 3))
+                draw = nbuf[idx, j]
+                sx, sy, sth = s.noise[:, 0], s.noise[:, 1], s.noise[:, 2]
+                mx = np.where(nz, mx + sx * draw[:, 0], mx)
+                my = np.where(nz, my + sy * draw[:, 1], my)
+                mth = np.where(nz, _wrap(th + sth * draw[:, 2]), th)
+                ncount[nz] += 1
+        slot = k % Ro
+        sel = take if not take.all() else slice(None)
+        obuf[slot, 0, sel] = mx[sel]
+        obuf[slot, 1, sel] = my[sel]
+        obuf[slot, 2, sel] = mth[sel]
+        obuf[slot, 3, sel] = pv[sel]
+
+    # -- tracker state
+    K = s.K
+    P = s.P
+    S = P.shape[1]
+    seg = -1
+    Kc = None
+    tv = np.zeros(n)
+    started = np.zeros(n, dtype=bool)
+    all_started = False
+    tdt = s.tdt
+    vmax, wmax, vmin = tracker.max_linear_speed, tracker.max_angular_speed, tracker.min_speed
+    comp = tracker.delay_compensation
+    if comp:
+        Atc = np.array(tracker.A_tau, dtype=float)
+        cterms = [[(j, float(Atc[i, j])) for j in range(4)] for i in range(4)]
+        Lc = s.comp_n
+        cbuf_ref = np.zeros((int(Lc.max()), 8, n))
+        ccount = np.zeros(n, dtype=np.int64)
+    reuse_error = ideal_odom and not comp           # tracker's position error = logged one
+    cs = np.empty((2, n))                           # cos, sin of the measured heading
+    mid = np.empty((2, n))
+
+    # -- metrics
+    last_out = np.full(n, -1, dtype=np.int64)
+    first_in = np.full(n, -1, dtype=np.int64)
+    sq = np.zeros(n)
+    steady = np.zeros(n)
+    steady_k = max(0, int(steady_from / (dt_ns * 1e-9)) - 2)   # first k with t_k >= steady_from
+    while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < steady_from:
+        steady_k += 1
+    peak_v = np.zeros(n)
+    peak_w = np.zeros(n)
+    cmd_v_log, cmd_w_log = force_v.copy(), force_w.copy()
+    if record:
+        names = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
+        trace = {name: np.zeros((steps + 1, n)) for name in names}
+
+    if not ideal_odom:
+        measure(0)
+    err = np.zeros(n)
+    searching = True
+    with np.errstate(all='ignore'):
+        for k in range(steps + 1):
+            t_k = step_time_ns(k, dt) * 1e-9
+            rpos, rvel, racc = ref.at(k)
+            # ---- odometry due at k
+            epos = None
+            if ideal_odom:
+                due = True
+                mpos, mth, mv = pos, th, pv
+                mstep = k
+            else:
+                ms = k - odom_d
+                dmask = (ms >= 0) & ((ms % period) == 0)
+                if uniform_odom:
+                    due = bool(dmask[0])
+                else:
+                    due = dmask if dmask.any() else False
+                if due is not False:
+                    slot = ms % Ro
+                    mpos = obuf[slot, 0:2, idx].T
+                    mth, mv = obuf[slot, 2, idx], obuf[slot, 3, idx]
+                    mstep = ms if not uniform_odom else int(ms[0])
+            if due is not False:
+                if np.ndim(mstep) == 0 and mstep == k:
+                    qpos, qvel, qacc = rpos, rvel, racc
+                else:
+                    qpos, qvel, qacc = ref.at(mstep)
+                # ---- Tracker.step
+                if not all_started:
+                    new = ~started if due is True else (~started & due)
+                    if new.any():
+                        v_init = np.where(np.isfinite(mv), mv, 0.0)
+                        v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
+                        tv = np.where(new, v_init, tv)
+                        started = started | new
+                        all_started = bool(started.all())
+                v = tv
+                if exact:
+                    # yaw through the message's quaternion (its qx = qy = 0 terms add exact
+                    # zeros: left out), as the tracker node reads it
+                    # (libm's atan2 per element: numpy's SIMD arctan2 differs from it by an
+                    # ulp for about 3 % of arguments)
+                    qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
+                    mth = _ATAN2(2.0 * (qw * qz), qw * qw - qz * qz).astype(float)
+                # (otherwise the yaw is used as measured: the same angle to round-off)
+                np.cos(mth, out=cs[0])
+                np.sin(mth, out=cs[1])
+                if comp:
+                    xdpos, xdvel, ud = _compensated(cbuf_ref, ccount, Lc, cterms, qpos, qvel,
+                                                    qacc, due, idx, n)
+                else:
+                    xdpos, xdvel, ud = qpos, qvel, qacc
+                epos = mpos - xdpos
+                evel = v * cs - xdvel
+                sg = segment_index(k, dt, s.hold_ns, S) if S > 1 else 0
+                if sg != seg:
+                    Ke = K + P[:, sg]
+                    Kc = [Ke[:, :, j].T.copy() for j in range(4)]     # (2, N) per column
+                    seg = sg
+                u = ud + Kc[0] * epos[0] + Kc[1] * evel[0] + Kc[2] * epos[1] + Kc[3] * evel[1]
+                floored = np.abs(v) < vmin
+                vf = np.where(floored, np.where(v >= 0, vmin, -vmin), v) if floored.any() \
+                    else v
+                uc = u * cs                               # u1 cos, u2 sin
+                a = uc[0] + uc[1]
+                us = u * cs[::-1]                         # u1 sin, u2 cos
+                w = (us[1] - us[0]) / vf
+                w = np.minimum(np.maximum(w, -wmax), wmax)      # nan stays nan
+                v_next = v + a * tdt
+                v_next = np.minimum(np.maximum(v_next, -vmax), vmax)
+                cv = 0.5 * (v + v_next)
+                cw = w
+                ok = np.isfinite(cv) & np.isfinite(w)
+                if ok.all():
+                    tv = v_next if due is True else np.where(due, v_next, tv)
+                else:       # non-finite: stop, keep the compensator state
+                    ok = np.isfinite(w) & np.isfinite(v_next)
+                    tv = np.where(ok if due is True else ok & due, v_next, tv)
+                    cv = np.where(ok, cv, 0.0)
+                    cw = np.where(ok, w, 0.0)
+                if due is True:
+                    cmd_v_log, cmd_w_log = cv, cw
+                else:
+                    cmd_v_log = np.where(due, cv, cmd_v_log)
+                    cmd_w_log = np.where(due, cw, cmd_w_log)
+                # ---- UnicyclePlant.command
+                if cmd_delayed:
+                    slot = k % R
+                    if due is True:
+                        cbuf[slot, 0] = cv
+                        cbuf[slot, 1] = cw
+                        cstep[slot] = k
+                    else:
+                        cbuf[slot, 0] = np.where(due, cv, cbuf[slot, 0])
+                        cbuf[slot, 1] = np.where(due, cw, cbuf[slot, 1])
+                        cstep[slot] = np.where(due, k, cstep[slot])
+                elif due is True:
+                    force_v, force_w = cv, cw
+                else:
+                    force_v = np.where(due, cv, force_v)
+                    force_w = np.where(due, cw, force_w)
+            # ---- log row k and metrics
+            if reuse_error:
+                err = np.hypot(epos[0], epos[1])
+            else:
+                dp = pos - rpos
+                err = np.hypot(dp[0], dp[1])
+            out = err > tolerance            # nan: never back within (it stays nan)
+            np.copyto(last_out, k, where=out)
+            if searching:
+                fin = first_in < 0
+                fin &= ~out
+                np.copyto(first_in, k, where=fin)
+                if k % 64 == 0:
+                    searching = bool((first_in < 0).any())
+            sq += err * err
+            if k >= steady_k:
+                np.fmax(steady, err, out=steady)
+            if due is not False:
+                np.fmax(peak_v, np.abs(cmd_v_log), out=peak_v)
+                np.fmax(peak_w, np.abs(cmd_w_log), out=peak_w)
+            if record:
+                commanded = 0.0 if due is False else (1.0 if due is True else due)
+                row = (t_k, pos[0], pos[1], th, pv, rpos[0], rpos[1], cmd_v_log, cmd_w_log,
+                       commanded)
+                for name, val in zip(names, row):
+                    trace[name][k] = val
+            if k == steps:
+                break
+            # ---- UnicyclePlant.advance
+            if cmd_delayed:
+                ks = k - cmd_d
+                slot = ks % R
+                hit = cstep[slot, idx] == ks
+                if hit.any():
+                    force_v = np.where(hit, cbuf[slot, 0, idx], force_v)
+                    force_w = np.where(hit, cbuf[slot, 1, idx], force_w)
+            v, w = force_v, force_w
+            if act_on:
+                v_end, v = _first_order(pv, v, lag_v, alv, em1_v, lagv_m, limv_m, dt)
+                w_end, w = _first_order(pw, w, lag_w, alw, em1_w, lagw_m, limw_m, dt)
+            if ideal_odom and not exact:     # the tracker measured this very heading
+                csp = cs
+            elif use_delay:
+                csp = np.stack((np.cos(th), np.sin(th)))
+            else:
+                csp = None
+            if use_delay:
+                vel = v * csp + off                  # xi_now = (x, vel_x, y, vel_y)
+                if Nd == 0:
+                    xi = (pos[0], vel[0], pos[1], vel[1])
+                    for i in range(4):
+                        _dot_terms(terms[i], xi, dbuf[i])
+                else:
+                    hs = k % (Nd + 1)
+                    old = hist[hs]                   # xi at step k - N
+                    for i in range(4):
+                        _dot_terms(terms[i], old, dbuf[i])
+                    old[0::2] = pos
+                    old[1::2] = vel
+            half = 0.5 * w * dt
+            sinc = _arc_terms(th, half, csp, exact, mid)
+            arc = v * dt * sinc
+            if use_delay:
+                pos = pos + (arc * mid + (dpos + off) * dt + 0.5 * dvel * dt * dt)
+                off = off + dvel * dt
+            else:                                    # the delay terms are exact zeros
+                pos = pos + arc * mid
+            th = _wrap(th + w * dt)
+            if act_on:
+                pv, pw = v_end, w_end
+            else:
+                pv, pw = v, w
+            if not ideal_odom:
+                measure(k + 1)
+        finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
+
+    t_of = lambda kk: (kk * dt_ns) * 1e-9   # noqa: E731
+    within_end = err <= tolerance
+    settle = np.where(within_end, t_of(last_out + 1), np.nan)
+    first = np.where(first_in >= 0, t_of(first_in), np.nan)
+    steady = np.where(finite, steady, np.nan)
+    return BatchRun(steps=steps, dt=dt, tolerance=float(tolerance), steady_from=steady_from,
+                    settling_time=settle, first_within=first, final_error=err.copy(),
+                    rms_error=np.sqrt(sq / (steps + 1)), steady_error=steady,
+                    peak_abs_v=peak_v, peak_abs_w=peak_w, finite=finite,
+                    trace=trace if record else None)
+
+
+def _compensated(buf, count, L, terms, qpos, qvel, qacc, due, idx, n):
+    """:meth:`control.loop.Tracker._compensated_reference` for every case that is due.
+
+    ``buf`` holds per case the last ``L`` pairs ``(xi*, xi*')`` (8 rows) in a ring
+    indexed by the case's call ``count``; returns ``xi*`` as position and velocity
+    pairs and ``u*`` (each ``(2, N)``).
+    """
+    rx, ry = np.broadcast_to(qpos[0], (n,)), np.broadcast_to(qpos[1], (n,))
+    vx, vy = np.broadcast_to(qvel[0], (n,)), np.broadcast_to(qvel[1], (n,))
+    ax, ay = qacc[0], qacc[1]
+    first = count == 0
+    if due is not True:
+        first = first & due
+    if first.any():
+        init = _stack((rx, vx, ry, vy, vx, 0.0 * vx, vy, 0.0 * vy), n)
+        buf[:, :, first] = init[:, first][None]
+    cs = count % L
+    z = buf[cs, :, idx].T                           # (8, N): xi*, xi*' at t - tau
+    d = [_dot4(terms[i], z[0:4]) for i in range(4)]
+    dd = [_dot4(terms[i], z[4:8]) for i in range(4)]
+    xs = (rx, vx - d[0], ry, vy - d[2])
+    us = (ax - dd[0] - d[1], ay - dd[2] - d[3])
+    row = _stack((xs[0], xs[1], xs[2], xs[3], vx, us[0] + d[1], vy, us[1] + d[3]), n)
+    if due is True:
+        buf[cs, :, idx] = row.T
+        count += 1
+    else:
+        w_idx = np.flatnonzero(due)
+        buf[cs[w_idx], :, w_idx] = row[:, w_idx].T
+        count[w_idx] += 1
+    return (_stack((xs[0], xs[2]), n), _stack((xs[1], xs[3]), n), _stack(us, n))
+
+
+# Taylor coefficients of sin(h)/h and cos(h) in h^2 (to h^6; |h| <= 0.01: truncation < 1e-20)
+_S1, _S2, _S3 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0
+_C1, _C2, _C3 = -1.0 / 2.0, 1.0 / 24.0, -1.0 / 720.0
+
+
+def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
+    """``sin(half) / half`` of the exact arc; ``mid`` receives ``cos, sin (th + half)``.
+
+    ``exact``: the plant's own operations.  Otherwise, for ``|half| <= 0.01``
+    (``|w| dt <= 0.02``), ``sin(half) / half`` from its Taylor series (truncation below
+    1e-20) and, given ``cs = (cos th, sin th)`` (else ``None``), the angle-addition
+    formulas: up to three transcendental calls per step fewer, the same values to
+    round-off.
+    """
+    if not exact and np.max(np.abs(half)) <= 1e-2:
+        h2 = half * half
+        sinc = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
+        if cs is not None:
+            sh = half * sinc
+            ch = ((h2 * _C3 + _C2) * h2 + _C1) * h2 + 1.0
+            c, s = cs[0], cs[1]
+            np.subtract(c * ch, s * sh, out=mid[0])
+            np.add(s * ch, c * sh, out=mid[1])
+            return sinc
+    else:
+        big = np.abs(half) > 1e-8
+        sinc = np.where(big, np.sin(half) / np.where(big, half, 1.0), 1.0 - half * half / 6.0)
+    a = th + half
+    np.cos(a, out=mid[0])
+    np.sin(a, out=mid[1])
+    return sinc
+
+
+def _stack(values, n: int) -> np.ndarray:
+    """Rows of scalars or arrays of ``n`` as one ``(len(values), n)`` array."""
+    return np.stack([np.broadcast_to(v, (n,)) for v in values])
+
+
+def _dot_terms(terms, xi, out: np.ndarray) -> None:
+    """``out = sum(a * xi[j])`` over the nonzero terms, left to right (as the plant).
+
+    The plant starts from ``0.0``: that changes at most the sign of a zero.  Rows
+    without terms are left as they are (zero).
+    """
+    if not terms:
+        return
+    j, a = terms[0]
+    np.multiply(a, xi[j], out=out)
+    for j, a in terms[1:]:
+        out += a * xi[j]
+
+
+def _dot4(terms, z):
+    """``sum(A[i][j] * z[j] for j in range(4))`` left to right (Python's ``sum`` from 0)."""
+    out = 0
+    for j, a in terms:
+        out = out + a * z[j]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Linear delay loop
+
+def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: float = 1e-3
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`control.simulate.simulate_delay_loop` for N loops at once (constant history).
+
+    Parameters
+    ----------
+    A0 : array_like, (N, n, n) or (n, n)
+        Delay-free matrices (e.g. ``A + B (K + E Delta_i F)``).
+    A1 : array_like, (N, n, n) or (n, n)
+        Delayed-state matrices.
+    tau : float
+        Delay (s), a multiple of ``dt``.
+    xi0 : array_like, (N, n) or (n,)
+        Initial states (the history before 0 is constant).
+    duration, dt : float
+        Length and RK4 step (s).
+
+    Returns
+    -------
+    t : numpy.ndarray, (steps + 1,)
+    xi : numpy.ndarray, (steps + 1, N, n)
+    """
+    from .simulate import steps_for_duration
+    A0 = np.asarray(A0, float)
+    A1 = np.asarray(A1, float)
+    xi0 = np.asarray(xi0, float)
+    N = max(A0.shape[0] if A0.ndim == 3 else 1, A1.shape[0] if A1.ndim == 3 else 1,
+            xi0.shape[0] if xi0.ndim == 2 else 1)
+    n = A0.shape[-1]
+    try:
+        A0 = np.broadcast_to(A0, (N, n, n))
+        A1 = np.broadcast_to(A1, (N, n, n))
+        xi0 = np.broadcast_to(xi0, (N, n))
+    except ValueError:
+        raise BatchError(f'shapes do not match: A0 {A0.shape}, A1 {A1.shape}, '
+                         f'xi0 {xi0.shape}') from None
+    if not (np.all(np.isfinite(A0)) and np.all(np.isfinite(A1)) and np.all(np.isfinite(xi0))):
+        raise BatchError('A0, A1 and xi0 must be finite')
+    Nd = int(round(tau / dt))
+    if abs(Nd * dt - tau) > 1e-9 * max(1.0, tau):
+        raise BatchError(f'tau = {tau} s is not a multiple of dt = {dt} s')
+    steps = steps_for_duration(duration, dt)
+    if Nd == 0:
+        A0, A1 = A0 + A1, np.zeros_like(A1)
+    out = np.zeros((Nd + steps + 1, N, n))
+    out[:Nd + 1] = xi0
+
+    def f(x, xd):
+        return np.einsum('kij,kj->ki', A0, x) + np.einsum('kij,kj->ki', A1, xd)
+
+    for k in range(steps):
+        i = Nd + k
+        x = out[i]
+        d0, d1 = out[i - Nd], out[i - Nd + 1]
+        dm = 0.5 * (d0 + d1)
+        k1 = f(x, d0)
+        k2 = f(x + 0.5 * dt * k1, dm)
+        k3 = f(x + 0.5 * dt * k2, dm)
+        k4 = f(x + dt * k3, d1)
+        out[i + 1] = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return np.arange(steps + 1) * dt, out[Nd:].copy()
