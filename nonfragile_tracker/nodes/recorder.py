@@ -18,6 +18,12 @@ Parameters (read-only): ``output`` (bag directory to create; empty: a new
 ``runs/run_YYYYmmdd_HHMMSS[_N]/bag``), ``topics``, ``drain_timeout``,
 ``chunk_size``, ``flush_period``; and the standard ``use_sim_time``.
 
+Lockstep start (``lockstep_gate``): DDS matches each side on its own, so the plant
+counting the recorder's subscriptions does not mean they receive yet.  The recorder
+publishes ``recorder/ready`` (latched) once each recorded lockstep topic's subscription
+has matched its publisher, and a plant with ``lockstep_recorder`` starts only then; a
+republished step (a stamp already recorded on that topic) is written once.
+
 Ending: SIGINT/SIGTERM close the bag cleanly (MCAP summary + metadata.yaml)
 and exit 0.  In a lockstep run the plant publishes ``run_done`` = S (the last
 step); the recorder then waits until it has S+1 distinct stamps on each of
