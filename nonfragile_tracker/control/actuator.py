@@ -101,7 +101,10 @@ def actuate(model: ActuatorModel, v: float, w: float, cv: float, cw: float, h: f
 
 def unicycle_arc(x: float, y: float, th: float, v: float, w: float, h: float
                  ) -> tuple[float, float, float]:
-    """Pose after ``h`` seconds at constant ``(v, w)`` (exact arc; ``th`` wrapped to ``[-pi, pi]``)."""
+    """Pose after ``h`` seconds at constant ``(v, w)``.
+
+    Exact arc; ``th`` wrapped to ``[-pi, pi]``.
+    """
     half = 0.5 * w * h
     sinc = math.sin(half) / half if abs(half) > 1e-8 else 1.0 - half * half / 6.0
     mid = th + half

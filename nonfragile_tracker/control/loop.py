@@ -454,8 +454,11 @@ class Tracker:
 
     def step(self, x: float, y: float, th: float, ref: RefSample,
              measured_speed: float | None = None, stamp: float | None = None) -> Command:
-        """One command from the pose ``(x, y, th)`` measured at ``stamp`` (s; default
-        ``ref.t``) and a reference sample (any time; the predictor extrapolates it)."""
+        """One command from the pose ``(x, y, th)`` measured at ``stamp``.
+
+        ``stamp`` in s (default ``ref.t``); ``ref`` a reference sample of any time (the
+        predictor extrapolates it).
+        """
         c = self.config
         if self.v is None:
             self.v = float(measured_speed) if measured_speed is not None else 0.0

@@ -56,6 +56,7 @@ class Odometer:
         self.reset()
 
     def reset(self) -> None:
+        """Forget pending measurements and restart the noise from the seed."""
         self._pending: deque = deque()
         self._rng = np.random.default_rng(self.model.seed) if self._noisy else None
 
