@@ -27,10 +27,10 @@ node, ``runner.run_processes``) and in ``real time`` (wall timers,
 worst in brackets, the uncompensated law ("none") beside the predictor assuming the
 configured latency ("exact") and 30 % more / less.  RMS position error of the true pose
 (``/pose``) against the recorded reference (interpolated at the pose stamps) over the
-samples more than 10 s after the first pose.  Last columns: the latency ``identify``
-finds on the bags of the "exact" runs (median; bootstrap 50) against the configured one
-(one plant step = 10 ms).  Independent runs go ``--jobs`` at a time, each on its own
-ROS_DOMAIN_ID.
+samples more than 10 s after the plant's start (last pose stamp - duration).  Last
+columns: the latency ``identify`` finds on the bags of the "exact" runs (median;
+bootstrap 50) against the configured one (one plant step = 10 ms).  Independent runs go
+``--jobs`` at a time, each on its own ROS_DOMAIN_ID.
 """
 from __future__ import annotations
 
@@ -91,15 +91,19 @@ def cell(values_m: list[float]) -> str:
 
 # ------------------------------------------------------------------------ through the nodes
 
-def bag_rms_after(bag: Path, after: float = 10.0) -> float:
-    """RMS of |true pose - reference| over the pose samples ``after`` s past the first one."""
+def bag_rms_after(bag: Path, duration: float, after: float = 10.0) -> float:
+    """RMS of |true pose - reference| over the pose samples ``after`` s into the run.
+
+    The run's start is its last pose stamp minus the plant's ``duration`` (exact in
+    lockstep and in real time, where the recorder may miss the first samples).
+    """
     from nonfragile_tracker.bag.reader import read_bag, read_messages
     ref = read_bag(bag, strict=False).run.reference
     rows = [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.pose.position.x,
              m.pose.position.y) for _, m in read_messages(bag, 'pose')]
     ps, px, py = (np.array(c, dtype=float) for c in zip(*rows))
     rs = ref.stamp_ns.astype(float)
-    keep = (ps >= ps[0] + after * 1e9) & (ps >= rs[0]) & (ps <= rs[-1])
+    keep = (ps >= ps[-1] - (duration - after) * 1e9) & (ps >= rs[0]) & (ps <= rs[-1])
     ex = px[keep] - np.interp(ps[keep], rs, ref.x)
     ey = py[keep] - np.interp(ps[keep], rs, ref.y)
     return float(np.sqrt(np.mean(ex * ex + ey * ey))) if keep.any() else math.nan
@@ -135,7 +139,7 @@ def node_run(job: dict) -> dict:
     out = {**job, 'exit_codes': res.exit_codes, 'wall_s': res.wall_time,
            'rms_m': math.nan, 'identified_s': math.nan}
     try:
-        out['rms_m'] = bag_rms_after(res.bag)
+        out['rms_m'] = bag_rms_after(res.bag, job['duration'])
         if job['identify']:
             out['identified_s'] = bag_latency(res.bag)
     except Exception as exc:          # noqa: BLE001 - one bad run must not hide the table

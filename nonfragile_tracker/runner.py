@@ -113,6 +113,21 @@ def _doubles(value):
 
 #: Real time: how long the recorder keeps recording after the plant has finished (s).
 REALTIME_TAIL_S = 0.3
+#: Real time: longest wait for the recorder to start before the plant is started (s).
+REALTIME_START_WAIT_S = 30.0
+
+
+def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> bool:
+    """Wait until ``log`` contains ``text`` (True), ``proc`` exits or ``timeout`` s pass."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and proc.poll() is None:
+        try:
+            if text in log.read_text(errors='replace'):
+                return True
+        except OSError:
+            pass
+        time.sleep(0.05)
+    return False
 
 
 def is_realtime(params: dict) -> bool:
@@ -174,6 +189,10 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
             start('recorder', extra)
         start('tracker')
         start('reference')
+        if realtime and record:
+            # the real-time plant steps from its start: let the recorder subscribe first
+            _wait_for_line(run_dir / 'recorder.log', 'recording', procs['recorder'],
+                           REALTIME_START_WAIT_S)
         start('plant', ['-p', f'lockstep_subscribers:={2 if record else 1}'])
         plant = procs['plant']
         with open(run_dir / 'plant.log') as reader:

@@ -256,3 +256,10 @@ def test_follower_without_predictor_is_unchanged():
         ca = a.step(s.x + 0.01, s.y - 0.02, s.heading + 0.05, t, 0.1)
         cb = b.step(s.x + 0.01, s.y - 0.02, s.heading + 0.05, s, 0.1)
         assert (ca.v, ca.w) == (cb.v, cb.w)
+
+
+def test_run_paper_flag_refuses_a_second_configuration(capsys):
+    """`run --paper` is the paper's configuration; with --gains or compensation: exit 2."""
+    for extra in (['--gains', str(CONFIG / 'tracker_gains.yaml')], ['--delay-compensation']):
+        assert main(['run', '--paper', *extra]) == 2
+        assert "--paper is the paper's configuration" in capsys.readouterr().err
