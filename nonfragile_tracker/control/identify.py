@@ -235,17 +235,17 @@ class Identification:
 
     @property
     def latency_interval_s(self) -> tuple[float, float]:
-        """Latency interval (low, high) in s."""
+        """(low, high) of the latency interval (s)."""
         return (self.latency_low_s, self.latency_high_s)
 
     @property
     def tau_v_interval_s(self) -> tuple[float, float]:
-        """Interval of tau_v (low, high) in s."""
+        """(low, high) of the linear-speed time constant's interval (s)."""
         return (self.tau_v_low_s, self.tau_v_high_s)
 
     @property
     def tau_w_interval_s(self) -> tuple[float, float]:
-        """Interval of tau_w (low, high) in s."""
+        """(low, high) of the angular-speed time constant's interval (s)."""
         return (self.tau_w_low_s, self.tau_w_high_s)
 
 

@@ -454,10 +454,10 @@ class Tracker:
 
     def step(self, x: float, y: float, th: float, ref: RefSample,
              measured_speed: float | None = None, stamp: float | None = None) -> Command:
-        """One command from the pose ``(x, y, th)`` measured at ``stamp``.
+        """One command from a measured pose and a reference sample.
 
-        ``stamp`` in s (default ``ref.t``); ``ref`` a reference sample of any time (the
-        predictor extrapolates it).
+        The pose ``(x, y, th)`` is measured at ``stamp`` (s; default ``ref.t``); the
+        reference sample may be of any time (the predictor extrapolates it).
         """
         c = self.config
         if self.v is None:
