@@ -188,11 +188,12 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                 extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
             start('recorder', extra)
         start('tracker')
-        start('reference')
         if realtime and record:
-            # the real-time plant steps from its start: let the recorder subscribe first
+            # the real-time plant steps and the reference's time runs from their start:
+            # let the recorder subscribe first, then start both together
             _wait_for_line(run_dir / 'recorder.log', 'recording', procs['recorder'],
                            REALTIME_START_WAIT_S)
+        start('reference')
         start('plant', ['-p', f'lockstep_subscribers:={2 if record else 1}'])
         plant = procs['plant']
         with open(run_dir / 'plant.log') as reader:
