@@ -134,11 +134,12 @@ def node_run(job: dict) -> dict:
     run_dir = Path(job['dir'])
     run_dir.mkdir(parents=True)
     env = runner.isolated_env({**__import__('os').environ, 'ROS_DOMAIN_ID': str(job['domain'])})
-    res = runner.run_processes(params, run_dir, record=True, env=env, timeout=300.0,
-                               progress=lambda _line: None)
-    out = {**job, 'exit_codes': res.exit_codes, 'wall_s': res.wall_time,
-           'rms_m': math.nan, 'identified_s': math.nan}
+    out = {**job, 'exit_codes': {}, 'wall_s': math.nan, 'rms_m': math.nan,
+           'identified_s': math.nan}
     try:
+        res = runner.run_processes(params, run_dir, record=True, env=env, timeout=300.0,
+                                   progress=lambda _line: None)
+        out.update(exit_codes=res.exit_codes, wall_s=res.wall_time)
         out['rms_m'] = bag_rms_after(res.bag, job['duration'])
         if job['identify']:
             out['identified_s'] = bag_latency(res.bag)

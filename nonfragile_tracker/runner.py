@@ -213,7 +213,11 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         if plant.poll() is not None and record and realtime:
             time.sleep(REALTIME_TAIL_S)          # the last messages in flight, then stop
             procs['recorder'].send_signal(signal.SIGINT)
-            procs['recorder'].wait(timeout=30)
+            try:
+                procs['recorder'].wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                progress('[runner] the recorder did not stop within 30 s of SIGINT; '
+                         'killing it')          # the finally below kills it
         elif plant.poll() is not None and record:
             try:
                 procs['recorder'].wait(timeout=30)
