@@ -221,7 +221,8 @@ def test_file_round_trip(result, tmp_path):
     data = yaml.safe_load(f.read_text())['identification']
     assert list(data) == ['source', 'latency_s', 'latency_interval_s', 'tau_v_s',
                           'tau_v_interval_s', 'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz',
-                          'samples', 'residual_rms']
+                          'samples', 'residual_rms', 'command_period_s', 'command_age_s']
+    assert data['command_period_s'] == pytest.approx(result.command_period_s, rel=1e-5)
     back = read_identification(f)
     for name in ('latency_s', 'latency_low_s', 'latency_high_s', 'tau_v_s', 'tau_v_low_s',
                  'tau_v_high_s', 'tau_w_s', 'tau_w_low_s', 'tau_w_high_s', 'odom_rate_hz',
