@@ -9,6 +9,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'
+#: Golden bags and the gain they pin (``test/data``).
+DATA = ROOT / 'test' / 'data'
 
 # Tests keep DDS discovery on this host, whatever the caller's environment says.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
