@@ -161,6 +161,7 @@ class PlantConfig:
 
     @property
     def delay_steps(self) -> int:
+        """State delay ``tau`` in whole plant steps."""
         return delay_steps(self.tau, self.dt)[0]
 
     @property
@@ -170,11 +171,13 @@ class PlantConfig:
 
     @property
     def actuator(self) -> ActuatorModel:
+        """The actuator model (lags and acceleration limits) of this configuration."""
         return ActuatorModel(self.lag_v, self.lag_w, self.max_linear_accel,
                              self.max_angular_accel)
 
     @property
     def odometry(self) -> OdometryModel:
+        """The odometry model (latency, period, noise, seed) of this configuration."""
         return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
                              odometry_period_steps(self.odom_rate, self.dt)[0],
                              self.odom_noise, int(self.noise_seed))
@@ -217,6 +220,7 @@ class UnicyclePlant:
         self.reset()
 
     def reset(self) -> None:
+        """Back to the initial state of the configuration (step 0, no pending commands)."""
         c = self.config
         self.k = 0
         self.x, self.y, self.th = float(c.x0), float(c.y0), float(c.th0)
@@ -233,6 +237,7 @@ class UnicyclePlant:
 
     @property
     def t(self) -> float:
+        """Time of the current step in s."""
         return step_time(self.k, self.config.dt)
 
     def xi(self, v: float | None = None) -> tuple[float, float, float, float]:
