@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
-from typing import NamedTuple
+from dataclasses import dataclass, field
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -357,6 +357,8 @@ class TrackerConfig:
     predict_odom_latency: float = 0.0
     predict_lag_v: float = 0.0
     predict_lag_w: float = 0.0
+    #: The gain actually applied, ``K + E D F`` (set from ``K`` and ``perturbation``).
+    K_effective: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         K = validate_gain(self.K)
@@ -385,9 +387,9 @@ class TrackerConfig:
                      'predict_lag_w'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
 
-        K = self.K if self.perturbation is None else tuple(
+        K_eff = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
-        object.__setattr__(self, 'K_effective', K)   # the gain actually applied: K + E D F
+        object.__setattr__(self, 'K_effective', K_eff)   # the gain actually applied: K + E D F
 
     @property
     def predicts(self) -> bool:
@@ -538,12 +540,12 @@ class Tracker:
         history is the first sample at rest).  Then ``e = xi - xi*`` obeys
         ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
         """
-        At = self.config.A_tau
-        hist = self._ref_hist
+        At = cast(tuple, self.config.A_tau)     # set whenever delay_compensation is
+        hist = cast(deque, self._ref_hist)      # bounded deque whenever delay_compensation is
         p_dot = (ref.vx, ref.vy)
         if not hist:
             first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))
-            hist.extend([first] * hist.maxlen)
+            hist.extend([first] * cast(int, hist.maxlen))
         z, zdot = hist[0]
         d = [sum(At[i][j] * z[j] for j in range(4)) for i in range(4)]
         dd = [sum(At[i][j] * zdot[j] for j in range(4)) for i in range(4)]

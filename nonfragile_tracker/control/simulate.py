@@ -100,7 +100,7 @@ def run_loop(plant_config: PlantConfig, steps: int,
     :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
     """
     plant = UnicyclePlant(plant_config)
-    rows = []
+    rows: list[tuple[float | bool, ...]] = []
     append = rows.append
     dt = plant_config.dt
     cmd_v, cmd_w = plant.cmd
