@@ -73,7 +73,7 @@ import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import yaml
@@ -338,7 +338,8 @@ class _Channel:
         vals = _interp_shifted(sig, self.pos[:last], shifts)
         if ib is None:
             return vals[:, ia]
-        width = self.width if n is None else self.width[:n]
+        width = cast(np.ndarray, self.width)     # set whenever ib is
+        width = width if n is None else width[:n]
         return (vals[:, ib] - vals[:, ia]) / width
 
 
@@ -565,7 +566,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         """(index a, index b or None, width or None, z, mid time) into the odometry."""
         if use[c] == 'twist':
             ia = np.flatnonzero((to >= t_first) & (to <= t_last))
-            return ia, None, None, twist[c][ia], to[ia]
+            return ia, None, None, cast(np.ndarray, twist[c])[ia], to[ia]
         sel = (to[wa] >= t_first) & (to[wb] <= t_last)
         z = (zv_pose if c == 'v' else zw_pose)[sel]
         return wa[sel], wb[sel], width[sel], z, 0.5 * (to[wa[sel]] + to[wb[sel]])
@@ -660,14 +661,14 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             bl = np.minimum(((ch.t_mid - t_begin) // block_len).astype(int), n_blocks - 1) \
                 if blocks else None
             st = np.stack([_stats(ch, tau, shifts, bl, n_blocks) for tau in grids[c]], axis=1)
-            zzb = np.bincount(bl, weights=ch.z * ch.z, minlength=n_blocks) if blocks \
-                else float(ch.z @ ch.z)
+            zzb = (np.bincount(cast(np.ndarray, bl), weights=ch.z * ch.z, minlength=n_blocks)
+                   if blocks else float(ch.z @ ch.z))
             out[c] = (st, zzb)
         return out
 
     def estimate(stats, weights: np.ndarray | None, shifts, grids):
         """(latency grid pos, {c: tau}, {c: channel latency pos}) from (weighted) statistics."""
-        j = 0.0
+        j: Any = 0.0                    # + the profiles: an array of the latency grid
         tau_hat, lat_c = {}, {}
         sse_all = {}
         for c in _CHANNELS:
@@ -696,7 +697,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     #    fit figures at the result
     zzs = {c: float(ch.z @ ch.z) for c, ch in chans.items()}
 
-    def channel_sse(c: str, p: float, tau: float) -> np.ndarray:
+    def channel_sse(c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
         return _sse(_stats(chans[c], tau, np.array([p]), None, 0), zzs[c])
 
     def objective(x: np.ndarray) -> float:
