@@ -1,5 +1,7 @@
 # Two commands do everything on a fresh machine (see README.md):
 #   make demo   - create .venv, install pinned dependencies, run the paper's scenario end to end
+#                 in the recommended configuration (shipped gain, delay compensation);
+#                 make demo ARGS=--paper: the paper's configuration (K_nf, no compensation)
 #   make test   - create .venv if needed and run the whole test suite
 PYTHON ?= python3
 VENV := .venv
@@ -17,7 +19,7 @@ $(STAMP): requirements.txt
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m nonfragile_tracker.cli run $(ARGS)
+	$(PY) -m nonfragile_tracker.cli run $(if $(filter --paper,$(ARGS)),,--delay-compensation) $(ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider test $(ARGS); rc=$$?; \

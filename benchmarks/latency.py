@@ -16,6 +16,21 @@ Figure: RMS position error (true pose vs reference) over t > 10 s, in mm, median
 ``delay_compensation``).  Gains: the shipped ``config/tracker_gains.yaml`` and the
 paper's ``K_nf`` (``config/paper_gains.yaml``).  ``sat`` is the share of steps after
 10 s with |w| at its 2 rad/s limit without the predictor.  Prints one table; not a test.
+
+    .venv/bin/python benchmarks/latency.py --nodes [--duration 20] [--seeds 3] [--jobs 4]
+
+The issue's "what it must show", through the ROS nodes (run inside a network namespace
+of your own): the package's plant node with ``config/latency_scenario.yaml`` (the robot
+above, no ``A_tau``) and the shipped gain, each figure in ``lockstep`` (one process per
+node, ``runner.run_processes``) and in ``real time`` (wall timers,
+``runner.realtime_overrides``), median of ``--seeds`` runs (noise seed 1..N) with the
+worst in brackets, the uncompensated law ("none") beside the predictor assuming the
+configured latency ("exact") and 30 % more / less.  RMS position error of the true pose
+(``/pose``) against the recorded reference (interpolated at the pose stamps) over the
+samples more than 10 s after the plant's start (last pose stamp - duration).  Last
+columns: the latency ``identify`` finds on the bags of the "exact" runs (median;
+bootstrap 50) against the configured one (one plant step = 10 ms).  Independent runs go
+``--jobs`` at a time, each on its own ROS_DOMAIN_ID.
 """
 from __future__ import annotations
 
@@ -74,12 +89,165 @@ def cell(values_m: list[float]) -> str:
     return f'{statistics.median(mm):7.2f} ({max(mm):6.2f})'
 
 
+# ------------------------------------------------------------------------ through the nodes
+
+def bag_rms_after(bag: Path, duration: float, after: float = 10.0) -> float:
+    """RMS of |true pose - reference| over the pose samples ``after`` s into the run.
+
+    The run's start is its last pose stamp minus the plant's ``duration`` (exact in
+    lockstep and in real time, where the recorder may miss the first samples).
+    """
+    from nonfragile_tracker.bag.reader import read_bag, read_messages
+    ref = read_bag(bag, strict=False).run.reference
+    rows = [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.pose.position.x,
+             m.pose.position.y) for _, m in read_messages(bag, 'pose')]
+    ps, px, py = (np.array(c, dtype=float) for c in zip(*rows))
+    rs = ref.stamp_ns.astype(float)
+    keep = (ps >= ps[-1] - (duration - after) * 1e9) & (ps >= rs[0]) & (ps <= rs[-1])
+    ex = px[keep] - np.interp(ps[keep], rs, ref.x)
+    ey = py[keep] - np.interp(ps[keep], rs, ref.y)
+    return float(np.sqrt(np.mean(ex * ex + ey * ey))) if keep.any() else math.nan
+
+
+def bag_latency(bag: Path) -> float:
+    """The command-to-motion latency ``identify`` finds in ``bag`` (s)."""
+    from nonfragile_tracker.bag.motion import read_motion
+    from nonfragile_tracker.control.identify import identify_latency
+    data = read_motion(bag)
+    return identify_latency(data.commands, data.odometry, bootstrap=50).latency_s
+
+
+def node_run(job: dict) -> dict:
+    """One run through the nodes; returns the job with its RMS (and identified latency)."""
+    from nonfragile_tracker import runner
+    lat, assumed = job['latency'], job['assumed']
+    predict = ({'predict_latency': 0.0, 'predict_lag_v': 0.0, 'predict_lag_w': 0.0}
+               if assumed is None else {'predict_latency': assumed, 'predict_lag_v': LAG,
+                                        'predict_lag_w': LAG})
+    ov = {'plant': {'ros__parameters': {'cmd_latency': lat, 'noise_seed': job['seed'],
+                                        'duration': job['duration']}},
+          'tracker': {'ros__parameters': {'predict_odom_latency': 0.0, **predict}}}
+    if job['mode'] == 'realtime':
+        runner.merge(ov, runner.realtime_overrides())
+    params = runner.scenario_parameters(CONFIG / 'latency_scenario.yaml',
+                                        CONFIG / 'tracker_gains.yaml', ov)
+    run_dir = Path(job['dir'])
+    run_dir.mkdir(parents=True)
+    env = runner.isolated_env({**__import__('os').environ, 'ROS_DOMAIN_ID': str(job['domain'])})
+    out = {**job, 'exit_codes': {}, 'wall_s': math.nan, 'rms_m': math.nan,
+           'identified_s': math.nan}
+    try:
+        res = runner.run_processes(params, run_dir, record=True, env=env, timeout=300.0,
+                                   progress=lambda _line: None)
+        out.update(exit_codes=res.exit_codes, wall_s=res.wall_time)
+        out['rms_m'] = bag_rms_after(res.bag, job['duration'])
+        if job['identify']:
+            out['identified_s'] = bag_latency(res.bag)
+    except Exception as exc:          # noqa: BLE001 - one bad run must not hide the table
+        out['error'] = repr(exc)
+    return out
+
+
+def main_nodes(args) -> int:
+    import shutil
+    import tempfile
+    from concurrent.futures import ThreadPoolExecutor
+    tmp = Path(tempfile.mkdtemp(prefix='nflat_'))
+    cols = [('none', None), ('exact', 1.0), ('+30 %', 1.3), ('-30 %', 0.7)]
+    jobs = []
+    modes = [args.only_mode] if args.only_mode else ['lockstep', 'realtime']
+    lats = tuple(args.latencies) if args.latencies else LATENCIES
+    for mode in modes:
+        for lat in lats:
+            for cname, f in cols:
+                for s in range(1, args.seeds + 1):
+                    jobs.append({'mode': mode, 'latency': lat, 'col': cname,
+                                 'assumed': None if f is None else lat * f, 'seed': s,
+                                 'duration': args.duration, 'identify': cname == 'exact',
+                                 'dir': str(tmp / f'{mode}_{int(lat * 1e3)}_{cname[:2]}_{s}')})
+    t0 = time.perf_counter()
+    import queue
+    free: queue.Queue = queue.Queue()
+    for d in range(args.domain, args.domain + args.jobs):
+        free.put(d)
+
+    def go(job):
+        job['domain'] = free.get()          # a domain id of its own while it runs
+        try:
+            return node_run(job)
+        finally:
+            free.put(job['domain'])
+    print(f'{len(jobs)} runs of {args.duration:g} s, {args.jobs} at a time ...', file=sys.stderr,
+          flush=True)
+    results = []
+    try:
+        for mode in modes:
+            batch = [j for j in jobs if j['mode'] == mode]
+            with ThreadPoolExecutor(max_workers=args.jobs) as ex:
+                results += list(ex.map(go, batch))
+            print(f'{mode}: done at {time.perf_counter() - t0:.0f} s', file=sys.stderr,
+                  flush=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    head = (f'{"mode":9} {"latency":>7} | ' + ' | '.join(f'{c:>15}' for c, _ in cols)
+            + f' | {"identified (exact runs)":>23} | target')
+    print(f'RMS position error after 10 s, mm: median of {args.seeds} runs (worst); nodes, '
+          f'config/latency_scenario.yaml + config/tracker_gains.yaml, {args.duration:g} s runs')
+    print(head)
+    print('-' * len(head))
+    for mode in modes:
+        for lat in lats:
+            row = []
+            for cname, _ in cols:
+                vals = [r['rms_m'] for r in results if r['mode'] == mode and r['latency'] == lat
+                        and r['col'] == cname]
+                row.append(cell(vals) if all(math.isfinite(v) for v in vals) else
+                           f'{"failed":>15}')
+            ids = [r['identified_s'] for r in results if r['mode'] == mode
+                   and r['latency'] == lat and r['col'] == 'exact']
+            idm = statistics.median(ids) if ids and all(math.isfinite(v) for v in ids) \
+                else math.nan
+            within = all(abs(v - lat) <= DT for v in ids) if ids else False
+            exact = [r['rms_m'] * 1e3 for r in results if r['mode'] == mode
+                     and r['latency'] == lat and r['col'] == 'exact']
+            off = [r['rms_m'] * 1e3 for r in results if r['mode'] == mode
+                   and r['latency'] == lat and r['col'] in ('+30 %', '-30 %')]
+            met = (all(v <= TARGETS_MM[lat] for v in exact) and all(v <= 20.0 for v in off))
+            print(f'{mode:9} {lat * 1e3:5.0f}ms | ' + ' | '.join(row)
+                  + f' | {idm * 1e3:7.1f} ms ({"all" if within else "NOT all"} within 10 ms)'
+                  + f' | <= {TARGETS_MM[lat]:.0f} / 20 mm: {"met" if met else "MISSED"}')
+    bad = [r for r in results if r.get('error') or any(
+        c not in (0, None, -2) for c in r['exit_codes'].values())]
+    for r in bad:
+        print(f'run {r["mode"]} {r["latency"]} {r["col"]} seed {r["seed"]}: exit codes '
+              f'{r["exit_codes"]} {r.get("error", "")}')
+    print(f'({time.perf_counter() - t0:.0f} s wall; "target": every exact run within the '
+          'latency target and every +-30 % run within 20 mm; identified: median of the exact '
+          'runs, "within" = every one within one plant step of the configured latency)')
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--duration', type=float, default=40.0, help='simulated s per run (> 10)')
+    ap.add_argument('--duration', type=float, default=None,
+                    help='simulated s per run (> 10; default 40, with --nodes 20)')
     ap.add_argument('--seeds', type=int, default=3, help='noise seeds per figure')
     ap.add_argument('--json', help='also write every raw figure to this file')
+    ap.add_argument('--nodes', action='store_true',
+                    help='the issue table through the ROS nodes, lockstep and real time')
+    ap.add_argument('--jobs', type=int, default=4, help='--nodes: runs at a time')
+    ap.add_argument('--domain', type=int, default=160, help='--nodes: first ROS_DOMAIN_ID')
+    ap.add_argument('--only-mode', choices=['lockstep', 'realtime'],
+                    help='--nodes: one mode only (default both)')
+    ap.add_argument('--latencies', type=float, nargs='+',
+                    help='--nodes: command latencies in s (default 0.1 0.2 0.3)')
     args = ap.parse_args(argv)
+    if args.nodes:
+        args.duration = args.duration or 20.0
+        return main_nodes(args)
+    args.duration = args.duration or 40.0
     gains = {'shipped': read_gain_file(CONFIG / 'tracker_gains.yaml'),
              'K_nf': np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'],
                               dtype=float)}

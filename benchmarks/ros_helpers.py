@@ -136,7 +136,6 @@ def cmd_probe(args) -> int:
 def cmd_publish(args) -> int:
     import rclpy
     from nav_msgs.msg import Odometry
-    from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     rclpy.init()
     node = rclpy.create_node('bench_publisher')

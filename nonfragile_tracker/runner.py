@@ -139,6 +139,41 @@ def _doubles(value):
     return value
 
 
+#: Real time: how long the recorder keeps recording after the plant has finished (s).
+REALTIME_TAIL_S = 0.3
+#: Real time: longest wait for the recorder to start before the plant is started (s).
+REALTIME_START_WAIT_S = 30.0
+
+
+def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> bool:
+    """Wait until ``log`` contains ``text`` (True), ``proc`` exits or ``timeout`` s pass."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and proc.poll() is None:
+        try:
+            if text in log.read_text(errors='replace'):
+                return True
+        except OSError:
+            pass
+        time.sleep(0.05)
+    return False
+
+
+def is_realtime(params: dict) -> bool:
+    """True if the plant of ``params`` runs in ``mode: realtime``."""
+    return params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime'
+
+
+def realtime_overrides() -> dict:
+    """Overrides that put plant, reference and tracker in real-time mode (wall timers).
+
+    The plant steps on a wall timer for its ``duration`` (0: forever), the reference
+    publishes at ``publish_rate`` and the tracker answers each odometry message; for
+    :func:`scenario_parameters` and :func:`run_processes`.
+    """
+    return {n: {'ros__parameters': {'mode': 'realtime'}} for n in ('plant', 'reference',
+                                                                   'tracker')}
+
+
 def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
                   timeout: float = 600.0, progress=print,
                   recorder_topics: list[str] | None = None) -> RunResult:
@@ -146,7 +181,10 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
     Each node's output goes to ``<run_dir>/<node>.log``; the plant's progress lines
     are passed to ``progress``.  If a node dies before the plant has finished, the
-    run is stopped at once (its exit code tells which).
+    run is stopped at once (its exit code tells which).  With the plant in
+    ``mode: realtime`` (see :func:`realtime_overrides`) the recorder records on the
+    wall clock (no sim time, no start gate) and is stopped once the plant has run its
+    ``duration``.
     """
     env = isolated_env(env)
     params_file = write_parameter_file(params, run_dir / 'params.yaml')
@@ -171,15 +209,22 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
     hand = lockstep_handshake(record)
     try:
+        realtime = is_realtime(params)
         if record:
-            extra = ['-p', f'output:={bag}', '-p', 'use_sim_time:=true',
-                     *_ros_args(hand['recorder'])]
+            extra = ['-p', f'output:={bag}'] + ([] if realtime else [
+                '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
             if recorder_topics:
                 extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
             start('recorder', extra)
-        start('tracker', _ros_args(hand['tracker']))
-        start('reference', _ros_args(hand['reference']))
-        start('plant', _ros_args(hand['plant']))
+        lockstep_args = (lambda node: []) if realtime else (lambda node: _ros_args(hand[node]))
+        start('tracker', lockstep_args('tracker'))
+        if realtime and record:
+            # the real-time plant steps and the reference's time runs from their start:
+            # let the recorder subscribe first, then start both together
+            _wait_for_line(run_dir / 'recorder.log', 'recording', procs['recorder'],
+                           REALTIME_START_WAIT_S)
+        start('reference', lockstep_args('reference'))
+        start('plant', lockstep_args('plant'))
         plant = procs['plant']
         with open(run_dir / 'plant.log') as reader:
             while plant.poll() is None:
@@ -198,7 +243,15 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                     break
                 time.sleep(0.05)
             report_plant(reader)
-        if plant.poll() is not None and record:
+        if plant.poll() is not None and record and realtime:
+            time.sleep(REALTIME_TAIL_S)          # the last messages in flight, then stop
+            procs['recorder'].send_signal(signal.SIGINT)
+            try:
+                procs['recorder'].wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                progress('[runner] the recorder did not stop within 30 s of SIGINT; '
+                         'killing it')          # the finally below kills it
+        elif plant.poll() is not None and record:
             try:
                 procs['recorder'].wait(timeout=30)
             except subprocess.TimeoutExpired:

@@ -9,12 +9,16 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'
+#: Golden bags and the gain they pin (``test/data``).
+DATA = ROOT / 'test' / 'data'
 
 # Tests keep DDS discovery on this host, whatever the caller's environment says.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
-#: Test modules that start nodes or an rclpy context: every test in them is marked ``ros``
-#: (markers are registered in setup.cfg; ``pytest -m "not ros"`` runs the ROS-free suite).
+#: Test modules (by file name, wherever they are under test/) that start nodes or an rclpy
+#: context: every test in them is marked ``ros`` (markers are registered in setup.cfg;
+#: ``pytest -m "not ros"`` runs the ROS-free suite).  Other modules mark their ROS tests
+#: with ``@pytest.mark.ros`` / ``pytestmark``.
 ROS_MODULES = {'test_bag_writer_reader', 'test_failures', 'test_golden_regression',
                'test_node_parameters', 'test_realtime_faults', 'test_recorder_node',
                'test_ros_lockstep', 'test_tracker_safety'}

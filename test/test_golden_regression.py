@@ -17,7 +17,7 @@ from nonfragile_tracker.nodes.common import DATA_QOS
 from nonfragile_tracker.nodes.tracker import TrackerNode
 from nonfragile_tracker.scenario import node_parameters
 
-from conftest import CONFIG, unique_domain_id
+from conftest import unique_domain_id
 
 
 @pytest.mark.parametrize('name', sorted(golden.SCENARIOS))

@@ -64,6 +64,7 @@ class Tolerance:
     rtol: float = 0.0
 
     def ok(self, expected: float, got: float) -> bool:
+        """Whether ``got`` is within ``atol + rtol |expected|`` of ``expected``."""
         return abs(got - expected) <= self.atol + self.rtol * abs(expected)
 
 
@@ -169,6 +170,7 @@ class Comparison:
 
     @property
     def equal(self) -> bool:
+        """Whether the two bags agree everywhere (no difference found)."""
         return self.total_differences == 0
 
 

@@ -152,6 +152,7 @@ class BagData:
 
     @property
     def message_count(self) -> int:
+        """Messages on all topics."""
         return sum(self.counts.values())
 
     def count(self, name: str) -> int:

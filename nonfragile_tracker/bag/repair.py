@@ -67,6 +67,7 @@ class McapScan:
 
     @property
     def discarded_bytes(self) -> int:
+        """Bytes after the last valid record (dropped by a repair)."""
         return self.size - self.valid_bytes
 
 
@@ -154,9 +155,11 @@ class RepairResult:
 
     @property
     def total(self) -> int:
+        """Messages written to the repaired bag, all topics."""
         return sum(self.counts.values())
 
     def summary(self) -> str:
+        """What was recovered: messages per topic, chunks, bytes discarded, notes."""
         lines = [f'repaired {self.source} -> {self.output}: {self.total} messages in '
                  f'{self.chunks} chunks, {self.discarded_bytes} bytes discarded']
         lines += [f'  {t}  {self.msgtypes[t]}  {n}' for t, n in sorted(self.counts.items())]

@@ -54,10 +54,12 @@ class Gap:
 
     @property
     def step(self) -> float:
+        """Length of the gap in s."""
         return self.t_after - self.t_before
 
     @property
     def missing_samples(self) -> int:
+        """Samples missing in the gap at the median step (0 without a median)."""
         return max(0, int(round(self.step / self.median_step)) - 1) if self.median_step > 0 \
             else 0
 
@@ -93,6 +95,7 @@ class TimingMetrics:
     stamp_latency_median: float      # s; NaN when the clocks differ
 
     def as_dict(self) -> dict:
+        """The timing figures as a plain dict (for JSON)."""
         return asdict(self)
 
 
@@ -127,6 +130,7 @@ class Report:
 
     @property
     def tolerance(self) -> float:
+        """Distance of "within tolerance" in m (NaN without tracking metrics)."""
         return self.metrics.tolerance if self.metrics is not None else math.nan
 
 

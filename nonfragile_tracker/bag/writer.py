@@ -320,14 +320,16 @@ class BagWriter:
 
     @property
     def topics(self) -> dict[str, str]:
-        """topic -> message type of every connection added so far."""
+        """Message type of every connection added so far, by topic."""
         return {t: c.msgtype for t, c in self._connections.items()}
 
     @property
     def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
         return self._closed
 
     def has_connection(self, topic: str) -> bool:
+        """Whether ``topic`` has a connection in this bag."""
         return topic in self._connections
 
     def add_connection(self, topic: str, msgtype: str,
@@ -408,6 +410,7 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
+        """Messages written so far, all topics."""
         return sum(self.counts.values())
 
     def close(self) -> None:

@@ -5,7 +5,6 @@ import argparse
 import math
 from pathlib import Path
 
-import numpy as np
 
 
 def _fmt_interval(lo: float, hi: float) -> str:
@@ -27,8 +26,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                            confidence=args.confidence, bootstrap=args.bootstrap,
                            command_timeout_s=args.command_timeout, seed=args.seed)
     res = with_source(res, args.bag)
-    cmd_period = float(np.median(np.diff(data.commands.t))) if len(data.commands) > 1 \
-        else math.nan
+    cmd_period = res.command_period_s
     pct = f'{100 * res.confidence:.0f} %'
     src = {'twist': 'odometry twist', 'pose': 'differenced poses'}
     lines = [
@@ -67,15 +65,20 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.output:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
-    step = cmd_period if math.isfinite(cmd_period) else 0.0
-    lag = max(res.tau_v_s, res.tau_w_s)
-    d_lo, _, d_hi = (0.0 if not math.isfinite(d) else d for d in mc_delay)
-    print('next: gains certified for the delay from measurement to motion and the lag '
-          '(h_min = latency low + command age low, h_max = latency high + command age high '
-          '+ one command period; README "Identify the latency"):\n'
-          f'  nonfragile_tracker latency-design PROBLEM --delay-interval '
-          f'{res.latency_low_s + d_lo:.4f} {res.latency_high_s + d_hi + step:.4f} '
-          f'--lag {lag:.4f}')
+    from ..control.latency_design import plan_from_identification
+    if math.isfinite(res.command_period_s):
+        plan = plan_from_identification(res)
+        bare = plan_from_identification(res, predictor=False)
+        out = args.output or 'FILE'
+        print('next: gains certified for the residual delay after the tracker\'s predictor '
+              '(README "From the interval to h_min, h_max"):\n'
+              f'  nonfragile_tracker latency-design PROBLEM --identification {out} -o g.yaml\n'
+              f'  = --delay-interval {plan.h_min:.4f} {plan.h_max:.4f} --lag {plan.lag:.4f} '
+              f'with predict_latency {plan.predict_latency:.4f}, predict_odom_latency '
+              f'{plan.predict_odom_latency:.4f}, predict_lag_v {plan.predict_lag_v:.4f}, '
+              f'predict_lag_w {plan.predict_lag_w:.4f} (written into g.yaml)\n'
+              f'  without the predictor (--no-predictor): --delay-interval {bare.h_min:.4f} '
+              f'{bare.h_max:.4f} --lag {bare.lag:.4f}')
     return 0
 
 

@@ -26,8 +26,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .. import runner
     from ..control.gains import read_gain_file
     from ..resources import config_dir
+    if args.paper and (args.gains or args.delay_compensation):
+        raise InputError('--paper is the paper\'s configuration (its K_nf, no delay '
+                         'compensation): leave out --gains and --delay-compensation')
     scenario = Path(args.scenario) if args.scenario else config_dir() / 'paper_scenario.yaml'
-    gains = Path(args.gains) if args.gains else config_dir() / 'tracker_gains.yaml'
+    gains = (Path(args.gains) if args.gains else config_dir() / (
+        'paper_gains_tracker.yaml' if args.paper else 'tracker_gains.yaml'))
     ov: dict = {'plant': {'ros__parameters': {}}, 'tracker': {'ros__parameters': {}},
                 'reference': {'ros__parameters': {}}}
     if args.duration is not None:
@@ -65,7 +69,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     dur = params['plant']['ros__parameters'].get('duration')
     print(f'run directory: {run_dir}')
     length = f'{dur:g} s simulated' if dur is not None else "the plant's default duration"
-    print(f'scenario {scenario.name}, gains {gains.name}, {length}, '
+    comp = params['tracker']['ros__parameters'].get('delay_compensation', False)
+    print(f'scenario {scenario.name}, gains {gains.name}'
+          f'{", delay compensation" if comp else ""}, {length}, '
           f'{"composed" if args.composed else "one process per node"}, lockstep')
     if args.composed:
         res = runner.run_composed(params, run_dir, record=record)
@@ -102,7 +108,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="inject a perturbation of config/paper_problem.yaml (Delta_1, Delta_2) "
                    'into the tracker as E Delta F')
     r.add_argument('--delay-compensation', action='store_true',
-                   help='zero steady-state error law (delay-consistent reference)')
+                   help='zero steady-state error law (delay-consistent reference); '
+                   '`make demo` adds it (the recommended configuration)')
+    r.add_argument('--paper', action='store_true',
+                   help="the paper's configuration: its printed K_nf "
+                   '(config/paper_gains_tracker.yaml), no delay compensation')
     r.add_argument('--path', choices=['circle', 'figure_eight'], help='reference path')
     r.add_argument('--trajectory', metavar='FILE',
                    help='follow a waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) instead of '

@@ -166,6 +166,7 @@ class DelayDependentVerification:
 
     @property
     def worst_eigenvalue(self) -> float:
+        """Largest eigenvalue of ``Psi`` (verified when below ``-tolerance * scale``)."""
         return self.max_eig_Psi
 
 
@@ -210,26 +211,32 @@ class DelayDependentResult:
 
     @property
     def gain_norm(self) -> float:
+        """Spectral norm ``||K||_2`` of the gain."""
         return float(np.linalg.norm(self.K, 2))
 
     @property
     def P1(self) -> np.ndarray:
+        """Matrix ``P1`` of the certificate (must be positive definite)."""
         return self.certificate.P1
 
     @property
     def S(self) -> np.ndarray:
+        """Matrix ``S`` of the certificate (must be positive definite)."""
         return self.certificate.S
 
     @property
     def R(self) -> np.ndarray:
+        """Matrix ``R`` of the certificate (must be positive definite)."""
         return self.certificate.R
 
     @property
     def lam(self) -> float | None:
+        """Petersen scalar of the certificate (None: the nominal condition)."""
         return self.certificate.lam
 
     @property
     def verification(self) -> DelayDependentVerification:
+        """The independent check of the certificate."""
         return self.certificate.verification
 
 
@@ -619,8 +626,8 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
     lower bound of the largest delay the LMI family certifies.  The bracket
     ``[lo, hi]`` is found by halving ``h_hi`` and bisected until ``hi - lo <= tol``.
     Returns ``(lo, result)``, ``result`` the full line search (with refinement) at ``lo``
-    (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi`` means ``h_hi`` itself is
-    certified (the condition may hold for every delay, e.g. ``A_tau = 0``).
+    (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi``
+    means ``h_hi`` itself is certified (the condition may hold for every delay, e.g. ``A_tau = 0``).
 
     Raises
     ------

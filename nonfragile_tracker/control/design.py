@@ -41,6 +41,7 @@ class DesignResult:
 
     @property
     def K(self) -> np.ndarray:
+        """The designed gain (the synthesis result's ``K``)."""
         return self.synthesis.K
 
 
@@ -111,9 +112,10 @@ def min_gain_norm(problem: Problem, *, nominal: bool = False, rel_tol: float = 1
 
 def at_gain_norm(design: Callable[..., DesignResult], problem: Problem, norm: float, *,
                  rel_tol: float = 2e-3, **kw) -> DesignResult:
-    """Run ``design(problem, gain_bound=kappa, **kw)`` with the largest LMI bound ``kappa``
-    whose gain still has ``||K||_2 <= norm``.
+    """Run ``design`` with the largest LMI gain bound whose gain has ``||K||_2 <= norm``.
 
+    ``design(problem, gain_bound=kappa, **kw)`` is run with the largest LMI bound ``kappa``
+    whose gain still has ``||K||_2 <= norm``.
     The LMI form of the gain bound (``X >= I``, ``R^T R <= kappa^2 (2X - I)``) is
     conservative: the realized ``||K||_2`` is often well below ``kappa``.  This outer
     bisection over ``kappa`` in ``[norm, 4 norm]`` spends the whole budget ``norm``.

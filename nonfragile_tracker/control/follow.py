@@ -71,7 +71,13 @@ class Follower:
 
     def step(self, x: float, y: float, th: float, t: float,
              measured_speed: float | None = None) -> Command:
-        """Command for the pose ``(x, y, th)`` at trajectory time ``t``."""
+        """Command for the pose ``(x, y, th)`` measured at trajectory time ``t``.
+
+        With the tracker's predictor the pose is predicted to ``t + horizon`` (the time
+        the command acts) and the trajectory is sampled there; the times the predictor
+        sees are trajectory times (consistent: it uses differences only, and a new
+        trajectory resets it).
+        """
         ref = self.trajectory.sample(t)
         self.last_ref = ref
         if self.finished:
@@ -81,7 +87,14 @@ class Follower:
             # on the spot); the compensator starts from the measured speed at t_start
             self.tracker.reset()
             return Command(v=0.0, w=0.0)
-        cmd = self.tracker.step(x, y, th, ref, measured_speed)
+        pred = self.tracker.predictor
+        if pred is None:
+            cmd = self.tracker.step(x, y, th, ref, measured_speed)
+        else:
+            # the predictor evaluates the law at the time the command acts: sample the
+            # trajectory there (exact, also across its end) instead of extrapolating
+            ahead = self.trajectory.sample(t + pred.horizon)
+            cmd = self.tracker.step(x, y, th, ahead, measured_speed, stamp=t)
         if t > self.trajectory.t_end:
             self.ended = True
             if abs(cmd.v) < self.rest_speed:

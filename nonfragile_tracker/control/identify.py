@@ -58,6 +58,12 @@ The file the latency-aware design reads (:func:`write_identification`,
       odom_rate_hz: 50.0
       samples: 1234
       residual_rms: {v: 0.0012, w: 0.0031}
+      command_period_s: 0.02          # optional: median period of the commands
+      command_age_s: [0.0, 0.0]       # optional: age of the newest odometry at a command
+                                      # (1st and 99th percentile)
+
+``latency-design --identification FILE`` turns this into the delay interval it
+certifies (:func:`.latency_design.plan_from_identification`).
 
 Nothing here imports ROS; numpy, scipy and PyYAML only.
 """
@@ -67,7 +73,7 @@ import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import yaml
@@ -220,6 +226,12 @@ class Identification:
     commands: int = 0
     bootstrap: int = 0
     notes: tuple[str, ...] = field(default=())
+    #: median period of the commands (s; NaN: unknown) - the sample-and-hold of the loop
+    command_period_s: float = math.nan
+    #: age of the newest odometry when a command is sent, 1st / 99th percentile (s; NaN:
+    #: unknown), see :func:`measurement_to_command_delay`
+    command_age_low_s: float = math.nan
+    command_age_high_s: float = math.nan
 
     @property
     def latency_interval_s(self) -> tuple[float, float]:
@@ -326,7 +338,8 @@ class _Channel:
         vals = _interp_shifted(sig, self.pos[:last], shifts)
         if ib is None:
             return vals[:, ia]
-        width = self.width if n is None else self.width[:n]
+        width = cast(np.ndarray, self.width)     # set whenever ib is
+        width = width if n is None else width[:n]
         return (vals[:, ib] - vals[:, ia]) / width
 
 
@@ -553,7 +566,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         """(index a, index b or None, width or None, z, mid time) into the odometry."""
         if use[c] == 'twist':
             ia = np.flatnonzero((to >= t_first) & (to <= t_last))
-            return ia, None, None, twist[c][ia], to[ia]
+            return ia, None, None, cast(np.ndarray, twist[c])[ia], to[ia]
         sel = (to[wa] >= t_first) & (to[wb] <= t_last)
         z = (zv_pose if c == 'v' else zw_pose)[sel]
         return wa[sel], wb[sel], width[sel], z, 0.5 * (to[wa[sel]] + to[wb[sel]])
@@ -648,14 +661,14 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             bl = np.minimum(((ch.t_mid - t_begin) // block_len).astype(int), n_blocks - 1) \
                 if blocks else None
             st = np.stack([_stats(ch, tau, shifts, bl, n_blocks) for tau in grids[c]], axis=1)
-            zzb = np.bincount(bl, weights=ch.z * ch.z, minlength=n_blocks) if blocks \
-                else float(ch.z @ ch.z)
+            zzb = (np.bincount(cast(np.ndarray, bl), weights=ch.z * ch.z, minlength=n_blocks)
+                   if blocks else float(ch.z @ ch.z))
             out[c] = (st, zzb)
         return out
 
     def estimate(stats, weights: np.ndarray | None, shifts, grids):
         """(latency grid pos, {c: tau}, {c: channel latency pos}) from (weighted) statistics."""
-        j = 0.0
+        j: Any = 0.0                    # + the profiles: an array of the latency grid
         tau_hat, lat_c = {}, {}
         sse_all = {}
         for c in _CHANNELS:
@@ -684,7 +697,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     #    fit figures at the result
     zzs = {c: float(ch.z @ ch.z) for c, ch in chans.items()}
 
-    def channel_sse(c: str, p: float, tau: float) -> np.ndarray:
+    def channel_sse(c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
         return _sse(_stats(chans[c], tau, np.array([p]), None, 0), zzs[c])
 
     def objective(x: np.ndarray) -> float:
@@ -773,6 +786,9 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     if abs(lat_c['v'] - lat_c['w']) * h > max(lat_hi - lat_lo, 2 * h) * 2:
         notes.append(f'the channels alone give different latencies (v {lat_c["v"] * h:.4f} s, '
                      f'w {lat_c["w"] * h:.4f} s)')
+    used = np.sort(tc[(tc >= t_begin - max_latency_s) & (tc <= t_end)])
+    period = float(np.median(np.diff(used))) if used.size > 1 else math.nan
+    age_lo, _, age_hi = measurement_to_command_delay(commands, odometry)
     return Identification(
         latency_s=latency, latency_low_s=lat_lo, latency_high_s=lat_hi,
         tau_v_s=tau_hat['v'], tau_v_low_s=tv_lo, tau_v_high_s=tv_hi,
@@ -784,7 +800,10 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         latency_v_s=lat_c['v'] * h, latency_w_s=lat_c['w'] * h,
         confidence=float(confidence), resolution_s=h, duration_s=duration,
         commands=int(np.count_nonzero((tc >= t_begin - max_latency_s) & (tc <= t_end))),
-        bootstrap=int(bootstrap), notes=tuple(notes))
+        bootstrap=int(bootstrap), notes=tuple(notes),
+        command_period_s=period if period > 0 else math.nan,
+        command_age_low_s=max(age_lo, 0.0) if math.isfinite(age_lo) else math.nan,
+        command_age_high_s=max(age_hi, 0.0) if math.isfinite(age_hi) else math.nan)
 
 
 def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySamples
@@ -863,6 +882,11 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
         f'  samples: {int(result.samples)}',
         f'  residual_rms: {{v: {_num(result.residual_rms_v)}, w: {_num(result.residual_rms_w)}}}',
     ]
+    if math.isfinite(result.command_period_s):
+        lines.append(f'  command_period_s: {_num(result.command_period_s)}')
+    if math.isfinite(result.command_age_low_s) and math.isfinite(result.command_age_high_s):
+        lines.append(f'  command_age_s: [{_num(max(result.command_age_low_s, 0.0))}, '
+                     f'{_num(max(result.command_age_high_s, 0.0))}]')
     text = '\n'.join(lines) + '\n'
     read_identification_text(text, str(p))            # never write what cannot be read back
     p.write_text(text)
@@ -871,6 +895,7 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
 
 _FIELDS = ('source', 'latency_s', 'latency_interval_s', 'tau_v_s', 'tau_v_interval_s',
            'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz', 'samples', 'residual_rms')
+_OPTIONAL = ('command_period_s', 'command_age_s')
 
 
 def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
@@ -908,11 +933,11 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
     if missing:
         raise IdentificationFileError(f'{where}: {FILE_KEY} lacks the field(s) '
                                       f'{", ".join(missing)}')
-    unknown = sorted(set(d) - set(_FIELDS))
+    unknown = sorted(set(map(str, d)) - set(_FIELDS) - set(_OPTIONAL))
     if unknown:
         raise IdentificationFileError(f'{where}: {FILE_KEY} has unknown field(s) '
-                                      f'{", ".join(map(str, unknown))}; known: '
-                                      f'{", ".join(_FIELDS)}')
+                                      f'{", ".join(unknown)}; known: '
+                                      f'{", ".join(_FIELDS + _OPTIONAL)}')
     if not isinstance(d['source'], str):
         raise IdentificationFileError(f'{where}: {FILE_KEY}.source must be a string (the bag '
                                       f'path), got {d["source"]!r}')
@@ -933,8 +958,18 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
                                       f'{{v: ..., w: ...}}, got {rr!r}')
     rv = _number(where, 'residual_rms.v', rr['v'])
     rw = _number(where, 'residual_rms.w', rr['w'])
+    period = (_number(where, 'command_period_s', d['command_period_s'], positive=True)
+              if 'command_period_s' in d else math.nan)
+    age = (math.nan, math.nan)
+    if 'command_age_s' in d:
+        a = d['command_age_s']
+        if not isinstance(a, (list, tuple)) or len(a) != 2:
+            raise IdentificationFileError(f'{where}: {FILE_KEY}.command_age_s must be a list '
+                                          f'[low, high] of two numbers, got {a!r}')
+        age = _pair(where, 'command_age_s', a, _number(where, 'command_age_s[0]', a[0]))
     return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
-                          rv, rw, source=d['source'])
+                          rv, rw, source=d['source'], command_period_s=period,
+                          command_age_low_s=age[0], command_age_high_s=age[1])
 
 
 def read_identification(path: str | os.PathLike) -> Identification:

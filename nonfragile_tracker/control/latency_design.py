@@ -31,10 +31,11 @@ from .delay import delay_margin, spectral_abscissa
 from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
                           max_certified_input_delay, max_input_delay_decay_rate,
                           synthesize_input_delay)
+from .identify import Identification
 from .problem import Problem
 
-__all__ = ['OBJECTIVES', 'LatencyDesign', 'lagged_problem', 'perturbation_set',
-           'design_for_latency', 'latency_figures']
+__all__ = ['OBJECTIVES', 'LatencyDesign', 'LatencyPlan', 'lagged_problem', 'perturbation_set',
+           'design_for_latency', 'latency_figures', 'plan_from_identification']
 
 OBJECTIVES = ('decay', 'max-delay')
 
@@ -251,3 +252,113 @@ def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
                  for D in perturbation_set(problem))
     cert = certified_input_delay_of_gain(problem, K, 0.0, tol=tol, h_hi=h_hi)
     return {'certified_latency': float(cert), 'true_latency_margin': float(margin)}
+
+
+@dataclass(frozen=True)
+class LatencyPlan:
+    """What to certify and what the tracker predicts, derived from an identification.
+
+    The one rule (README "From the interval to h_min, h_max"), with ``[L_lo, L_hi]`` the
+    identified command-to-motion latency interval, ``[a_lo, a_hi]`` the age of the newest
+    odometry when a command is sent, ``T`` the command period and ``tau_v``, ``tau_w`` the
+    identified lags:
+
+    * with the predictor (default): the tracker predicts ``predict_latency = L_lo``,
+      ``predict_odom_latency = a_lo`` and the lags, so that the residual delay
+      ``(L + a) - (L_lo + a_lo)`` is never negative; certify ``h`` in
+      ``[0, (L_hi - L_lo) + (a_hi - a_lo) + T]`` (``T``: the sample-and-hold);
+    * without it: certify ``h`` in ``[L_lo + a_lo, L_hi + a_hi + T]``;
+
+    and in both cases design with the actuator lag ``max(tau_v, tau_w)``.
+    """
+
+    predictor: bool
+    h_min: float
+    h_max: float
+    lag: float
+    predict_latency: float
+    predict_odom_latency: float
+    predict_lag_v: float
+    predict_lag_w: float
+    latency_interval: tuple[float, float]
+    command_age: tuple[float, float]
+    command_period: float
+    source: str
+
+    def tracker_parameters(self) -> dict[str, float]:
+        """The tracker's predictor parameters this plan assumes (all 0 without predictor)."""
+        keys = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'predict_lag_w')
+        if not self.predictor:
+            return {k: 0.0 for k in keys}
+        return {k: float(getattr(self, k)) for k in keys}
+
+    def metadata(self) -> dict[str, Any]:
+        """Flat record for the gain file's design section."""
+        return {'designed_from': self.source or '(identification)',
+                'compensation': 'predictor' if self.predictor else 'none',
+                'identified_latency_interval': list(self.latency_interval),
+                'identified_command_age': list(self.command_age),
+                'command_period': self.command_period,
+                **{k: v for k, v in self.tracker_parameters().items()}}
+
+    def describe(self) -> str:
+        """One line per derived quantity."""
+        lo, hi = self.latency_interval
+        a0, a1 = self.command_age
+        head = (f'identified latency [{lo:.4f}, {hi:.4f}] s, command age [{a0:.4f}, {a1:.4f}] s,'
+                f' command period {self.command_period:.4g} s, lag {self.lag:.4f} s')
+        if self.predictor:
+            return (head + f'\npredictor: predict_latency = {self.predict_latency:.4f} s, '
+                    f'predict_odom_latency = {self.predict_odom_latency:.4f} s, predict_lag_v '
+                    f'= {self.predict_lag_v:.4f} s, predict_lag_w = {self.predict_lag_w:.4f} s'
+                    f'\nresidual delay to certify: [{self.h_min:.4f}, {self.h_max:.4f}] s')
+        return head + (f'\nno predictor: delay to certify [{self.h_min:.4f}, '
+                       f'{self.h_max:.4f}] s')
+
+
+def plan_from_identification(ident: Identification, *, predictor: bool = True,
+                             command_period: float | None = None) -> LatencyPlan:
+    """The delay interval, lag and predictor settings for an identification (one rule).
+
+    Parameters
+    ----------
+    ident : Identification
+        From :func:`.identify.identify_latency` or :func:`.identify.read_identification`.
+    predictor : bool
+        Design for the tracker with its predictor at the low end of the interval (the
+        residual delay) or for the uncompensated law (the whole delay).
+    command_period : float, optional
+        The tracker's command period ``T`` (s); default: the identification's
+        ``command_period_s``.  Required when the identification has none.
+
+    Returns
+    -------
+    LatencyPlan
+        See the class docstring for the rule.
+
+    Raises
+    ------
+    InputError
+        No command period known, or a bad one.
+    """
+    T = ident.command_period_s if command_period is None else command_period
+    if T is None or not math.isfinite(float(T)):
+        raise InputError('the identification has no command_period_s (an older file or '
+                         'another tool wrote it); pass the tracker\'s command period, e.g. '
+                         '--command-period 0.02')
+    T = _number(T, 'command period', positive=True)
+    a_lo = ident.command_age_low_s if math.isfinite(ident.command_age_low_s) else 0.0
+    a_hi = ident.command_age_high_s if math.isfinite(ident.command_age_high_s) else a_lo
+    a_lo, a_hi = max(a_lo, 0.0), max(a_hi, a_lo, 0.0)
+    lo, hi = ident.latency_low_s, ident.latency_high_s
+    lag = max(ident.tau_v_s, ident.tau_w_s)
+    if predictor:
+        h0, h1 = 0.0, (hi - lo) + (a_hi - a_lo) + T
+    else:
+        h0, h1 = lo + a_lo, hi + a_hi + T
+    return LatencyPlan(predictor=predictor, h_min=float(h0), h_max=float(h1), lag=float(lag),
+                       predict_latency=float(lo), predict_odom_latency=float(a_lo),
+                       predict_lag_v=float(ident.tau_v_s), predict_lag_w=float(ident.tau_w_s),
+                       latency_interval=(float(lo), float(hi)),
+                       command_age=(float(a_lo), float(a_hi)), command_period=float(T),
+                       source=str(ident.source))

@@ -69,6 +69,7 @@ class Verification:
 
     @property
     def worst_eigenvalue(self) -> float:
+        """Largest eigenvalue of ``V`` (verified when below ``-tolerance * scale``)."""
         return self.max_eig_V
 
 
@@ -103,14 +104,17 @@ class SynthesisResult:
 
     @property
     def P(self) -> np.ndarray:
+        """Lyapunov-Krasovskii matrix ``P`` of the certificate."""
         return self.certificate.P
 
     @property
     def Q(self) -> np.ndarray:
+        """Lyapunov-Krasovskii matrix ``Q`` of the certificate."""
         return self.certificate.Q
 
     @property
     def eps(self) -> float | None:
+        """Scalar ``eps`` of the certificate (None: the nominal condition, D = 0)."""
         return self.certificate.eps
 
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
-from typing import NamedTuple
+from dataclasses import dataclass, field
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -161,6 +161,7 @@ class PlantConfig:
 
     @property
     def delay_steps(self) -> int:
+        """State delay ``tau`` in whole plant steps."""
         return delay_steps(self.tau, self.dt)[0]
 
     @property
@@ -170,11 +171,13 @@ class PlantConfig:
 
     @property
     def actuator(self) -> ActuatorModel:
+        """The actuator model (lags and acceleration limits) of this configuration."""
         return ActuatorModel(self.lag_v, self.lag_w, self.max_linear_accel,
                              self.max_angular_accel)
 
     @property
     def odometry(self) -> OdometryModel:
+        """The odometry model (latency, period, noise, seed) of this configuration."""
         return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
                              odometry_period_steps(self.odom_rate, self.dt)[0],
                              self.odom_noise, int(self.noise_seed))
@@ -217,6 +220,7 @@ class UnicyclePlant:
         self.reset()
 
     def reset(self) -> None:
+        """Back to the initial state of the configuration (step 0, no pending commands)."""
         c = self.config
         self.k = 0
         self.x, self.y, self.th = float(c.x0), float(c.y0), float(c.th0)
@@ -233,6 +237,7 @@ class UnicyclePlant:
 
     @property
     def t(self) -> float:
+        """Time of the current step in s."""
         return step_time(self.k, self.config.dt)
 
     def xi(self, v: float | None = None) -> tuple[float, float, float, float]:
@@ -352,6 +357,8 @@ class TrackerConfig:
     predict_odom_latency: float = 0.0
     predict_lag_v: float = 0.0
     predict_lag_w: float = 0.0
+    #: The gain actually applied, ``K + E D F`` (set from ``K`` and ``perturbation``).
+    K_effective: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         K = validate_gain(self.K)
@@ -380,9 +387,9 @@ class TrackerConfig:
                      'predict_lag_w'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
 
-        K = self.K if self.perturbation is None else tuple(
+        K_eff = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
-        object.__setattr__(self, 'K_effective', K)   # the gain actually applied: K + E D F
+        object.__setattr__(self, 'K_effective', K_eff)   # the gain actually applied: K + E D F
 
     @property
     def predicts(self) -> bool:
@@ -533,12 +540,12 @@ class Tracker:
         history is the first sample at rest).  Then ``e = xi - xi*`` obeys
         ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
         """
-        At = self.config.A_tau
-        hist = self._ref_hist
+        At = cast(tuple, self.config.A_tau)     # set whenever delay_compensation is
+        hist = cast(deque, self._ref_hist)      # bounded deque whenever delay_compensation is
         p_dot = (ref.vx, ref.vy)
         if not hist:
             first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))
-            hist.extend([first] * hist.maxlen)
+            hist.extend([first] * cast(int, hist.maxlen))
         z, zdot = hist[0]
         d = [sum(At[i][j] * z[j] for j in range(4)) for i in range(4)]
         dd = [sum(At[i][j] * zdot[j] for j in range(4)) for i in range(4)]

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 from .actuator import ActuatorModel, actuate, unicycle_arc
 from .reference import RefSample
@@ -194,7 +194,7 @@ class LatencyPredictor:
         last = self._ref_last
         if last is None or ref.t > last.t:
             self._ref_prev, self._ref_last = last, ref
-        prev, last = self._ref_prev, self._ref_last
+        prev, last = self._ref_prev, cast(RefSample, self._ref_last)   # set just above
         jerk = (0.0, 0.0)
         if prev is not None and ref.t == last.t and 0.0 < ref.t - prev.t <= JERK_WINDOW:
             gap = ref.t - prev.t

@@ -48,6 +48,7 @@ class Path:
     _heading0: float
 
     def sample(self, t: float) -> RefSample:
+        """Position, velocity, acceleration and heading of the path at time ``t``."""
         x, y, vx, vy, ax, ay = self._fn(t)
         if vx * vx + vy * vy > 1e-24:
             heading = math.atan2(vy, vx)
@@ -86,7 +87,10 @@ def circle(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
 
 def figure_eight(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
                  center_y: float = 0.0, phase: float = 0.0) -> Path:
-    """Lemniscate of Gerono: ``x = c_x + r sin(a)``, ``y = c_y + (r/2) sin(2a)``, ``a = W t + phase``."""
+    """Lemniscate of Gerono: ``x = c_x + r sin(a)``, ``y = c_y + (r/2) sin(2a)``.
+
+    The parameter is ``a = W t + phase`` (``W`` = ``rate``).
+    """
     r, w, cx, cy, ph = _path_params(radius, rate, center_x, center_y, phase)
 
     def fn(t: float):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -69,7 +69,7 @@ class Odometer:
         if k % m.period_steps:
             return
         if self._noisy:
-            nx, ny, nth = self._rng.standard_normal(3)
+            nx, ny, nth = cast(np.random.Generator, self._rng).standard_normal(3)
             sx, sy, sth = m.noise
             x, y = x + sx * float(nx), y + sy * float(ny)
             th = math.remainder(th + sth * float(nth), math.tau)

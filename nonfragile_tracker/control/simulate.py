@@ -55,11 +55,13 @@ class TrackingRun:
     commanded: np.ndarray    # 1.0 at steps where the tracker computed a command
 
     def metrics(self, tolerance: float = 0.01) -> TrackingMetrics:
+        """Tracking metrics of the run (:func:`~.metrics.tracking_metrics`)."""
         return tracking_metrics(self.t, self.x, self.y, self.xd, self.yd, self.cmd_v,
                                 self.cmd_w, tolerance=tolerance)
 
     @property
     def error(self) -> np.ndarray:
+        """Position error ``|p - p_d|`` in m at every sample."""
         return np.hypot(self.x - self.xd, self.y - self.yd)
 
 
@@ -98,7 +100,7 @@ def run_loop(plant_config: PlantConfig, steps: int,
     :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
     """
     plant = UnicyclePlant(plant_config)
-    rows = []
+    rows: list[tuple[float | bool, ...]] = []
     append = rows.append
     dt = plant_config.dt
     cmd_v, cmd_w = plant.cmd

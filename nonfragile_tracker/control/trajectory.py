@@ -51,6 +51,7 @@ import io
 import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
+from typing import cast
 
 import numpy as np
 
@@ -113,6 +114,8 @@ class Trajectory:
         self.kind = kind
         self._pp = pp
         if pp is not None:
+            knots = cast(np.ndarray, knots)            # given with pp by the factories
+            direction = cast(np.ndarray, direction)
             # scalar fast path: local power-basis coefficients, highest power first
             self._bp = [float(b) for b in knots]
             c = np.asarray(pp.c)                 # shape (k+1, segments, 2)
@@ -397,7 +400,7 @@ def from_waypoints(t, x, y, yaw=None, speed=None, *, ends: str = 'rest',
                         ch = P[max(i, j)] - P[min(i, j)]
                         nrm = float(np.hypot(*ch))
                         v[:] = abs(speed[i]) * ch / nrm if nrm > 0 else 0.0
-            bc = ((1, v0), (1, v1))
+            bc: str | tuple[tuple[int, np.ndarray], tuple[int, np.ndarray]] = ((1, v0), (1, v1))
         else:
             bc = 'natural'
         if n == 2 and bc == 'natural':

@@ -7,7 +7,7 @@ is the same everywhere: the name, what was wrong, and what to write instead.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def as_matrix(value: Any, name: str, shape: Shape | None = None, *,
     if flat:
         if shape is None or None in tuple(shape):
             raise TypeError('as_matrix(flat=True) needs a full shape')
-        rows, cols = int(shape[0]), int(shape[1])
+        rows, cols = int(cast(int, shape[0])), int(cast(int, shape[1]))
         if arr.ndim != 1 or arr.size != rows * cols:
             raise error(f'{name} needs {rows * cols} doubles ({rows}x{cols} row-major), '
                         f'got {arr.size}')

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag, read_messages
 
 CMD_TIMEOUT = 0.5          # plant: a command older than this is replaced by a stop

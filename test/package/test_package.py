@@ -5,9 +5,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from conftest import ROOT
+
 COLCON = Path(sys.executable).parent / 'colcon'
 EXECUTABLES = {'reference', 'plant', 'tracker', 'recorder', 'nonfragile_tracker'}
 

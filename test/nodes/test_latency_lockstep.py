@@ -48,11 +48,24 @@ def simulation():
     return simulate_tracking(pc, tc, circle(), STEPS)
 
 
+def _first_per_stamp(rows):
+    """Rows with a header stamp not seen before: a lockstep step the plant republished
+    (``lockstep_retry``, under load) is recorded twice; the bag reader drops it too."""
+    seen, out = set(), []
+    for row in rows:
+        if row[0] not in seen:
+            seen.add(row[0])
+            out.append(row)
+    return out
+
+
 def recorded(bag):
-    pose = np.array([(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
-                      m.pose.position.x, m.pose.position.y) for _, m in read_messages(bag, 'pose')])
-    odom = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
-                     for _, m in read_messages(bag, 'odom')])
+    pose = np.array(_first_per_stamp(
+        (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.pose.position.x,
+         m.pose.position.y) for _, m in read_messages(bag, 'pose')))
+    odom = np.array([r[0] for r in _first_per_stamp(
+        (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,)
+        for _, m in read_messages(bag, 'odom'))])
     cmd = np.array([(m.linear.x, m.angular.z) for _, m in read_messages(bag, 'cmd_vel')])
     return pose, odom, cmd
 

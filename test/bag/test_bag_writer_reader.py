@@ -17,6 +17,7 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 
+from conftest import ROOT
 from nonfragile_tracker import topics
 from nonfragile_tracker.bag.reader import (BagNotFoundError, BagTruncatedError,
                                            MissingTopicsError, NotABagError, read_bag,
@@ -30,7 +31,6 @@ from nonfragile_tracker.control.reference import make_path
 from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
-ROOT = Path(__file__).resolve().parent.parent
 DT = 0.01
 TYPES = {f'/{n}': t for n, t in topics.TYPES.items() if not n.startswith('/')}
 RUN = ['/odom', '/pose', '/reference/pose', '/reference/twist', '/reference/accel', '/cmd_vel']

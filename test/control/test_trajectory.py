@@ -1,10 +1,10 @@
 """Timed trajectories (control/trajectory.py): analytic, splines, Hermite, time law, files."""
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
 from nonfragile_tracker.control.reference import circle, figure_eight
 from nonfragile_tracker.control.simulate import simulate_tracking
@@ -14,7 +14,6 @@ from nonfragile_tracker.control.trajectory import (Trajectory, TrajectoryError, 
                                                    time_law)
 from nonfragile_tracker.errors import InputError, exit_code
 
-ROOT = Path(__file__).resolve().parent.parent
 LAP = ROOT / 'config' / 'trajectories' / 'lap.csv'
 K_NF = [[-4.4453, -4.8047, -1.4766, -1.5234], [-1.4766, -1.5234, -4.4453, -4.8047]]
 NO_DELAY = dict(A_tau=np.zeros((4, 4)), tau=0.0)

@@ -16,6 +16,7 @@ from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 
+from conftest import CONFIG, DATA
 from nonfragile_tracker.bag.motion import read_motion
 from nonfragile_tracker.bag.reader import MissingTopicsError
 from nonfragile_tracker.bag.writer import BagWriter
@@ -221,7 +222,8 @@ def test_file_round_trip(result, tmp_path):
     data = yaml.safe_load(f.read_text())['identification']
     assert list(data) == ['source', 'latency_s', 'latency_interval_s', 'tau_v_s',
                           'tau_v_interval_s', 'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz',
-                          'samples', 'residual_rms']
+                          'samples', 'residual_rms', 'command_period_s', 'command_age_s']
+    assert data['command_period_s'] == pytest.approx(result.command_period_s, rel=1e-5)
     back = read_identification(f)
     for name in ('latency_s', 'latency_low_s', 'latency_high_s', 'tau_v_s', 'tau_v_low_s',
                  'tau_v_high_s', 'tau_w_s', 'tau_w_low_s', 'tau_w_high_s', 'odom_rate_hz',
@@ -396,8 +398,7 @@ def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: 
     from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,
                                                  UnicyclePlant, quaternion_to_yaw, step_time)
     from nonfragile_tracker.control.reference import make_path
-    root = Path(__file__).resolve().parent.parent
-    params = yaml.safe_load((root / 'config' / 'tracker_gains.yaml').read_text())
+    params = yaml.safe_load((CONFIG / 'tracker_gains.yaml').read_text())
     K = np.array(params['/**/tracker']['ros__parameters']['K'], float).reshape(2, 4)
     plant = UnicyclePlant(PlantConfig(dt=dt, cmd_latency=latency, lag_v=lag, lag_w=lag,
                                       odom_rate=odom_rate, odom_noise=(noise, noise, noise),
@@ -438,7 +439,7 @@ def test_our_plant_latency_and_lag_recovered(latency):
 def test_golden_lockstep_bag_of_our_plant_has_no_latency():
     """The golden bag (three node processes, lockstep, the paper's plant: no command
     latency, no lag, twist = speeds in force): zero latency and lag within a step."""
-    bag = Path(__file__).resolve().parent / 'data' / 'golden_paper'
+    bag = DATA / 'golden_paper'
     data = read_motion(bag)
     assert data.cmd_time == 'receive time' and data.odom_delay_s == 0.0
     res = identify_latency(data.commands, data.odometry, max_latency_s=0.2, bootstrap=50)
@@ -452,10 +453,6 @@ def test_golden_lockstep_bag_of_our_plant_has_no_latency():
 def test_lockstep_ros_run_of_our_plant_identified(tmp_path):
     """One lockstep run of the nodes (composed) with 100 ms command latency, 50 ms lag on v
     and w, odometry at 50 Hz with 1 mm noise, figure eight; the recorded bag through the CLI."""
-    import sys
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from conftest import CONFIG
-
     from nonfragile_tracker.runner import run_composed, scenario_parameters
     ov = {'plant': {'ros__parameters': dict(
               cmd_latency=0.1, lag_v=0.05, lag_w=0.05, odom_rate=50.0,

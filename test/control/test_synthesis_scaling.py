@@ -4,16 +4,16 @@ independent blocks is solved block by block and certified on the whole problem.
 No timing here: ``benchmarks/synthesis_scaling.py`` measures the speed."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
 
+from conftest import CONFIG
 from nonfragile_tracker.control.delay import closed_loop_matrix, spectral_abscissa
 from nonfragile_tracker.control.lmi import decoupled_blocks, synthesize, verify_certificate
 from nonfragile_tracker.control.problem import load_problem
 
-PAPER = load_problem(Path(__file__).resolve().parents[1] / 'config' / 'paper_problem.yaml')
+PAPER = load_problem(CONFIG / 'paper_problem.yaml')
 
 
 def stacked(k: int, perm: np.ndarray | None = None):

@@ -1,18 +1,16 @@
 """Real-time mode: silence makes the tracker stop (once), it resumes after restarts."""
 import math
-import os
 import signal
 import subprocess
 import sys
 import time
 
 import numpy as np
-import pytest
 import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG
 
 RT = ['-p', 'mode:=realtime']
 

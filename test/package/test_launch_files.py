@@ -2,12 +2,12 @@
 arguments a ROS user expects, use every argument they declare and only those, and
 the RViz configuration they start is installed."""
 import ast
-from pathlib import Path
 
 import pytest
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
+from conftest import ROOT
+
 LAUNCH = ROOT / 'launch'
 
 

@@ -23,11 +23,11 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt64
 
+from conftest import ROOT
 from nonfragile_tracker import topics
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag, read_messages
 from nonfragile_tracker.bag.repair import repair_bag, scan_mcap
 
-ROOT = Path(__file__).resolve().parent.parent
 PY = str(ROOT / '.venv' / 'bin' / 'python') if (ROOT / '.venv').exists() else sys.executable
 DATA_QOS = QoSProfile(depth=topics.DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)

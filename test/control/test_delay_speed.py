@@ -6,7 +6,6 @@ No timing here: the speed comparison with tdcpy is ``benchmarks/delay_analysis.p
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,11 +13,11 @@ import scipy.sparse as sp
 import yaml
 from scipy.sparse.linalg import eigs
 
+from conftest import CONFIG
 from nonfragile_tracker.control.delay import (closed_loop_matrix, rightmost_roots,
                                               spectral_abscissa)
 from nonfragile_tracker.control.problem import load_problem
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 def _cheb(N: int) -> np.ndarray:

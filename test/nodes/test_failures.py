@@ -4,7 +4,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 
@@ -13,7 +12,7 @@ import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.runner import isolated_env, run_processes, scenario_parameters
+from nonfragile_tracker.runner import run_processes, scenario_parameters
 
 from conftest import CONFIG, ROOT, unique_domain_id
 

@@ -1,0 +1,37 @@
+"""Types: mypy (pinned in requirements.txt) over the public modules listed in setup.cfg."""
+from __future__ import annotations
+
+import configparser
+import subprocess
+import sys
+
+from conftest import ROOT
+
+#: The public API that must stay type-checked (the ``files`` of ``[mypy]`` may list more).
+PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.py',
+          'nonfragile_tracker/control/model.py', 'nonfragile_tracker/control/problem.py',
+          'nonfragile_tracker/control/gains.py', 'nonfragile_tracker/control/loop.py',
+          'nonfragile_tracker/control/trajectory.py', 'nonfragile_tracker/control/identify.py',
+          'nonfragile_tracker/bag/compare.py')
+
+
+def _checked_files() -> list[str]:
+    cfg = configparser.ConfigParser()
+    cfg.read(ROOT / 'setup.cfg')
+    return [f.strip() for f in cfg['mypy']['files'].split(',') if f.strip()]
+
+
+def test_mypy_passes_on_the_public_modules():
+    files = _checked_files()
+    proc = subprocess.run([sys.executable, '-m', 'mypy'], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f'Success: no issues found in {len(files)} source files' in proc.stdout, proc.stdout
+
+
+def test_mypy_configuration_covers_the_public_api():
+    files = _checked_files()
+    assert set(PUBLIC) <= set(files), sorted(set(PUBLIC) - set(files))
+    assert all((ROOT / f).is_file() for f in files), files
+    assert any(line.strip() == 'mypy==2.4.1'
+               for line in (ROOT / 'requirements.txt').read_text().splitlines())
