@@ -28,10 +28,12 @@ SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_fa
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark the tests of :data:`ROS_MODULES` ``ros`` and of :data:`SLOW_MODULES` ``slow``."""
+    """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
+    of :data:`SLOW_MODULES`."""
+    nodes_dir = Path(__file__).resolve().parent / 'nodes'
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else ''
-        if module in ROS_MODULES:
+        if module in ROS_MODULES or nodes_dir in Path(str(item.fspath)).resolve().parents:
             item.add_marker(pytest.mark.ros)
         if module in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
