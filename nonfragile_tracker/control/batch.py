@@ -924,7 +924,7 @@ def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: floa
     t : numpy.ndarray, (steps + 1,)
     xi : numpy.ndarray, (steps + 1, N, n)
     """
-    from .simulate import steps_for_duration
+    from .simulate import rk4_delay_steps, steps_for_duration
     A0 = np.asarray(A0, float)
     A1 = np.asarray(A1, float)
     xi0 = np.asarray(xi0, float)
@@ -952,14 +952,5 @@ def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: floa
     def f(x, xd):
         return np.einsum('kij,kj->ki', A0, x) + np.einsum('kij,kj->ki', A1, xd)
 
-    for k in range(steps):
-        i = Nd + k
-        x = out[i]
-        d0, d1 = out[i - Nd], out[i - Nd + 1]
-        dm = 0.5 * (d0 + d1)
-        k1 = f(x, d0)
-        k2 = f(x + 0.5 * dt * k1, dm)
-        k3 = f(x + 0.5 * dt * k2, dm)
-        k4 = f(x + dt * k3, d1)
-        out[i + 1] = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    rk4_delay_steps(out, Nd, steps, dt, f)
     return np.arange(steps + 1) * dt, out[Nd:].copy()

@@ -21,6 +21,7 @@ from .reference import Path, RefSample
 from .sensors import OdometrySample
 
 __all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'DelayRun', 'simulate_delay_loop',
+           'rk4_delay_steps',
            'steps_for_duration']
 
 
@@ -153,7 +154,19 @@ def simulate_delay_loop(A0, A1, tau: float, xi0, duration: float, dt: float = 1e
     for i in range(N + 1):
         s = (i - N) * dt
         out[i] = xi0 if history is None or i == N else np.asarray(history(s), float)
-    f = lambda x, xd: A0 @ x + A1 @ xd  # noqa: E731
+    rk4_delay_steps(out, N, steps, dt, lambda x, xd: A0 @ x + A1 @ xd)
+    return DelayRun(np.arange(steps + 1) * dt, out[N:].copy())
+
+
+def rk4_delay_steps(out: np.ndarray, N: int, steps: int, dt: float,
+                    f: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
+    """RK4 steps of ``xi' = f(xi, xi(t - N dt))`` in place over the history buffer ``out``.
+
+    ``out[:N + 1]`` holds the initial function on ``[-N dt, 0]``; ``out[N + k + 1]`` is
+    written from ``out[N + k]``.  The delayed state at the half step is the mean of the
+    two neighbouring samples.  Shared by :func:`simulate_delay_loop` and the batched loop
+    (:func:`control.batch.simulate_delay_loop_batch`), so both integrate the same way.
+    """
     for k in range(steps):
         i = N + k
         x = out[i]
@@ -164,4 +177,3 @@ def simulate_delay_loop(A0, A1, tau: float, xi0, duration: float, dt: float = 1e
         k3 = f(x + 0.5 * dt * k2, dm)
         k4 = f(x + dt * k3, d1)
         out[i + 1] = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return DelayRun(np.arange(steps + 1) * dt, out[N:].copy())
