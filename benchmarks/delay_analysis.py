@@ -12,7 +12,8 @@ n = 10 and n = 32, tau = 1; a 2-state loop with tau = 5.
   worst-case searches); ours, cold: the same with those caches cleared before each call.
 * tdcpy: ``tdcpy.spectral_abscissa(RDDE)`` (PyPI ``tdcpy==0.0.1``), run by the python of
   its own environment (``--tdcpy-python``, default ``$TDCPY_PYTHON`` or
-  ``/work/wt/perf-bench-venv/bin/python``; never installed in the project venv).  If it
+  ``benchmarks/tdcpy-venv/bin/python``, made with ``python3 -m venv benchmarks/tdcpy-venv &&
+  benchmarks/tdcpy-venv/bin/pip install tdcpy==0.0.1``; never installed in the project venv).  If it
   is absent the table says so and shows ours only.
 * error: |abscissa - reference|, the reference being an independent high-degree
   discretization (sparse shift-invert at N_ref = min(max(64, 3 R tau), 160)) refined by Newton's
@@ -158,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--reps', type=int, default=7)
     ap.add_argument('--tdcpy-python', default=os.environ.get(
-        'TDCPY_PYTHON', '/work/wt/perf-bench-venv/bin/python'))
+        'TDCPY_PYTHON', str(Path(__file__).resolve().parent / 'tdcpy-venv' / 'bin' / 'python')))
     args = ap.parse_args(argv)
     data = cases()
     tdc, note = run_tdcpy(args.tdcpy_python, data, args.reps)

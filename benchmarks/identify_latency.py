@@ -19,8 +19,8 @@ one plus the mean wait from receipt to that tick, measured from the bag (ticks =
 stamps); ``tick sd`` is the standard deviation of the tick interval (timer jitter: the
 plant integrates a nominal ``dt`` per tick, so jitter smears the response and inflates
 the apparent lag).  ROS runs must be started in
-a network namespace of their own (``/work/wt/bin/inns <name> ...`` on the shared
-machine) or on a quiet host.  Not part of the test suite.
+a network namespace of their own (``ip netns exec <ns> ...`` with the loopback up, on a
+shared machine) or on a quiet host.  Not part of the test suite.
 """
 from __future__ import annotations
 
