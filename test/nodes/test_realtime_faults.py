@@ -65,7 +65,7 @@ def stop(p):
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
-    return p.stdout.read()
+    return p.stdout.read() if p.stdout is not None else ''
 
 
 def test_silence_stop_and_resume(ros_env, tmp_path):
@@ -74,18 +74,24 @@ def test_silence_stop_and_resume(ros_env, tmp_path):
     procs = {}
     bag = tmp_path / 'bag'
     try:
+        rec_log = tmp_path / 'recorder.log'
         procs['recorder'] = subprocess.Popen(
             [sys.executable, '-m', 'nonfragile_tracker.nodes.recorder', '--ros-args', '-p',
-             f'output:={bag}', '-p', "topics:=['odom','cmd_vel']"], env=env,
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             f'output:={bag}', '-p', "topics:=['odom','cmd_vel']"],
+            env=dict(env, RCUTILS_LOGGING_BUFFERED_STREAM='0'),
+            stdout=rec_log.open('w'), stderr=subprocess.STDOUT, text=True)
         procs['tracker'] = start('tracker', env, '-p', 'input_timeout:=0.3')
         procs['reference'] = start('reference', env)
         procs['plant'] = start('plant', env, '-p', 'duration:=0.0')
         assert probe.wait_for(lambda: sum(1 for c in probe.cmds if c[1] != 0.0) > 20), \
             'no commands from the tracker'
-        # the recorder is in the graph on both topics (tracker/plant + recorder + probe)
+        # the recorder is in the graph on both topics (tracker/plant + recorder + probe) and
+        # has received from the first plant (a subscriber in the graph may not have matched
+        # its publisher yet: then the first plant's lifetime is missing from the bag)
         assert probe.wait_for(lambda: probe.node.count_subscribers('/odom') >= 3
                               and probe.node.count_subscribers('/cmd_vel') >= 3)
+        assert probe.wait_for(lambda: all(f'first message on /{t}' in rec_log.read_text()
+                                          for t in ('odom', 'cmd_vel'))), rec_log.read_text()
         probe.spin(1.0)
         # silence of the reference: the tracker publishes stops
         stop(procs.pop('reference'))
@@ -116,6 +122,7 @@ def test_silence_stop_and_resume(ros_env, tmp_path):
     finally:
         logs = {k: stop(p) for k, p in procs.items()}
         probe.close()
+    logs['recorder'] = rec_log.read_text()
     log = logs['tracker']
     events = [('stop' if 'publishing stop' in line else 'resume') for line in log.splitlines()
               if 'publishing stop' in line or 'resuming' in line]
