@@ -211,14 +211,23 @@ class _Theorem1Program:
             size = 3 * n + q + p
             norm = cp.trace(self.X) + cp.trace(self.W) + self.eps
             extra = [self.eps >= self.t]
+        self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
+
+    def _maximize_strictness(self, blocks: list, size: int, norm, extra: list, n: int, m: int,
+                             gain_bound: bool) -> None:
+        """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (both forms).
+
+        With ``gain_bound``, ``||K||_2 <= kappa``: ``X >= I`` and
+        ``[[kappa^2 (2X - I), R^T], [R, I]] >= 0``, because ``X^2 >= 2X - I`` gives
+        ``R^T R <= kappa^2 (2X - I) <= kappa^2 X^2``; the scale is then fixed by ``X >= I``,
+        so the trace normalization is replaced by ``t <= 1``.
+        """
+        cp = self.cp
         L = cp.bmat(blocks)
         L = 0.5 * (L + L.T)
         cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
                 self.W >> self.t * np.eye(n)] + extra
         if gain_bound:
-            # ||K||_2 <= kappa: X >= I and [[kappa^2 (2X - I), R^T], [R, I]] >= 0, because
-            # X^2 >= 2X - I gives R^T R <= kappa^2 (2X - I) <= kappa^2 X^2.  Here the scale
-            # is fixed by X >= I, so the trace normalization is replaced by t <= 1.
             self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
             G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
                          [self.R, np.eye(m)]])
@@ -369,19 +378,7 @@ class _CompactProgram(_Theorem1Program):
             size = 2 * n + q + p
             norm = cp.trace(self.X) + cp.trace(self.S) + self.eps
             extra = [self.eps >= self.t]
-        L = cp.bmat(blocks)
-        L = 0.5 * (L + L.T)
-        cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
-                self.S >> self.t * np.eye(n)] + extra
-        if gain_bound:
-            self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
-            G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
-                         [self.R, np.eye(m)]])
-            cons += [self.X >> np.eye(n), 0.5 * (G + G.T) >> 0, self.t <= 1]
-        else:
-            self.kappa2 = None
-            cons += [norm <= 1]
-        self.problem = cp.Problem(cp.Maximize(self.t), cons)
+        self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
 
     def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
         status, t, X, S, R, eps, st = super().solve(problem, solver, kappa)
