@@ -214,19 +214,26 @@ class _Theorem1Program:
         self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
 
     def _maximize_strictness(self, blocks: list, size: int, norm, extra: list, n: int, m: int,
-                             gain_bound: bool) -> None:
-        """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (both forms).
+                             gain_bound: bool, drop_implied: bool = False) -> None:
+        """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (all forms).
 
         With ``gain_bound``, ``||K||_2 <= kappa``: ``X >= I`` and
         ``[[kappa^2 (2X - I), R^T], [R, I]] >= 0``, because ``X^2 >= 2X - I`` gives
         ``R^T R <= kappa^2 (2X - I) <= kappa^2 X^2``; the scale is then fixed by ``X >= I``,
         so the trace normalization is replaced by ``t <= 1``.
+
+        ``drop_implied`` leaves out the PSD cones the others imply (each costs the solver a
+        dense block): ``W >= t I`` (``-W`` is a diagonal block of ``LMI <= -t I``) and,
+        with ``gain_bound``, ``X >= t I`` (``X >= I`` and ``t <= 1``).
         """
         cp = self.cp
         L = cp.bmat(blocks)
         L = 0.5 * (L + L.T)
-        cons = [L << -self.t * np.eye(size), self.X >> self.t * np.eye(n),
-                self.W >> self.t * np.eye(n)] + extra
+        cons = [L << -self.t * np.eye(size)] + extra
+        if not (drop_implied and gain_bound):
+            cons.append(self.X >> self.t * np.eye(n))
+        if self.W is not None and not drop_implied:
+            cons.append(self.W >> self.t * np.eye(self.W.shape[0]))
         if gain_bound:
             self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
             G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
@@ -237,7 +244,8 @@ class _Theorem1Program:
             cons += [norm <= 1]
         self.problem = cp.Problem(cp.Maximize(self.t), cons)
 
-    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+    def set_data(self, problem: Problem, kappa: float | None = None) -> None:
+        """Put ``problem``'s data (and the gain bound ``kappa``) into the parameters."""
         self.A.value = problem.A
         self.B.value = problem.B
         self.Ad.value = problem.A_tau
@@ -246,9 +254,22 @@ class _Theorem1Program:
             self.F.value = problem.F
         if self.kappa2 is not None:
             self.kappa2.value = float(kappa) ** 2
+
+    def point(self, status: str, solve_time: float) -> tuple:
+        """``(status, t, X, Q, R, eps, solve_time)`` with ``Q = W^-1`` (``None`` if singular)."""
+        W = self.W.value
+        try:
+            Q = None if W is None else np.linalg.inv(_sym(W))
+        except np.linalg.LinAlgError:
+            Q = None
+        return (status, self.t.value, self.X.value, Q, self.R.value,
+                None if self.eps is None else self.eps.value, solve_time)
+
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+        """Solve for ``problem``: ``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`point`)."""
+        self.set_data(problem, kappa)
         out = solve(self.problem, solver, what=f'problem {problem.name!r}')
-        return (out.status, self.t.value, self.X.value, self.W.value, self.R.value,
-                None if self.eps is None else self.eps.value, out.solve_time)
+        return self.point(out.status, out.solve_time)
 
 
 def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
@@ -291,7 +312,7 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
         raise ValueError(f'gain_bound must be > 0, got {gain_bound!r}')
     t0 = time.perf_counter()
     prog = _program_for(problem, nominal, gain_bound is not None)
-    status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
+    status, t, X, Q, R, eps, solve_time = prog.solve(problem, solver, gain_bound)
     kind = 'nominal' if nominal else 'non-fragile'
     verdict = classify(status, t, margin)
     if verdict == 'infeasible':
@@ -301,11 +322,10 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
             f'Theorem 1 ({kind}{bound}) is infeasible for problem {problem.name!r}: {best} < '
             f'required margin {margin:g}. Try a smaller A_tau or F, a looser gain bound, the '
             'nominal design, or the delay-dependent design.')
-    if verdict == 'failed' or X is None:
+    if verdict == 'failed' or X is None or Q is None:
         raise SolverFailure(f'solver {solver} returned status {status!r} for problem '
                             f'{problem.name!r}; no gain was produced')
     P = np.linalg.inv(_sym(X))
-    Q = np.linalg.inv(_sym(W))
     K = R @ P
     eps_val = None if nominal else float(eps)
     ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
@@ -326,92 +346,151 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
 
 
 # ---------------------------------------------------------------------------------------------
-# Compact form of Theorem 1 for larger n.
+# Reduced form of Theorem 1 for larger n.
 
-class _CompactProgram(_Theorem1Program):
-    """Theorem 1 with ``S = X Q X`` instead of ``W = Q^-1``: LMI of size ``2n + q + p``.
+def _rank_split(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """SVD ``M = U diag(s) V^T`` and its numerical rank (``s > max(shape) eps s_max``)."""
+    U, s, Vt = np.linalg.svd(M)
+    tol = max(M.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
+    return U, s, Vt, int(np.sum(s > tol)) if s.size and s[0] > 0 else 0
 
-    Congruence of ``V`` (module docstring) with ``diag(X, X, eps I)`` and Schur on
-    ``F`` give the equivalent (``S > 0`` <-> ``Q = P S P > 0``) ::
 
-        [ He(A X + B R) + S   A_tau X   eps B E   X F^T  ]
-        [  *                  -S        0         0      ]  < 0
-        [  *                   *        -eps I    0      ]
-        [  *                   *         *        -eps I ]
+def _reduced_shape(problem: Problem) -> tuple[int, int]:
+    """``(rank A_tau, rank F)``: the sizes the reduced LMI depends on."""
+    return _rank_split(problem.A_tau)[3], _rank_split(problem.F)[3]
 
-    one ``n``-block smaller than the paper's form (size ``3n + q + p``), which the
-    interior-point solver pays for cubically in the cone size.  Same objective and
-    normalization (``S`` in place of ``W``); ``W`` is returned as ``S^-1``-consistent
-    ``X S^-1 X`` so that ``Q = W^-1 = P S P``.
+
+class _ReducedProgram(_Theorem1Program):
+    """Theorem 1 with the rank of ``A_tau`` and ``F`` exploited: LMI of size ``n + r + p'``.
+
+    Write ``A_tau = U M^T`` (``r = rank A_tau``) and ``F^T F = G^T G`` (``G`` is
+    ``p' x n``, ``p' = rank F``).  The Schur complement of the module docstring's ``V``
+    in ``X = P^-1`` coordinates is ::
+
+        He(A X + B R) + eps B E E^T B^T + X Q X + X G^T G X / eps
+                      + U M^T Q^-1 M U^T  < 0.
+
+    Only ``M^T Q^-1 M`` (``r x r``) enters the delay term, so with ``W_r > 0``
+    (``r x r``) and ``Q = M W_r^-1 M^T + (t / 2) P^2`` the condition holds iff ::
+
+        [ He(A X + B R) + eps B E E^T B^T + U W_r U^T   X M    X G^T  ]
+        [  *                                           -W_r    0      ]  < 0
+        [  *                                            *     -eps I  ]
+
+    Equivalence: given ``(X, Q)``, ``W_r = M^T Q^-1 M`` gives ``M W_r^-1 M^T <= Q``
+    (so the ``X Q X`` term only shrinks) and the same delay term.  Conversely, for the
+    ``Q`` above ``M^T Q^-1 M = (S^-1 + W_r^-1)^-1 <= W_r`` (Woodbury, ``S = M^T D^-1 M``,
+    ``D = (t/2) P^2``), so the delay term only shrinks, and ``X D X = (t / 2) I`` uses
+    half of the strictness ``LMI <= -t I`` (``Q`` is positive definite even when
+    ``r < n``, and well away from singular when ``A_tau`` has tiny singular values).
+    The ``E`` block is eliminated (it is linear in ``eps``).  The size ``n + r + p'`` is
+    at most ``2n + p`` (full ranks) against ``2n + q + p`` for ``S = X Q X`` and
+    ``3n + q + p`` for the paper's form; the interior-point solver's dense ``svec``
+    block costs the sixth power of that size.
+
+    The data are first rotated by the orthogonal ``T`` of the SVD ``A_tau = T S V^T``
+    (``xi = T z``): then ``U = [I_r; 0]`` and ``U W_r U^T = diag(W_r, 0)`` has no data
+    in it, so the program stays DPP (parameters ``A, B, B E E^T B^T, M, G`` of the
+    rotated problem).  :meth:`point` maps ``X, R, Q`` back; the certificate is verified
+    on the original problem like every other.  Same objective and normalization
+    (``W_r`` in place of ``W``).
     """
 
-    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
+    def __init__(self, n: int, m: int, r: int, pr: int, nominal: bool, gain_bound: bool):
         import cvxpy as cp
         self.cp = cp
         self.nominal = nominal
+        self.n, self.r, self.pr = n, r, pr
         self.A = cp.Parameter((n, n), name='A')
         self.B = cp.Parameter((n, m), name='B')
-        self.Ad = cp.Parameter((n, n), name='A_tau')
         self.X = cp.Variable((n, n), symmetric=True, name='X')
-        self.S = cp.Variable((n, n), symmetric=True, name='S')
-        self.W = self.S                        # the normalization's second matrix
         self.R = cp.Variable((m, n), name='R')
         self.t = cp.Variable(name='t')
-        AX = self.A @ self.X + self.B @ self.R
+        S = self.A @ self.X + self.B @ self.R
+        top = S + S.T
+        norm = cp.trace(self.X)
         Z = np.zeros
-        AdX = self.Ad @ self.X
+        cols: list = []             # blocks right of ``top`` in the first block row
+        diag: list = []             # their diagonal blocks
+        self.W = self.M = None
+        if r:
+            self.W = cp.Variable((r, r), symmetric=True, name='W_r')
+            self.M = cp.Parameter((n, r), name='M')
+            top = top + (self.W if r == n else cp.bmat([[self.W, Z((r, n - r))],
+                                                       [Z((n - r, r)), Z((n - r, n - r))]]))
+            cols.append(self.X @ self.M)
+            diag.append(-self.W)
+            norm = norm + cp.trace(self.W)
         if nominal:
-            blocks = [[AX + AX.T + self.S, AdX], [AdX.T, -self.S]]
-            size, self.eps, extra = 2 * n, None, []
-            norm = cp.trace(self.X) + cp.trace(self.S)
+            self.eps, extra = None, []
         else:
-            self.BE = cp.Parameter((n, q), name='BE')
-            self.F = cp.Parameter((p, n), name='F')
             self.eps = cp.Variable(name='eps')
-            XFt = self.X @ self.F.T
-            blocks = [
-                [AX + AX.T + self.S, AdX, self.eps * self.BE, XFt],
-                [AdX.T, -self.S, Z((n, q)), Z((n, p))],
-                [(self.eps * self.BE).T, Z((q, n)), -self.eps * np.eye(q), Z((q, p))],
-                [XFt.T, Z((p, n)), Z((p, q)), -self.eps * np.eye(p)],
-            ]
-            size = 2 * n + q + p
-            norm = cp.trace(self.X) + cp.trace(self.S) + self.eps
+            self.BEBE = cp.Parameter((n, n), name='BEEB')
+            top = top + self.eps * self.BEBE
+            if pr:
+                self.G = cp.Parameter((pr, n), name='G')
+                cols.append(self.X @ self.G.T)
+                diag.append(-self.eps * np.eye(pr))
+            norm = norm + self.eps
             extra = [self.eps >= self.t]
-        self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
+        sizes = [c.shape[1] for c in cols]
+        blocks = [[top] + cols]
+        for i, c in enumerate(cols):
+            blocks.append([c.T] + [diag[i] if j == i else Z((sizes[i], sizes[j]))
+                                   for j in range(len(cols))])
+        self._maximize_strictness(blocks, n + sum(sizes), norm, extra, n, m, gain_bound,
+                                  drop_implied=True)
 
-    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
-        status, t, X, S, R, eps, st = super().solve(problem, solver, kappa)
-        if X is None or S is None:
-            return status, t, X, S, R, eps, st
-        # W = Q^-1 with Q = P S P:  W = X S^-1 X
-        Xs = 0.5 * (X + X.T)
+    def set_data(self, problem: Problem, kappa: float | None = None) -> None:
+        """Rotate ``problem`` (class docstring) and put its data into the parameters."""
+        T, s, Vt, _ = _rank_split(problem.A_tau)
+        r = self.r
+        self.T = T
+        self.A.value = T.T @ problem.A @ T
+        self.B.value = T.T @ problem.B
+        if self.r:
+            M = (s[:r, None] * Vt[:r] @ T).T          # A_tau = T diag(s) V^T: T^T A_tau T
+            self.M.value = M                          # = [M^T; 0]
+        if not self.nominal:
+            BE = self.B.value @ problem.E
+            self.BEBE.value = BE @ BE.T
+            if self.pr:
+                _, sf, Vft, _ = _rank_split(problem.F @ T)
+                self.G.value = sf[:self.pr, None] * Vft[:self.pr]
+        if self.kappa2 is not None:
+            self.kappa2.value = float(kappa) ** 2
+
+    def point(self, status: str, solve_time: float) -> tuple:
+        """``(status, t, X, Q, R, eps, solve_time)`` in the original coordinates."""
+        t, X, R = self.t.value, self.X.value, self.R.value
+        eps = None if self.eps is None else self.eps.value
+        if X is None or R is None or t is None:
+            return status, t, None, None, None, eps, solve_time
+        X = _sym(X)
         try:
-            W = Xs @ np.linalg.solve(0.5 * (S + S.T), Xs)
+            Pz = np.linalg.inv(X)
+            Qz = 0.5 * max(float(t), 0.0) * Pz @ Pz        # half the slack t P^2
+            if self.r:
+                Qz = Qz + self.M.value @ np.linalg.solve(_sym(self.W.value), self.M.value.T)
         except np.linalg.LinAlgError:
-            W = None
-        return status, t, X, W, R, eps, st
+            return status, t, None, None, None, eps, solve_time
+        T = self.T
+        return (status, t, T @ X @ T.T, _sym(T @ Qz @ T.T), R @ T.T, eps, solve_time)
 
 
-COMPACT_FROM_N = 8    # Theorem 1 uses _CompactProgram for n >= this (smaller SDP)
-_COMPACT: dict[tuple, _CompactProgram] = {}
+COMPACT_FROM_N = 8    # Theorem 1 uses _ReducedProgram for n >= this (smaller SDP)
 
 
 def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
     """The Theorem 1 program for ``problem``.
 
-    The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the compact one
-    (same feasible set, cached per shape).
+    The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the reduced one
+    (same feasible set, cached per shape and ranks).
     """
     if problem.n < COMPACT_FROM_N:
         return _program(problem, nominal, gain_bound)
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal, gain_bound)
-    prog = _COMPACT.get(key)
-    if prog is None:
-        if len(_COMPACT) > 32:
-            _COMPACT.clear()
-        prog = _COMPACT[key] = _CompactProgram(*key)
-    return prog
+    key = (problem.n, problem.m) + _reduced_shape(problem) + (nominal, gain_bound)
+    return cached_program(('theorem1-reduced',) + key, lambda: _ReducedProgram(*key))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -436,62 +515,51 @@ class _MinNormProgram:
     with ``X >= t_req I`` this bounds ``||K||_2 = ||R X^-1||_2 <= sqrt(s / t_req)``.
     """
 
-    def __init__(self, n: int, m: int, q: int, p: int, nominal: bool):
+    def __init__(self, base: _Theorem1Program):
         import cvxpy as cp
         self.cp = cp
-        form = _CompactProgram if n >= COMPACT_FROM_N else _Theorem1Program
-        self.base = form(n, m, q, p, nominal, False)
-        b = self.base
+        self.base = b = base
         self.t_req = cp.Parameter(nonneg=True, name='t_req')
         self.s = cp.Variable(name='s')
+        m = b.R.shape[0]
         G = cp.bmat([[self.s * np.eye(m), b.R], [b.R.T, b.X]])
         cons = [c for c in b.problem.constraints] + [b.t >= self.t_req, 0.5 * (G + G.T) >> 0]
         self.problem = cp.Problem(cp.Minimize(self.s), cons)
 
     def solve(self, problem: Problem, solver: str, t_req: float) -> tuple:
-        b = self.base
-        b.A.value, b.B.value, b.Ad.value = problem.A, problem.B, problem.A_tau
-        if not b.nominal:
-            b.BE.value = problem.B @ problem.E
-            b.F.value = problem.F
+        """``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`_Theorem1Program.point`)."""
+        self.base.set_data(problem)
         self.t_req.value = float(t_req)
-        try:
-            self.problem.solve(solver=solver)
-        except self.cp.error.SolverError as exc:
-            raise SolverFailure(f'solver {solver} failed on the minimum-norm stage for '
-                                f'problem {problem.name!r}: {exc}') from None
-        stats = self.problem.solver_stats
-        W = b.W.value
-        if isinstance(b, _CompactProgram) and W is not None and b.X.value is not None:
-            Xs = _sym(b.X.value)                     # W = X S^-1 X (see _CompactProgram)
-            W = Xs @ np.linalg.solve(_sym(W), Xs)
-        return (self.problem.status, b.t.value, b.X.value, W, b.R.value,
-                None if b.eps is None else b.eps.value,
-                float(stats.solve_time or 0.0) if stats is not None else 0.0)
+        out = solve(self.problem, solver, what='the minimum-norm stage for problem '
+                    f'{problem.name!r}')
+        return self.base.point(out.status, out.solve_time)
 
 
-_MIN_NORM: dict[tuple, _MinNormProgram] = {}
+def _min_norm_program(problem: Problem, nominal: bool) -> _MinNormProgram:
+    """The stage-2 program for ``problem``'s shape (same form as :func:`_program_for`)."""
+    n, m = problem.n, problem.m
+    if n < COMPACT_FROM_N:
+        shape = (n, m, problem.E.shape[1], problem.F.shape[0], nominal)
+        return cached_program(('min-norm',) + shape, lambda: _MinNormProgram(
+            _Theorem1Program(*shape, False)))
+    key = (n, m) + _reduced_shape(problem) + (nominal,)
+    return cached_program(('min-norm-reduced',) + key,
+                          lambda: _MinNormProgram(_ReducedProgram(*key, False)))
 
 
 def _min_norm_stage(problem: Problem, nominal: bool, solver: str, t_req: float,
                     verify_tol: float) -> SynthesisResult | None:
     """Stage 2 (see :class:`_MinNormProgram`); ``None`` if it gives no verified gain."""
-    key = (problem.n, problem.m, problem.E.shape[1], problem.F.shape[0], nominal)
-    prog = _MIN_NORM.get(key)
-    if prog is None:
-        if len(_MIN_NORM) > 32:
-            _MIN_NORM.clear()
-        prog = _MIN_NORM[key] = _MinNormProgram(*key)
+    prog = _min_norm_program(problem, nominal)
     t0 = time.perf_counter()
     try:
-        status, t, X, W, R, eps, solve_time = prog.solve(problem, solver, t_req)
+        status, t, X, Q, R, eps, solve_time = prog.solve(problem, solver, t_req)
     except SolverFailure:
         return None
-    if status not in ('optimal', 'optimal_inaccurate') or X is None or t is None:
+    if status not in OK_STATUSES or X is None or t is None or Q is None:
         return None
     try:
         P = np.linalg.inv(_sym(X))
-        Q = np.linalg.inv(_sym(W))
     except np.linalg.LinAlgError:
         return None
     K = R @ P

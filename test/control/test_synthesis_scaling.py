@@ -75,7 +75,7 @@ def coupled(k: int, seed: int = 0):
 
 
 def test_compact_form_matches_the_paper_form(monkeypatch):
-    """n >= 8 uses the LMI with S = X Q X (size 2n+q+p): same feasible set, verified."""
+    """n >= 8 uses the reduced LMI (size n + rank A_tau + rank F): same verdict, verified."""
     import nonfragile_tracker.control.lmi as lmi
     p = coupled(2)
     assert decoupled_blocks(p) == [] and p.n >= lmi.COMPACT_FROM_N
