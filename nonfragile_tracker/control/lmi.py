@@ -265,10 +265,20 @@ class _Theorem1Program:
         return (status, self.t.value, self.X.value, Q, self.R.value,
                 None if self.eps is None else self.eps.value, solve_time)
 
+    #: compile the first solve without DPP (``sdp.solve(ignore_dpp=True)``), re-solves with it
+    cold_first = False
+    solves = 0
+
+    def first_solve(self) -> bool:
+        """Count a solve; ``True`` for the first one of a ``cold_first`` program."""
+        self.solves += 1
+        return self.cold_first and self.solves == 1
+
     def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
         """Solve for ``problem``: ``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`point`)."""
         self.set_data(problem, kappa)
-        out = solve(self.problem, solver, what=f'problem {problem.name!r}')
+        out = solve(self.problem, solver, what=f'problem {problem.name!r}',
+                    ignore_dpp=self.first_solve())
         return self.point(out.status, out.solve_time)
 
 
@@ -395,6 +405,8 @@ class _ReducedProgram(_Theorem1Program):
     on the original problem like every other.  Same objective and normalization
     (``W_r`` in place of ``W``).
     """
+
+    cold_first = True      # larger programs: cvxpy's DPP compilation costs more than a solve
 
     def __init__(self, n: int, m: int, r: int, pr: int, nominal: bool, gain_bound: bool):
         import cvxpy as cp
@@ -531,7 +543,7 @@ class _MinNormProgram:
         self.base.set_data(problem)
         self.t_req.value = float(t_req)
         out = solve(self.problem, solver, what='the minimum-norm stage for problem '
-                    f'{problem.name!r}')
+                    f'{problem.name!r}', ignore_dpp=self.base.first_solve())
         return self.base.point(out.status, out.solve_time)
 
 

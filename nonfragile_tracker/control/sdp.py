@@ -65,7 +65,7 @@ class SolveOutcome:
 
 
 def solve(problem: Any, solver: str, *, what: str = 'the LMI',
-          quiet_inaccurate: bool = False) -> SolveOutcome:
+          quiet_inaccurate: bool = False, ignore_dpp: bool = False) -> SolveOutcome:
     """Solve the cvxpy ``problem`` with ``solver``.
 
     Parameters
@@ -79,6 +79,10 @@ def solve(problem: Any, solver: str, *, what: str = 'the LMI',
     quiet_inaccurate : bool
         Suppress cvxpy's "Solution may be inaccurate" warning (the status says it and
         the point is verified independently anyway).
+    ignore_dpp : bool
+        Compile with the parameters' current values as constants: several times faster
+        than cvxpy's parametrized (DPP) compilation, but nothing is kept for a re-solve.
+        Worth it for the first solve of a cached program (most are solved only once).
 
     Raises
     ------
@@ -90,7 +94,7 @@ def solve(problem: Any, solver: str, *, what: str = 'the LMI',
         with warnings.catch_warnings():
             if quiet_inaccurate:
                 warnings.filterwarnings('ignore', message='Solution may be inaccurate')
-            problem.solve(solver=solver)
+            problem.solve(solver=solver, ignore_dpp=ignore_dpp)
     except cp.error.SolverError as exc:
         raise SolverFailure(f'solver {solver} failed on {what}: {exc}. Check that the solver '
                             'is installed (pip install clarabel).') from None
