@@ -12,11 +12,13 @@ cost are paid before the clock starts):
   ``benchmarks/run.py``), gain bound 8.67;
 * coupled: the same plus 0.02 x a seeded Gaussian matrix added to A (no block structure).
 
-Columns: today's path (``synthesize`` defaults: block decoupling, compact LMI for n >= 8)
-and the previous single paper-form solve (``decouple=False`` and the compact form
-disabled), median over ``--reps`` children; every certificate is verified by
+Columns: today's path (``synthesize`` defaults: block decoupling; for n >= 8 the reduced
+LMI of size n + rank(A_tau) + rank(F), compiled without DPP on its first solve) and the
+previous single paper-form solve (``decouple=False`` and the reduced form disabled),
+median over ``--reps`` children; every certificate is verified by
 ``verify_certificate`` (the ``ok`` column).  Timings are single-threaded
-(OPENBLAS_NUM_THREADS=1).  n = 32 with the previous path takes minutes.
+(OPENBLAS_NUM_THREADS=1; Clarabel's own threads are its default).  n = 32 with the
+previous path takes minutes.
 """
 from __future__ import annotations
 
@@ -108,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             ratio = (f"x{b['wall'] / t['wall']:.1f}" if 'wall' in t and 'wall' in b
                      else 'n/a')
             how = ('blocks ' + 'x'.join(map(str, t['blocks'])) if t.get('blocks')
-                   else ('compact LMI' if n >= 8 else 'paper LMI'))
+                   else ('reduced LMI' if n >= 8 else 'paper LMI'))
             ok_t = 'yes' if t.get('ok') else 'NO'
             ok_b = 'yes' if b.get('ok') else ('NO' if 'wall' in b else '-')
             print(f'{kind:12s} {n:3d} {cell(t, "wall", 8)} {cell(t, "solver", 8)} {ok_t:>3s} '

@@ -214,7 +214,7 @@ class _Theorem1Program:
         self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
 
     def _maximize_strictness(self, blocks: list, size: int, norm, extra: list, n: int, m: int,
-                             gain_bound: bool, drop_implied: bool = False) -> None:
+                             gain_bound: bool, lean: bool = False) -> None:
         """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (all forms).
 
         With ``gain_bound``, ``||K||_2 <= kappa``: ``X >= I`` and
@@ -222,23 +222,28 @@ class _Theorem1Program:
         ``R^T R <= kappa^2 (2X - I) <= kappa^2 X^2``; the scale is then fixed by ``X >= I``,
         so the trace normalization is replaced by ``t <= 1``.
 
-        ``drop_implied`` leaves out the PSD cones the others imply (each costs the solver a
-        dense block): ``W >= t I`` (``-W`` is a diagonal block of ``LMI <= -t I``) and,
-        with ``gain_bound``, ``X >= t I`` (``X >= I`` and ``t <= 1``).
+        ``lean`` leaves out PSD cones that are not needed (each costs the interior-point
+        solver a dense ``svec`` block): ``W >= t I`` (``-W`` is a diagonal block of
+        ``LMI <= -t I``) and, with ``gain_bound``, ``X >= t I`` and ``X >= I``: the second
+        cone alone gives ``2X - I >= R^T R / kappa^2 >= 0``, i.e. ``X >= I / 2 > 0``
+        (the scale fixed from below), and the bound needs only ``X > 0``:
+        ``K^T K = X^-1 R^T R X^-1 <= kappa^2 (I - (I - X^-1)^2) <= kappa^2 I``.
         """
         cp = self.cp
         L = cp.bmat(blocks)
         L = 0.5 * (L + L.T)
         cons = [L << -self.t * np.eye(size)] + extra
-        if not (drop_implied and gain_bound):
+        if not (lean and gain_bound):
             cons.append(self.X >> self.t * np.eye(n))
-        if self.W is not None and not drop_implied:
+        if self.W is not None and not lean:
             cons.append(self.W >> self.t * np.eye(self.W.shape[0]))
         if gain_bound:
             self.kappa2 = cp.Parameter(nonneg=True, name='kappa2')
             G = cp.bmat([[self.kappa2 * (2 * self.X - np.eye(n)), self.R.T],
                          [self.R, np.eye(m)]])
-            cons += [self.X >> np.eye(n), 0.5 * (G + G.T) >> 0, self.t <= 1]
+            if not lean:
+                cons.append(self.X >> np.eye(n))
+            cons += [0.5 * (G + G.T) >> 0, self.t <= 1]
         else:
             self.kappa2 = None
             cons += [norm <= 1]
@@ -451,7 +456,7 @@ class _ReducedProgram(_Theorem1Program):
             blocks.append([c.T] + [diag[i] if j == i else Z((sizes[i], sizes[j]))
                                    for j in range(len(cols))])
         self._maximize_strictness(blocks, n + sum(sizes), norm, extra, n, m, gain_bound,
-                                  drop_implied=True)
+                                  lean=True)
 
     def set_data(self, problem: Problem, kappa: float | None = None) -> None:
         """Rotate ``problem`` (class docstring) and put its data into the parameters."""

@@ -57,6 +57,8 @@ def test_reduced_and_paper_forms_agree(nominal, monkeypatch):
         assert verify_certificate(p, r.K, r.P, r.Q, r.eps).ok
         assert np.linalg.norm(r.K, 2) <= 8.67 * (1 + 1e-9)
     assert abs(red.margin_achieved - paper.margin_achieved) < 1e-6
+    # the reduced program does not impose X >= I: the bound's cone gives X >= I / 2
+    assert np.linalg.eigvalsh(red.P)[-1] <= 2.0 * (1 + 1e-6)
 
 
 @pytest.mark.parametrize('ad_rank', [None, 3, 0])
