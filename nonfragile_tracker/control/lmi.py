@@ -37,6 +37,7 @@ is :func:`certify_gain`.
 """
 from __future__ import annotations
 
+import contextvars
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -496,6 +497,8 @@ class _ReducedProgram(_Theorem1Program):
 
 
 COMPACT_FROM_N = 8    # Theorem 1 uses _ReducedProgram for n >= this (smaller SDP)
+#: set while :func:`_verified` falls back to the paper's form
+_PAPER_FORM: contextvars.ContextVar[bool] = contextvars.ContextVar('paper_form', default=False)
 
 
 def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Program:
@@ -504,7 +507,7 @@ def _program_for(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1
     The paper's form (:func:`_program`) for ``n < COMPACT_FROM_N``, else the reduced one
     (same feasible set, cached per shape and ranks).
     """
-    if problem.n < COMPACT_FROM_N:
+    if problem.n < COMPACT_FROM_N or _PAPER_FORM.get():
         return _program(problem, nominal, gain_bound)
     key = (problem.n, problem.m) + _reduced_shape(problem) + (nominal, gain_bound)
     return cached_program(('theorem1-reduced',) + key, lambda: _ReducedProgram(*key))
@@ -555,7 +558,7 @@ class _MinNormProgram:
 def _min_norm_program(problem: Problem, nominal: bool) -> _MinNormProgram:
     """The stage-2 program for ``problem``'s shape (same form as :func:`_program_for`)."""
     n, m = problem.n, problem.m
-    if n < COMPACT_FROM_N:
+    if n < COMPACT_FROM_N or _PAPER_FORM.get():
         shape = (n, m, problem.E.shape[1], problem.F.shape[0], nominal)
         return cached_program(('min-norm',) + shape, lambda: _MinNormProgram(
             _Theorem1Program(*shape, False)))
@@ -619,6 +622,32 @@ def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
 
 
 def _verified(problem: Problem, **kw) -> SynthesisResult:
+    """:func:`_verified_chain`; for ``n >= COMPACT_FROM_N`` the paper's form as a last resort.
+
+    When no point of the reduced program verifies, the whole chain is run again with the
+    paper's form (:class:`_Theorem1Program`), whose verdict (a verified gain,
+    ``InfeasibleError`` at the edge of feasibility, ``CertificateError``) is the answer:
+    the reduction never makes the outcome worse than the paper's form, only faster when
+    it verifies.
+    """
+    try:
+        return _verified_chain(problem, **kw)
+    except CertificateError as exc:
+        if problem.n < COMPACT_FROM_N or _PAPER_FORM.get():
+            raise
+        reduced = str(exc)
+    token = _PAPER_FORM.set(True)
+    try:
+        res = _verified_chain(problem, **kw)
+    except CertificateError as exc:
+        raise CertificateError(f'{exc} | reduced LMI first: {reduced}') from None
+    finally:
+        _PAPER_FORM.reset(token)
+    res.extra['recovered_by'] = 'paper-form LMI (the reduced one gave no verified point)'
+    return res
+
+
+def _verified_chain(problem: Problem, **kw) -> SynthesisResult:
     """Synthesize once; if the point fails verification, retry before giving up.
 
     The retries are the balanced problem, a 100x higher margin, then the second solver.

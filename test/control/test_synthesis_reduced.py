@@ -87,3 +87,18 @@ def test_reduced_form_reports_infeasibility():
                      F=np.hstack([base.F, np.zeros((base.F.shape[0], 2))]), name='extra')
     with pytest.raises(InfeasibleError, match="infeasible for problem 'extra'"):
         synthesize(p, gain_bound=8.67)
+
+
+def test_paper_form_is_the_last_resort(monkeypatch):
+    """If no point of the reduced program verifies, the paper's form decides."""
+    p = coupled(3)
+    real = lmi._ReducedProgram.point
+
+    def broken(self, *args, **kw):
+        status, t, X, Q, R, eps, st = real(self, *args, **kw)
+        return status, t, X, Q, None if R is None else -R, eps, st
+    monkeypatch.setattr(lmi._ReducedProgram, 'point', broken)
+    res = synthesize(p, gain_bound=8.67, solver='CLARABEL')
+    assert res.extra['recovered_by'].startswith('paper-form LMI')
+    assert verify_certificate(p, res.K, res.P, res.Q, res.eps).ok
+    assert np.linalg.norm(res.K, 2) <= 8.67 * (1 + 1e-9)
