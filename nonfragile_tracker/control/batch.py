@@ -891,7 +891,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
 
 
 #: Steps per block of the metrics.
-_BLOCK = 32
+_BLOCK = 16
 
 
 class _Metrics:
