@@ -632,12 +632,19 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     # (|th| > pi) cannot be needed for (pi - m) / (wmax dt) steps
     wstep = wmax * dt * (1.0 + 1e-9)
     wrap_next = 0
-    if cmd_delayed and ideal_odom:                  # a command every step: a gather table
-        dmin, dmax = int(cmd_d.min()), int(cmd_d.max())
-        slots = (np.arange(R)[:, None] - cmd_d[None, :]) % R               # (R, N)
-        gidx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
-                + np.arange(n)[None, None, :])                            # (R, 2, N)
-        cflat = cbuf.reshape(-1)
+    queue = cmd_delayed and ideal_odom
+    if queue:
+        # a command every step: the one sent at k is put where step k + d reads it, a ring
+        # of Rq steps whose slots hold the initial command in force, (v0, 0), until then
+        # (one slot more than the longest delay: the slot read at k is not written at k + 1)
+        Rq = int(cmd_d.max()) + 2
+        cq = np.empty((Rq, 2, n))
+        cq[:, 0] = force_v
+        cq[:, 1] = force_w
+        cq_flat = cq.reshape(-1)
+        slots = (np.arange(Rq)[:, None] + cmd_d[None, :]) % Rq               # (Rq, N)
+        put_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
+                   + np.arange(n)[None, None, :])                            # (Rq, 2, N)
 
     # -- metrics (without exact: on the squared error, square roots at the end), from
     # blocks of _BLOCK steps: the error and the command of each step are written to a row
@@ -757,7 +764,9 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     cmd[...] = np.where(ok, cmd, 0.0)
                 cmd_log = cmd if due is True else np.where(due, cmd, cmd_log)
                 # ---- UnicyclePlant.command
-                if cmd_delayed:
+                if queue:
+                    np.put(cq_flat, put_idx[k % Rq], cmd)
+                elif cmd_delayed:
                     slot = k % R
                     if due is True:
                         cbuf[slot] = cmd
@@ -792,15 +801,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
             if k == steps:
                 break
             # ---- UnicyclePlant.advance
-            if cmd_delayed and ideal_odom:
-                if k >= dmin:                    # the command sent at k - d (every step)
-                    fvw = np.take(cflat, gidx[k % R])
-                    if k >= dmax:
-                        force_v, force_w = fvw[0], fvw[1]
-                    else:
-                        hit = k >= cmd_d
-                        force_v = np.where(hit, fvw[0], force_v)
-                        force_w = np.where(hit, fvw[1], force_w)
+            if queue:                            # the command sent at k - d, or (v0, 0)
+                force_v, force_w = cq[k % Rq]
             elif cmd_delayed:
                 ks = k - cmd_d
                 slot = ks % R
