@@ -5,7 +5,12 @@ with :class:`control.loop.Tracker` and :class:`control.loop.UnicyclePlant` for `
 cases in parallel, every quantity a numpy array over cases, with the operations of the
 scalar step functions in the same order (``exact=False`` allows a few cheaper forms of
 the same values: the yaw is not sent through a quaternion, the arc's sine and cosines
-come from series and angle addition).  Case ``i`` of a batch equals
+come from series and angle addition, the heading's cosine and sine are carried from step
+to step by angle addition and evaluated afresh every 16 steps, the metrics are taken on
+the squared error).  Each step is a fixed sequence of whole-array operations on
+preallocated buffers: at about 1,000 cases numpy's per-call overhead dominates, so
+throughput grows with ``N``; the loop runs in the calling process (the study splits large
+batches over processes, :func:`control.study.run_study`).  Case ``i`` of a batch equals
 :func:`control.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
 round-off (the test checks 1e-12; bit for bit with ``exact=True``, about 1e-14 without,
 away from rest).
@@ -476,10 +481,10 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         (the yaw through a quaternion with libm's ``atan2`` element by element, the arc's
         sine and cosines); a case equals :func:`control.simulate.simulate_tracking` bit
         for bit in every configuration tested.  False: cheaper forms of the same values
-        (about 3-4 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
+        (about 3 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
         for some arguments), for statistics over many cases; their
         round-off differences grow by up to ``1 / min_speed`` where the speed is near 0
-        (a robot coming to rest at a trajectory's end: about 2e-12; elsewhere 1e-14).
+        (a robot coming to rest at a trajectory's end: about 2e-12; elsewhere 1e-13).
 
     Returns
     -------
