@@ -674,10 +674,11 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     if not ideal_odom:
         measure(0)
     err = np.zeros(n)
+    ref_rows = ref.rows if ref.table is not None else None
     with np.errstate(all='ignore'):
         for k in range(steps + 1):
             j = k % _BLOCK
-            rpos, rvel, racc = ref.at(k)
+            rpos, rvel, racc = ref_rows[k] if ref_rows is not None else ref.at(k)
             # ---- odometry due at k
             if ideal_odom:
                 due = True
@@ -739,7 +740,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 np.multiply(Kc, e, out=prod_ke)
                 np.add.reduce(prod, axis=1, out=u)
                 np.abs(v, out=vabs)
-                if vabs.min() < vmin:
+                if np.minimum.reduce(vabs) < vmin:
                     vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
                 else:
                     vf = v
@@ -1009,10 +1010,14 @@ def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
 
 def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
     """``out = (c ch - s sh, s ch + c sh)`` for ``cs = (c, s)`` (angle addition)."""
-    np.multiply(cs, ch, out=out)                 # c ch, s ch
-    np.multiply(cs[::-1], sh, out=tmp)           # s sh, c sh
-    np.negative(tmp[0], out=tmp[0])
-    out += tmp
+    c, s = cs
+    t = tmp[0]
+    np.multiply(c, ch, out=out[0])
+    np.multiply(s, sh, out=t)
+    out[0] -= t
+    np.multiply(s, ch, out=out[1])
+    np.multiply(c, sh, out=t)
+    out[1] += t
 
 
 def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
