@@ -5,7 +5,12 @@ with :class:`control.loop.Tracker` and :class:`control.loop.UnicyclePlant` for `
 cases in parallel, every quantity a numpy array over cases, with the operations of the
 scalar step functions in the same order (``exact=False`` allows a few cheaper forms of
 the same values: the yaw is not sent through a quaternion, the arc's sine and cosines
-come from series and angle addition).  Case ``i`` of a batch equals
+come from series and angle addition, the heading's cosine and sine are carried from step
+to step by angle addition and evaluated afresh every 16 steps, the metrics are taken on
+the squared error).  Each step is a fixed sequence of whole-array operations on
+preallocated buffers: at about 1,000 cases numpy's per-call overhead dominates, so
+throughput grows with ``N``; the loop runs in the calling process (the study splits large
+batches over processes, :func:`control.study.run_study`).  Case ``i`` of a batch equals
 :func:`control.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
 round-off (the test checks 1e-12; bit for bit with ``exact=True``, about 1e-14 without,
 away from rest).
@@ -386,6 +391,7 @@ class _Reference:
             tab = np.array([(s.x, s.y, s.vx, s.vy, s.ax, s.ay) for s in rows], dtype=float)
             # (steps + 1, 2, 1) each: position, velocity, acceleration as column pairs
             self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
+            self.rows = list(zip(*self.table))      # (position, velocity, acceleration)
 
     def at(self, k):
         """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
@@ -394,7 +400,7 @@ class _Reference:
         """
         if self.table is not None:
             if np.ndim(k) == 0:
-                return tuple(col[k] for col in self.table)
+                return self.rows[k]
             return tuple(col[k][:, :, 0].T for col in self.table)
         t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
         r, w, cx, cy = self.r, self.w, self.cx, self.cy
@@ -475,10 +481,10 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         (the yaw through a quaternion with libm's ``atan2`` element by element, the arc's
         sine and cosines); a case equals :func:`control.simulate.simulate_tracking` bit
         for bit in every configuration tested.  False: cheaper forms of the same values
-        (about 3-4 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
+        (about 3 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
         for some arguments), for statistics over many cases; their
         round-off differences grow by up to ``1 / min_speed`` where the speed is near 0
-        (a robot coming to rest at a trajectory's end: about 2e-12; elsewhere 1e-14).
+        (a robot coming to rest at a trajectory's end: about 2e-12; elsewhere 1e-13).
 
     Returns
     -------
@@ -519,8 +525,19 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     terms = [[(j, float(At[i, j])) for j in range(4) if At[i, j] != 0.0] for i in range(4)]
     use_delay = any(terms)
     if use_delay:
-        hist = np.empty((Nd + 1, 4, n))             # xi = (x, x', y, y') by step % (Nd + 1)
-        hist[:] = np.array((pos[0], pv * np.cos(th), pos[1], pv * np.sin(th)))[None]
+        # history of the parts of xi = (x, x', y, y') that A_tau uses, by step % (Nd + 1)
+        cols = sorted({j for row in terms for j, _ in row})
+        need_vel = 1 in cols or 3 in cols
+        has_off = bool(terms[1] or terms[3])        # else the velocity offset stays 0
+        hterms = [[(cols.index(j), a) for j, a in row] for row in terms]
+        # the paper's form: d_x = a x(t - tau), d_y = b y(t - tau) (one product for both)
+        diag = (cols == [0, 2] and not has_off and [len(r) for r in terms] == [1, 0, 1, 0]
+                and terms[0][0][0] == 0 and terms[2][0][0] == 2)
+        if diag:
+            ax, ay = terms[0][0][1], terms[2][0][1]
+        xi0 = (pos[0], pv * np.cos(th), pos[1], pv * np.sin(th))
+        hist = np.empty((Nd + 1, len(cols), n))
+        hist[:] = np.array([xi0[j] for j in cols])[None]
         dbuf = np.zeros((4, n))
         dpos, dvel = dbuf[0::2], dbuf[1::2]
     # actuator
@@ -586,6 +603,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     started = np.zeros(n, dtype=bool)
     all_started = False
     tdt = s.tdt
+    if np.all(tdt == tdt[0]):
+        tdt = float(tdt[0])                         # the same value, a scalar operand
     vmax, wmax, vmin = tracker.max_linear_speed, tracker.max_angular_speed, tracker.min_speed
     comp = tracker.delay_compensation
     if comp:
@@ -596,19 +615,58 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         ccount = np.zeros(n, dtype=np.int64)
     reuse_error = ideal_odom and not comp           # tracker's position error = logged one
     cs = np.empty((2, n))                           # cos, sin of the measured heading
+    cs_rev = cs[::-1]
     mid = np.empty((2, n))
+    e = np.empty((4, n))                            # tracking error (x, x', y, y')
+    epos, evel = e[0::2], e[1::2]
+    prod = np.empty((2, 5, n))                      # u* and the four K_j e_j terms
+    prod_ud, prod_ke = prod[:, 0], prod[:, 1:]
+    u = np.empty((2, n))
+    uc = np.empty((2, n))
+    uc0, uc1 = uc[0], uc[1]
+    vabs = np.empty(n)
+    arcbuf = np.empty((4, n))
+    # |w| <= max_angular_speed for every command (clipped, held, or a mean of two through
+    # the actuator): the arc's series applies at every step when 0.5 wmax dt <= 0.01
+    small_arc = not exact and 0.5 * wmax * dt <= _SERIES_MAX
+    # the heading's cosine and sine carried from step to step by angle addition (the
+    # tracker measures the plant's own heading), evaluated afresh every _ANCHOR steps
+    recur = small_arc and ideal_odom
+    hdt = 0.5 * dt
+    # the heading moves at most wmax dt per step: after a look at max |th| = m the wrap
+    # (|th| > pi) cannot be needed for (pi - m) / (wmax dt) steps
+    wstep = wmax * dt * (1.0 + 1e-9)
+    wrap_next = 0
+    queue = cmd_delayed and ideal_odom
+    if queue:
+        # a command every step: the one sent at k is put where step k + d reads it, a ring
+        # of Rq steps whose slots hold the initial command in force, (v0, 0), until then
+        # (one slot more than the longest delay: the slot read at k is not written at k + 1)
+        Rq = int(cmd_d.max()) + 2
+        cq = np.empty((Rq, 2, n))
+        cq[:, 0] = force_v
+        cq[:, 1] = force_w
+        cq_flat = cq.reshape(-1)
+        slots = (np.arange(Rq)[:, None] + cmd_d[None, :]) % Rq               # (Rq, N)
+        put_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
+                   + np.arange(n)[None, None, :])                            # (Rq, 2, N)
 
-    # -- metrics
+    # -- metrics (without exact: on the squared error, square roots at the end), from
+    # blocks of _BLOCK steps: the error and the command of each step are written to a row
+    # of a block, whose rows are reduced at once when it is full (_flush_metrics)
+    thr = tolerance if exact else tolerance * tolerance
     last_out = np.full(n, -1, dtype=np.int64)
     first_in = np.full(n, -1, dtype=np.int64)
-    sq = np.zeros(n)
+    sqblk = np.zeros((_BLOCK + 1, n))               # row 0: the sum of squares so far
+    eblk = np.empty((_BLOCK, n)) if exact else sqblk[1:]
+    cblk = np.zeros((_BLOCK, 2, n))                 # commands sent (0: none)
     steady = np.zeros(n)
     steady_k = max(0, int(steady_from / (dt_ns * 1e-9)) - 2)   # first k with t_k >= steady_from
     while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < steady_from:
         steady_k += 1
-    peak_v = np.zeros(n)
-    peak_w = np.zeros(n)
-    cmd_v_log, cmd_w_log = force_v.copy(), force_w.copy()
+    peak = np.zeros((2, n))
+    cmd_log = np.stack((force_v, force_w))
+    metrics = _Metrics(thr, last_out, first_in, sqblk, eblk, cblk, steady, steady_k, peak)
     if record:
         names = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
         trace = {name: np.zeros((steps + 1, n)) for name in names}
@@ -616,13 +674,12 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     if not ideal_odom:
         measure(0)
     err = np.zeros(n)
-    searching = True
+    ref_rows = ref.rows if ref.table is not None else None
     with np.errstate(all='ignore'):
         for k in range(steps + 1):
-            t_k = step_time_ns(k, dt) * 1e-9
-            rpos, rvel, racc = ref.at(k)
+            j = k % _BLOCK
+            rpos, rvel, racc = ref_rows[k] if ref_rows is not None else ref.at(k)
             # ---- odometry due at k
-            epos = None
             if ideal_odom:
                 due = True
                 mpos, mth, mv = pos, th, pv
@@ -640,7 +697,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     mth, mv = obuf[slot, 2, idx], obuf[slot, 3, idx]
                     mstep = ms if not uniform_odom else int(ms[0])
             if due is not False:
-                if np.ndim(mstep) == 0 and mstep == k:
+                if ideal_odom or (np.ndim(mstep) == 0 and mstep == k):
                     qpos, qvel, qacc = rpos, rvel, racc
                 else:
                     qpos, qvel, qacc = ref.at(mstep)
@@ -662,92 +719,97 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                     qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
                     mth = _ATAN2(2.0 * (qw * qz), qw * qw - qz * qz).astype(float)
                 # (otherwise the yaw is used as measured: the same angle to round-off)
-                np.cos(mth, out=cs[0])
-                np.sin(mth, out=cs[1])
+                if not recur or k % _ANCHOR == 0:
+                    np.cos(mth, out=cs[0])
+                    np.sin(mth, out=cs[1])
                 if comp:
                     xdpos, xdvel, ud = _compensated(cbuf_ref, ccount, Lc, cterms, qpos, qvel,
                                                     qacc, due, idx, n)
                 else:
                     xdpos, xdvel, ud = qpos, qvel, qacc
-                epos = mpos - xdpos
-                evel = v * cs - xdvel
+                np.subtract(mpos, xdpos, out=epos)
+                np.multiply(cs, v, out=uc)
+                np.subtract(uc, xdvel, out=evel)
                 sg = segment_index(k, dt, s.hold_ns, S) if S > 1 else 0
                 if sg != seg:
-                    Ke = K + P[:, sg]
-                    Kc = [Ke[:, :, j].T.copy() for j in range(4)]     # (2, N) per column
+                    Kc = np.ascontiguousarray((K + P[:, sg]).transpose(1, 2, 0))   # (2, 4, N)
                     seg = sg
-                u = ud + Kc[0] * epos[0] + Kc[1] * evel[0] + Kc[2] * epos[1] + Kc[3] * evel[1]
-                floored = np.abs(v) < vmin
-                vf = np.where(floored, np.where(v >= 0, vmin, -vmin), v) if floored.any() \
-                    else v
-                uc = u * cs                               # u1 cos, u2 sin
-                a = uc[0] + uc[1]
-                us = u * cs[::-1]                         # u1 sin, u2 cos
-                w = (us[1] - us[0]) / vf
-                w = np.minimum(np.maximum(w, -wmax), wmax)      # nan stays nan
-                v_next = v + a * tdt
-                v_next = np.minimum(np.maximum(v_next, -vmax), vmax)
-                cv = 0.5 * (v + v_next)
-                cw = w
-                ok = np.isfinite(cv) & np.isfinite(w)
-                if ok.all():
+                # u = u* + K_0 e_0 + K_1 e_1 + K_2 e_2 + K_3 e_3, left to right (a reduction
+                # over a non-contiguous axis of 5 adds in order, as the tracker does)
+                prod_ud[...] = ud
+                np.multiply(Kc, e, out=prod_ke)
+                np.add.reduce(prod, axis=1, out=u)
+                np.abs(v, out=vabs)
+                if np.minimum.reduce(vabs) < vmin:
+                    vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
+                else:
+                    vf = v
+                # (v, w) sent; with a command every step, straight into the block
+                cmd = cblk[j] if ideal_odom else np.empty((2, n))
+                cv, w = cmd[0], cmd[1]
+                np.multiply(u, cs, out=uc)                # u1 cos, u2 sin
+                np.add(uc0, uc1, out=cv)                  # a
+                cv *= tdt
+                cv += v                                   # v_next = v + a dt
+                np.multiply(u, cs_rev, out=uc)            # u1 sin, u2 cos
+                np.subtract(uc1, uc0, out=w)
+                w /= vf
+                np.maximum(w, -wmax, out=w)               # nan stays nan
+                np.minimum(w, wmax, out=w)
+                np.maximum(cv, -vmax, out=cv)             # v_next clipped
+                np.minimum(cv, vmax, out=cv)
+                v_next = cv.copy()
+                cv += v
+                cv *= 0.5                                 # (v + v_next) / 2
+                # the sum is finite unless a value is nan (all are clipped)
+                if math.isfinite(np.add.reduce(cmd, axis=None)):
                     tv = v_next if due is True else np.where(due, v_next, tv)
                 else:       # non-finite: stop, keep the compensator state
                     ok = np.isfinite(w) & np.isfinite(v_next)
                     tv = np.where(ok if due is True else ok & due, v_next, tv)
-                    cv = np.where(ok, cv, 0.0)
-                    cw = np.where(ok, w, 0.0)
-                if due is True:
-                    cmd_v_log, cmd_w_log = cv, cw
-                else:
-                    cmd_v_log = np.where(due, cv, cmd_v_log)
-                    cmd_w_log = np.where(due, cw, cmd_w_log)
+                    cmd[...] = np.where(ok, cmd, 0.0)
+                cmd_log = cmd if due is True else np.where(due, cmd, cmd_log)
                 # ---- UnicyclePlant.command
-                if cmd_delayed:
+                if queue:
+                    np.put(cq_flat, put_idx[k % Rq], cmd)
+                elif cmd_delayed:
                     slot = k % R
                     if due is True:
-                        cbuf[slot, 0] = cv
-                        cbuf[slot, 1] = cw
+                        cbuf[slot] = cmd
                         cstep[slot] = k
                     else:
-                        cbuf[slot, 0] = np.where(due, cv, cbuf[slot, 0])
-                        cbuf[slot, 1] = np.where(due, cw, cbuf[slot, 1])
+                        cbuf[slot] = np.where(due, cmd, cbuf[slot])
                         cstep[slot] = np.where(due, k, cstep[slot])
                 elif due is True:
-                    force_v, force_w = cv, cw
+                    force_v, force_w = cv, w
                 else:
                     force_v = np.where(due, cv, force_v)
-                    force_w = np.where(due, cw, force_w)
-            # ---- log row k and metrics
-            if reuse_error:
-                err = np.hypot(epos[0], epos[1])
+                    force_w = np.where(due, w, force_w)
+            # ---- log row k and metrics (err: the error, or its square without exact)
+            dp = epos if reuse_error else pos - rpos
+            err = eblk[j]
+            if exact:
+                np.hypot(dp[0], dp[1], out=err)
+                np.multiply(err, err, out=sqblk[j + 1])
             else:
-                dp = pos - rpos
-                err = np.hypot(dp[0], dp[1])
-            out = err > tolerance            # nan: never back within (it stays nan)
-            np.copyto(last_out, k, where=out)
-            if searching:
-                fin = first_in < 0
-                fin &= ~out
-                np.copyto(first_in, k, where=fin)
-                if k % 64 == 0:
-                    searching = bool((first_in < 0).any())
-            sq += err * err
-            if k >= steady_k:
-                np.fmax(steady, err, out=steady)
-            if due is not False:
-                np.fmax(peak_v, np.abs(cmd_v_log), out=peak_v)
-                np.fmax(peak_w, np.abs(cmd_w_log), out=peak_w)
+                np.multiply(dp, dp, out=uc)
+                np.add(uc0, uc1, out=err)
+            if not ideal_odom:
+                cblk[j] = 0.0 if due is False else cmd_log
+            if j == _BLOCK - 1 or k == steps:
+                metrics.flush(k - j, j + 1)
             if record:
                 commanded = 0.0 if due is False else (1.0 if due is True else due)
-                row = (t_k, pos[0], pos[1], th, pv, rpos[0], rpos[1], cmd_v_log, cmd_w_log,
-                       commanded)
+                row = (step_time_ns(k, dt) * 1e-9, pos[0], pos[1], th, pv, rpos[0], rpos[1],
+                       cmd_log[0], cmd_log[1], commanded)
                 for name, val in zip(names, row):
                     trace[name][k] = val
             if k == steps:
                 break
             # ---- UnicyclePlant.advance
-            if cmd_delayed:
+            if queue:                            # the command sent at k - d, or (v0, 0)
+                force_v, force_w = cq[k % Rq]
+            elif cmd_delayed:
                 ks = k - cmd_d
                 slot = ks % R
                 hit = cstep[slot, idx] == ks
@@ -764,28 +826,54 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 csp = np.stack((np.cos(th), np.sin(th)))
             else:
                 csp = None
-            if use_delay:
-                vel = v * csp + off                  # xi_now = (x, vel_x, y, vel_y)
+            if use_delay and diag and Nd > 0:
+                old = hist[k % (Nd + 1)]                # (x, y) at step k - N
+                np.multiply(ax, old[0], out=dpos[0])
+                np.multiply(ay, old[1], out=dpos[1])
+                old[...] = pos
+            elif use_delay:
+                if need_vel:
+                    vel = v * csp
+                    if has_off:
+                        vel += off
+                    xi = (pos[0], vel[0], pos[1], vel[1])   # xi_now = (x, vel_x, y, vel_y)
+                else:
+                    xi = (pos[0], None, pos[1], None)
                 if Nd == 0:
-                    xi = (pos[0], vel[0], pos[1], vel[1])
                     for i in range(4):
                         _dot_terms(terms[i], xi, dbuf[i])
                 else:
-                    hs = k % (Nd + 1)
-                    old = hist[hs]                   # xi at step k - N
+                    old = hist[k % (Nd + 1)]            # the used parts of xi at step k - N
                     for i in range(4):
-                        _dot_terms(terms[i], old, dbuf[i])
-                    old[0::2] = pos
-                    old[1::2] = vel
-            half = 0.5 * w * dt
-            sinc = _arc_terms(th, half, csp, exact, mid)
-            arc = v * dt * sinc
+                        _dot_terms(hterms[i], old, dbuf[i])
+                    for r, j in enumerate(cols):
+                        old[r] = xi[j]
+            half = w * hdt                           # = 0.5 w dt (halving is exact)
+            if small_arc and csp is not None:
+                sinc, ch, sh = _arc_series(half, csp, mid, uc, arcbuf)
+                if recur:                            # cos, sin (th + 2 half) for the tracker
+                    _rotate(mid, ch, sh, cs, uc)
+            else:
+                sinc = _arc_terms(th, half, csp, exact, mid)
+            arc = v * dt
+            arc *= sinc
+            step = mid * arc
             if use_delay:
-                pos = pos + (arc * mid + (dpos + off) * dt + 0.5 * dvel * dt * dt)
-                off = off + dvel * dt
-            else:                                    # the delay terms are exact zeros
-                pos = pos + arc * mid
-            th = _wrap(th + w * dt)
+                if has_off:
+                    step += (dpos + off) * dt
+                    step += 0.5 * dvel * dt * dt
+                    off = off + dvel * dt
+                else:                                # the velocity terms are exact zeros
+                    step += dpos * dt
+            pos = pos + step
+            th = th + w * dt
+            if k >= wrap_next:
+                m = float(np.abs(th).max())
+                if m > _PI:
+                    th = _wrap(th)
+                    m = float(np.abs(th).max())
+                # nan (a non-finite case): look at every step
+                wrap_next = k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1
             if act_on:
                 pv, pw = v_end, w_end
             else:
@@ -794,6 +882,10 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 measure(k + 1)
         finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
 
+    sq = sqblk[0]
+    if not exact:
+        err = np.sqrt(err)
+        steady = np.sqrt(steady)
     t_of = lambda kk: (kk * dt_ns) * 1e-9   # noqa: E731
     within_end = err <= tolerance
     settle = np.where(within_end, t_of(last_out + 1), np.nan)
@@ -802,8 +894,52 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     return BatchRun(steps=steps, dt=dt, tolerance=float(tolerance), steady_from=steady_from,
                     settling_time=settle, first_within=first, final_error=err.copy(),
                     rms_error=np.sqrt(sq / (steps + 1)), steady_error=steady,
-                    peak_abs_v=peak_v, peak_abs_w=peak_w, finite=finite,
+                    peak_abs_v=peak[0].copy(), peak_abs_w=peak[1].copy(), finite=finite,
                     trace=trace if record else None)
+
+
+#: Steps per block of the metrics.
+_BLOCK = 16
+
+
+class _Metrics:
+    """Per-case metrics updated from blocks of per-step rows (see :func:`simulate_batch`)."""
+
+    def __init__(self, thr, last_out, first_in, sqblk, eblk, cblk, steady, steady_k, peak):
+        self.thr, self.last_out, self.first_in = thr, last_out, first_in
+        self.sqblk, self.eblk, self.cblk = sqblk, eblk, cblk
+        self.steady, self.steady_k, self.peak = steady, steady_k, peak
+        self.searching = True
+        self.cabs = np.empty_like(cblk)
+        self.sums = np.empty_like(steady)
+        self.out = np.empty(eblk.shape, dtype=bool)
+
+    def flush(self, k0: int, m: int) -> None:
+        """Take the first ``m`` rows, those of steps ``k0 .. k0 + m - 1``.
+
+        Every update equals the step-by-step one: the sum of squares adds the rows in
+        order after the running sum (a reduction over the first axis adds row by row), the
+        others are maxima and first/last indices.
+        """
+        rows = self.eblk[:m]
+        np.add.reduce(self.sqblk[:m + 1], axis=0, out=self.sums)
+        self.sqblk[0] = self.sums
+        out = np.greater(rows, self.thr, out=self.out[:m])   # nan: never back within
+        hit = np.logical_or.reduce(out, axis=0)
+        if hit.any():
+            last = (k0 + m - 1) - np.argmax(out[::-1], axis=0)
+            np.copyto(self.last_out, last, where=hit)
+        if self.searching:
+            inside = ~out
+            fin = (self.first_in < 0) & inside.any(axis=0)
+            if fin.any():
+                np.copyto(self.first_in, k0 + np.argmax(inside, axis=0), where=fin)
+            self.searching = bool((self.first_in < 0).any())
+        if k0 + m - 1 >= self.steady_k:
+            lo = max(0, self.steady_k - k0)
+            np.fmax(self.steady, np.fmax.reduce(rows[lo:], axis=0), out=self.steady)
+        cabs = np.abs(self.cblk[:m], out=self.cabs[:m])
+        np.fmax(self.peak, np.fmax.reduce(cabs, axis=0), out=self.peak)
 
 
 def _compensated(buf, count, L, terms, qpos, qvel, qacc, due, idx, n):
@@ -844,6 +980,46 @@ _S1, _S2, _S3 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0
 _C1, _C2, _C3 = -1.0 / 2.0, 1.0 / 24.0, -1.0 / 720.0
 
 
+#: Largest ``|half|`` (rad) for which the arc's series are used.
+_SERIES_MAX = 1e-2
+#: Steps between fresh evaluations of the heading's cosine and sine when they are carried
+#: by angle addition (each step adds about an ulp; the fresh values bound the drift).
+_ANCHOR = 16
+
+
+def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
+    """``(sin(h)/h, cos h, sin h)`` of ``h = half`` from their series.
+
+    ``mid`` receives ``cos, sin (th + half)`` from ``cs = (cos th, sin th)`` by angle
+    addition.  The operations of the non-exact branch of :func:`_arc_terms` (the same values) into
+    the rows of ``buf`` (4, N); for ``|half| <= _SERIES_MAX``.
+    """
+    h2, sinc, ch, sh = buf
+    np.multiply(half, half, out=h2)
+    for out, c3, c2, c1 in ((sinc, _S3, _S2, _S1), (ch, _C3, _C2, _C1)):
+        np.multiply(h2, c3, out=out)
+        out += c2
+        out *= h2
+        out += c1
+        out *= h2
+        out += 1.0
+    np.multiply(half, sinc, out=sh)
+    _rotate(cs, ch, sh, mid, tmp)
+    return sinc, ch, sh
+
+
+def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
+    """``out = (c ch - s sh, s ch + c sh)`` for ``cs = (c, s)`` (angle addition)."""
+    c, s = cs
+    t = tmp[0]
+    np.multiply(c, ch, out=out[0])
+    np.multiply(s, sh, out=t)
+    out[0] -= t
+    np.multiply(s, ch, out=out[1])
+    np.multiply(c, sh, out=t)
+    out[1] += t
+
+
 def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     """``sin(half) / half`` of the exact arc; ``mid`` receives ``cos, sin (th + half)``.
 
@@ -853,7 +1029,7 @@ def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     formulas: up to three transcendental calls per step fewer, the same values to
     round-off.
     """
-    if not exact and np.max(np.abs(half)) <= 1e-2:
+    if not exact and np.max(np.abs(half)) <= _SERIES_MAX:
         h2 = half * half
         sinc = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
         if cs is not None:
