@@ -58,13 +58,10 @@ def timed(fn, reps: int) -> list[float]:
     return out
 
 
-def main(argv=None) -> int:
-    """Measure every row, print the table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--quick', action='store_true', help='fewer steps, study of 2,000 cases')
-    ap.add_argument('--reps', type=int, default=3, help='repetitions per row (default 3)')
-    args = ap.parse_args(argv)
-    reps = max(1, args.reps)
+def measure(quick: bool = False, reps: int = 3) -> list[tuple]:
+    """Measure every row: ``(name, unit, values, ratios to the single run or None, target)``
+    (also the rows of ``benchmarks/run.py``'s batch section)."""
+    reps = max(1, reps)
     gains = CONFIG / 'tracker_gains.yaml'
     K = read_gain_file(gains)
     problem = load_problem(CONFIG / 'paper_problem.yaml')
@@ -75,7 +72,7 @@ def main(argv=None) -> int:
     print(f'# load average at start {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores, '
           f'{jobs} usable); shared machine: figures under load', file=sys.stderr)
 
-    single_steps = 1000 if args.quick else 3000
+    single_steps = 1000 if quick else 3000
 
     def single_rate() -> float:
         return single_steps / timed(lambda: simulate_tracking(pc, tc, circle(), single_steps),
@@ -83,7 +80,7 @@ def main(argv=None) -> int:
 
     singles: list[float] = []
     rng = np.random.default_rng(0)
-    batch_steps = 200 if args.quick else 600
+    batch_steps = 200 if quick else 600
     batch_rows = []
     for n in (1000, 10000):
         P = perturbation_schedule(problem.E, problem.F, sample_deltas(rng, n, 1, (2, 2)))
@@ -114,15 +111,24 @@ def main(argv=None) -> int:
     rows.append(('single run (simulate_tracking)', 'steps/s', singles, None, ''))
     rows.extend(batch_rows)
 
-    n_study = 2000 if args.quick else 10000
+    n_study = 2000 if quick else 10000
     spec = StudySpec(cases=n_study, duration=60.0, latency=(0.0, 0.3), pose_spread=(0.1, 0.3))
     path = PathBatch('circle', 0.5, 0.01)
     design = read_gain_design(gains)
     tstudy = timed(lambda: run_study(spec, pc, tc, path, problem.E, problem.F, design, jobs),
-                   1 if not args.quick else reps)
+                   1 if not quick else reps)
     rows.append((f'study {n_study:,} cases x 60 s, {jobs} processes', 's wall', tstudy, None,
                  '< 120 s'))
+    return rows
 
+
+def main(argv=None) -> int:
+    """Measure every row, print the table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--quick', action='store_true', help='fewer steps, study of 2,000 cases')
+    ap.add_argument('--reps', type=int, default=3, help='repetitions per row (default 3)')
+    args = ap.parse_args(argv)
+    rows = measure(args.quick, args.reps)
     head = (f'{"row":<44}{"median":>11} {"min-max":>25}  {"unit":<13}'
             f'{"x single (min-max)":>22}  target')
     print(head)
