@@ -340,8 +340,9 @@ class Config:
         self.fleet_window = 1.5 if quick else 5.0
         # issue 15: batch / study, delay analysis against tdcpy, synthesis scaling
         self.batch_reps = 1 if quick else 3
-        self.tdcpy_reps = 1 if quick else 3
-        self.scaling = ((16, 1),) if quick else ((16, 3), (32, 1))
+        self.tdcpy_reps = 1 if quick else 5
+        # (n, repetitions of the stacked problem, of the coupled one); a child per solve
+        self.scaling = ((16, 1, 1),) if quick else ((16, 3, 3), (32, 3, 1))
         self.scaling_timeout = 150.0
 
 

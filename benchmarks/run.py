@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID for all ROS measurements (default 215 + pid %% 18)')
     ap.add_argument('--budget', type=float, default=None,
-                    help='seconds the run may take (default 560, quick 100); the long tails '
+                    help='seconds the run may take (default 560, quick 120); the long tails '
                     '(n=32, fleet) are cut to fit')
     ap.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             worker_tdcpy(int(args.worker[1]))
         return 0
 
-    cfg = Config(args.quick, args.budget or (100.0 if args.quick else 560.0))
+    cfg = Config(args.quick, args.budget or (120.0 if args.quick else 560.0))
     only = [s for s in args.only.split(',') if s] or list(SECTIONS)
     bad = [s for s in only if s not in SECTIONS]
     if bad:

@@ -15,8 +15,8 @@ def bench_scaling(cfg, table: Table, raw: dict) -> None:
     import synthesis_scaling              # benchmarks/synthesis_scaling.py
     res: dict = {}
     raw['scaling'] = res
-    for n, reps in cfg.scaling:
-        for kind in ('stacked', 'coupled'):
+    for n, *kind_reps in cfg.scaling:
+        for kind, reps in zip(('stacked', 'coupled'), kind_reps):
             limit = cfg.scaling_timeout
             if n > 16:                     # the long tail: cut to the time budget
                 limit = max(30.0, min(limit, cfg.budget - elapsed() - 300))
