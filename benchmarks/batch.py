@@ -25,6 +25,7 @@ import os
 import statistics
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,6 +49,18 @@ from nonfragile_tracker.scenario import paper_plant_config  # noqa: E402
 CONFIG = ROOT / 'config'
 
 
+@dataclass
+class Row:
+    """One row: measured ``values`` (``unit``), ratios to the single run, target, verdict."""
+
+    name: str
+    unit: str
+    values: list = field(default_factory=list)
+    ratios: list | None = None
+    target: str = ''
+    met: bool | None = None
+
+
 def timed(fn, reps: int) -> list[float]:
     """Wall times (s) of ``reps`` calls of ``fn``."""
     out = []
@@ -58,9 +71,8 @@ def timed(fn, reps: int) -> list[float]:
     return out
 
 
-def measure(quick: bool = False, reps: int = 3) -> list[tuple]:
-    """Measure every row: ``(name, unit, values, ratios to the single run or None, target)``
-    (also the rows of ``benchmarks/run.py``'s batch section)."""
+def measure(quick: bool = False, reps: int = 3) -> list[Row]:
+    """Measure every row (also the rows of ``benchmarks/run.py``'s batch section)."""
     reps = max(1, reps)
     gains = CONFIG / 'tracker_gains.yaml'
     K = read_gain_file(gains)
@@ -119,7 +131,7 @@ def measure(quick: bool = False, reps: int = 3) -> list[tuple]:
                    1 if not quick else reps)
     rows.append((f'study {n_study:,} cases x 60 s, {jobs} processes', 's wall', tstudy, None,
                  '< 120 s'))
-    return rows
+    return [Row(*r) for r in rows]
 
 
 def main(argv=None) -> int:
@@ -133,7 +145,8 @@ def main(argv=None) -> int:
             f'{"x single (min-max)":>22}  target')
     print(head)
     print('-' * len(head))
-    for name, unit, vals, ratios, target in rows:
+    for name, unit, vals, ratios, target in ((r.name, r.unit, r.values, r.ratios, r.target)
+                                             for r in rows):
         med = statistics.median(vals)
         spread = f'{min(vals):.3g}-{max(vals):.3g} (n={len(vals)})'
         ratio = (f'{statistics.median(ratios):.0f} x ({min(ratios):.0f}-{max(ratios):.0f})'

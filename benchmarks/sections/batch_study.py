@@ -13,9 +13,13 @@ from harness import Table, fmt, log, run_worker, summary
 
 
 def worker_batch(quick: bool, reps: int) -> None:
-    """Child: the rows of ``benchmarks/batch.py`` as one JSON line."""
+    """Child: the rows of ``benchmarks/batch.py`` (``measure(quick, reps)`` -> ``Row``s with
+    name, unit, values, ratios, target, met) as one JSON line."""
+    import dataclasses
+
     import batch                          # benchmarks/batch.py (run.py puts benchmarks/ first)
-    print(json.dumps({'rows': batch.measure(quick, reps), 'jobs': os.cpu_count()}))
+    rows = [dataclasses.asdict(r) for r in batch.measure(quick, reps)]
+    print(json.dumps({'rows': rows, 'jobs': os.cpu_count()}))
 
 
 def bench_batch(cfg, table: Table, raw: dict) -> None:
@@ -27,18 +31,19 @@ def bench_batch(cfg, table: Table, raw: dict) -> None:
         table.note('3.2', 'batch section', 'timed out' if timed_out else 'failed (see stderr)')
         return
     rid = 2
-    for name, unit, vals, ratios, target in out['rows']:
+    for row in out['rows']:
+        name, unit, vals, ratios = row['name'], row['unit'], row['values'], row['ratios']
         s = summary(vals)
         detail = f"{fmt(s['min'])}-{fmt(s['max'])} (n={s['n']})" if s['n'] > 1 else 'n=1'
         if ratios:
             r = summary(ratios)
-            ratio = f"x{fmt(r['median'])} single run just before" + (
+            ratio = f"x{fmt(r['median'])} single run (same load)" + (
                 f" ({fmt(r['min'])}-{fmt(r['max'])})" if r['n'] > 1 else '')
             table.add(f'3.{rid}', name, s['median'], unit, detail, ratio,
                       target='batch_speedup', check=r['median'], raw={'values': vals,
                                                                        'ratios': ratios})
-        elif target.startswith('<'):
-            table.add(f'3.{rid}', name, s['median'], 's', detail, '',
+        elif row['target'].startswith('<'):
+            table.add(f'3.{rid}', f'{name}: wall time', s['median'], 's', detail, '',
                       target='study_10k' if '10,000' in name else None, raw={'values': vals})
         else:
             table.add(f'3.{rid}', name, s['median'], unit, detail,
