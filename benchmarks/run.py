@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Speed, cost and control-quality benchmarks of nonfragile_tracker (issue 7).
+"""Speed, cost and control-quality benchmarks of nonfragile_tracker (issues 7 and 15).
 
     .venv/bin/python benchmarks/run.py [--quick] [--json PATH] [--only SECTIONS]
 
@@ -56,7 +56,7 @@ def cpu_seconds() -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description='nonfragile_tracker benchmarks (issue 7)')
+    ap = argparse.ArgumentParser(description='nonfragile_tracker benchmarks (issues 7 and 15)')
     ap.add_argument('--quick', action='store_true', help='about 2 minutes: fewer repetitions, '
                     'shorter runs, no n=32, fleet up to 4')
     ap.add_argument('--json', default=str(HERE / 'results' / 'latest.json'),
