@@ -154,38 +154,51 @@ def run_tdcpy(python: str, data: dict, reps: int) -> tuple[dict | None, str]:
     return json.loads(proc.stdout.strip().splitlines()[-1]), f'tdcpy 0.0.1 via {python}'
 
 
-def main(argv: list[str] | None = None) -> int:
+def default_tdcpy_python() -> str:
+    """``$TDCPY_PYTHON`` or ``benchmarks/tdcpy-venv/bin/python``."""
+    return os.environ.get(
+        'TDCPY_PYTHON', str(Path(__file__).resolve().parent / 'tdcpy-venv' / 'bin' / 'python'))
+
+
+def measure(reps: int, tdcpy_python: str) -> tuple[list[tuple], str]:
+    """Every case: ``(name, n, tau, N, ours warm s, ours cold s, ours error, tdcpy
+    [abscissa, s] or None, reference abscissa, warm times, cold times)`` and the tdcpy note
+    (also the rows of ``benchmarks/run.py``'s tdcpy section)."""
     from nonfragile_tracker.control import delay
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--reps', type=int, default=7)
-    ap.add_argument('--tdcpy-python', default=os.environ.get(
-        'TDCPY_PYTHON', str(Path(__file__).resolve().parent / 'tdcpy-venv' / 'bin' / 'python')))
-    args = ap.parse_args(argv)
     data = cases()
-    tdc, note = run_tdcpy(args.tdcpy_python, data, args.reps)
+    tdc, note = run_tdcpy(tdcpy_python, data, reps)
     rows = []
     for name, (A0, A1, tau) in data.items():
         ref = reference_abscissa(A0, A1, tau)
         val = delay.spectral_abscissa(A0, A1, tau)            # first call (imports, caches)
         warm = []
-        for _ in range(args.reps):
+        for _ in range(reps):
             t = time.perf_counter()
             val = delay.spectral_abscissa(A0, A1, tau)
             warm.append(time.perf_counter() - t)
         cold = []
-        for _ in range(args.reps):
+        for _ in range(reps):
             delay.clear_caches()
             t = time.perf_counter()
             delay.spectral_abscissa(A0, A1, tau)
             cold.append(time.perf_counter() - t)
         N = delay.rightmost_roots(A0, A1, tau, count=2).N
         rows.append((name, A0.shape[0], tau, N, float(np.median(warm)), float(np.median(cold)),
-                     abs(val - ref), tdc.get(name) if tdc else None, ref))
+                     abs(val - ref), tdc.get(name) if tdc else None, ref, warm, cold))
+    return rows, note
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--reps', type=int, default=7)
+    ap.add_argument('--tdcpy-python', default=default_tdcpy_python())
+    args = ap.parse_args(argv)
+    rows, note = measure(args.reps, args.tdcpy_python)
     print(f'# delay analysis: time per spectral abscissa (median of {args.reps}), '
           f'OPENBLAS_NUM_THREADS={os.environ["OPENBLAS_NUM_THREADS"]}; {note}')
     print(f'{"case":22s} {"n":>3s} {"tau":>4s} {"N":>4s} {"ours ms":>8s} {"cold ms":>8s} '
           f'{"tdcpy ms":>9s} {"tdcpy/ours":>10s} {"ours err":>9s} {"tdcpy err":>9s}')
-    for name, n, tau, N, w, c, err, t, ref in rows:
+    for name, n, tau, N, w, c, err, t, ref, *_ in rows:
         if t is None:
             tt = ratio = terr = 'n/a'
         else:

@@ -31,13 +31,19 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
-# Targets of issue 7 (figure -> (operator, value, unit)).
+# Targets of issues 7 and 15 (figure -> (operator, value, unit)).
 TARGETS = {
     'lockstep_processes': ('>=', 2000.0, 'steps/s'),
     'lockstep_composed': ('>=', 10000.0, 'steps/s'),
     'latency_p99_100hz': ('<=', 1.0, 'ms'),
     'simulation': ('>=', 1000.0, 'sim s/wall s'),
     'warm_resolve': ('<=', 5.0, 'ms'),
+    # issue 15
+    'batch_speedup': ('>=', 100.0, 'x single run'),
+    'study_10k': ('<', 120.0, 's'),
+    'tdcpy_peer': ('<=', 1.0, 'x tdcpy time'),
+    'synthesis_n16': ('<=', 0.5, 's'),
+    'synthesis_n32': ('<=', 10.0, 's'),
 }
 
 
@@ -124,17 +130,22 @@ class Table:
         self.rows: list[dict] = []
 
     def add(self, rid: str, figure: str, value, unit: str = '', detail: str = '',
-            ratio: str = '', target: str | None = None, raw=None) -> dict:
+            ratio: str = '', target: str | None = None, raw=None, check=None,
+            also: bool | None = None, also_text: str = '') -> dict:
+        """One row.  ``target`` (a TARGETS key) is checked on ``check`` (default ``value``,
+        e.g. a ratio when the figure is a rate) and, when ``also`` is not None, on that
+        second condition too (``also_text`` is appended to the target cell)."""
         status = ''
         tgt = ''
         if target is not None:
             op, limit, tunit = TARGETS[target]
-            tgt = f'{op} {fmt(limit)} {tunit}'
-            if value is None or (isinstance(value, float) and math.isnan(value)):
+            tgt = f'{op} {fmt(limit)} {tunit}' + (f', {also_text}' if also_text else '')
+            x = value if check is None else check
+            if x is None or (isinstance(x, float) and math.isnan(x)):
                 status = 'n/a'
             else:
-                ok = value >= limit if op == '>=' else value <= limit
-                status = 'MET' if ok else 'MISSED'
+                ok = {'>=': x >= limit, '<=': x <= limit, '<': x < limit}[op]
+                status = 'MET' if ok and also is not False else 'MISSED'
         row = {'id': rid, 'figure': figure, 'value': value, 'unit': unit, 'detail': detail,
                'ratio': ratio, 'target': tgt, 'status': status, 'target_key': target}
         if raw is not None:
@@ -327,6 +338,12 @@ class Config:
         self.fleet_n = (1, 2, 4) if quick else (1, 2, 4, 8, 12, 16)
         self.fleet_warmup = 0.5 if quick else 2.0
         self.fleet_window = 1.5 if quick else 5.0
+        # issue 15: batch / study, delay analysis against tdcpy, synthesis scaling
+        self.batch_reps = 1 if quick else 3
+        self.tdcpy_reps = 1 if quick else 5
+        # (n, repetitions of the stacked problem, of the coupled one); a child per solve
+        self.scaling = ((16, 1, 1),) if quick else ((16, 3, 3), (32, 3, 1))
+        self.scaling_timeout = 150.0
 
 
 def proc_stat() -> list[int]:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Speed, cost and control-quality benchmarks of nonfragile_tracker (issue 7).
+"""Speed, cost and control-quality benchmarks of nonfragile_tracker (issues 7 and 15).
 
     .venv/bin/python benchmarks/run.py [--quick] [--json PATH] [--only SECTIONS]
 
@@ -17,7 +17,9 @@ import argparse
 import json
 import math
 import os
+import resource
 import shutil
+import time
 import signal
 import sys
 import tempfile
@@ -30,22 +32,32 @@ if str(HERE) not in sys.path:
 
 from harness import (TARGETS, Config, Procs, Table, cpu_usage, elapsed, fmt, log,  # noqa: E402
                      machine, proc_stat)
+from sections.batch_study import bench_batch, worker_batch  # noqa: E402
 from sections.delay import bench_delay, worker_roots  # noqa: E402
+from sections.delay_tdcpy import bench_tdcpy, worker_tdcpy  # noqa: E402
 from sections.fleet import bench_fleet  # noqa: E402
 from sections.lockstep import bench_lockstep  # noqa: E402
 from sections.quality import bench_quality  # noqa: E402
 from sections.realtime import bench_realtime  # noqa: E402
 from sections.recorder import bench_recorder  # noqa: E402
+from sections.scaling import bench_scaling  # noqa: E402
 from sections.simulation import bench_simulation  # noqa: E402
 from sections.synthesis import bench_synthesis, worker_cold, worker_growth  # noqa: E402
 
-SECTIONS = ('synthesis', 'delay', 'simulation', 'lockstep', 'realtime', 'recorder', 'quality',
-            'fleet')
+SECTIONS = ('synthesis', 'scaling', 'delay', 'tdcpy', 'simulation', 'batch', 'lockstep',
+            'realtime', 'recorder', 'quality', 'fleet')
+
+
+def cpu_seconds() -> float:
+    """CPU time (user + system) of this process and of its waited-for children."""
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description='nonfragile_tracker benchmarks (issue 7)')
-    ap.add_argument('--quick', action='store_true', help='about 1 minute: fewer repetitions, '
+    ap = argparse.ArgumentParser(description='nonfragile_tracker benchmarks (issues 7 and 15)')
+    ap.add_argument('--quick', action='store_true', help='about 2 minutes: fewer repetitions, '
                     'shorter runs, no n=32, fleet up to 4')
     ap.add_argument('--json', default=str(HERE / 'results' / 'latest.json'),
                     help='JSON output (default benchmarks/results/latest.json)')
@@ -53,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID for all ROS measurements (default 215 + pid %% 18)')
     ap.add_argument('--budget', type=float, default=None,
-                    help='seconds the run may take (default 560, quick 100); the long tails '
+                    help='seconds the run may take (default 560, quick 120); the long tails '
                     '(n=32, fleet) are cut to fit')
     ap.add_argument('--worker', nargs='+', help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -64,9 +76,13 @@ def main(argv: list[str] | None = None) -> int:
             worker_roots(int(args.worker[1]))
         elif args.worker[0] == 'growth':
             worker_growth(int(args.worker[1]), args.worker[2], int(args.worker[3]))
+        elif args.worker[0] == 'batch':
+            worker_batch(args.worker[1] == '1', int(args.worker[2]))
+        elif args.worker[0] == 'tdcpy':
+            worker_tdcpy(int(args.worker[1]))
         return 0
 
-    cfg = Config(args.quick, args.budget or (100.0 if args.quick else 560.0))
+    cfg = Config(args.quick, args.budget or (120.0 if args.quick else 560.0))
     only = [s for s in args.only.split(',') if s] or list(SECTIONS)
     bad = [s for s in only if s not in SECTIONS]
     if bad:
@@ -81,14 +97,18 @@ def main(argv: list[str] | None = None) -> int:
     stat0 = proc_stat()
     tmp = Path(tempfile.mkdtemp(prefix='nfbench_'))
     failures = {}
+    times: dict = {}
 
     def handler(signum, frame):          # noqa: ARG001
         raise KeyboardInterrupt
     signal.signal(signal.SIGTERM, handler)
     try:
         steps = [('synthesis', lambda: bench_synthesis(cfg, table, raw)),
+                 ('scaling', lambda: bench_scaling(cfg, table, raw)),
                  ('delay', lambda: bench_delay(cfg, table, raw)),
+                 ('tdcpy', lambda: bench_tdcpy(cfg, table, raw)),
                  ('simulation', lambda: bench_simulation(cfg, table, raw)),
+                 ('batch', lambda: bench_batch(cfg, table, raw)),
                  ('lockstep', lambda: bench_lockstep(cfg, table, raw, domain)),
                  ('realtime', lambda: bench_realtime(cfg, table, raw, domain, tmp)),
                  ('recorder', lambda: bench_recorder(cfg, table, raw, domain, tmp)),
@@ -97,6 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, fn in steps:
             if name not in only:
                 continue
+            w0, c0 = time.monotonic(), cpu_seconds()
             try:
                 fn()
             except KeyboardInterrupt:
@@ -106,6 +127,10 @@ def main(argv: list[str] | None = None) -> int:
                 failures[name] = traceback.format_exc()
                 log(f'section {name} FAILED: {exc!r}')
                 table.note(name, f'{name} section failed', repr(exc)[:200])
+            finally:
+                times[name] = {'wall_s': time.monotonic() - w0, 'cpu_s': cpu_seconds() - c0}
+                log(f"section {name}: {times[name]['wall_s']:.0f} s wall, "
+                    f"{times[name]['cpu_s']:.0f} s CPU")
     except KeyboardInterrupt:
         log('interrupted: stopping processes')
         return_code = 130
@@ -132,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     tg = [r for r in table.rows if r['target_key']]
     print('targets: ' + ', '.join(f"{r['id']} {r['status']}" for r in tg))
+    print('section times (wall / CPU of this process and its children, s): ' + ', '.join(
+        f"{k} {v['wall_s']:.0f} / {v['cpu_s']:.0f}" for k, v in times.items()))
     if failures:
         print(f'sections that failed: {", ".join(failures)} (tracebacks in the JSON)')
     out = Path(args.json)
@@ -148,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
             return clean(o.item())
         return o
     doc = {'date': started.isoformat(timespec='seconds'), 'quick': args.quick,
-           'wall_s': wall, 'machine': info, 'ros_domain_id': domain, 'sections': only,
+           'wall_s': wall, 'section_times': times, 'machine': info, 'ros_domain_id': domain,
+           'sections': only,
            'targets': {k: {'op': v[0], 'value': v[1], 'unit': v[2]} for k, v in TARGETS.items()},
            'table': table.rows, 'raw': raw, 'failures': failures, 'table_text': text}
     out.write_text(json.dumps(clean(doc), indent=1))

@@ -72,6 +72,29 @@ def run(n: int, kind: str, path: str, timeout: float) -> dict | None:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def measure(n: int, kind: str, reps: int, baseline: bool, timeout: float) -> dict:
+    """One problem (``kind`` 'stacked' or 'coupled', n states): ``{'today': col,
+    'previous': col}`` (``previous`` only with ``baseline``), col = medians of 'wall' and
+    'solver' (s), 'ok' (every certificate verified), 'blocks', 'walls' (each run), or the
+    first run's ``{'timeout': s}`` / ``{'error': text}`` if none finished (also the rows
+    of ``benchmarks/run.py``'s scaling section)."""
+    cols = {}
+    for path in ('today', 'previous'):
+        if path == 'previous' and not baseline:
+            continue
+        k = reps if path == 'today' or n < 32 else 1
+        runs = [run(n, kind, path, timeout) for _ in range(k)]
+        good = [r for r in runs if r and 'wall' in r]
+        if not good:
+            cols[path] = runs[0]
+            continue
+        cols[path] = {'wall': statistics.median(r['wall'] for r in good),
+                      'solver': statistics.median(r['solver'] for r in good),
+                      'ok': all(r['ok'] for r in good), 'blocks': good[0]['blocks'],
+                      'walls': [r['wall'] for r in good]}
+    return cols
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--sizes', default='8,16,32')
@@ -86,19 +109,7 @@ def main(argv: list[str] | None = None) -> int:
           f'{"previous s":>10s} {"solver s":>8s} {"ok":>3s} {"speed-up":>8s}  path today')
     for n in sizes:
         for kind in ('stacked', 'coupled'):
-            cols = {}
-            for path in ('today', 'previous'):
-                if path == 'previous' and args.no_baseline:
-                    continue
-                reps = args.reps if path == 'today' or n < 32 else 1
-                runs = [run(n, kind, path, args.timeout) for _ in range(reps)]
-                good = [r for r in runs if r and 'wall' in r]
-                if not good:
-                    cols[path] = runs[0]
-                    continue
-                cols[path] = {'wall': statistics.median(r['wall'] for r in good),
-                              'solver': statistics.median(r['solver'] for r in good),
-                              'ok': all(r['ok'] for r in good), 'blocks': good[0]['blocks']}
+            cols = measure(n, kind, args.reps, not args.no_baseline, args.timeout)
             t, b = cols.get('today', {}), cols.get('previous', {})
 
             def cell(c: dict, key: str, width: int) -> str:

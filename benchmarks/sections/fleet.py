@@ -108,6 +108,10 @@ def bench_fleet(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None:
         tail = f" (no failure up to N={last['N']}; {res['stopped']})"
     elif last:
         tail = f' (no failure up to N={last["N"]}, the limit of this run)'
+    if not res['levels']:
+        table.note('6.1', 'fleet: robot pairs at 100 Hz within deadlines',
+                   f"not measured: {res.get('stopped', '?')} (--budget S gives it more)")
+        return
     table.add('6.1', 'fleet: robot pairs at 100 Hz within deadlines', passed, 'pairs',
               detail + tail + (f"; at N={last['N']}: trackers {fmt(last['cpu_trackers'])}, "
                                f"plants {fmt(last['cpu_plants'])}, machine "
