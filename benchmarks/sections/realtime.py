@@ -1,15 +1,26 @@
 """Benchmark section, realtime latency: odom -> cmd_vel through the tracker vs an echo node.
 
 Run through ``benchmarks/run.py --only realtime``; helpers come from ``harness``.
+
+Like for like: at 100 Hz the tracker and the bare echo node are measured in
+interleaved repetitions (tracker, echo / echo, tracker / ...) with the same
+processes around them - plant, reference (unused by the echo) and probe - the
+same executor (EventsExecutor) and QoS; the ratio of their p99 latencies (median
+of the repetitions) is the issue-12 target.  The callback cost itself is timed in
+process on synthetic odometry (``ros_helpers.py callback``).
 """
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
+import json
+import subprocess
+
 from harness import (
     HELPERS,
     PY,
+    ROOT,
     Procs,
     Table,
     fmt,
@@ -64,14 +75,18 @@ def latency_stats(rec: dict, period: float) -> dict:
 
 
 def _rt_once(kind: str, rate: float, env: dict, tmp: Path, cfg, tag: str) -> dict:
-    """One real-time measurement: plant + reference + tracker (or plant + bare echo) + probe."""
+    """One real-time measurement: plant + reference + tracker (or bare echo) + probe.
+
+    The reference runs in the echo measurement too (the echo ignores it), so both see
+    the same processes and the same DDS traffic on the machine.
+    """
     pf = write_params(tmp / f'rt_{tag}.yaml', realtime_params(rate))
     with Procs() as g:
         if kind == 'tracker':
             tr = g.start(node_cmd('tracker', pf), env, tmp / f'rt_{tag}_tracker.log')
-            g.start(node_cmd('reference', pf), env, tmp / f'rt_{tag}_reference.log')
         else:
             tr = g.start([PY, str(HELPERS), 'echo'], env, tmp / f'rt_{tag}_echo.log')
+        g.start(node_cmd('reference', pf), env, tmp / f'rt_{tag}_reference.log')
         pl = g.start(node_cmd('plant', pf), env, tmp / f'rt_{tag}_plant.log')
         data = run_probe(env, tmp / f'rt_{tag}.json', pids=(tr.pid, pl.pid),
                          warmup=cfg.rt_warmup, duration=cfg.rt_window)
@@ -79,8 +94,22 @@ def _rt_once(kind: str, rate: float, env: dict, tmp: Path, cfg, tag: str) -> dic
     st.update(node_cpu=data['cpu_fraction'].get(str(tr.pid)),
               plant_cpu=data['cpu_fraction'].get(str(pl.pid)),
               probe_cpu=data['probe_cpu_fraction'], window_s=data['window_s'],
-              machine_busy_cores=data.get('machine_busy_cores'))
+              machine_busy_cores=data.get('machine_busy_cores'),
+              load1=(data.get('loadavg') or [math.nan])[0])
     return st
+
+
+def _callback_cost(env: dict, tmp: Path) -> dict | None:
+    """In-process callback times of the tracker and the echo (``ros_helpers.py callback``)."""
+    pf = write_params(tmp / 'rt_callback.yaml', realtime_params(100))
+    try:
+        out = subprocess.run([PY, str(HELPERS), 'callback', '--params', str(pf)], env=env,
+                             capture_output=True, text=True, timeout=120, check=True,
+                             stdin=subprocess.DEVNULL, cwd=str(ROOT)).stdout
+        return json.loads(out.strip().splitlines()[-1])
+    except (subprocess.SubprocessError, ValueError, IndexError) as exc:
+        log(f'  callback timing failed: {exc}')
+        return None
 
 
 def bench_realtime(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None:
@@ -89,7 +118,9 @@ def bench_realtime(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None
         'the DDS source (write) and received timestamps of every message; each cmd_vel is '
         'paired with the last odom written before it; latency = cmd_vel write time - odom '
         'write time (plant -> tracker hop + tracker callback up to its publish); deadlines '
-        'from the odom header stamps (plant timer), late = interval > 1.5 period'),
+        'from the odom header stamps (plant timer), late = interval > 1.5 period; at 100 Hz '
+        'tracker and bare echo node alternate (ABBA order) with the same processes around '
+        'them (plant, reference, probe); ratio = median tracker p99 / median echo p99'),
         'runs': {}}
     raw['realtime'] = res
     env = ros_env(domain)
@@ -97,12 +128,12 @@ def bench_realtime(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None
     for rate in cfg.rt_rates:
         reps = cfg.rt_reps if rate == 100 else 1
         for i in range(reps):
-            schedule.append(('tracker', rate, i))
-            if rate == 100:
-                schedule.append(('echo', rate, i))       # interleaved: same conditions
+            pair = [('tracker', rate, i), ('echo', rate, i)] if rate == 100 else \
+                [('tracker', rate, i)]
+            schedule.extend(pair if i % 2 == 0 else pair[::-1])   # interleaved, ABBA
     for kind, rate, i in schedule:
         log(f'real time {rate} Hz, {kind} rep {i}: plant + '
-            f"{'reference + tracker' if kind == 'tracker' else 'bare echo node'} + probe "
+            f"reference + {'tracker' if kind == 'tracker' else 'bare echo node'} + probe "
             f'({cfg.rt_window} s window)')
         st = _rt_once(kind, rate, env, tmp, cfg, f'{kind}_{rate}_{i}')
         res['runs'].setdefault(f'{kind}_{rate}', []).append(st)
@@ -144,3 +175,33 @@ def bench_realtime(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None
                   f"p50 {fmt(echo['lat_p50_ms']['median'])}, max "
                   f"{fmt(echo['lat_max_ms']['max'])}; echo CPU "
                   f"{fmt(100 * echo['node_cpu']['median'])}%")
+        _ratio_row(table, res)
+    cost = _callback_cost(env, tmp)
+    res['callback_us'] = cost
+    if cost:
+        tr, ec = cost['tracker'], cost['echo']
+        table.add('4.7', 'tracker odom callback, in process (synthetic odom)', tr['p50_us'], 'us',
+                  f"p99 {fmt(tr['p99_us'])}; {tr['n']} calls; bare echo callback p50 "
+                  f"{fmt(ec['p50_us'])}, p99 {fmt(ec['p99_us'])}",
+                  f"x{fmt(tr['p50_us'] / ec['p50_us'])} echo callback")
+
+
+def _ratio_row(table: Table, res: dict) -> None:
+    """Issue 12: tracker p99 / bare echo p99 at 100 Hz, both measured in this run."""
+    tr, ec = res['runs'].get('tracker_100', []), res['runs'].get('echo_100', [])
+
+    def med(runs: list, field: str) -> float:
+        return summary([r.get(field, math.nan) for r in runs])['median']
+    ratio = med(tr, 'lat_p99_ms') / med(ec, 'lat_p99_ms')
+    per_rep = [a.get('lat_p99_ms', math.nan) / b.get('lat_p99_ms', math.nan)
+               for a, b in zip(tr, ec)]
+    p50 = med(tr, 'lat_p50_ms') / med(ec, 'lat_p50_ms')
+    loads = [r.get('load1', math.nan) for r in tr + ec]
+    res['ratio_p99_100'] = {'ratio': ratio, 'per_rep': per_rep, 'ratio_p50': p50,
+                            'load1': loads}
+    table.add('4.6', 'tracker / bare echo latency p99, 100 Hz, same run', ratio, 'x echo',
+              f"median {fmt(med(tr, 'lat_p99_ms'))} / {fmt(med(ec, 'lat_p99_ms'))} ms "
+              f"(n={len(tr)}/{len(ec)}, interleaved); per rep "
+              f"{', '.join(fmt(r) for r in per_rep)}; p50 ratio {fmt(p50)}; load1 "
+              f"{fmt(min(loads))}-{fmt(max(loads))}",
+              target='latency_p99_ratio_100hz')
