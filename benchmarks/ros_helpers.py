@@ -13,7 +13,7 @@ Nothing here is part of the package; each subcommand is one short-lived process:
   matched; prints the achieved rate as JSON.
 * ``echo``     - the bare baseline of the tracker's latency: subscribes ``odom``
   and publishes a ``cmd_vel`` Twist from each, on the EventsExecutor (as the nodes,
-  ``nodes.common.make_executor``) with the nodes' QoS.
+  ``nodes.common.make_executor``) with the nodes' QoS; ``--ns`` puts it in a namespace.
 * ``callback`` - in process, no other node: times the tracker's odometry callback
   (real-time parameters from ``--params``; a fresh reference sample before each
   odometry, as at equal rates) and the echo's, on the same synthetic messages, by
@@ -85,11 +85,12 @@ def cmd_probe(args) -> int:
             seen.add(key)
         return cb
 
-    def cmd_cb(rec):
+    def cmd_cb(rec, key):
         def cb(raw, info):
             if state['recording']:
                 rec['src'].append(info['source_timestamp'])
                 rec['rcv'].append(info['received_timestamp'])
+            seen.add(key)
         return cb
 
     for ns in namespaces:
@@ -100,7 +101,8 @@ def cmd_probe(args) -> int:
         node.create_subscription(Odometry, prefix + topics.ODOM, odom_cb(odom, ns or '/'), qos,
                                  raw=True)
         if not args.no_cmd:
-            node.create_subscription(Twist, prefix + topics.CMD_VEL, cmd_cb(cmd), qos, raw=True)
+            node.create_subscription(Twist, prefix + topics.CMD_VEL,
+                                     cmd_cb(cmd, 'cmd:' + (ns or '/')), qos, raw=True)
     if args.executor == 'events':
         from rclpy.experimental import EventsExecutor
         ex = EventsExecutor()
@@ -108,8 +110,10 @@ def cmd_probe(args) -> int:
         ex = rclpy.executors.SingleThreadedExecutor()
     ex.add_node(node)
     t_start = time.monotonic()
-    # wait for odom from every namespace (or give up), then the warm-up, then the window
-    while len(seen) < len(data) and time.monotonic() - t_start < args.wait:
+    # wait for odom (and cmd_vel: the node under test is up) from every namespace (or give
+    # up), then the warm-up, then the window
+    expected = len(data) * (1 if args.no_cmd else 2)
+    while len(seen) < expected and time.monotonic() - t_start < args.wait:
         ex.spin_once(timeout_sec=0.05)
     first = time.monotonic()
     while time.monotonic() - first < args.warmup:
@@ -131,7 +135,7 @@ def cmd_probe(args) -> int:
     machine_busy = (busy1[0] - busy0[0]) / total * (os.cpu_count() or 1) if total else None
     cpu = {str(p): (None if ticks0[p] is None or ticks1[p] is None
                     else (ticks1[p] - ticks0[p]) / hz / window) for p in pids}
-    out = {'window_s': window, 'waited_s': first - t_start, 'saw_odom': sorted(seen),
+    out = {'window_s': window, 'waited_s': first - t_start, 'saw': sorted(seen),
            'cpu_fraction': cpu, 'probe_cpu_fraction': (self1 - self0) / hz / window,
            'machine_busy_cores': machine_busy, 'loadavg': os.getloadavg(),
            'data': data}
@@ -188,13 +192,13 @@ def cmd_publish(args) -> int:
     return 0
 
 
-def _echo_node(rclpy):
+def _echo_node(rclpy, namespace: str = ''):
     """The bare echo: odom in (deserialized), one preallocated Twist out, nothing else."""
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
-    node = rclpy.create_node('bench_echo')
+    node = rclpy.create_node('bench_echo', namespace=namespace)
     pub = node.create_publisher(Twist, topics.CMD_VEL, qos)
     out = Twist()
 
@@ -211,7 +215,7 @@ def cmd_echo(args) -> int:
     import rclpy
     from nonfragile_tracker.nodes.common import make_executor
     rclpy.init()
-    node = _echo_node(rclpy)
+    node = _echo_node(rclpy, args.ns)
     ex = make_executor()
     ex.add_node(node)
     try:
@@ -342,6 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     q.add_argument('--wait', type=float, default=20.0)
     q.set_defaults(func=cmd_publish)
     e = sub.add_parser('echo')
+    e.add_argument('--ns', default='', help="node namespace ('' = root)")
     e.set_defaults(func=cmd_echo)
     b = sub.add_parser('callback')
     b.add_argument('--params', required=True, help='parameter file (realtime tracker)')
