@@ -36,6 +36,7 @@ TARGETS = {
     'lockstep_processes': ('>=', 2000.0, 'steps/s'),
     'lockstep_composed': ('>=', 10000.0, 'steps/s'),
     'latency_p99_100hz': ('<=', 1.0, 'ms'),
+    'latency_p99_ratio_100hz': ('<=', 1.2, 'x echo'),   # issue 12: same run, median of 3
     'simulation': ('>=', 1000.0, 'sim s/wall s'),
     'warm_resolve': ('<=', 5.0, 'ms'),
     # issue 15

@@ -12,7 +12,12 @@ Nothing here is part of the package; each subcommand is one short-lived process:
   fixed rate (for the recorder's sustained-rate test), after the subscriber is
   matched; prints the achieved rate as JSON.
 * ``echo``     - the bare baseline of the tracker's latency: subscribes ``odom``
-  and publishes a ``cmd_vel`` Twist from each, on the EventsExecutor.
+  and publishes a ``cmd_vel`` Twist from each, on the EventsExecutor (as the nodes,
+  ``nodes.common.make_executor``) with the nodes' QoS; ``--ns`` puts it in a namespace.
+* ``callback`` - in process, no other node: times the tracker's odometry callback
+  (real-time parameters from ``--params``; a fresh reference sample before each
+  odometry, as at equal rates) and the echo's, on the same synthetic messages, by
+  calling the subscriptions' callbacks as the executor does; prints JSON (us).
 * ``composed`` - runs ``runner.run_composed`` (lockstep, three nodes in this
   process, no recording) for a duration; prints its wall time as JSON.  The
   orchestrator also parses the plant's log lines (stderr) for the in-run rate.
@@ -26,6 +31,10 @@ import struct
 import sys
 import time
 from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:          # this checkout's package, not an installed one
+    sys.path.insert(0, str(ROOT))
 
 
 def _cpu_ticks(pid: int) -> int | None:
@@ -76,11 +85,12 @@ def cmd_probe(args) -> int:
             seen.add(key)
         return cb
 
-    def cmd_cb(rec):
+    def cmd_cb(rec, key):
         def cb(raw, info):
             if state['recording']:
                 rec['src'].append(info['source_timestamp'])
                 rec['rcv'].append(info['received_timestamp'])
+            seen.add(key)
         return cb
 
     for ns in namespaces:
@@ -91,7 +101,8 @@ def cmd_probe(args) -> int:
         node.create_subscription(Odometry, prefix + topics.ODOM, odom_cb(odom, ns or '/'), qos,
                                  raw=True)
         if not args.no_cmd:
-            node.create_subscription(Twist, prefix + topics.CMD_VEL, cmd_cb(cmd), qos, raw=True)
+            node.create_subscription(Twist, prefix + topics.CMD_VEL,
+                                     cmd_cb(cmd, 'cmd:' + (ns or '/')), qos, raw=True)
     if args.executor == 'events':
         from rclpy.experimental import EventsExecutor
         ex = EventsExecutor()
@@ -99,8 +110,10 @@ def cmd_probe(args) -> int:
         ex = rclpy.executors.SingleThreadedExecutor()
     ex.add_node(node)
     t_start = time.monotonic()
-    # wait for odom from every namespace (or give up), then the warm-up, then the window
-    while len(seen) < len(data) and time.monotonic() - t_start < args.wait:
+    # wait for odom (and cmd_vel: the node under test is up) from every namespace (or give
+    # up), then the warm-up, then the window
+    expected = len(data) * (1 if args.no_cmd else 2)
+    while len(seen) < expected and time.monotonic() - t_start < args.wait:
         ex.spin_once(timeout_sec=0.05)
     first = time.monotonic()
     while time.monotonic() - first < args.warmup:
@@ -122,7 +135,7 @@ def cmd_probe(args) -> int:
     machine_busy = (busy1[0] - busy0[0]) / total * (os.cpu_count() or 1) if total else None
     cpu = {str(p): (None if ticks0[p] is None or ticks1[p] is None
                     else (ticks1[p] - ticks0[p]) / hz / window) for p in pids}
-    out = {'window_s': window, 'waited_s': first - t_start, 'saw_odom': sorted(seen),
+    out = {'window_s': window, 'waited_s': first - t_start, 'saw': sorted(seen),
            'cpu_fraction': cpu, 'probe_cpu_fraction': (self1 - self0) / hz / window,
            'machine_busy_cores': machine_busy, 'loadavg': os.getloadavg(),
            'data': data}
@@ -179,16 +192,13 @@ def cmd_publish(args) -> int:
     return 0
 
 
-def cmd_echo(args) -> int:
-    """Bare baseline of the tracker: odom in (deserialized), a Twist out, nothing else."""
-    import rclpy
+def _echo_node(rclpy, namespace: str = ''):
+    """The bare echo: odom in (deserialized), one preallocated Twist out, nothing else."""
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
-    from rclpy.experimental import EventsExecutor
     from nonfragile_tracker import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
-    rclpy.init()
-    node = rclpy.create_node('bench_echo')
+    node = rclpy.create_node('bench_echo', namespace=namespace)
     pub = node.create_publisher(Twist, topics.CMD_VEL, qos)
     out = Twist()
 
@@ -197,7 +207,16 @@ def cmd_echo(args) -> int:
         pub.publish(out)
 
     node.create_subscription(Odometry, topics.ODOM, cb, qos)
-    ex = EventsExecutor()
+    return node
+
+
+def cmd_echo(args) -> int:
+    """Bare baseline of the tracker: odom in (deserialized), a Twist out, nothing else."""
+    import rclpy
+    from nonfragile_tracker.nodes.common import make_executor
+    rclpy.init()
+    node = _echo_node(rclpy, args.ns)
+    ex = make_executor()
     ex.add_node(node)
     try:
         while rclpy.ok():
@@ -207,6 +226,91 @@ def cmd_echo(args) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    return 0
+
+
+def _subscription(node, topic: str):
+    name = node.resolve_topic_name(topic)
+    return next(s for s in node.subscriptions if s.topic_name == name)
+
+
+def cmd_callback(args) -> int:
+    """Per-call time of the tracker's and the echo's odometry callbacks (in process)."""
+    import math as m
+    import rclpy
+    from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+    from nav_msgs.msg import Odometry
+    from nonfragile_tracker import topics
+    from nonfragile_tracker.msgconv import fill_pose, ns_to_stamp
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+    rclpy.init(args=['--ros-args', '--params-file', args.params])
+    tracker = TrackerNode()
+    echo = _echo_node(rclpy)
+    n, period, r, w = args.calls, 10_000_000, 0.5, 0.02    # paper circle: 0.5 m, 0.02 rad/s
+    steps = []
+    for i in range(n + args.warmup):
+        t = 1.0 + i * period * 1e-9
+        ph = w * t
+        stamp = 1_000_000_000 + i * period
+        msgs = [Odometry(), PoseStamped(), TwistStamped(), AccelStamped()]
+        for msg in msgs:
+            msg.header.frame_id = topics.ODOM_FRAME
+            ns_to_stamp(stamp, msg.header.stamp)
+        odom, pose, twist, accel = msgs
+        odom.child_frame_id = topics.BASE_FRAME
+        fill_pose(odom.pose.pose, r * m.cos(ph) + 1e-3, r * m.sin(ph), ph + m.pi / 2)
+        odom.twist.twist.linear.x = r * w
+        fill_pose(pose.pose, r * m.cos(ph), r * m.sin(ph), ph + m.pi / 2)
+        twist.twist.linear.x, twist.twist.linear.y = -r * w * m.sin(ph), r * w * m.cos(ph)
+        accel.accel.linear.x = -r * w * w * m.cos(ph)
+        accel.accel.linear.y = -r * w * w * m.sin(ph)
+        steps.append(msgs)
+    subs = [_subscription(tracker, t).callback for t in
+            (topics.ODOM, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)]
+    echo_cb = _subscription(echo, topics.ODOM).callback
+    clock = time.perf_counter_ns
+    sent = [0]
+
+    class Stamped:
+        """cmd_vel publisher of the tracker, noting when its publish returned."""
+
+        def __init__(self, pub):
+            self.pub = pub
+
+        def publish(self, msg):
+            self.pub.publish(msg)
+            sent[0] = clock()
+
+        def __getattr__(self, name):
+            return getattr(self.pub, name)
+
+    tracker.pub_cmd = Stamped(tracker.pub_cmd)
+    times: dict[str, list[int]] = {'tracker': [], 'tracker_to_publish': [], 'echo': []}
+    for i, (odom, pose, twist, accel) in enumerate(steps):
+        subs[1](pose)
+        subs[2](twist)
+        subs[3](accel)
+        t0 = clock()
+        subs[0](odom)
+        t1 = clock()
+        echo_cb(odom)
+        t2 = clock()
+        if i >= args.warmup:
+            times['tracker'].append(t1 - t0)
+            times['tracker_to_publish'].append(sent[0] - t0)
+            times['echo'].append(t2 - t1)
+    out = {}
+    for key, ts in times.items():
+        ts.sort()
+        out[key] = {'n': len(ts), 'p50_us': ts[len(ts) // 2] * 1e-3,
+                    'p99_us': ts[int(0.99 * (len(ts) - 1))] * 1e-3,
+                    'min_us': ts[0] * 1e-3}
+    out['tracker_commands'] = tracker.commands
+    out['loadavg'] = os.getloadavg()
+    print(json.dumps(out))
+    tracker.destroy_node()
+    echo.destroy_node()
+    rclpy.try_shutdown()
     return 0
 
 
@@ -242,7 +346,13 @@ def main(argv: list[str] | None = None) -> int:
     q.add_argument('--wait', type=float, default=20.0)
     q.set_defaults(func=cmd_publish)
     e = sub.add_parser('echo')
+    e.add_argument('--ns', default='', help="node namespace ('' = root)")
     e.set_defaults(func=cmd_echo)
+    b = sub.add_parser('callback')
+    b.add_argument('--params', required=True, help='parameter file (realtime tracker)')
+    b.add_argument('--calls', type=int, default=5000)
+    b.add_argument('--warmup', type=int, default=500)
+    b.set_defaults(func=cmd_callback)
     c = sub.add_parser('composed')
     c.add_argument('--duration', type=float, required=True)
     c.add_argument('--scenario', required=True)

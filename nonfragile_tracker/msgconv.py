@@ -38,15 +38,21 @@ def fill_pose(pose, x: float, y: float, th: float) -> None:
 
 
 def pose_from_odom(pose) -> tuple[float, float, float] | str:
-    """Planar pose from a geometry_msgs/Pose, or a reason string if it is unusable."""
+    """Planar pose from a geometry_msgs/Pose, or a reason string if it is unusable.
+
+    On the tracker's real-time path: each field is read once (message fields are
+    properties) and checked without building temporaries.
+    """
     p, q = pose.position, pose.orientation
-    vals = (p.x, p.y, q.x, q.y, q.z, q.w)
-    if not all(math.isfinite(v) for v in vals):
-        return f'non-finite pose {vals}'
-    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    px, py, qx, qy, qz, qw = p.x, p.y, q.x, q.y, q.z, q.w
+    isfinite = math.isfinite
+    if not (isfinite(px) and isfinite(py) and isfinite(qx) and isfinite(qy)
+            and isfinite(qz) and isfinite(qw)):
+        return f'non-finite pose {(px, py, qx, qy, qz, qw)}'
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
     if abs(norm - 1.0) > 1e-3:
         return f'quaternion norm {norm:.6g} is not 1'
-    return (p.x, p.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+    return (px, py, quaternion_to_yaw(qx, qy, qz, qw))
 
 
 def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
@@ -64,10 +70,11 @@ def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample |
     if isinstance(pose, str):
         return f'reference/pose: {pose}'
     tw, ac = twist_msg.twist.linear, accel_msg.accel.linear
-    vals = (tw.x, tw.y, ac.x, ac.y)
-    if not all(math.isfinite(v) for v in vals):
-        return f'reference twist/accel not finite: {vals}'
-    return RefSample(t, pose[0], pose[1], tw.x, tw.y, ac.x, ac.y, pose[2])
+    vx, vy, ax, ay = tw.x, tw.y, ac.x, ac.y
+    isfinite = math.isfinite
+    if not (isfinite(vx) and isfinite(vy) and isfinite(ax) and isfinite(ay)):
+        return f'reference twist/accel not finite: {(vx, vy, ax, ay)}'
+    return RefSample(t, pose[0], pose[1], vx, vy, ax, ay, pose[2])
 
 
 #: Tracker parameters of the latency predictor (all 0: no prediction, today's law).

@@ -6,6 +6,7 @@ flow) and the Jazzy shutdown pattern.  No control math lives here.
 """
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -29,7 +30,8 @@ from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
            'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
-           'make_executor', 'run', 'StartupError', 'AdapterNode', 'overrides', 'check_mode']
+           'make_executor', 'freeze_startup_objects', 'run', 'StartupError', 'AdapterNode',
+           'overrides', 'check_mode']
 
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
@@ -105,6 +107,19 @@ def make_executor(context=None):
         return rclpy.executors.SingleThreadedExecutor(context=context)
     from rclpy.experimental import EventsExecutor
     return EventsExecutor(context=context)
+
+
+def freeze_startup_objects() -> None:
+    """Take the objects made at start-up out of Python's cyclic garbage collector.
+
+    Modules, messages, the node and its parameters (some 40,000 objects) would otherwise be
+    walked by every full collection - about 13 ms here, and a collection of the middle
+    generation soon after start-up about 1 ms - stalls that land on a real-time callback.
+    Collected once now, then frozen (``gc.freeze``); objects made later are collected as
+    usual.
+    """
+    gc.collect()
+    gc.freeze()
 
 
 def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
@@ -284,6 +299,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             raise
         executor = make_executor()
         executor.add_node(node)
+        freeze_startup_objects()
         node.get_logger().info('started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
         spin_until(executor, lambda: node.finished)
         if node.finished and context.ok():

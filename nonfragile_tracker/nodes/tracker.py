@@ -305,20 +305,30 @@ class TrackerNode(AdapterNode):
             self._odom_interval_sum += gap
             if gap > 1.5 * self.tracker.config.dt:
                 self.deadline_misses += 1
-        self._last_odom_rx = self.get_clock().now().nanoseconds
         self._odom = msg
         self.last_odom_stamp = s
+        self._try_compute()                # cmd_vel first: the clock read is bookkeeping
+        self._odom_received()
+
+    def _odom_received(self) -> None:
+        """Receipt time of the odometry just handled (diagnostics' odom age, the watchdog).
+
+        Read after the command is published, once (in real time the node clock is the
+        wall clock the watchdog compares with), so it costs nothing on the odom -> cmd_vel
+        path; callbacks run one at a time, so the watchdog never sees it half done.
+        """
+        now = self.get_clock().now().nanoseconds
+        self._last_odom_rx = now
         if self.mode == 'realtime':
-            self._last_odom_wall = self.get_clock().now().nanoseconds
-        self._try_compute()
+            self._last_odom_wall = now
 
     def _on_ref(self, i: int, msg) -> None:
         if msg.header.frame_id != self.frame:
             return self._reject(f'reference in frame {msg.header.frame_id!r}')
         self._ref[i] = msg
-        self._last_ref_rx = self.get_clock().now().nanoseconds
+        self._last_ref_rx = now = self.get_clock().now().nanoseconds
         if self.mode == 'realtime':
-            self._last_ref_wall = self.get_clock().now().nanoseconds
+            self._last_ref_wall = now       # one clock read: it delays an odom arriving now
         elif self.follower is None and not self.wait_for_trajectory:
             s = stamp_ns(msg.header.stamp)
             if s < self.last_stamp:
@@ -347,7 +357,8 @@ class TrackerNode(AdapterNode):
         if self.wait_for_trajectory:
             return
         odom = self._odom
-        if odom is None or any(r is None for r in self._ref):
+        r_pose, r_twist, r_accel = self._ref
+        if odom is None or r_pose is None or r_twist is None or r_accel is None:
             return
         if self.mode == 'realtime' and self._stopped:
             return                         # the watchdog publishes the stop
