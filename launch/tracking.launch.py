@@ -10,8 +10,9 @@ namespace, gains, scenario, trajectory (waypoint file; "" = the scenario's path)
 enable_stamped_cmd_vel (true|false), rviz (true|false).  Standard launch/launch_ros API
 (Jazzy).  In lockstep the plant publishes the global /clock: one lockstep system per
 ROS domain (namespaces separate real-time systems).  The launch ends by itself when the
-run is complete: when the plant exits (its ``duration``), or with ``record:=true`` when
-the recorder has closed the bag; Ctrl-C ends it earlier.
+run is complete: when the plant exits (its ``duration``; a real-time recorder then
+closes its bag on the shutdown's SIGINT), or in lockstep with ``record:=true`` when the
+recorder has drained and closed the bag; Ctrl-C ends it earlier.
 """
 import os
 
@@ -39,6 +40,8 @@ def generate_launch_description():
     # with a recorder every lockstep publisher waits for it too (runner.lockstep_handshake)
     subscribers = ParameterValue(PythonExpression(["2 if '", record, "' == 'true' else 0"]),
                                  value_type=int)
+    lockstep_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
+                                           "' == 'lockstep'"])
     has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
@@ -94,11 +97,13 @@ def generate_launch_description():
                  condition=IfCondition(LaunchConfiguration('rviz')),
                  arguments=['-d', os.path.join(share, 'rviz', 'tracking.rviz')]),
             # the run is complete: end the launch (the reference and tracker would idle on)
+            # (a lockstep recorder drains and closes the bag itself after run_done: wait for
+            # it; in real time the shutdown's SIGINT closes the bag)
             RegisterEventHandler(OnProcessExit(target_action=plant, on_exit=[EmitEvent(
                 event=Shutdown(reason='the plant has completed its run'))]),
-                condition=UnlessCondition(record)),
+                condition=UnlessCondition(lockstep_recording)),
             RegisterEventHandler(OnProcessExit(target_action=recorder, on_exit=[EmitEvent(
                 event=Shutdown(reason='the recorder has closed the bag'))]),
-                condition=IfCondition(record)),
+                condition=IfCondition(lockstep_recording)),
         ]),
     ])

@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from .. import topics
 from ..errors import InputError
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
-from .entry import catch_stop_signals, stop_requested
+from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
@@ -268,6 +268,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
     """
     catch_stop_signals()
     if stop_requested():
+        ignore_stop_signals()
         return 0                                    # a signal while importing
     try:
         rclpy.init(args=args)
@@ -302,6 +303,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         if context.ok():
             raise                                   # a real error, not the shutdown
     finally:
+        ignore_stop_signals()                       # ending: a repeated signal changes nothing
         if node is not None:
             node.destroy_node()                     # close() first: the recorder's bag
         try:

@@ -39,6 +39,19 @@ def catch_stop_signals() -> None:
         signal.signal(sig, _note)
 
 
+def ignore_stop_signals() -> None:
+    """The process is ending: ignore further SIGINT/SIGTERM (main thread only).
+
+    ``ros2 launch`` forwards a second SIGINT right after the terminal's.  Python resets
+    a signal with a Python handler to its default action while the interpreter
+    finalizes, so a repeated signal during the last clean-up (DDS teardown) would kill
+    the process (exit -2) instead of letting it end with 0.  A hang still ends by
+    launch's SIGKILL escalation.
+    """
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def stop_requested() -> bool:
     """Whether SIGINT or SIGTERM arrived since :func:`catch_stop_signals`."""
     return bool(_received)
@@ -52,8 +65,11 @@ def main(name: str, args: list[str] | None = None) -> int:
         return 2
     module = importlib.import_module(f'nonfragile_tracker.nodes.{name}')
     if stop_requested():
+        ignore_stop_signals()
         return 0
-    return int(module.main(args) or 0)
+    code = int(module.main(args) or 0)
+    ignore_stop_signals()
+    return code
 
 
 def reference() -> int:
