@@ -9,14 +9,19 @@ Arguments: mode (lockstep|realtime), record (true|false) and bag (directory to c
 namespace, gains, scenario, trajectory (waypoint file; "" = the scenario's path),
 enable_stamped_cmd_vel (true|false), rviz (true|false).  Standard launch/launch_ros API
 (Jazzy).  In lockstep the plant publishes the global /clock: one lockstep system per
-ROS domain (namespaces separate real-time systems).
+ROS domain (namespaces separate real-time systems).  The launch ends by itself when the
+run is complete: when the plant exits (its ``duration``; a real-time recorder then
+closes its bag on the shutdown's SIGINT), or in lockstep with ``record:=true`` when the
+recorder has drained and closed the bag; Ctrl-C ends it earlier.
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, GroupAction
-from launch.conditions import IfCondition
+from launch.actions import DeclareLaunchArgument, EmitEvent, GroupAction, RegisterEventHandler
+from launch.conditions import IfCondition, UnlessCondition
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
 from launch_ros.parameter_descriptions import ParameterValue
@@ -35,9 +40,24 @@ def generate_launch_description():
     # with a recorder every lockstep publisher waits for it too (runner.lockstep_handshake)
     subscribers = ParameterValue(PythonExpression(["2 if '", record, "' == 'true' else 0"]),
                                  value_type=int)
+    lockstep_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
+                                           "' == 'lockstep'"])
     has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
+    plant = Node(package='nonfragile_tracker', executable='plant', name='plant',
+                 parameters=[scenario, common, cmd, {
+                     'lockstep_subscribers': ParameterValue(PythonExpression(
+                         ["2 if '", record, "' == 'true' else 1"]), value_type=int),
+                     'lockstep_recorder': ParameterValue(record, value_type=bool)}],
+                 output='screen')
+    recorder = Node(package='nonfragile_tracker', executable='recorder', name='recorder',
+                    condition=IfCondition(record),
+                    parameters=[cmd, {'output': ParameterValue(LaunchConfiguration('bag'),
+                                                               value_type=str),
+                                      'use_sim_time': ParameterValue(lockstep, value_type=bool),
+                                      'lockstep_gate': ParameterValue(lockstep, value_type=bool)}],
+                    output='screen')
     return LaunchDescription([
         DeclareLaunchArgument('mode', default_value='lockstep', choices=['lockstep', 'realtime'],
                               description='lockstep (deterministic, sim time) or realtime'),
@@ -71,21 +91,19 @@ def generate_launch_description():
                      'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool),
                      'lockstep_subscribers': subscribers}],
                  output='screen'),
-            Node(package='nonfragile_tracker', executable='plant', name='plant',
-                 parameters=[scenario, common, cmd, {
-                     'lockstep_subscribers': ParameterValue(PythonExpression(
-                         ["2 if '", record, "' == 'true' else 1"]), value_type=int),
-                     'lockstep_recorder': ParameterValue(record, value_type=bool)}],
-                 output='screen'),
-            Node(package='nonfragile_tracker', executable='recorder', name='recorder',
-                 condition=IfCondition(record),
-                 parameters=[cmd, {'output': ParameterValue(LaunchConfiguration('bag'),
-                                                            value_type=str),
-                              'use_sim_time': ParameterValue(lockstep, value_type=bool),
-                              'lockstep_gate': ParameterValue(lockstep, value_type=bool)}],
-                 output='screen'),
+            plant,
+            recorder,
             Node(package='rviz2', executable='rviz2', name='rviz2',
                  condition=IfCondition(LaunchConfiguration('rviz')),
                  arguments=['-d', os.path.join(share, 'rviz', 'tracking.rviz')]),
+            # the run is complete: end the launch (the reference and tracker would idle on)
+            # (a lockstep recorder drains and closes the bag itself after run_done: wait for
+            # it; in real time the shutdown's SIGINT closes the bag)
+            RegisterEventHandler(OnProcessExit(target_action=plant, on_exit=[EmitEvent(
+                event=Shutdown(reason='the plant has completed its run'))]),
+                condition=UnlessCondition(lockstep_recording)),
+            RegisterEventHandler(OnProcessExit(target_action=recorder, on_exit=[EmitEvent(
+                event=Shutdown(reason='the recorder has closed the bag'))]),
+                condition=IfCondition(lockstep_recording)),
         ]),
     ])

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import gc
 import os
-import signal
 import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence, TypeVar
@@ -25,6 +24,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from .. import topics
 from ..errors import InputError
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
+from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
@@ -269,15 +269,22 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
     Signals: rclpy's own handlers (installed by ``rclpy.init`` for SIGINT and SIGTERM)
     shut the context down from rclpy's signal thread; the executor then raises
     ``ExternalShutdownException`` between callbacks and the node is destroyed (the
-    recorder closes its bag).  Python's KeyboardInterrupt is switched off first (SIGINT
-    ignored at Python level, so rclpy's handler has nothing to chain to): it would be
-    raised wherever the interpreter happens to be - in a callback writing the bag, or in
-    the clean-up when ``ros2 launch`` forwards a second SIGINT after the terminal's -
-    and print a traceback.  Repeated signals during the clean-up are therefore harmless.
+    recorder closes its bag).  Python's KeyboardInterrupt is switched off first: SIGINT
+    and SIGTERM only set a flag (:func:`entry.catch_stop_signals`, to which rclpy's
+    handlers chain).  A KeyboardInterrupt would be raised wherever the interpreter
+    happens to be - in a callback writing the bag, or in the clean-up when ``ros2
+    launch`` forwards a second SIGINT after the terminal's - and print a traceback, so
+    repeated signals during the clean-up are harmless.  The flag also covers the window
+    before ``rclpy.init`` has installed its handlers (and, through the console scripts of
+    :mod:`entry`, the imports): a signal there ends the process with 0 before or right
+    after the node is built, instead of being lost.
     Exceptions that are only the consequence of the shutdown racing the main thread
     (rclpy 7.1: ros2/rclpy#1352, fixed upstream after Jazzy) are not reported.
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    catch_stop_signals()
+    if stop_requested():
+        ignore_stop_signals()
+        return 0                                    # a signal while importing
     try:
         rclpy.init(args=args)
     except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments/params files so
@@ -288,7 +295,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         try:
             node = node_class()
         except Exception as exc:  # noqa: BLE001
-            if not context.ok():
+            if not context.ok() or stop_requested():
                 return 0                            # a signal during start-up
             if isinstance(exc, ParameterException):
                 hint = (' Write doubles as 1.0, not 1, in parameter files.'
@@ -299,10 +306,12 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             raise
         executor = make_executor()
         executor.add_node(node)
+        if stop_requested():                        # a signal before rclpy's handlers
+            return 0
         freeze_startup_objects()
         node.get_logger().info('started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
-        spin_until(executor, lambda: node.finished)
-        if node.finished and context.ok():
+        spin_until(executor, lambda: node.finished or stop_requested())
+        if node.finished and context.ok() and not stop_requested():
             node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -310,6 +319,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         if context.ok():
             raise                                   # a real error, not the shutdown
     finally:
+        ignore_stop_signals()                       # ending: a repeated signal changes nothing
         if node is not None:
             node.destroy_node()                     # close() first: the recorder's bag
         try:

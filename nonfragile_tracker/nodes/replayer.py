@@ -68,7 +68,7 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
     RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
     with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
         pfile = write_parameter_file(scenario_parameters(params, gains), Path(tmp) / 'p.yaml')
-        cmd = [sys.executable, '-m', 'nonfragile_tracker.nodes.tracker', '--ros-args',
+        cmd = [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', 'tracker', '--ros-args',
                '--params-file', str(pfile), '-p', f'mode:={mode}', '-p',
                f'input_timeout:={NO_WATCHDOG}']
         log = open(Path(tmp) / 'tracker.log', 'w+')

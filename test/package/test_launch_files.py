@@ -54,6 +54,17 @@ def test_tracking_launch_modes_and_nodes():
             if kw.arg == 'executable'}
     assert exes == {'reference', 'tracker', 'plant', 'recorder', 'rviz2'}
     assert calls(tree, 'PushRosNamespace')
+    # the launch ends when the run is complete: on the plant's exit, or the recorder's
+    # (bag closed) when recording in lockstep - one handler each, on one condition
+    handlers = calls(tree, 'RegisterEventHandler')
+    targets = sorted(kw.value.id for h in handlers for c in calls(h, 'OnProcessExit')
+                     for kw in c.keywords if kw.arg == 'target_action')
+    conditions = sorted(kw.value.func.id for h in handlers for kw in h.keywords
+                        if kw.arg == 'condition')
+    assert targets == ['plant', 'recorder'] and conditions == ['IfCondition', 'UnlessCondition']
+    assert {kw.value.args[0].id for h in handlers for kw in h.keywords
+            if kw.arg == 'condition'} == {'lockstep_recording'}
+    assert all(calls(h, 'Shutdown') for h in handlers)
 
 
 def test_robot_launch_starts_tracker_and_reference_with_remappable_topics():
