@@ -24,13 +24,13 @@ setup(
     description='Non-fragile LMI trajectory tracking of delayed wheeled mobile robots (ROS 2 Jazzy).',
     license='Apache-2.0',
     tests_require=['pytest'],
+    # the nodes are plain scripts (installed into lib/<package> by setup.cfg), not console
+    # scripts: a setuptools wrapper imports importlib.metadata before any package code, a
+    # window in which Ctrl-C printed a traceback (see nonfragile_tracker/nodes/entry.py)
+    scripts=['scripts/' + node for node in ('reference', 'plant', 'tracker', 'recorder')],
     entry_points={
         'console_scripts': [
             'nonfragile_tracker = nonfragile_tracker.cli:main',
-            'reference = nonfragile_tracker.nodes.entry:reference',
-            'plant = nonfragile_tracker.nodes.entry:plant',
-            'tracker = nonfragile_tracker.nodes.entry:tracker',
-            'recorder = nonfragile_tracker.nodes.entry:recorder',
         ],
     },
 )

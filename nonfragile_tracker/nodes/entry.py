@@ -1,8 +1,9 @@
 """Process entry points of the nodes: a stop signal is honoured from the first line on.
 
-``ros2 run``/``ros2 launch`` start the console scripts ``reference``, ``plant``,
-``tracker`` and ``recorder``, which call the functions below (``python -m
-nonfragile_tracker.nodes.entry NAME [--ros-args ...]`` does the same).  This module
+``ros2 run``/``ros2 launch`` start the scripts ``reference``, ``plant``, ``tracker`` and
+``recorder`` (``scripts/`` of the source tree, installed into ``lib/nonfragile_tracker``),
+which call :func:`main` (``python -m nonfragile_tracker.nodes.entry NAME [--ros-args
+...]`` does the same).  This module
 imports nothing heavy: before anything else it notes SIGINT and SIGTERM in a flag
 instead of Python's default actions (KeyboardInterrupt with a traceback, or death by
 SIGTERM), then imports the node module (numpy, rclpy, rosbags: a second or more on a
@@ -11,7 +12,7 @@ or initialising - Ctrl-C on ``ros2 launch`` right after start, ``systemctl stop`
 boot - ends it with exit code 0 and no traceback, like a signal during the run
 (:func:`nonfragile_tracker.nodes.common.run`).  Without this, a SIGINT in the window
 before rclpy installs its handlers was either a traceback or lost (a recorder that never
-ended).  What remains is the interpreter's own start-up (tens of ms) before this line.
+ended).  What remains is the interpreter's own start-up (tens of ms) before this module runs.
 """
 from __future__ import annotations
 
@@ -70,26 +71,6 @@ def main(name: str, args: list[str] | None = None) -> int:
     code = int(module.main(args) or 0)
     ignore_stop_signals()
     return code
-
-
-def reference() -> int:
-    """Console script ``reference``."""
-    return main('reference')
-
-
-def plant() -> int:
-    """Console script ``plant``."""
-    return main('plant')
-
-
-def tracker() -> int:
-    """Console script ``tracker``."""
-    return main('tracker')
-
-
-def recorder() -> int:
-    """Console script ``recorder``."""
-    return main('recorder')
 
 
 if __name__ == '__main__':

@@ -22,15 +22,19 @@ def test_package_xml_is_valid_for_catkin_pkg():
     assert {'rclpy', 'geometry_msgs', 'nav_msgs', 'rosgraph_msgs', 'launch_ros'} <= exec_deps
 
 
-def test_setup_entry_points_match_node_modules():
+def test_setup_installs_the_cli_and_one_script_per_node():
+    from nonfragile_tracker.nodes.entry import NODES
     tree = ast.parse((ROOT / 'setup.py').read_text())
-    scripts = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
-               and isinstance(n.value, str) and ' = nonfragile_tracker.' in n.value]
-    names = {s.split(' = ')[0] for s in scripts}
-    assert names == EXECUTABLES
-    for s in scripts:
-        module = s.split(' = ')[1].split(':')[0]
-        assert (ROOT / (module.replace('.', '/') + '.py')).is_file(), module
+    consoles = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+                and isinstance(n.value, str) and ' = nonfragile_tracker.' in n.value]
+    assert consoles == ['nonfragile_tracker = nonfragile_tracker.cli:main']
+    assert set(NODES) | {'nonfragile_tracker'} == EXECUTABLES
+    for node in NODES:                  # plain scripts: no setuptools wrapper before entry
+        script = ROOT / 'scripts' / node
+        assert os.access(script, os.X_OK), node
+        assert script.read_text().splitlines()[0] == '#!/usr/bin/env python3'
+        assert f"sys.exit(main('{node}'))" in script.read_text(), node
+        assert (ROOT / 'nonfragile_tracker' / 'nodes' / f'{node}.py').is_file(), node
 
 
 def test_launch_file_is_idiomatic_python():
