@@ -27,10 +27,10 @@ setup(
     entry_points={
         'console_scripts': [
             'nonfragile_tracker = nonfragile_tracker.cli:main',
-            'reference = nonfragile_tracker.nodes.reference:main',
-            'plant = nonfragile_tracker.nodes.plant:main',
-            'tracker = nonfragile_tracker.nodes.tracker:main',
-            'recorder = nonfragile_tracker.nodes.recorder:main',
+            'reference = nonfragile_tracker.nodes.entry:reference',
+            'plant = nonfragile_tracker.nodes.entry:plant',
+            'tracker = nonfragile_tracker.nodes.entry:tracker',
+            'recorder = nonfragile_tracker.nodes.entry:recorder',
         ],
     },
 )

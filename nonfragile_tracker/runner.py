@@ -197,7 +197,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     t0 = time.monotonic()
 
     def start(name: str, extra: Sequence[str] = ()) -> None:
-        cmd = [py, '-m', f'nonfragile_tracker.nodes.{name}', '--ros-args', '--params-file',
+        cmd = [py, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args', '--params-file',
                str(params_file), *extra]
         logs[name] = open(run_dir / f'{name}.log', 'w')
         procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
