@@ -393,13 +393,13 @@ class _InputDelayProgram:
         RC = cp.bmat([[R1b, S12b], [S12b.T, R1b]])
         cons = [L << -self.t * np.eye(size), 0.5 * (RC + RC.T) >> self.t * np.eye(2 * n)]
         cons += [M >> self.t * In for M in lyap] + extra
+        self.kappa2: Any = None             # a cvxpy Parameter with the gain bound
         if gain_bound:
             self.kappa2 = par(nonneg=True)
             He = X + X.T
             Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
             cons += [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
         else:
-            self.kappa2 = None
             norm = sum(cp.trace(M) for M in lyap) + cp.trace(X)
             if self.lam is not None:
                 norm = norm + self.lam
@@ -412,6 +412,8 @@ class _InputDelayProgram:
             self.BE.value = problem.B @ problem.E
             self.F.value = problem.F
         if self.kappa2 is not None:
+            if kappa is None:
+                raise InputError('this program has a gain bound: kappa is required')
             self.kappa2.value = float(kappa) ** 2
 
     def solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
@@ -430,13 +432,13 @@ class _InputDelayProgram:
             out = solve(self.problem, solver, what='the input-delay LMI', quiet_inaccurate=True)
         except SolverFailure as exc:
             return _Point(f'solver_error: {exc}', None, 0.0, eps)
-        t = self.t.value
-        t = None if t is None else float(t)
+        tv = self.t.value
+        t = None if tv is None else float(tv)
         if out.status in OK_STATUSES and self.X.value is not None:
-            vals = {k: np.array(v.value) for k, v in self.sv.items()}
+            vals: dict[str, Any] = {k: np.array(v.value) for k, v in self.sv.items()}
             vals.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
                         S12b=np.array(self.S12b.value),
-                        lam=None if self.lam is None else float(self.lam.value))
+                        lam=None if self.lam is None else float(np.asarray(self.lam.value)))
             return _Point(out.status, t, out.solve_time, eps, vals)
         return _Point(out.status, t, out.solve_time, eps)
 
@@ -721,18 +723,20 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
            sd)
     prog = cached_program(key, lambda: _CertifyProgram(*key[1:]))
     out = prog.solve(problem, K, _weights(h0, h1, alpha, problem.tau), solver)
-    sv, t, d = prog.sv, prog.t, prog.d
-    if out.status not in OK_STATUSES or t.value is None or sv['P'].value is None:
+    values = {k: v.value for k, v in prog.sv.items()}
+    t, d = prog.t.value, None if prog.d is None else prog.d.value
+    if out.status not in OK_STATUSES or t is None or values['P'] is None:
         return InputDelayCertification(False, -math.inf, None, None, out.status)
-    tv = float(t.value)
+    tv = float(t)
     if tv < margin:
         return InputDelayCertification(False, tv, None, None, out.status)
     cert = InputDelayCertificate(
-        P=sym(sv['P'].value), P2=np.array(prog.P2.value), P3=np.array(prog.P3.value),
-        S0=sym(sv['S0'].value), S1=sym(sv['S1'].value), R0=sym(sv['R0'].value),
-        R1=sym(sv['R1'].value), S12=np.array(prog.S12.value),
-        Q=sym(sv['Q'].value) if sd else None,
-        lam=None if d is None else 1.0 / float(d.value))
+        P=sym(np.asarray(values['P'])), P2=np.array(prog.P2.value),
+        P3=np.array(prog.P3.value), S0=sym(np.asarray(values['S0'])),
+        S1=sym(np.asarray(values['S1'])), R0=sym(np.asarray(values['R0'])),
+        R1=sym(np.asarray(values['R1'])), S12=np.array(prog.S12.value),
+        Q=sym(np.asarray(values['Q'])) if sd else None,
+        lam=None if d is None else 1.0 / float(d))
     ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
     return InputDelayCertification(ver.ok, tv, cert, ver, out.status)
 
@@ -795,8 +799,9 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     h0 = _check_interval(h_min, max(float(h_min), tol))[0]
     if not (math.isfinite(h_hi) and h_hi > h0 and tol > 0):
         raise InputError(f'need h_hi > h_min and tol > 0, got h_hi={h_hi!r}, tol={tol!r}')
-    kw = dict(gain_bound=gain_bound, alpha=alpha, nominal=nominal, state_delay=state_delay,
-              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    kw: dict[str, Any] = dict(gain_bound=gain_bound, alpha=alpha, nominal=nominal,
+                              state_delay=state_delay, eps_grid=eps_grid, refine=refine,
+                              margin=margin, solver=solver)
     last: list[float] = []
 
     def trial(h1: float) -> InputDelayResult | None:
@@ -860,8 +865,9 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     InfeasibleError
         Not even ``alpha = 0`` is certified.
     """
-    kw = dict(gain_bound=gain_bound, nominal=nominal, state_delay=state_delay,
-              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    kw: dict[str, Any] = dict(gain_bound=gain_bound, nominal=nominal,
+                              state_delay=state_delay, eps_grid=eps_grid, refine=refine,
+                              margin=margin, solver=solver)
     base = _try(problem, h_min, h_max, alpha=0.0, **kw)
     if base is None:
         synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
