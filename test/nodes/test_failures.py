@@ -34,7 +34,8 @@ def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path
     def progress(line):
         lines.append(line)
         if 'progress' in line and not hit.is_set():
-            out = subprocess.run(['pgrep', '-f', f'nodes.tracker.*{tmp_path}'],
+            # run starts it as `-m nonfragile_tracker.nodes.entry tracker --ros-args ...`
+            out = subprocess.run(['pgrep', '-f', f'nodes[.](entry )?tracker .*{tmp_path}'],
                                  capture_output=True, text=True)
             for pid in out.stdout.split():
                 os.kill(int(pid), sig)
