@@ -14,6 +14,7 @@ spinning: a clean end, exit 0, no output.  Only the standard library is imported
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 
 #: The node modules (in this package) that have a ``main(args) -> int``.
@@ -32,8 +33,27 @@ def _interrupted(exc: BaseException | None) -> bool:
     return False
 
 
+def _exit_now(code: int) -> None:
+    """Flush and leave at once.
+
+    CPython would otherwise end by re-raising SIGINT (status -2, what ``ros2 launch``
+    reports as a died process) when the KeyboardInterrupt passed through code an extension
+    module ran while importing, even though it was caught.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
 def start(name: str, args: list[str] | None = None) -> int:
-    """Import node module ``name`` and run its ``main(args)``; Ctrl-C while importing: 0."""
+    """Import node module ``name`` and run its ``main(args)`` (a process entry point).
+
+    A Ctrl-C before :func:`common.run` has switched KeyboardInterrupt off - while the
+    node module imports - ends the process at once with 0: nothing has started yet.
+    """
     if name not in NODES:
         print(f'error: unknown node {name!r}; one of {", ".join(NODES)}', file=sys.stderr)
         return 2
@@ -41,11 +61,12 @@ def start(name: str, args: list[str] | None = None) -> int:
         module = importlib.import_module(f'{__package__}.{name}')
         return int(module.main(args))
     except KeyboardInterrupt:
-        return 0
+        _exit_now(0)
     except Exception as exc:
         if _interrupted(exc):
-            return 0
+            _exit_now(0)
         raise
+    return 0                                        # not reached: _exit_now does not return
 
 
 def reference() -> int:

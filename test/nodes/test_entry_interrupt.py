@@ -24,8 +24,8 @@ def _loaded(pid: int, marker: str) -> bool:
         return False
 
 
-@pytest.mark.parametrize('node', ['plant', 'tracker', 'reference', 'recorder'])
-@pytest.mark.parametrize('delay', [0.0, 0.03, 0.1])
+@pytest.mark.parametrize('node, delay', [('plant', 0.0), ('tracker', 0.0), ('reference', 0.0),
+                                         ('recorder', 0.0), ('plant', 0.03), ('tracker', 0.1)])
 def test_ctrl_c_while_the_node_imports_is_a_clean_exit(node, delay, ros_env, tmp_path):
     args = ['--ros-args', '-p', f'output:={tmp_path / "bag"}'] if node == 'recorder' else []
     proc = subprocess.Popen([sys.executable, '-m', 'nonfragile_tracker.nodes.entry', node,
