@@ -20,7 +20,6 @@ LMI, 4 solver or verification failure, 5 run failure, 130 interrupted.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
@@ -29,21 +28,30 @@ import sys
 # numpy is imported; an explicit OPENBLAS_NUM_THREADS from the caller wins.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-from .commands import (bag, golden, identify, latency_design, reproduce, run,  # noqa: E402
-                       study, synthesis, trajectory)
-from .errors import NonfragileError, exit_code  # noqa: E402
+# Only the standard library and ``errors`` (no imports of its own) at the top: everything
+# heavy (argparse, the command modules, numpy, cvxpy, rclpy) is imported inside main(),
+# where Ctrl-C becomes exit 130 without a traceback (see main).
+from .errors import EXIT_INTERRUPTED, NonfragileError, exit_code  # noqa: E402
 
-#: The command modules, in ``--help`` order; each exposes ``register(subparsers)``.
-COMMANDS = (synthesis, identify, latency_design, run, study, trajectory, bag, reproduce, golden)
+TYPE_CHECKING = False            # typing.TYPE_CHECKING without importing typing (mypy: True)
+if TYPE_CHECKING:
+    import argparse
+
+#: The command modules (under ``nonfragile_tracker.commands``), in ``--help`` order; each
+#: exposes ``register(subparsers)``.  Imported by :func:`build_parser`.
+COMMANDS = ('synthesis', 'identify', 'latency_design', 'run', 'study', 'trajectory', 'bag',
+            'reproduce', 'golden')
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every command module's sub-commands."""
+    import argparse
+    import importlib
     p = argparse.ArgumentParser(prog='nonfragile_tracker', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest='command', required=True)
-    for module in COMMANDS:
-        module.register(sub)
+    for name in COMMANDS:
+        importlib.import_module(f'{__package__}.commands.{name}').register(sub)
     return p
 
 
@@ -54,20 +62,37 @@ def main(argv: list[str] | None = None) -> int:
     :func:`errors.exit_code` (2 for bad input); anything else is a bug: one
     ``internal error`` line with the exception type, exit 1, and the traceback only
     when ``NONFRAGILE_DEBUG=1``.  Usage errors exit 2 from argparse.
+
+    Ctrl-C (SIGINT) anywhere in here - while the command modules and numpy/cvxpy are
+    imported, while parsing, while the command runs or reports an error - returns 130
+    (also when Python wrapped the KeyboardInterrupt, e.g. into the RuntimeError of a
+    ``__set_name__`` interrupted while a dataclass was created)
+    (128 + SIGINT, what a shell reports for an interrupted program) without a traceback.
+    Before main() is entered only the interpreter's start, this package's ``__init__``
+    and ``errors`` (no imports) run: a SIGINT that early ends the process by the signal
+    itself (status -2 / 130 in a shell) or, once Python's handler is installed, with a
+    short KeyboardInterrupt traceback.
     """
-    args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
-    except (NonfragileError, OSError, KeyboardInterrupt) as exc:
-        if not isinstance(exc, KeyboardInterrupt):
+        args = build_parser().parse_args(argv)
+        try:
+            return int(args.func(args) or 0)
+        except (NonfragileError, OSError) as exc:
             print(f'error: {exc}', file=sys.stderr)
-        return exit_code(exc)
-    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback only on request
-        if os.environ.get('NONFRAGILE_DEBUG') == '1':
-            raise
-        print(f'internal error: {type(exc).__name__}: {exc} (this is a bug; re-run with '
-              'NONFRAGILE_DEBUG=1 for the traceback and report it)', file=sys.stderr)
-        return exit_code(exc)
+            return exit_code(exc)
+        except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request
+            cause: BaseException | None = exc
+            while cause is not None and not isinstance(cause, KeyboardInterrupt):
+                cause = cause.__cause__ or cause.__context__
+            if cause is not None:       # Ctrl-C wrapped by Python (RuntimeError of __set_name__
+                raise cause from None   # while a class body was being created at import)
+            if os.environ.get('NONFRAGILE_DEBUG') == '1':
+                raise
+            print(f'internal error: {type(exc).__name__}: {exc} (this is a bug; re-run with '
+                  'NONFRAGILE_DEBUG=1 for the traceback and report it)', file=sys.stderr)
+            return exit_code(exc)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
 
 
 if __name__ == '__main__':

@@ -89,10 +89,12 @@ def tracker_config(values: dict) -> TrackerConfig:
     D = as_matrix(values['Delta'], 'Delta', (2, 2), flat=True, error=LoopConfigError)
     pert = E @ D @ F
     a_tau = as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True, error=LoopConfigError)
-    return TrackerConfig(K=K, dt=values['dt'], max_linear_speed=values['max_linear_speed'],
+    return TrackerConfig(K=tuple(map(tuple, K.tolist())), dt=values['dt'],
+                         max_linear_speed=values['max_linear_speed'],
                          max_angular_speed=values['max_angular_speed'],
                          min_speed=values['min_speed'],
                          perturbation=pert if np.any(pert) else None,
-                         delay_compensation=values['delay_compensation'], A_tau=a_tau,
+                         delay_compensation=values['delay_compensation'],
+                         A_tau=tuple(map(tuple, a_tau.tolist())),
                          tau=values['tau'],
                          **{n: values.get(n, 0.0) for n in PREDICT_PARAMS})

@@ -15,8 +15,10 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import yaml
 
@@ -117,7 +119,7 @@ def _ros_args(values: dict) -> list[str]:
 class RunResult:
     """Outcome of a run: its directory, bag (if recorded), exit code per node, wall time, steps."""
 
-    run_dir: Path
+    run_dir: Path | None        # None: a run without a directory (nothing recorded)
     bag: Path | None
     exit_codes: dict
     wall_time: float
@@ -190,13 +192,13 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     params_file = write_parameter_file(params, run_dir / 'params.yaml')
     py = sys.executable
     procs: dict[str, subprocess.Popen] = {}
-    logs: dict[str, object] = {}
+    logs: dict[str, IO[str]] = {}
     bag = run_dir / 'bag' if record else None
     t0 = time.monotonic()
 
-    def start(name: str, extra: list[str] = ()) -> None:
-        cmd = [py, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args',
-               '--params-file', str(params_file), *extra]
+    def start(name: str, extra: Sequence[str] = ()) -> None:
+        cmd = [py, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args', '--params-file',
+               str(params_file), *extra]
         logs[name] = open(run_dir / f'{name}.log', 'w')
         procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
                                        stderr=subprocess.STDOUT, text=True)
@@ -280,7 +282,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     """Run the scenario with all nodes in this process on one executor."""
     import rclpy
 
-    from .nodes.common import make_executor, overrides
+    from .nodes.common import AdapterNode, make_executor, overrides
     from .nodes.plant import PlantNode
     from .nodes.reference import ReferenceNode
     from .nodes.tracker import TrackerNode
@@ -296,12 +298,14 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', env['ROS_AUTOMATIC_DISCOVERY_RANGE'])
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
-    nodes = []
+    nodes: list[AdapterNode] = []
     bag = None
     hand = lockstep_handshake(record)
     try:
         if record:
             from .nodes.recorder import Recorder
+            if run_dir is None:
+                raise InputError('a recorded run needs a run directory (got None)')
             bag = run_dir / 'bag'
             rec_params = {'output': str(bag), 'use_sim_time': True, **hand['recorder']}
             rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))

@@ -12,7 +12,11 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/model.py', 'nonfragile_tracker/control/problem.py',
           'nonfragile_tracker/control/gains.py', 'nonfragile_tracker/control/loop.py',
           'nonfragile_tracker/control/trajectory.py', 'nonfragile_tracker/control/identify.py',
-          'nonfragile_tracker/bag/compare.py')
+          'nonfragile_tracker/bag/compare.py', 'nonfragile_tracker/control/delay.py',
+          'nonfragile_tracker/control/input_delay.py',
+          'nonfragile_tracker/bag/reader.py', 'nonfragile_tracker/bag/writer.py',
+          'nonfragile_tracker/msgconv.py', 'nonfragile_tracker/scenario.py',
+          'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py')
 
 
 def _checked_files() -> list[str]:

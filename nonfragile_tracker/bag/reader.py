@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.interfaces import Connection, Qos
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition, Qos
 from rosbags.rosbag2 import Reader, ReaderError
 
 from .. import topics
@@ -249,7 +249,7 @@ def typestore_for(reader: Reader):
         return ts
     own = get_typestore(Stores.ROS2_JAZZY)
     for msgtype, msgdef in unknown.items():
-        text = getattr(msgdef, 'data', msgdef)
+        text = msgdef.data if isinstance(msgdef, MessageDefinition) else str(msgdef)
         try:
             own.register(get_types_from_msg(text, msgtype))
         except Exception as exc:  # noqa: BLE001 - rosbags raises several parser errors
@@ -294,9 +294,9 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
         if n.startswith('/'):
             continue
         for t in avail:
-            ns = _namespace_of(t, n)
-            if ns is not None and (ns == '' or ns.startswith('/')):
-                score[ns] = score.get(ns, 0) + 1
+            found = _namespace_of(t, n)
+            if found is not None and (found == '' or found.startswith('/')):
+                score[found] = score.get(found, 0) + 1
     best = sorted(score, key=lambda s: (-score[s], len(s)))
     ns = best[0] if best else ''
     return resolve_topics(avail, names, ns)
@@ -397,12 +397,14 @@ def read_messages(path: str | os.PathLike, topic: str, *, namespace: str | None 
         reader.close()
 
 
+#: Accepted types of the command topic.
+_CMD_VEL_TYPES = ('geometry_msgs/msg/Twist', 'geometry_msgs/msg/TwistStamped')
 _EXPECTED_TYPES = {topics.ODOM: 'nav_msgs/msg/Odometry',
                    topics.POSE: 'geometry_msgs/msg/PoseStamped',
                    topics.REF_POSE: 'geometry_msgs/msg/PoseStamped',
                    topics.REF_TWIST: 'geometry_msgs/msg/TwistStamped',
                    topics.REF_ACCEL: 'geometry_msgs/msg/AccelStamped',
-                   topics.CMD_VEL: ('geometry_msgs/msg/Twist', 'geometry_msgs/msg/TwistStamped')}
+                   topics.CMD_VEL: _CMD_VEL_TYPES}
 #: Message types accepted for the path (trajectory) topic, when the bag has one.
 PATH_TYPE = 'nav_msgs/msg/Path'
 #: Path topics used as the reference, in this order (the trajectory the tracker follows, then
@@ -432,7 +434,7 @@ def _complete_topic_map(by_topic: dict[str, Connection], topic_map: dict[str, st
                                      f'has {sorted(by_topic)}', [topic])
         out[name] = topic
     for name, types in ((topics.ODOM, ('nav_msgs/msg/Odometry',)),
-                        (topics.CMD_VEL, _EXPECTED_TYPES[topics.CMD_VEL])):
+                        (topics.CMD_VEL, _CMD_VEL_TYPES)):
         if name not in out:
             found = _by_type(by_topic, types, set(out.values()))
             if found is not None:
@@ -466,7 +468,8 @@ def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
     if hasattr(msg, 'pose'):
         p = msg.pose.pose if hasattr(msg.pose, 'pose') else msg.pose
         q = p.orientation
-        out = (stamp, float(p.position.x), float(p.position.y), q.x, q.y, q.z, q.w)
+        out: tuple[Any, ...] = (stamp, float(p.position.x), float(p.position.y),
+                                q.x, q.y, q.z, q.w)
         if hasattr(msg, 'twist'):
             out += (float(msg.twist.twist.linear.x),)
         return out, frames
@@ -480,7 +483,9 @@ def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
     Positions at the poses' stamps, velocities and accelerations by finite differences
     (numpy.gradient, second order inside).
     """
-    stamps, xs, ys = [], [], []
+    stamps: list[int] = []
+    xs: list[float] = []
+    ys: list[float] = []
     for ps in msg.poses:
         s = _stamp_ns(ps.header)
         if stamps and s <= stamps[-1]:
@@ -534,8 +539,8 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 f'bag {path} lacks topic(s) {", ".join(missing)} needed for a tracking run; '
                 f'it has {sorted(by_topic) or "no topics"}. Record them (recorder parameter '
                 '`topics`) or pass strict=False.', missing)
-        for name, expected in _EXPECTED_TYPES.items():
-            topic = topic_map.get(name)
+        for logical, expected in _EXPECTED_TYPES.items():
+            topic = topic_map.get(logical)
             ok = (expected,) if isinstance(expected, str) else expected
             if topic is not None and by_topic[topic].msgtype not in ok:
                 raise NotABagError(f'topic {topic} in {path} has type '
@@ -578,7 +583,7 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                         frames[:] = list(fast[1])
                     fast = fast[0]
                 elif name == pose_name and not frames[0]:
-                    m = ts.deserialize_cdr(raw, conn.msgtype)
+                    m: Any = ts.deserialize_cdr(raw, conn.msgtype)
                     frames[:] = [str(m.header.frame_id), str(getattr(m, 'child_frame_id', ''))]
                 if name == topics.CMD_VEL:
                     if len(fast) == 3:                  # TwistStamped: (stamp, v, w)
@@ -590,7 +595,7 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 stamp = fast[0]
                 if name == pose_name:
                     target = pose_rows
-                    row = (fast[1], fast[2], quaternion_to_yaw(*fast[3:7]),
+                    row: tuple[Any, ...] = (fast[1], fast[2], quaternion_to_yaw(*fast[3:7]),
                            fast[7] if len(fast) > 7 else math.nan)
                     if stamp not in pose_recv:
                         pose_recv[stamp] = timestamp
@@ -608,7 +613,7 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                                'repair`') from None
         msgtypes = {t: c.msgtype for t, c in by_topic.items()}
         offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
-                   if hasattr(c.ext, 'offered_qos_profiles')}
+                   if isinstance(c.ext, ConnectionExtRosbag2)}
     finally:
         reader.close()
 
@@ -620,15 +625,15 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                       receive_ns=precv, frame_id=frames[0], child_frame_id=frames[1])
     common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
         & set(ref_parts[topics.REF_ACCEL])
-    if not common and last_path is not None:
+    if not common and last_path is not None and path_topic is not None:
         reference = _path_reference(last_path, path_topic)
     else:
         rstamps = np.array(sorted(common), dtype=np.int64)
         rrows = np.array([ref_parts[topics.REF_POSE][s] + ref_parts[topics.REF_TWIST][s]
                           + ref_parts[topics.REF_ACCEL][s] for s in rstamps],
                          dtype=float).reshape(-1, 6)
-        reference = ReferenceSeries(rstamps, rstamps * 1e-9,
-                                    *(rrows[:, i].copy() for i in range(6)),
+        x, y, vx, vy, ax, ay = (rrows[:, i].copy() for i in range(6))
+        reference = ReferenceSeries(rstamps, rstamps * 1e-9, x, y, vx, vy, ax, ay,
                                     source=topic_map.get(topics.REF_POSE, ''))
     crow = np.array(cmds, dtype=float).reshape(-1, 4)
     cns = np.array([c[0] for c in cmds], dtype=np.int64)

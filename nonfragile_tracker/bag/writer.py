@@ -22,14 +22,16 @@ import os
 import time
 from collections.abc import Mapping, Sequence
 from datetime import datetime
+from enum import Enum
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Union
+from typing import Any, Final, Union
 
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.metadata import dump_qos_v9
+from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -41,7 +43,7 @@ __all__ = ['BagError', 'BagExistsError', 'InvalidRunNameError', 'BagWriter', 'ma
            'DEFAULT_CHUNK_SIZE', 'DEFAULT_FLUSH_PERIOD', 'INFINITE_NS']
 
 #: rosbag2 metadata version written (ROS 2 Jazzy).
-BAG_VERSION = 9
+BAG_VERSION: Final = 9
 #: Pending chunk size (bytes of uncompressed records) at which a chunk is written out.
 DEFAULT_CHUNK_SIZE = 128 * 1024
 #: Longest time (s) a written message may stay in memory before its chunk is written out.
@@ -84,7 +86,7 @@ def jazzy_typestore() -> Typestore:
     return _TYPESTORE
 
 
-def _enum(kind: type, value: Any, what: str):
+def _enum(kind: type[Enum], value: Any, what: str) -> Any:
     if isinstance(value, kind):
         return value
     if isinstance(value, bool):
@@ -291,10 +293,12 @@ class BagWriter:
             raise BagError(f'cannot create bag {self.path}: {exc.strerror or exc}. Check that '
                            'the parent directory is writable.') from None
         storage = self._writer.storage
-        if not all(hasattr(storage, a) for a in ('chunk', 'close_chunk', 'bio', 'chunks')):
+        if not isinstance(storage, McapWriter) or not all(
+                hasattr(storage, a) for a in ('chunk', 'close_chunk', 'bio', 'chunks')):
             self._writer.abort()
             raise BagError('rosbags changed its MCAP writer (no chunk/close_chunk/bio); this '
                            'module needs rosbags 0.11.x - pin rosbags==0.11.*')
+        self._mcap: McapWriter = storage
         self._connections: dict[str, Any] = {}
         self.counts: dict[str, int] = {}
         self._closed = False
@@ -378,7 +382,7 @@ class BagWriter:
                            f'on {topic!r}')
         self._writer.write(conn, timestamp_ns, bytes(rawdata))
         self.counts[topic] += 1
-        storage = self._writer.storage
+        storage = self._mcap
         now = time.monotonic()
         if len(storage.chunks) != self._last_chunks:      # rosbags closed a 1 MiB chunk itself
             self._last_chunks = len(storage.chunks)
@@ -398,7 +402,7 @@ class BagWriter:
         """
         if self._closed:
             return False
-        storage = self._writer.storage
+        storage = self._mcap
         wrote = False
         if storage.chunk.msgs:
             storage.close_chunk()

@@ -305,10 +305,10 @@ class _Char:
             if not np.all(np.isfinite(d)):
                 return s, math.inf
             v = v + d[:n]
-            s = s + d[n]
+            s = s + d[n].item()
             if self.tau * -np.real(s) > 700.0:      # exp(-s tau) would overflow
                 return s, math.inf
-            step = abs(d[n]) / max(1.0, abs(s))
+            step = abs(d[n].item()) / max(1.0, abs(s))
             if step <= 1e-12 or (step < 1e-8 and step >= prev):   # converged / round-off
                 small += 1
                 if small >= 2:
@@ -540,7 +540,7 @@ def _rightmost(A0: np.ndarray, A1: np.ndarray, tau: float, count: int = 6,
         return _delay_free(ch, A0, count)
     adaptive = N is None
     key = (ch.n, tau, count)
-    if adaptive:
+    if N is None:
         N = _N_USED.get(key)
         if N is None:
             # resolve R(a0), a0 a guess of the last wanted root's real part from the

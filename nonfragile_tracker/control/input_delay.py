@@ -114,7 +114,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
@@ -205,17 +205,37 @@ class InputDelayResult:
 # ---------------------------------------------------------------------------------------------
 # independent verification (numpy only)
 
-def _phi_rows(A, A1, A_tau, tau, h_min, h_max, alpha, P, P2, P3, S0, S1, R0, R1, S12, Q
-              ) -> list[list[Any]]:
-    """Block rows of ``Phi_0`` (module docstring step 4); numpy arrays or cvxpy expressions."""
-    n = A.shape[0]
+class _Weights(NamedTuple):
+    """The scalars of ``Phi_0``: numbers, or cvxpy parameters in a cached program."""
+
+    two_a: Any          # 2 alpha
+    w0: Any             # exp(-2 alpha h_min)
+    w1: Any             # exp(-2 alpha h_max)
+    wt: Any             # exp(-2 alpha tau)
+    h0sq: Any           # h_min^2
+    h10sq: Any          # (h_max - h_min)^2
+
+
+def _weights(h_min: float, h_max: float, alpha: float, tau: float) -> _Weights:
     h0, h1, a = float(h_min), float(h_max), float(alpha)
-    w0, w1 = math.exp(-2 * a * h0), math.exp(-2 * a * h1)
-    Z = np.zeros((n, n))
     h10 = h1 - h0
-    b11 = P2.T @ A + A.T @ P2 + 2 * a * P + S0 - w0 * R0
+    return _Weights(2 * a, math.exp(-2 * a * h0), math.exp(-2 * a * h1),
+                    math.exp(-2 * a * float(tau)), h0 * h0, h10 * h10)
+
+
+def _phi_rows(A, A1, A_tau, wt: _Weights, P, P2, P3, S0, S1, R0, R1, S12, Q
+              ) -> list[list[Any]]:
+    """Block rows of ``Phi_0`` (module docstring step 4).
+
+    Numpy arrays or cvxpy expressions (``A``, ``A1 = B K``, ``A_tau`` and the weights may be
+    cvxpy parameters).
+    """
+    n = A.shape[0]
+    w0, w1 = wt.w0, wt.w1
+    Z = np.zeros((n, n))
+    b11 = P2.T @ A + A.T @ P2 + wt.two_a * P + S0 - w0 * R0
     b12 = P - P2.T + A.T @ P3
-    b22 = -(P3 + P3.T) + h0 * h0 * R0 + h10 * h10 * R1
+    b22 = -(P3 + P3.T) + wt.h0sq * R0 + wt.h10sq * R1
     rows = [
         [b11, b12, w0 * R0, P2.T @ A1, Z],
         [b12.T, b22, Z, P3.T @ A1, Z],
@@ -225,12 +245,11 @@ def _phi_rows(A, A1, A_tau, tau, h_min, h_max, alpha, P, P2, P3, S0, S1, R0, R1,
         [Z, Z, w1 * S12.T, w1 * (R1 - S12).T, -w1 * (S1 + R1)],
     ]
     if Q is not None:
-        wt = math.exp(-2 * a * float(tau))
         rows[0][0] = rows[0][0] + Q
         cols = [P2.T @ A_tau, P3.T @ A_tau, Z, Z, Z]
         for r, c in zip(rows, cols):
             r.append(c)
-        rows.append([c.T for c in cols] + [-wt * Q])
+        rows.append([c.T for c in cols] + [-wt.wt * Q])
     return rows
 
 
@@ -242,8 +261,8 @@ def input_delay_verification_matrix(A, B, A_tau, tau, E, F, K, h_min, h_max, alp
     """
     n = A.shape[0]
     c = cert
-    rows = _phi_rows(A, B @ K, A_tau, tau, h_min, h_max, alpha, c.P, c.P2, c.P3, c.S0, c.S1,
-                     c.R0, c.R1, c.S12, c.Q)
+    rows = _phi_rows(A, B @ K, A_tau, _weights(h_min, h_max, alpha, tau), c.P, c.P2, c.P3,
+                     c.S0, c.S1, c.R0, c.R1, c.S12, c.Q)
     phi = sym(np.block(rows))
     if cert.lam is None:
         return phi
@@ -374,13 +393,13 @@ class _InputDelayProgram:
         RC = cp.bmat([[R1b, S12b], [S12b.T, R1b]])
         cons = [L << -self.t * np.eye(size), 0.5 * (RC + RC.T) >> self.t * np.eye(2 * n)]
         cons += [M >> self.t * In for M in lyap] + extra
+        self.kappa2: Any = None             # a cvxpy Parameter with the gain bound
         if gain_bound:
             self.kappa2 = par(nonneg=True)
             He = X + X.T
             Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
             cons += [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
         else:
-            self.kappa2 = None
             norm = sum(cp.trace(M) for M in lyap) + cp.trace(X)
             if self.lam is not None:
                 norm = norm + self.lam
@@ -393,6 +412,8 @@ class _InputDelayProgram:
             self.BE.value = problem.B @ problem.E
             self.F.value = problem.F
         if self.kappa2 is not None:
+            if kappa is None:
+                raise InputError('this program has a gain bound: kappa is required')
             self.kappa2.value = float(kappa) ** 2
 
     def solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
@@ -411,13 +432,13 @@ class _InputDelayProgram:
             out = solve(self.problem, solver, what='the input-delay LMI', quiet_inaccurate=True)
         except SolverFailure as exc:
             return _Point(f'solver_error: {exc}', None, 0.0, eps)
-        t = self.t.value
-        t = None if t is None else float(t)
+        tv = self.t.value
+        t = None if tv is None else float(tv)
         if out.status in OK_STATUSES and self.X.value is not None:
-            vals = {k: np.array(v.value) for k, v in self.sv.items()}
+            vals: dict[str, Any] = {k: np.array(v.value) for k, v in self.sv.items()}
             vals.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
                         S12b=np.array(self.S12b.value),
-                        lam=None if self.lam is None else float(self.lam.value))
+                        lam=None if self.lam is None else float(np.asarray(self.lam.value)))
             return _Point(out.status, t, out.solve_time, eps, vals)
         return _Point(out.status, t, out.solve_time, eps)
 
@@ -625,6 +646,60 @@ class InputDelayCertification:
     status: str
 
 
+class _CertifyProgram:
+    """The fixed-gain certification LMI of :func:`certify_input_delay`, compiled once.
+
+    The problem's matrices, ``B K`` and the weights are parameters: one program per shape.
+    """
+
+    def __init__(self, n: int, q: int, p: int, nominal: bool, state_delay: bool):
+        import cvxpy as cp
+        par, var = cp.Parameter, cp.Variable
+        self.nominal = nominal
+        self.A, self.A1, self.Ad = par((n, n)), par((n, n)), par((n, n))
+        self.wts = _Weights(*(par(nonneg=True) for _ in _Weights._fields))
+        sv = {k: var((n, n), symmetric=True) for k in ('P', 'S0', 'S1', 'R0', 'R1', 'Q')}
+        self.sv = sv
+        self.P2, self.P3, self.S12, self.t = var((n, n)), var((n, n)), var((n, n)), var()
+        P2, P3, S12, t = self.P2, self.P3, self.S12, self.t
+        rows = _phi_rows(self.A, self.A1, self.Ad, self.wts, sv['P'], P2, P3, sv['S0'],
+                         sv['S1'], sv['R0'], sv['R1'], S12, sv['Q'] if state_delay else None)
+        lyap = [sv[k] for k in ('P', 'S0', 'S1', 'R0', 'R1')] + (
+            [sv['Q']] if state_delay else [])
+        norm = sum(cp.trace(M) for M in lyap)
+        cons = []
+        self.d = None
+        k = len(rows)
+        if not nominal:
+            self.FtF, self.BE = par((n, n)), par((n, q))
+            self.d = d = var()
+            rows[3][3] = rows[3][3] + d * self.FtF
+            U = [P2.T @ self.BE, P3.T @ self.BE] + [np.zeros((n, q))] * (k - 2)
+            for r, u in zip(rows, U):
+                r.append(u)
+            rows.append([u.T for u in U] + [-d * np.eye(q)])
+            norm = norm + d
+            cons.append(d >= t)
+        L = cp.bmat(rows)
+        L = 0.5 * (L + L.T)
+        RC = cp.bmat([[sv['R1'], S12], [S12.T, sv['R1']]])
+        cons += [L << -t * np.eye(L.shape[0]), 0.5 * (RC + RC.T) >> t * np.eye(2 * n),
+                 norm <= 1]
+        cons += [M >> t * np.eye(n) for M in lyap]
+        self.problem = cp.Problem(cp.Maximize(t), cons)
+
+    def solve(self, problem: Problem, K: np.ndarray, weights: _Weights, solver: str):
+        self.A.value, self.A1.value = problem.A, problem.B @ K
+        self.Ad.value = problem.A_tau
+        for p, v in zip(self.wts, weights):
+            p.value = v
+        if not self.nominal:
+            self.FtF.value = problem.F.T @ problem.F
+            self.BE.value = problem.B @ problem.E
+        return solve(self.problem, solver, what='the input-delay certification LMI for K',
+                     quiet_inaccurate=True)
+
+
 def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
                         alpha: float = 0.0, nominal: bool = False,
                         state_delay: bool | None = None, margin: float = DEFAULT_MARGIN,
@@ -638,55 +713,30 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
     ``maximize t`` with every block ``<= -t I`` / ``>= t I`` and a trace bound, and
     certified iff ``t >= margin`` and :func:`verify_input_delay` passes.
     """
-    import cvxpy as cp
     h0, h1 = _check_interval(h_min, h_max)
     _check(None, alpha, [1.0])
     K = np.asarray(K, float)
     if K.shape != (problem.m, problem.n):
         raise InputError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
     sd = _uses_state_delay(problem, state_delay)
-    n = problem.n
-    sv = {k: cp.Variable((n, n), symmetric=True) for k in ('P', 'S0', 'S1', 'R0', 'R1', 'Q')}
-    P2, P3, S12, t = cp.Variable((n, n)), cp.Variable((n, n)), cp.Variable((n, n)), cp.Variable()
-    rows = _phi_rows(problem.A, problem.B @ K, problem.A_tau, problem.tau, h0, h1, alpha,
-                     sv['P'], P2, P3, sv['S0'], sv['S1'], sv['R0'], sv['R1'], S12,
-                     sv['Q'] if sd else None)
-    lyap = [sv[k] for k in ('P', 'S0', 'S1', 'R0', 'R1')] + ([sv['Q']] if sd else [])
-    norm = sum(cp.trace(M) for M in lyap)
-    cons = []
-    d = None
-    k = len(rows)
-    if not nominal:
-        q = problem.E.shape[1]
-        d = cp.Variable()
-        FtF = problem.F.T @ problem.F
-        rows[3][3] = rows[3][3] + d * FtF
-        BE = problem.B @ problem.E
-        U = [P2.T @ BE, P3.T @ BE] + [np.zeros((n, q))] * (k - 2)
-        for r, u in zip(rows, U):
-            r.append(u)
-        rows.append([u.T for u in U] + [-d * np.eye(q)])
-        norm = norm + d
-        cons.append(d >= t)
-    L = cp.bmat(rows)
-    L = 0.5 * (L + L.T)
-    RC = cp.bmat([[sv['R1'], S12], [S12.T, sv['R1']]])
-    cons += [L << -t * np.eye(L.shape[0]), 0.5 * (RC + RC.T) >> t * np.eye(2 * n), norm <= 1]
-    cons += [M >> t * np.eye(n) for M in lyap]
-    prob = cp.Problem(cp.Maximize(t), cons)
-    out = solve(prob, solver, what='the input-delay certification LMI for K',
-                quiet_inaccurate=True)
-    if out.status not in OK_STATUSES or t.value is None or sv['P'].value is None:
+    key = ('input_delay_certify', problem.n, problem.E.shape[1], problem.F.shape[0], nominal,
+           sd)
+    prog = cached_program(key, lambda: _CertifyProgram(*key[1:]))
+    out = prog.solve(problem, K, _weights(h0, h1, alpha, problem.tau), solver)
+    values = {k: v.value for k, v in prog.sv.items()}
+    t, d = prog.t.value, None if prog.d is None else prog.d.value
+    if out.status not in OK_STATUSES or t is None or values['P'] is None:
         return InputDelayCertification(False, -math.inf, None, None, out.status)
-    tv = float(t.value)
+    tv = float(t)
     if tv < margin:
         return InputDelayCertification(False, tv, None, None, out.status)
     cert = InputDelayCertificate(
-        P=sym(sv['P'].value), P2=np.array(P2.value), P3=np.array(P3.value),
-        S0=sym(sv['S0'].value), S1=sym(sv['S1'].value), R0=sym(sv['R0'].value),
-        R1=sym(sv['R1'].value), S12=np.array(S12.value),
-        Q=sym(sv['Q'].value) if sd else None,
-        lam=None if d is None else 1.0 / float(d.value))
+        P=sym(np.asarray(values['P'])), P2=np.array(prog.P2.value),
+        P3=np.array(prog.P3.value), S0=sym(np.asarray(values['S0'])),
+        S1=sym(np.asarray(values['S1'])), R0=sym(np.asarray(values['R0'])),
+        R1=sym(np.asarray(values['R1'])), S12=np.array(prog.S12.value),
+        Q=sym(np.asarray(values['Q'])) if sd else None,
+        lam=None if d is None else 1.0 / float(d))
     ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
     return InputDelayCertification(ver.ok, tv, cert, ver, out.status)
 
@@ -749,8 +799,9 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     h0 = _check_interval(h_min, max(float(h_min), tol))[0]
     if not (math.isfinite(h_hi) and h_hi > h0 and tol > 0):
         raise InputError(f'need h_hi > h_min and tol > 0, got h_hi={h_hi!r}, tol={tol!r}')
-    kw = dict(gain_bound=gain_bound, alpha=alpha, nominal=nominal, state_delay=state_delay,
-              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    kw: dict[str, Any] = dict(gain_bound=gain_bound, alpha=alpha, nominal=nominal,
+                              state_delay=state_delay, eps_grid=eps_grid, refine=refine,
+                              margin=margin, solver=solver)
     last: list[float] = []
 
     def trial(h1: float) -> InputDelayResult | None:
@@ -814,8 +865,9 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     InfeasibleError
         Not even ``alpha = 0`` is certified.
     """
-    kw = dict(gain_bound=gain_bound, nominal=nominal, state_delay=state_delay,
-              eps_grid=eps_grid, refine=refine, margin=margin, solver=solver)
+    kw: dict[str, Any] = dict(gain_bound=gain_bound, nominal=nominal,
+                              state_delay=state_delay, eps_grid=eps_grid, refine=refine,
+                              margin=margin, solver=solver)
     base = _try(problem, h_min, h_max, alpha=0.0, **kw)
     if base is None:
         synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason

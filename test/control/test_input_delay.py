@@ -137,7 +137,9 @@ def test_paper_state_delay_is_included_and_checked_at_tau(paper_problem):
         assert spectral_abscissa(p.A, A1, p.tau) < -0.5
 
 
-@pytest.mark.parametrize('seed,n,m', [(3, 3, 1), (7, 4, 2)])
+# (7, 4, 2) takes ~4 s: slow; the same claim on a random problem of general size stays in
+# the quick set with (3, 3, 1)
+@pytest.mark.parametrize('seed,n,m', [(3, 3, 1), pytest.param(7, 4, 2, marks=pytest.mark.slow)])
 def test_random_problems(seed, n, m):
     rng = np.random.default_rng(seed)
     A = rng.standard_normal((n, n))

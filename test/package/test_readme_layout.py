@@ -1,0 +1,80 @@
+"""README's *Layout* section matches the tree: every path it lists exists, and every package
+module, configuration file and test directory is listed."""
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from conftest import ROOT
+
+PKG = ROOT / 'nonfragile_tracker'
+
+
+def _layout_rows() -> list[tuple[list[str], str]]:
+    """(paths of the first column, description) of each row of the Layout table."""
+    text = (ROOT / 'README.md').read_text()
+    section = text.split('\n## Layout\n', 1)[1].split('\n## ', 1)[0]
+    rows = []
+    for line in section.splitlines():
+        if not line.startswith('| `'):
+            continue
+        first, desc = line[1:].split('|', 2)[:2]
+        rows.append((re.findall(r'`([^`]+)`', first), desc))
+    return rows
+
+
+def _listed_paths() -> list[str]:
+    """The first column's paths; a bare file name after a path is in that path's folder
+    (``nonfragile_tracker/runner.py``, ``reproduce.py``)."""
+    out = []
+    for paths, _ in _layout_rows():
+        folder = ''
+        for p in paths:
+            if '/' in p.rstrip('/'):
+                folder = p.rsplit('/', 1)[0] + '/' if not p.endswith('/') else ''
+                out.append(p)
+            else:
+                out.append(folder + p)
+    return out
+
+
+def _names_in(row_path: str) -> set[str]:
+    """Back-quoted words of the description of the row for ``row_path``."""
+    for paths, desc in _layout_rows():
+        if row_path in paths:
+            return set(re.findall(r'`([A-Za-z_][\w]*)`', desc))
+    raise AssertionError(f'README Layout has no row for {row_path}')
+
+
+def test_layout_section_has_rows():
+    assert len(_layout_rows()) >= 10
+
+
+@pytest.mark.parametrize('path', _listed_paths())
+def test_every_listed_path_exists(path):
+    assert (ROOT / path).exists(), f'README Layout lists {path}, which does not exist'
+
+
+@pytest.mark.parametrize('sub', ['control', 'nodes', 'bag', 'commands'])
+def test_every_module_of_a_subpackage_is_listed(sub):
+    modules = {p.stem for p in (PKG / sub).glob('*.py') if p.stem != '__init__'}
+    missing = modules - _names_in(f'nonfragile_tracker/{sub}/')
+    assert not missing, f'README Layout row nonfragile_tracker/{sub}/ misses {sorted(missing)}'
+
+
+def test_every_top_level_module_is_listed():
+    listed = set(_listed_paths())
+    modules = {f'nonfragile_tracker/{p.name}' for p in PKG.glob('*.py') if p.stem != '__init__'}
+    assert not modules - listed, sorted(modules - listed)
+
+
+def test_every_configuration_file_and_test_directory_is_listed():
+    config = {p.name for p in (ROOT / 'config').glob('*.yaml')}
+    names = set(re.findall(r'`([\w.]+\.yaml)`', dict(
+        (tuple(p), d) for p, d in _layout_rows())[('config/',)]))
+    assert not config - names, sorted(config - names)
+    tests = {p.name for p in (ROOT / 'test').iterdir()
+             if p.is_dir() and not p.name.startswith(('.', '__'))}
+    desc = dict((tuple(p), d) for p, d in _layout_rows())[('test/',)]
+    assert all(f'`{t}/' in desc for t in tests), (sorted(tests), desc)
