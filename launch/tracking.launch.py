@@ -35,7 +35,12 @@ def generate_launch_description():
     # with a recorder every lockstep publisher waits for it too (runner.lockstep_handshake)
     subscribers = ParameterValue(PythonExpression(["2 if '", record, "' == 'true' else 0"]),
                                  value_type=int)
-    has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
+    # the reference's samples have one subscriber to wait for: the recorder (the tracker
+    # follows the trajectory message)
+    # lockstep: the reference publishes the built-in path as a trajectory too
+    follow_only = PythonExpression(["'", mode, "' == 'lockstep' or '", trajectory, "' != ''"])
+    ref_subscribers = ParameterValue(PythonExpression(["1 if '", record, "' == 'true' else 0"]),
+                                     value_type=int)
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
     return LaunchDescription([
@@ -64,11 +69,11 @@ def generate_launch_description():
             Node(package='nonfragile_tracker', executable='reference', name='reference',
                  parameters=[scenario, common, {
                      'trajectory_file': ParameterValue(trajectory, value_type=str),
-                     'lockstep_subscribers': subscribers}],
+                     'lockstep_subscribers': ref_subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='tracker', name='tracker',
                  parameters=[scenario, gains, common, cmd, {
-                     'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool),
+                     'wait_for_trajectory': ParameterValue(follow_only, value_type=bool),
                      'lockstep_subscribers': subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='plant', name='plant',
