@@ -7,13 +7,18 @@ twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
 and, in lockstep mode, ``/clock`` and ``run_done``.
 
 Lockstep (default): at each step ``k`` the plant publishes ``/clock`` and ``pose``
-(the true pose) and, if an odometry sample is due at ``k``, ``odom``; only then does
-it wait for the tracker's command before stepping ``k -> k+1`` (at steps without
+(the true pose; each only when it has a subscriber - the tracker needs neither) and, if an
+odometry sample is due at ``k``, ``odom``; only then does it wait for the tracker's
+command before stepping ``k -> k+1`` (at steps without
 odometry the tracker has nothing to answer: the plant holds the command in force and
 steps on).  With the default plant odometry is due every step, so every step waits.
 The plant waits for its peers to be discovered, republishes step ``k`` every
 ``lockstep_retry`` s while it waits (peers ignore repeats), and aborts with exit
-code 5 after ``lockstep_timeout`` s of silence.  Real time: a wall timer steps at
+code 5 after ``lockstep_timeout`` s of silence.  With a recorder (``lockstep_recorder``)
+it starts once the recorder has announced ``recorder/ready`` and every ``/clock`` reader
+is matched, stays within ``lockstep_lead`` steps of ``recorder/progress`` (back-pressure:
+no queue overflows under load), and announces ``run_done/odom_count`` before
+``run_done``.  Real time: a wall timer steps at
 ``1/dt`` with the latest command (zero after ``cmd_timeout``).  The physics,
 including command latency, actuator lag, acceleration limits and odometry latency,
 rate and noise, is :class:`control.loop.UnicyclePlant`; an odometry message carries
@@ -232,8 +237,8 @@ class PlantNode(AdapterNode):
     def _publish_state(self, stamp_ns: int) -> bool:
         """Publish the current step (clock, true pose, odometry if due); True if odom went out."""
         p = self.plant
-        if self.mode == 'lockstep':
-            ns_to_stamp(stamp_ns, self._clock_msg.clock)
+        if self.mode == 'lockstep' and self.pub_clock.get_subscription_count():
+            ns_to_stamp(stamp_ns, self._clock_msg.clock)     # nobody on sim time: skip it
             self.pub_clock.publish(self._clock_msg)
         ns_to_stamp(stamp_ns, self._pose.header.stamp)
         fill_pose(self._pose.pose, p.x, p.y, p.th)

@@ -176,6 +176,7 @@ class ReferenceNode(AdapterNode):
         elif self.mode == 'lockstep' and not cfg.trajectory_topic:
             self._follow_analytic(start_ns)
         else:          # real time: the exact path's samples; a relay: the planner's plans
+            self.origin_ns = start_ns          # path time 0 = node start (real time)
             self._display(self.traj, start_ns)
         relay = cfg.trajectory_topic
         if relay:
