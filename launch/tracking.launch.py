@@ -42,7 +42,12 @@ def generate_launch_description():
                                  value_type=int)
     lockstep_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
                                            "' == 'lockstep'"])
-    has_trajectory = PythonExpression(["'", trajectory, "' != ''"])
+    # the tracker follows the trajectory message (in lockstep the reference publishes the
+    # built-in path as one too); the reference's per-step samples have one subscriber to
+    # wait for, the recorder
+    follow_only = PythonExpression(["'", mode, "' == 'lockstep' or '", trajectory, "' != ''"])
+    ref_subscribers = ParameterValue(PythonExpression(["1 if '", record, "' == 'true' else 0"]),
+                                     value_type=int)
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
     plant = Node(package='nonfragile_tracker', executable='plant', name='plant',
@@ -84,11 +89,11 @@ def generate_launch_description():
             Node(package='nonfragile_tracker', executable='reference', name='reference',
                  parameters=[scenario, common, {
                      'trajectory_file': ParameterValue(trajectory, value_type=str),
-                     'lockstep_subscribers': subscribers}],
+                     'lockstep_subscribers': ref_subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='tracker', name='tracker',
                  parameters=[scenario, gains, common, cmd, {
-                     'wait_for_trajectory': ParameterValue(has_trajectory, value_type=bool),
+                     'wait_for_trajectory': ParameterValue(follow_only, value_type=bool),
                      'lockstep_subscribers': subscribers}],
                  output='screen'),
             plant,

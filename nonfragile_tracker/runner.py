@@ -90,20 +90,56 @@ def write_parameter_file(params: dict, path: Path) -> Path:
 def lockstep_handshake(record: bool) -> dict[str, dict]:
     """Start-up handshake parameters of a lockstep run, per node (``{node: {name: value}}``).
 
-    With a recorder every lockstep publisher waits for two matched subscribers (the
-    plant's odom: tracker and recorder; the tracker's cmd_vel: plant and recorder; the
-    reference topics: tracker and recorder), the recorder announces when its own
+    With a recorder the lockstep publishers wait for two matched subscribers (the
+    plant's odom: tracker and recorder; the tracker's cmd_vel: plant and recorder), the
+    recorder announces when its own
     subscriptions have matched (``lockstep_gate``) and the plant waits for that
     (``lockstep_recorder``): DDS matching is per side, so both sides are checked and the
-    bag gets every step from the first.  Without a recorder the plant waits for its one
-    subscriber and the tracker and reference answer at once (a lost first sample there is
-    made good by the plant's republished step).
+    bag gets every step from the first.  The reference's per-step samples are off the
+    critical path (the tracker follows the trajectory message): they wait for the recorder
+    only, and steps seen before it matched are published then.  Without a recorder the
+    plant waits for its one subscriber and the tracker answers at once (a lost first
+    sample there is made good by the plant's republished step).
     """
     n = 2 if record else 0
     out = {'plant': {'lockstep_subscribers': max(n, 1), 'lockstep_recorder': record},
-           'tracker': {'lockstep_subscribers': n}, 'reference': {'lockstep_subscribers': n}}
+           'tracker': {'lockstep_subscribers': n},
+           'reference': {'lockstep_subscribers': 1 if record else 0}}
     if record:
         out['recorder'] = {'lockstep_gate': True}
+    return out
+
+
+def with_horizon(params: dict) -> dict:
+    """``params`` with the reference's ``horizon`` fitted to the plant's ``duration``.
+
+    A built-in path is published as a trajectory over ``[0, horizon]``; after it the
+    tracker brings the robot to rest.  A lockstep run ends after ``duration``: the
+    horizon is ``duration`` + 1 s unless the parameters give one (then at least that);
+    a real-time plant with ``duration`` 0 runs until stopped: the default horizon stays.
+    """
+    plant = params.get('plant', {}).get('ros__parameters', {})
+    ref = params.setdefault('reference', {}).setdefault('ros__parameters', {})
+    duration = float(plant.get('duration', 60.0))
+    if duration <= 0.0:
+        return params
+    if 'horizon' not in ref or duration + 1.0 > float(ref['horizon']):
+        ref['horizon'] = duration + 1.0
+    return params
+
+
+def lockstep_parameters(record: bool) -> dict[str, dict]:
+    """Per-node parameters of a lockstep run: :func:`lockstep_handshake` and the message set.
+
+    The tracker follows only the trajectory message (``wait_for_trajectory``: the
+    reference publishes the built-in path as one in lockstep), so a step is ``odom`` in,
+    ``cmd_vel`` out; the reference publishes its per-step samples only for a recorder
+    (``publish_samples``; without one it has no ``/clock`` subscription either).  Real-time
+    runs keep the defaults (the tracker follows the samples of a built-in path there).
+    """
+    out = lockstep_handshake(record)
+    out['tracker']['wait_for_trajectory'] = True
+    out['reference']['publish_samples'] = record
     return out
 
 
@@ -189,7 +225,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     ``duration``.
     """
     env = isolated_env(env)
-    params_file = write_parameter_file(params, run_dir / 'params.yaml')
+    params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
     py = sys.executable
     procs: dict[str, subprocess.Popen] = {}
     logs: dict[str, IO[str]] = {}
@@ -209,9 +245,9 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
             if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
                 progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
 
-    hand = lockstep_handshake(record)
+    realtime = is_realtime(params)
+    hand = lockstep_handshake(record) if realtime else lockstep_parameters(record)
     try:
-        realtime = is_realtime(params)
         if record:
             extra = ['-p', f'output:={bag}'] + ([] if realtime else [
                 '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
@@ -287,6 +323,8 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     from .nodes.reference import ReferenceNode
     from .nodes.tracker import TrackerNode
 
+    params = with_horizon(params)
+
     def node_overrides(name: str, extra: dict | None = None) -> list:
         vals = dict(params.get(name, {}).get('ros__parameters', {}))
         vals.update(extra or {})
@@ -300,7 +338,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes: list[AdapterNode] = []
     bag = None
-    hand = lockstep_handshake(record)
+    hand = lockstep_handshake(record) if is_realtime(params) else lockstep_parameters(record)
     try:
         if record:
             from .nodes.recorder import Recorder

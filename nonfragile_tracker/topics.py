@@ -28,6 +28,14 @@ DIAGNOSTICS = '/diagnostics'
 #: every recorded lockstep topic's subscription has matched its publisher; the plant
 #: (``lockstep_recorder``) starts the run only after it.  Not recorded.
 RECORDER_READY = 'recorder/ready'
+#: The recorder's progress (std_msgs/UInt64, reliable, volatile): the stamp (ns) up to which
+#: every recorded per-step topic has arrived; a plant with ``lockstep_recorder`` runs at
+#: most ``lockstep_lead`` steps ahead of it (no sample lost to a full queue).  Not recorded.
+RECORDER_PROGRESS = 'recorder/progress'
+#: How many odometry messages (distinct stamps) a lockstep plant published in its run
+#: (std_msgs/UInt64, transient-local), sent before ``run_done``: with odom_rate or
+#: odom_latency there are fewer than steps, and each gets one ``cmd_vel``.  Not recorded.
+ODOM_COUNT = 'run_done/odom_count'
 
 #: topic -> ROS 2 message type, for every topic a run records.
 TYPES: dict[str, str] = {

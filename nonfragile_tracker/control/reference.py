@@ -46,6 +46,8 @@ class Path:
     params: Mapping[str, float]
     _fn: Callable[[float], tuple[float, float, float, float, float, float]]
     _heading0: float
+    #: Highest multiple of ``rate`` among the path's harmonics (sampling density).
+    harmonic: int = 1
 
     def sample(self, t: float) -> RefSample:
         """Position, velocity, acceleration and heading of the path at time ``t``."""
@@ -103,7 +105,7 @@ def figure_eight(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
     h0 = math.atan2(math.cos(2 * ph), math.cos(ph)) if w >= 0 else \
         math.atan2(-math.cos(2 * ph), -math.cos(ph))
     return Path('figure_eight', dict(radius=r, rate=w, center_x=cx, center_y=cy, phase=ph),
-                fn, h0)
+                fn, h0, harmonic=2)
 
 
 PATHS: dict[str, Callable[..., Path]] = {'circle': circle, 'figure_eight': figure_eight}

@@ -7,13 +7,18 @@ twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
 and, in lockstep mode, ``/clock`` and ``run_done``.
 
 Lockstep (default): at each step ``k`` the plant publishes ``/clock`` and ``pose``
-(the true pose) and, if an odometry sample is due at ``k``, ``odom``; only then does
-it wait for the tracker's command before stepping ``k -> k+1`` (at steps without
+(the true pose; each only when it has a subscriber - the tracker needs neither) and, if an
+odometry sample is due at ``k``, ``odom``; only then does it wait for the tracker's
+command before stepping ``k -> k+1`` (at steps without
 odometry the tracker has nothing to answer: the plant holds the command in force and
 steps on).  With the default plant odometry is due every step, so every step waits.
 The plant waits for its peers to be discovered, republishes step ``k`` every
 ``lockstep_retry`` s while it waits (peers ignore repeats), and aborts with exit
-code 5 after ``lockstep_timeout`` s of silence.  Real time: a wall timer steps at
+code 5 after ``lockstep_timeout`` s of silence.  With a recorder (``lockstep_recorder``)
+it starts once the recorder has announced ``recorder/ready`` and every ``/clock`` reader
+is matched, stays within ``lockstep_lead`` steps of ``recorder/progress`` (back-pressure:
+no queue overflows under load), and announces ``run_done/odom_count`` before
+``run_done``.  Real time: a wall timer steps at
 ``1/dt`` with the latest command (zero after ``cmd_timeout``).  The physics,
 including command latency, actuator lag, acceleration limits and odometry latency,
 rate and noise, is :class:`control.loop.UnicyclePlant`; an odometry message carries
@@ -65,6 +70,10 @@ PARAMS = [
     Param('lockstep_recorder', False, 'lockstep: also wait until a recorder (lockstep_gate) '
           'has announced on recorder/ready that its subscriptions are matched (and pose has a '
           'matched subscriber if the graph shows one)', read_only=True),
+    Param('lockstep_lead', 30, 'lockstep with lockstep_recorder: run at most this many steps '
+          '(plus the odometry latency and period) ahead of the recorder\'s progress, so its '
+          'queues (depth 100) never overflow under load; 0 = do not wait for the recorder',
+          read_only=True),
     Param('enable_stamped_cmd_vel', False, 'subscribe cmd_vel as geometry_msgs/TwistStamped '
           '(Nav2 name) instead of Twist', read_only=True),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of odom and pose (REP-105)', read_only=True),
@@ -109,6 +118,7 @@ class PlantSettings:
     lockstep_retry: float
     lockstep_subscribers: int
     lockstep_recorder: bool
+    lockstep_lead: int
     cmd_timeout: float
     stamped: bool
     odom_frame: str
@@ -121,6 +131,10 @@ def plant_settings(values: dict) -> PlantSettings:
     pose0 = list(values['initial_pose'])
     if len(pose0) != 3:
         raise StartupError(f'initial_pose needs [x, y, yaw], got {pose0}')
+    if not 0 <= values['lockstep_lead'] <= topics.DEPTH // 2:
+        raise StartupError(f'lockstep_lead must be 0 .. {topics.DEPTH // 2} steps (the topics '
+                           f'keep the last {topics.DEPTH} messages), got '
+                           f'{values["lockstep_lead"]}')
     if values['lockstep_subscribers'] < 1:
         raise StartupError(f'lockstep_subscribers must be at least 1, got '
                            f'{values["lockstep_subscribers"]}')
@@ -144,6 +158,7 @@ def plant_settings(values: dict) -> PlantSettings:
                          lockstep_retry=values['lockstep_retry'],
                          lockstep_subscribers=values['lockstep_subscribers'],
                          lockstep_recorder=values['lockstep_recorder'],
+                         lockstep_lead=values['lockstep_lead'],
                          cmd_timeout=values['cmd_timeout'],
                          stamped=values['enable_stamped_cmd_vel'],
                          odom_frame=values['odom_frame'], base_frame=values['base_frame'])
@@ -192,10 +207,24 @@ class PlantNode(AdapterNode):
             self.pub_clock = self.create_publisher(Clock, topics.CLOCK, DATA_QOS)
             self.pub_done = self.create_publisher(UInt64, topics.RUN_DONE, LATCHED_QOS)
             self._clock_msg = Clock()
+            self.pub_odom_count = self.create_publisher(UInt64, topics.ODOM_COUNT, LATCHED_QOS)
+            self.odom_sent = 0                   # odometry messages (distinct stamps) so far
+            self._last_odom_ns = -1
             self.recorder_ready = not self.config.lockstep_recorder
+            # back-pressure: the recorder's progress (stamp ns) and how far ahead we may run
+            odo = cfg.odometry
+            self.lead_ns = ((self.config.lockstep_lead + odo.latency_steps + odo.period_steps)
+                            * self.dt_ns)
+            self.paced = self.config.lockstep_recorder and self.config.lockstep_lead > 0
+            self.recorder_progress = 0
+            self.holding = False                 # step published only when the recorder caught up
+            self.holds = 0
             if self.config.lockstep_recorder:
                 self.create_subscription(UInt64, topics.RECORDER_READY, self._on_recorder_ready,
                                          LATCHED_QOS)
+            if self.paced:
+                self.create_subscription(UInt64, topics.RECORDER_PROGRESS,
+                                         self._on_recorder_progress, DATA_QOS)
             self.started = False
             self.waiting_since = time.monotonic()
             self.last_publish = 0.0
@@ -208,8 +237,8 @@ class PlantNode(AdapterNode):
     def _publish_state(self, stamp_ns: int) -> bool:
         """Publish the current step (clock, true pose, odometry if due); True if odom went out."""
         p = self.plant
-        if self.mode == 'lockstep':
-            ns_to_stamp(stamp_ns, self._clock_msg.clock)
+        if self.mode == 'lockstep' and self.pub_clock.get_subscription_count():
+            ns_to_stamp(stamp_ns, self._clock_msg.clock)     # nobody on sim time: skip it
             self.pub_clock.publish(self._clock_msg)
         ns_to_stamp(stamp_ns, self._pose.header.stamp)
         fill_pose(self._pose.pose, p.x, p.y, p.th)
@@ -221,6 +250,9 @@ class PlantNode(AdapterNode):
             self._odom.twist.twist.linear.x = meas.v
             self._odom.twist.twist.angular.z = meas.w
             self.pub_odom.publish(self._odom)
+            if self.mode == 'lockstep' and odom_ns != self._last_odom_ns:
+                self.odom_sent += 1                  # a republished step counts once
+                self._last_odom_ns = odom_ns
         if self.pub_pose.get_subscription_count():       # nobody listening: skip it
             self.pub_pose.publish(self._pose)
         self.last_publish = time.monotonic()
@@ -232,6 +264,18 @@ class PlantNode(AdapterNode):
             self.get_logger().info('recorder ready: its subscriptions are matched')
         self.recorder_ready = True
 
+    def _on_recorder_progress(self, msg: UInt64) -> None:
+        self.recorder_progress = max(self.recorder_progress, int(msg.data))
+        if self.holding and not self.finished:
+            self.waiting_since = time.monotonic()     # the recorder is alive: no abort
+            if not self._ahead():
+                self.holding = False
+                self._publish_step()
+
+    def _ahead(self) -> bool:
+        """True if step k is more than the allowed lead past the recorder's progress."""
+        return step_time_ns(self.plant.k, self.dt) - self.recorder_progress > self.lead_ns
+
     def _peers_ready(self) -> bool:
         """Both sides matched: our publishers count their subscribers, the recorder says so.
 
@@ -241,13 +285,16 @@ class PlantNode(AdapterNode):
         lose the first steps, so with ``lockstep_recorder`` it has to announce its side.
         """
         if not (self.sub_cmd.get_publisher_count() >= 1
-                and self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers
-                and self.pub_clock.get_subscription_count() >= 1):
+                and self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers):
             return False
         if not self.config.lockstep_recorder:
             return True
         pose_wanted = min(1, self.count_subscribers(self.pub_pose.topic_name))   # recorded?
-        return self.recorder_ready and self.pub_pose.get_subscription_count() >= pose_wanted
+        # /clock: every reader in the graph matched (the reference's samples and the
+        # recorder's sim time follow it, and nobody republishes a step for them)
+        clock_wanted = max(1, self.count_subscribers(self.pub_clock.topic_name))
+        return (self.recorder_ready and self.pub_pose.get_subscription_count() >= pose_wanted
+                and self.pub_clock.get_subscription_count() >= clock_wanted)
 
     def _lockstep_watchdog(self) -> None:
         if self.finished:
@@ -264,7 +311,10 @@ class PlantNode(AdapterNode):
                 self._abort('no tracker/reference discovered', 'startup_timeout')
             return
         if now - self.waiting_since > self.config.lockstep_timeout:
-            self._abort(f'no command for step {self.plant.k}')
+            self._abort(f'the recorder made no progress (at stamp {self.recorder_progress} ns)'
+                        if self.holding else f'no command for step {self.plant.k}')
+        elif self.holding:
+            return                                 # step k not published yet: nothing to repeat
         elif now - self.last_publish > self.config.lockstep_retry:
             self._publish_state(step_time_ns(self.plant.k, self.dt))   # same sample again
 
@@ -277,12 +327,14 @@ class PlantNode(AdapterNode):
 
     def _finish(self) -> None:
         if self.mode == 'lockstep':
+            self.pub_odom_count.publish(UInt64(data=self.odom_sent))
             self.pub_done.publish(UInt64(data=self.plant.k))
         self.finished = True          # run() stops spinning, then drain() waits for the acks
 
     def drain(self) -> None:
         """After the run: give ``run_done`` up to 2 s to reach its subscribers."""
         if self.mode == 'lockstep':
+            self.pub_odom_count.wait_for_all_acked(Duration(seconds=2.0))
             self.pub_done.wait_for_all_acked(Duration(seconds=2.0))
 
     def _on_stamped_cmd(self, msg: TwistStamped) -> None:
@@ -307,6 +359,10 @@ class PlantNode(AdapterNode):
         self.plant.command(v, w)
         self._advance()
         self.waiting_since = time.monotonic()
+        if self.paced and self._ahead():
+            self.holding = True                  # the recorder's progress publishes it
+            self.holds += 1
+            return
         self._publish_step()
 
     def _advance(self) -> None:
@@ -324,8 +380,9 @@ class PlantNode(AdapterNode):
             self._advance()
 
     def _complete(self) -> None:
+        held = f', waited for the recorder {self.holds} times' if self.paced else ''
         self.get_logger().info(f'lockstep run complete: {self.plant.k} steps, '
-                               f't = {self.plant.t:.3f} s')
+                               f't = {self.plant.t:.3f} s{held}')
         self._finish()
 
     # ------------------------------------------------------------------ real time

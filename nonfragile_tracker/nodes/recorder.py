@@ -22,14 +22,18 @@ Lockstep start (``lockstep_gate``): DDS matches each side on its own, so the pla
 counting the recorder's subscriptions does not mean they receive yet.  The recorder
 publishes ``recorder/ready`` (latched) once each recorded lockstep topic's subscription
 has matched its publisher, and a plant with ``lockstep_recorder`` starts only then; a
-republished step (a stamp already recorded on that topic) is written once.
+republished step (a stamp already recorded on that topic) is written once.  During the
+run it publishes ``recorder/progress`` (the stamp up to which every recorded per-step topic
+has arrived, every 10 messages and every 20 ms) and the plant stays at most
+``lockstep_lead`` steps ahead of it, so under load no queue (depth 100) overflows.
 
 Ending: SIGINT/SIGTERM close the bag cleanly (MCAP summary + metadata.yaml)
-and exit 0.  In a lockstep run the plant publishes ``run_done`` = S (the last
-step); the recorder then waits until it has S+1 distinct stamps on each of
-``odom``, ``pose``, ``reference/pose|twist|accel`` and S+1 ``cmd_vel``
-messages (those it records), or ``drain_timeout`` wall seconds, logs what it
-got (a warning lists shortfalls), closes the bag and exits 0.  Chunks are
+and exit 0.  In a lockstep run the plant publishes ``run_done/odom_count`` = N (the
+odometry messages it sent: fewer than steps with ``odom_rate`` or ``odom_latency``) and
+``run_done`` = S (the last step); the recorder then waits until it has S+1 distinct
+stamps on each of ``pose``, ``reference/pose|twist|accel``, N distinct ``odom`` stamps
+and N ``cmd_vel`` messages (those it records), or ``drain_timeout`` wall seconds, logs
+what it got (a warning lists shortfalls), closes the bag and exits 0.  Chunks are
 flushed to disk every ``chunk_size`` bytes or ``flush_period`` s, so a killed
 recorder loses at most that much (``nonfragile_tracker bag repair``).
 
@@ -68,6 +72,14 @@ LOCKSTEP_TOPICS = topics.LOCKSTEP_TOPICS
 #: Topics whose subscriptions must have matched a publisher before the gate opens.
 _GATED = frozenset(topics.LOCKSTEP_TOPICS) | {topics.CLOCK}
 _STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
+#: Topics with one message per step whose latest stamp is the recorder's progress.
+_PER_STEP = (topics.CLOCK, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
+#: Topics with one message per odometry sample (fewer than steps with odom_rate/latency).
+_PER_ODOM = (topics.ODOM, topics.CMD_VEL)
+#: The progress goes out every this many messages of a paced topic (and on a 20 ms timer).
+PROGRESS_EVERY = 10
+#: Progress that never holds a plant back (nothing recorded to pace by).
+_NO_PACING = (1 << 63) - 1
 _RUNS_ROOT = 'runs'
 
 PARAMS = [
@@ -192,6 +204,7 @@ class Recorder(AdapterNode):
         self.counts: dict[str, int] = {}
         self.stamps: dict[str, set[int]] = {}
         self.final_step: int | None = None
+        self.odom_count: int | None = None     # odometry messages the plant says it sent
         self.repeats = 0                  # lockstep_gate: republished steps not written again
         self._drain_deadline: float | None = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -208,6 +221,12 @@ class Recorder(AdapterNode):
                                     custom_data={'recorder': self.get_fully_qualified_name()})
         except BagError as exc:
             raise StartupError(f'recorder: {exc}') from None
+        # back-pressure: the latest stamp per paced topic; their minimum is the progress
+        paced = [n for n in _PER_STEP if n in names] or \
+            [n for n in (topics.ODOM,) if n in names]
+        self._latest: dict[str, int] = {n: -1 for n in paced}
+        self._paced_count = 0
+        self._progress_sent = -1
         self._subs = {}
         self._resolved: dict[str, str] = {}
         for name in names:
@@ -215,12 +234,17 @@ class Recorder(AdapterNode):
             if name in _STAMPED:
                 self.stamps[name] = set()
             self._subscribe(name)
-        self._gate_timer = self.pub_ready = None
+        self._gate_timer = self.pub_ready = self.pub_progress = None
         self.ready = not cfg.lockstep_gate
         if cfg.lockstep_gate:
             self.pub_ready = self.create_publisher(UInt64, topics.RECORDER_READY, _LATCHED_QOS)
+            self.pub_progress = self.create_publisher(UInt64, topics.RECORDER_PROGRESS,
+                                                      _DATA_QOS)
             self._gate_started = self._steady.now()
             self._gate_timer = self.create_timer(0.02, self._check_gate, clock=self._steady)
+            self._progress_timer = self.create_timer(0.02, self._publish_progress,
+                                                     clock=self._steady)
+        self.create_subscription(UInt64, topics.ODOM_COUNT, self._on_odom_count, _LATCHED_QOS)
         # run_done: recorded and handled by one subscription (so it is in the bag before the
         # drain can close it); a deserialized one if it is not recorded
         self._done_sub = None if topics.RUN_DONE in names else self.create_subscription(
@@ -275,12 +299,19 @@ class Recorder(AdapterNode):
         topic_stamps = self.stamps.get(name)
         is_done = name == topics.RUN_DONE
         skip_repeats = self.config.lockstep_gate and topic_stamps is not None
+        latest = self._latest if name in self._latest and self.config.lockstep_gate else None
 
         def callback(raw: bytes) -> None:
             writer = self.writer
             if writer is None or writer.closed:
                 return
-            stamp = _header_stamp_ns(raw) if topic_stamps is not None else None
+            stamp = _header_stamp_ns(raw) if topic_stamps is not None or latest is not None \
+                else None
+            if latest is not None and stamp is not None and stamp > latest[name]:
+                latest[name] = stamp
+                self._paced_count += 1
+                if self._paced_count % PROGRESS_EVERY == 0:
+                    self._publish_progress()
             if skip_repeats and stamp in topic_stamps:
                 self.repeats += 1          # a lockstep step republished: recorded once
                 return
@@ -290,7 +321,7 @@ class Recorder(AdapterNode):
                 self.get_logger().info(f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
-            if stamp is not None:
+            if topic_stamps is not None:
                 topic_stamps.add(stamp)
             if is_done:
                 self._on_run_done(deserialize_message(raw, UInt64))
@@ -312,16 +343,36 @@ class Recorder(AdapterNode):
         if self.writer is not None and not self.writer.closed:
             self.writer.flush()
 
+    def _publish_progress(self) -> None:
+        """Tell the plant how far every paced topic has been recorded (back-pressure)."""
+        if self.pub_progress is None or self.finished:
+            return
+        progress = min(self._latest.values()) if self._latest else _NO_PACING
+        if progress != self._progress_sent and progress >= 0:
+            self._progress_sent = progress
+            self.pub_progress.publish(UInt64(data=progress))
+
     # ------------------------------------------------------------------ run_done
     def _received(self, name: str) -> int:
         return len(self.stamps[name]) if name in self.stamps else self.counts.get(name, 0)
 
+    def _needed(self, name: str) -> int:
+        """Samples of ``name`` the run produced: S+1 per step; odom/cmd_vel as announced."""
+        assert self.final_step is not None
+        if name in _PER_ODOM and self.odom_count is not None:
+            return self.odom_count
+        return self.final_step + 1
+
     def _shortfalls(self) -> dict[str, int]:
         if self.final_step is None:
             return {}
-        need = self.final_step + 1
-        return {n: need - self._received(n) for n in LOCKSTEP_TOPICS
-                if n in self.counts and self._received(n) < need}
+        return {n: self._needed(n) - self._received(n) for n in LOCKSTEP_TOPICS
+                if n in self.counts and self._received(n) < self._needed(n)}
+
+    def _on_odom_count(self, msg: UInt64) -> None:
+        self.odom_count = int(msg.data)
+        if self.final_step is not None and not self.finished and self._drained():
+            self._finish()
 
     def _drained(self) -> bool:
         return not self._shortfalls()
@@ -332,8 +383,9 @@ class Recorder(AdapterNode):
         self.final_step = int(msg.data)
         timeout = self.config.drain_timeout
         self._drain_deadline = time.monotonic() + timeout
+        odom = '' if self.odom_count is None else f' ({self.odom_count} odom/cmd_vel)'
         self.get_logger().info(f'run_done: last step {self.final_step}; waiting up to {timeout} s '
-                               f'for {self.final_step + 1} samples per lockstep topic')
+                               f'for {self.final_step + 1} samples per lockstep topic{odom}')
         if self._drained():
             self._finish()
         else:
@@ -365,7 +417,8 @@ class Recorder(AdapterNode):
         if self.finished:
             return
         self.finished = True
-        for timer in (self._flush_timer, self._drain_timer):
+        for timer in (self._flush_timer, self._drain_timer,
+                      getattr(self, '_progress_timer', None)):
             if timer is not None:
                 timer.cancel()
         writer, self.writer = self.writer, None

@@ -1,26 +1,33 @@
-"""``reference``: publishes the desired trajectory with its feedforward.
+"""``reference``: publishes the desired trajectory, and per-step samples of it.
 
-Publishes, all in frame ``odom`` and stamped with the sample time:
-``reference/pose`` (geometry_msgs/PoseStamped: position and tangent heading),
-``reference/twist`` (geometry_msgs/TwistStamped: linear = desired velocity in
-``odom``) and ``reference/accel`` (geometry_msgs/AccelStamped: linear = desired
-acceleration in ``odom``).  Lockstep: one sample per ``/clock`` message, at the
-clock's time.  Real time: a wall timer at ``publish_rate``.
+A trajectory reaches the tracker as one (transient-local) trajectory message, and the
+tracker samples it itself at each odometry stamp (:class:`control.follow.Follower`):
 
-Where the trajectory comes from (:mod:`control.trajectory`):
-
-* a built-in analytic path (``path``, default): exact, as :func:`control.reference.make_path`;
-  the tracker follows the three per-step topics (exact, golden bags unchanged);
+* a built-in analytic path (``path``, default), in lockstep: as
+  trajectory_msgs/MultiDOFJointTrajectory on ``trajectory_multidof`` - knots with pose,
+  velocity and acceleration over ``[0, horizon]`` (:func:`control.trajectory.analytic_knots`:
+  spaced so that the quintic Hermite interpolant the tracker rebuilds is the exact path to
+  about 1e-14 m).  In real time the built-in path goes as the samples below (exact);
 * a waypoint file (``trajectory_file``, CSV or YAML: t, x, y[, yaw][, speed]), or
-* a nav_msgs/Path relayed from ``trajectory_topic`` (e.g. a planner's output).
+* a nav_msgs/Path relayed from ``trajectory_topic`` (e.g. a planner's output): as
+  nav_msgs/Path on ``trajectory`` (poses at the knots, stamped origin + t).  With a relay
+  the built-in path is not published (the tracker waits at rest for the first plan; the
+  samples until then are those of the built-in path).
 
-A file or relayed trajectory is published on ``trajectory`` (nav_msgs/Path,
-transient-local; poses at the knots, stamped origin + t) for the tracker, which builds
-the same trajectory from it and samples it itself at the odometry stamp; the per-step
-samples are then those of the trajectory rebuilt from that very message (what the
-tracker follows).  Every source is also shown on ``reference/path`` (transient-local,
-for RViz).  A relayed Path that is not a valid trajectory is refused with the reason
-and the previous trajectory stays.
+The node follows the trajectory rebuilt from the very message it published (the same
+function as the tracker), so its samples are what the tracker follows.  Every source is
+also shown on ``reference/path`` (transient-local, for RViz).  A relayed Path that is not
+a valid trajectory is refused with the reason and the previous trajectory stays.
+
+Samples, for the bag and third-party consumers (off the tracker's critical path: the
+tracker does not wait for them): ``reference/pose`` (geometry_msgs/PoseStamped: position
+and tangent heading), ``reference/twist`` (geometry_msgs/TwistStamped: linear = desired
+velocity in ``odom``) and ``reference/accel`` (geometry_msgs/AccelStamped: linear = desired
+acceleration), all in frame ``odom``, stamped with the sample time.  Lockstep: one sample
+per ``/clock`` message at the clock's time (a step seen before the topics have
+``lockstep_subscribers`` matched subscribers is published once they have, so a recorder
+misses none); ``publish_samples: false`` drops them and the ``/clock`` subscription.  Real
+time: a wall timer at ``publish_rate``.
 """
 from __future__ import annotations
 
@@ -38,7 +45,11 @@ from ..control.reference import Path, make_path
 from ..control.trajectory import Trajectory, TrajectoryError, load_waypoints
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_reference, ns_to_stamp, run, stamp_ns)
-from .trajectory_io import path_to_trajectory, trajectory_to_path
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+from ..control.trajectory import analytic_knots
+from .trajectory_io import (multidof_to_trajectory, path_to_trajectory, states_to_multidof,
+                            trajectory_to_path)
 
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (one sample per /clock) or realtime (wall timer)',
@@ -50,10 +61,15 @@ PARAMS = [
     Param('phase', 0.0, 'phase of the path parameter at t = 0 (rad)', read_only=True),
     Param('publish_rate', 100.0, 'realtime: samples per second (Hz)', low=1e-3, high=1e5,
           read_only=True),
-    Param('lockstep_subscribers', 0, 'lockstep: publish a step\'s sample only once each '
-          'reference topic has this many matched subscribers (tracker and recorder: 2); '
-          'until then the step is left for the plant to republish; 0 = publish at once',
-          read_only=True),
+    Param('lockstep_subscribers', 0, 'lockstep: publish the samples only once each reference '
+          'topic has this many matched subscribers (a recorder: 1); steps seen before are '
+          'published then; 0 = publish at once', read_only=True),
+    Param('publish_samples', True, 'publish the per-step samples reference/pose|twist|accel '
+          '(lockstep: per /clock; real time: at publish_rate); the tracker does not need '
+          'them', read_only=True),
+    Param('horizon', 3600.0, 'built-in path: the trajectory message covers [0, horizon] s '
+          '(after it the tracker brings the robot to rest); `nonfragile_tracker run` makes '
+          'it at least the run\'s duration', low=1e-3, high=1e9, read_only=True),
     Param('trajectory_file', '', 'waypoint file (CSV or YAML: t, x, y[, yaw][, speed]) to '
           'follow instead of the built-in path; "" = built-in path', read_only=True),
     Param('trajectory_topic', '', 'relay nav_msgs/Path trajectories from this topic '
@@ -78,6 +94,8 @@ class ReferenceSettings:
     path: Path
     publish_rate: float
     lockstep_subscribers: int
+    publish_samples: bool
+    horizon: float
     trajectory_file: str
     trajectory_topic: str
     smoothing: float
@@ -102,6 +120,8 @@ def reference_settings(values: dict) -> ReferenceSettings:
         raise StartupError(f'display_points must be at least 2, got {values["display_points"]}')
     return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'],
                              lockstep_subscribers=values['lockstep_subscribers'],
+                             publish_samples=values['publish_samples'],
+                             horizon=values['horizon'],
                              trajectory_file=values['trajectory_file'],
                              trajectory_topic=values['trajectory_topic'],
                              smoothing=values['smoothing'],
@@ -123,20 +143,27 @@ class ReferenceNode(AdapterNode):
         self.pub_twist = self.create_publisher(TwistStamped, topics.REF_TWIST, DATA_QOS)
         self.pub_accel = self.create_publisher(AccelStamped, topics.REF_ACCEL, DATA_QOS)
         self.pub_traj = self.create_publisher(PathMsg, topics.TRAJECTORY, LATCHED_QOS)
+        self.pub_multidof = self.create_publisher(MultiDOFJointTrajectory,
+                                                  topics.TRAJECTORY_MULTIDOF, LATCHED_QOS)
         self.pub_display = self.create_publisher(PathMsg, topics.REF_PATH, LATCHED_QOS)
         self._msgs = (PoseStamped(), TwistStamped(), AccelStamped())
+        self._sample_pubs = (self.pub_pose, self.pub_twist, self.pub_accel)
         for m in self._msgs:
             m.header.frame_id = self.frame
         self.traj: Trajectory = Trajectory.analytic(self.path)
         self.origin_ns = 0
         self.last_refusal = ''
+        self._pending: list[int] = []      # lockstep: stamps seen before the subscribers
         if self.mode == 'lockstep':
-            self.set_parameters([Parameter('use_sim_time', value=True)])
-            self.sub_clock = self.create_subscription(Clock, topics.CLOCK, self._on_clock,
-                                                      DATA_QOS)
+            if cfg.publish_samples or cfg.trajectory_topic:   # sample and relay times
+                self.set_parameters([Parameter('use_sim_time', value=True)])
+            if cfg.publish_samples:
+                self.sub_clock = self.create_subscription(Clock, topics.CLOCK, self._on_clock,
+                                                          DATA_QOS)
         else:
             self.t0_ns = self.get_clock().now().nanoseconds   # path time 0 = node start
-            self.timer = self.create_timer(1.0 / cfg.publish_rate, self._on_timer)
+            if cfg.publish_samples:
+                self.timer = self.create_timer(1.0 / cfg.publish_rate, self._on_timer)
         start_ns = 0 if self.mode == 'lockstep' else self.t0_ns
         self._display_origin = start_ns
         file = cfg.trajectory_file
@@ -146,7 +173,10 @@ class ReferenceNode(AdapterNode):
             except (TrajectoryError, OSError) as exc:
                 raise StartupError(f'reference: trajectory_file: {exc}') from None
             self._follow(trajectory_to_path(traj, start_ns, self.frame), file)
-        else:
+        elif self.mode == 'lockstep' and not cfg.trajectory_topic:
+            self._follow_analytic(start_ns)
+        else:          # real time: the exact path's samples; a relay: the planner's plans
+            self.origin_ns = start_ns          # path time 0 = node start (real time)
             self._display(self.traj, start_ns)
         relay = cfg.trajectory_topic
         if relay:
@@ -167,6 +197,20 @@ class ReferenceNode(AdapterNode):
         else:
             times = np.linspace(traj.t_start, traj.t_end, n)
         self.pub_display.publish(trajectory_to_path(traj, origin_ns, self.frame, times))
+
+    def _follow_analytic(self, origin_ns: int) -> None:
+        """Publish the built-in path as knots and follow the trajectory rebuilt from them."""
+        try:
+            t_ns, states = analytic_knots(self.path, self.config.horizon)
+        except TrajectoryError as exc:
+            raise StartupError(f'reference: {exc}') from None
+        msg = states_to_multidof(t_ns, states, origin_ns, self.frame)
+        self.traj, self.origin_ns = multidof_to_trajectory(msg, frame=self.frame,
+                                                           source=f'path {self.path.name}')
+        self.pub_multidof.publish(msg)
+        self._display(Trajectory.analytic(self.path), origin_ns)
+        self.get_logger().info(f'trajectory: path {self.path.name} as {len(t_ns)} knots over '
+                               f'{self.config.horizon:g} s on {self.pub_multidof.topic_name}')
 
     def _follow(self, msg: PathMsg, source: str) -> None:
         """Adopt the trajectory of a timed Path that this node built, and publish it.
@@ -198,29 +242,42 @@ class ReferenceNode(AdapterNode):
             self.get_logger().error(f'refused trajectory: {exc}; keeping the previous one')
 
     def publish_sample(self, t_ns: int, t: float) -> None:
-        """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``."""
+        """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``.
+
+        Only to topics with a subscriber (nobody needs them per step: no work then).
+        """
+        pubs = self._sample_pubs
+        wanted = [p.get_subscription_count() > 0 for p in pubs]
+        if not any(wanted):
+            return
         ref = self.traj.sample(t)
-        pose, twist, accel = self._msgs
         for m in self._msgs:
             ns_to_stamp(t_ns, m.header.stamp)
-        fill_reference(ref, pose, twist, accel)
-        self.pub_pose.publish(pose)
-        self.pub_twist.publish(twist)
-        self.pub_accel.publish(accel)
+        fill_reference(ref, *self._msgs)
+        for pub, msg, w in zip(pubs, self._msgs, wanted):
+            if w:
+                pub.publish(msg)
 
     def _on_clock(self, msg: Clock) -> None:
+        t_ns = stamp_ns(msg.clock)
         need = self.config.lockstep_subscribers
         if need and any(p.get_subscription_count() < need
                for p in (self.pub_pose, self.pub_twist, self.pub_accel)):
-            return                         # not every subscriber matched: the plant
-                                           # republishes the step (its lockstep_retry)
-        t_ns = stamp_ns(msg.clock)
+            # not every subscriber matched yet: publish this step when they have (the
+            # tracker does not wait for the samples, so nobody republishes the step)
+            if len(self._pending) < 10 * topics.DEPTH:
+                self._pending.append(t_ns)
+            return
+        if self._pending:
+            pending, self._pending = self._pending, []
+            for s in pending:
+                if s != t_ns:
+                    self.publish_sample(s, (s - self.origin_ns) * 1e-9)
         self.publish_sample(t_ns, (t_ns - self.origin_ns) * 1e-9)
 
     def _on_timer(self) -> None:
         now = self.get_clock().now().nanoseconds
-        origin = self.t0_ns if self.traj.is_analytic else self.origin_ns
-        self.publish_sample(now, (now - origin) * 1e-9)
+        self.publish_sample(now, (now - self.origin_ns) * 1e-9)
 
 
 def main(args=None) -> int:

@@ -1,8 +1,9 @@
 """``tracker``: the non-fragile tracking law with K from parameters.
 
 Subscribes ``odom`` (nav_msgs/Odometry; its twist.linear.x initialises the
-compensator speed), ``reference/pose``, ``reference/twist``, ``reference/accel``;
-publishes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
+compensator speed) and the trajectory topics (below; with ``wait_for_trajectory: false``
+also ``reference/pose``, ``reference/twist``, ``reference/accel``); publishes
+``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
 ``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
 ``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
 z heading error in rad, in the reference point's frame; every step, when subscribed),
@@ -10,13 +11,16 @@ z heading error in rad, in the reference point's frame; every step, when subscri
 (visualization_msgs/Marker, arrow at the current reference) every ``viz_period`` s of
 stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
 loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
-commands, trajectory state and end) every ``diagnostics_period`` s.  The law is
+commands, trajectory state and end) every ``diagnostics_period`` s (stamp time in
+lockstep, which needs no clock: the tracker has no ``/clock`` subscription there).  The law is
 :class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
 
-Lockstep: a command is computed once per odom stamp, when the pose and the three
-reference parts with that stamp have all arrived (repeats are ignored; reference
-samples are kept by stamp until the odometry measured at that time arrives, so a
-plant with odometry latency pairs each measurement with the reference of its
+Lockstep: a command is computed once per odom stamp, from the trajectory sampled at that
+stamp (repeats are ignored; an odometry message that arrives before the first trajectory
+is answered when it arrives).  With ``wait_for_trajectory: false`` and no trajectory yet,
+a command waits until the three reference parts with the odom stamp have arrived
+(reference samples are kept by stamp until the odometry measured at that time arrives,
+so a plant with odometry latency pairs each measurement with the reference of its
 measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
 ``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
 the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
@@ -32,8 +36,11 @@ Trajectories (:mod:`control.trajectory`): a nav_msgs/Path on ``trajectory``
 each odometry stamp (:class:`control.follow.Follower`): no reference samples are needed
 then.  Each new valid trajectory starts a new run; an invalid one is refused with the
 reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
-trajectory's end the robot is brought to rest and the tracker says so.  Without a
-trajectory the three reference topics are followed (the built-in analytic paths).
+trajectory's end the robot is brought to rest and the tracker says so.  In lockstep the
+reference publishes the built-in analytic paths as MultiDOFJointTrajectory knots (exact
+to about 1e-14 m) and lockstep runs set ``wait_for_trajectory`` (no sample subscriptions:
+a step is odom in, cmd_vel out); without a trajectory and with ``wait_for_trajectory:
+false`` the three reference topics are followed (real time: the built-in paths).
 
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
 go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
@@ -49,7 +56,6 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Ve
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterType
-from rclpy.parameter import Parameter
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
@@ -106,8 +112,10 @@ PARAMS = [
     Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
           '(m/s^2)', low=1e-6, high=1e3),
     Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
-          'trajectory topics (ignore the per-step reference samples); set it when the '
-          'reference publishes a file or relayed trajectory', read_only=True),
+          'trajectory topics and do not subscribe the per-step samples reference/pose|twist|'
+          'accel; set it when the reference publishes a file or relayed trajectory, and in '
+          'lockstep (the reference publishes the built-in paths as a trajectory there; '
+          '`nonfragile_tracker run` and tracking.launch.py set it)', read_only=True),
     Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
           '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
           'instead of Twist', read_only=True),
@@ -116,7 +124,8 @@ PARAMS = [
     Param('viz_period', 0.2, 'period (s, stamp time) of the travelled path and the reference '
           'marker', low=1e-3, high=1e6, read_only=True),
     Param('max_path_poses', 5000, 'travelled path: keep the last this many poses (>= 1)'),
-    Param('diagnostics_period', 1.0, 'period (s, node clock) of the status on /diagnostics',
+    Param('diagnostics_period', 1.0, 'period (s; lockstep: stamp time, real time: node clock) '
+          'of the status on /diagnostics',
           low=1e-3, high=1e6, read_only=True),
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
@@ -183,19 +192,22 @@ class TrackerNode(AdapterNode):
         self.mode = cfg.mode
         self.tracker = Tracker(cfg.tracker)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
-        self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
-        self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist, DATA_QOS)
-        self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel, DATA_QOS)
         self.frame = cfg.frame
         self.wait_for_trajectory = cfg.wait_for_trajectory
+        if not self.wait_for_trajectory:     # only then are the per-step samples read
+            self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
+            self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist,
+                                     DATA_QOS)
+            self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel,
+                                     DATA_QOS)
         self.follower: Follower | None = None
         self.last_refusal = ''
         self.origin_ns = 0
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
                                  self._on_multidof, LATCHED_QOS)
-        if self.mode == 'lockstep':
-            self.set_parameters([Parameter('use_sim_time', value=True)])
+        # lockstep needs no clock: a command answers an odom stamp, and the time law of an
+        # untimed Path starts at the latest odom stamp (no /clock subscription per step)
         self._odom: Odometry | None = None
         self._ref = [None, None, None]
         self._refs: dict[int, list] = {}      # lockstep: stamp -> [pose, twist, accel]
@@ -233,7 +245,12 @@ class TrackerNode(AdapterNode):
         mk.ns, mk.id, mk.type, mk.action = 'reference', 0, Marker.ARROW, Marker.ADD
         mk.scale.x, mk.scale.y, mk.scale.z = 0.25, 0.04, 0.04
         mk.color.r, mk.color.g, mk.color.b, mk.color.a = 1.0, 0.3, 0.0, 1.0
-        self.create_timer(cfg.diagnostics_period, self._diagnostics)
+        # diagnostics: every diagnostics_period of stamp time in lockstep (no clock there),
+        # of the node clock in real time
+        self.diag_period_ns = int(cfg.diagnostics_period * 1e9)
+        self._last_diag = -(1 << 62)
+        if self.mode == 'realtime':
+            self.create_timer(cfg.diagnostics_period, self._diagnostics)
         if self.mode == 'realtime':
             self._last_odom_wall = self._last_ref_wall = None
             self.create_timer(0.05, self._watchdog)
@@ -272,8 +289,14 @@ class TrackerNode(AdapterNode):
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
         self._new_trajectory(lambda: path_to_trajectory(
             msg, frame=self.frame, source=source, cruise_speed=self.config.cruise_speed,
-            max_accel=self.config.max_accel, now_ns=self.get_clock().now().nanoseconds),
+            max_accel=self.config.max_accel, now_ns=self._now_ns()),
             source)
+
+    def _now_ns(self) -> int:
+        """Now (ns) for an untimed Path: the latest odom stamp in lockstep, else the clock."""
+        if self.mode == 'lockstep':
+            return max(self.last_odom_stamp, 0)
+        return self.get_clock().now().nanoseconds
 
     def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'
@@ -439,6 +462,9 @@ class TrackerNode(AdapterNode):
         """Tracking error every step, travelled path and reference marker at viz_period."""
         if cmd.saturated:
             self.saturated += 1
+        if self.mode == 'lockstep' and stamp - self._last_diag >= self.diag_period_ns:
+            self._last_diag = stamp
+            self._diagnostics()
         if ref is None:
             return
         if self.pub_error.get_subscription_count():

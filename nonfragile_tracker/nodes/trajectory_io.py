@@ -27,7 +27,7 @@ from ..control.trajectory import (Trajectory, TrajectoryError, check_frame, from
                                   from_states, from_waypoints)
 
 __all__ = ['path_to_trajectory', 'trajectory_to_path', 'multidof_to_trajectory',
-           'stamp_ns']
+           'states_to_multidof', 'stamp_ns']
 
 
 def stamp_ns(stamp) -> int:
@@ -126,3 +126,34 @@ def multidof_to_trajectory(msg, *, frame: str, source: str) -> tuple[Trajectory,
     else:
         traj = from_waypoints(t, x, y, yaw=yaw, source=source)
     return traj, origin
+
+
+def states_to_multidof(t_ns, samples, origin_ns: int, frame: str, joint: str = 'base_link'):
+    """trajectory_msgs/MultiDOFJointTrajectory of timed states (one joint, the planar base).
+
+    ``t_ns``: integer nanoseconds after ``origin_ns`` (the header stamp); ``samples``: a
+    :class:`~control.trajectory.TrajectorySamples` (position, velocity, acceleration in
+    ``frame`` and heading) - e.g. :func:`control.trajectory.analytic_knots`.
+    :func:`multidof_to_trajectory` turns it back into the quintic Hermite trajectory.
+    """
+    from geometry_msgs.msg import Transform, Twist
+    from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+    msg = MultiDOFJointTrajectory()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(origin_ns), 1_000_000_000)
+    msg.joint_names = [joint]
+    points = []
+    for i, t in enumerate(t_ns):
+        p = MultiDOFJointTrajectoryPoint()
+        tr = Transform()
+        tr.translation.x, tr.translation.y = float(samples.x[i]), float(samples.y[i])
+        q = tr.rotation
+        q.x, q.y, q.z, q.w = yaw_to_quaternion(float(samples.heading[i]))
+        vel, acc = Twist(), Twist()
+        vel.linear.x, vel.linear.y = float(samples.vx[i]), float(samples.vy[i])
+        acc.linear.x, acc.linear.y = float(samples.ax[i]), float(samples.ay[i])
+        p.transforms, p.velocities, p.accelerations = [tr], [vel], [acc]
+        p.time_from_start.sec, p.time_from_start.nanosec = divmod(int(t), 1_000_000_000)
+        points.append(p)
+    msg.points = points
+    return msg

@@ -12,7 +12,8 @@ from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.gains import read_gain_file
 from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.follow import simulate_following
+from nonfragile_tracker.control.trajectory import Trajectory
 from nonfragile_tracker.nodes.common import StartupError
 from nonfragile_tracker.nodes.plant import PlantNode
 from nonfragile_tracker.nodes.tracker import TrackerNode
@@ -35,9 +36,7 @@ TRACKER = dict(dt=0.02, predict_latency=0.05, predict_odom_latency=0.03, predict
 
 def parameters():
     ov = {'plant': {'ros__parameters': dict(PLANT, duration=DURATION)},
-          'tracker': {'ros__parameters': TRACKER},
-          # the recorder expects one odom per step; here there are fewer, so do not wait 5 s
-          'recorder': {'ros__parameters': {'drain_timeout': 1.0}}}
+          'tracker': {'ros__parameters': TRACKER}}
     return scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov)
 
 
@@ -45,7 +44,9 @@ def simulation():
     pc = paper_plant_config(**dict(PLANT, odom_noise=tuple(PLANT['odom_noise'])))
     tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'), A_tau=pc.A_tau,
                        tau=pc.tau, **TRACKER)
-    return simulate_tracking(pc, tc, circle(), STEPS)
+    # the tracker samples the trajectory at the time its command acts (Follower), as the
+    # in-process following does; the path is the exact circle
+    return simulate_following(pc, tc, Trajectory.analytic(circle()), STEPS)
 
 
 def _first_per_stamp(rows):
