@@ -6,8 +6,9 @@ ROS - around the same step function as the node (:class:`control.loop.Tracker`):
 
 * odometry in another frame than ``odom``, or with a stamp that does not advance, is
   ignored; a stamp jump above ``max_stamp_jump`` re-initialises the compensator;
-* lockstep bags (most odometry stamps equal a reference stamp): a command when the
-  odometry and the three reference parts with the same stamp are all in;
+* lockstep bags (most odometry stamps equal a reference stamp): fed in stamp order (the
+  reference parts of a stamp before its odometry), a command when the odometry and the
+  three reference parts with the same stamp are all in;
 * real-time bags: a command at each odometry message with the latest reference parts
   (what the tracker had received by then).
 
@@ -347,8 +348,8 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
                 use_recorded: bool = True, atol: float = 1e-9) -> ReplayPlan:
     """Run the tracker over the events in process and fix what the recorder cannot tell.
 
-    Lockstep bags, and any bag when comparing with another bag (``use_recorded``
-    False), are fed in bag order.  A real-time bag compared with its own commands is
+    Lockstep bags are fed in stamp order, any other bag compared with another bag
+    (``use_recorded`` False) in bag order.  A real-time bag compared with its own commands is
     fed as the tracker saw it, which the recorder (another reader, with its own timing)
     shows only approximately:
 
@@ -377,6 +378,11 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
         if plan is not None:
             plan.fed = fed
             return plan
+    if mode == 'lockstep':
+        # a lockstep step is defined by its stamp, not by the recorder's receive order: the
+        # reference publishes its samples off the critical path (the tracker follows the
+        # trajectory message), so they may reach the recorder after the next odometry
+        data = sorted(data, key=lambda e: (stamp_ns(e.msg.header.stamp), e.kind == 'odom'))
     inputs = TrackerInputs(config, mode, max_stamp_jump)
     commands = []
     for e in data:
