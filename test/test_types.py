@@ -16,7 +16,9 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/input_delay.py',
           'nonfragile_tracker/bag/reader.py', 'nonfragile_tracker/bag/writer.py',
           'nonfragile_tracker/msgconv.py', 'nonfragile_tracker/scenario.py',
-          'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py')
+          'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py',
+          'nonfragile_tracker/control/sdp.py', 'nonfragile_tracker/control/follow.py',
+          'nonfragile_tracker/control/study.py')
 
 
 def _checked_files() -> list[str]:
