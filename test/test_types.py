@@ -18,7 +18,9 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/msgconv.py', 'nonfragile_tracker/scenario.py',
           'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py',
           'nonfragile_tracker/control/sdp.py', 'nonfragile_tracker/control/follow.py',
-          'nonfragile_tracker/control/study.py')
+          'nonfragile_tracker/control/study.py',
+          'nonfragile_tracker/control/latency_design.py',
+          'nonfragile_tracker/control/batch.py')
 
 
 def _checked_files() -> list[str]:
