@@ -20,7 +20,8 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/sdp.py', 'nonfragile_tracker/control/follow.py',
           'nonfragile_tracker/control/study.py',
           'nonfragile_tracker/control/latency_design.py',
-          'nonfragile_tracker/control/batch.py')
+          'nonfragile_tracker/control/batch.py',
+          'nonfragile_tracker/control/delay_dependent.py')
 
 
 def _checked_files() -> list[str]:
