@@ -21,7 +21,9 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/study.py',
           'nonfragile_tracker/control/latency_design.py',
           'nonfragile_tracker/control/batch.py',
-          'nonfragile_tracker/control/delay_dependent.py')
+          'nonfragile_tracker/control/delay_dependent.py',
+          'nonfragile_tracker/control/design.py', 'nonfragile_tracker/control/analysis.py',
+          'nonfragile_tracker/control/search.py')
 
 
 def _checked_files() -> list[str]:
