@@ -67,6 +67,8 @@ class CertificateError(LmiError):
     """A solver result failed the independent numpy verification."""
 
     exit_code = EXIT_SOLVER
+    #: the solver's strictness t, set by the Theorem 1 synthesis (not always present)
+    margin_achieved: float
 
 
 class RunError(NonfragileError, RuntimeError):

@@ -16,7 +16,14 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/input_delay.py',
           'nonfragile_tracker/bag/reader.py', 'nonfragile_tracker/bag/writer.py',
           'nonfragile_tracker/msgconv.py', 'nonfragile_tracker/scenario.py',
-          'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py')
+          'nonfragile_tracker/runner.py', 'nonfragile_tracker/topics.py',
+          'nonfragile_tracker/control/sdp.py', 'nonfragile_tracker/control/follow.py',
+          'nonfragile_tracker/control/study.py',
+          'nonfragile_tracker/control/latency_design.py',
+          'nonfragile_tracker/control/batch.py',
+          'nonfragile_tracker/control/delay_dependent.py',
+          'nonfragile_tracker/control/design.py', 'nonfragile_tracker/control/analysis.py',
+          'nonfragile_tracker/control/search.py')
 
 
 def _checked_files() -> list[str]:

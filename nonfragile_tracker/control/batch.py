@@ -149,7 +149,8 @@ class BatchCases:
         Raises :class:`BatchError` if case ``i`` has a time-varying perturbation.
         """
         s = _resolve(self, plant, tracker)
-        kw = {name: float(getattr(s, name)[i]) for name in _PER_CASE if name != 'noise_seed'}
+        kw: dict[str, Any] = {name: float(getattr(s, name)[i]) for name in _PER_CASE
+                              if name != 'noise_seed'}
         kw['odom_noise'] = tuple(float(v) for v in s.noise[i])
         kw['noise_seed'] = int(s.seed[i])
         pc = replace(plant, **kw)
@@ -597,14 +598,14 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     K = s.K
     P = s.P
     S = P.shape[1]
-    seg = -1
-    Kc = None
+    seg = 0                                         # segment_index(0, ...) is 0
+    Kc = np.ascontiguousarray((K + P[:, seg]).transpose(1, 2, 0))   # (2, 4, N)
     tv = np.zeros(n)
     started = np.zeros(n, dtype=bool)
     all_started = False
-    tdt = s.tdt
-    if np.all(tdt == tdt[0]):
-        tdt = float(tdt[0])                         # the same value, a scalar operand
+    tdt: np.ndarray | float = s.tdt
+    if np.all(s.tdt == s.tdt[0]):
+        tdt = float(s.tdt[0])                       # the same value, a scalar operand
     vmax, wmax, vmin = tracker.max_linear_speed, tracker.max_angular_speed, tracker.min_speed
     comp = tracker.delay_compensation
     if comp:
@@ -683,7 +684,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
             if ideal_odom:
                 due = True
                 mpos, mth, mv = pos, th, pv
-                mstep = k
+                mstep: int | np.ndarray = k
             else:
                 ms = k - odom_d
                 dmask = (ms >= 0) & ((ms % period) == 0)
@@ -692,7 +693,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
                 else:
                     due = dmask if dmask.any() else False
                 if due is not False:
-                    slot = ms % Ro
+                    slot: int | np.ndarray = ms % Ro
                     mpos = obuf[slot, 0:2, idx].T
                     mth, mv = obuf[slot, 2, idx], obuf[slot, 3, idx]
                     mstep = ms if not uniform_odom else int(ms[0])

@@ -126,7 +126,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 
@@ -314,9 +314,15 @@ def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDepe
     if not (math.isfinite(h) and h >= 0):
         raise ValueError(f'h must be a finite delay >= 0, got {h!r}')
     c = certificate
-    P1, S, R = (_sym(np.asarray(M, float)) for M in (c.P1, c.S, c.R))
-    P2, P3 = np.asarray(c.P2, float), np.asarray(c.P3, float)
-    lam = None if c.lam is None else float(c.lam)
+    return _verify(problem, K, h, c.P1, c.P2, c.P3, c.S, c.R, c.lam, tol)
+
+
+def _verify(problem: Problem, K: np.ndarray, h: float, P1, P2, P3, S, R, lam: float | None,
+            tol: float) -> DelayDependentVerification:
+    """:func:`verify_delay_dependent` on the matrices themselves (``K``, ``h`` checked)."""
+    P1, S, R = (_sym(np.asarray(M, float)) for M in (P1, S, R))
+    P2, P3 = np.asarray(P2, float), np.asarray(P3, float)
+    lam = None if lam is None else float(lam)
     Psi = descriptor_verification_matrix(problem.A, problem.B, problem.A_tau, problem.E,
                                          problem.F, K, h, P1, P2, P3, S, R, lam)
     finite = bool(np.all(np.isfinite(Psi)))
@@ -389,7 +395,7 @@ class _DescriptorProgram:
                 Rb >> self.t * I] + extra
         if gain_bound:
             # ||K||_2 <= kappa with K = Y X^-1, X not symmetric: see the module docstring.
-            self.kappa2 = par(nonneg=True)
+            self.kappa2: cp.Parameter | None = par(nonneg=True)
             He = X + X.T
             Gk = cp.bmat([[self.kappa2 * (He - I), Y.T], [Y, np.eye(m)]])
             cons += [0.5 * He >> I, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
@@ -404,7 +410,7 @@ class _DescriptorProgram:
             self.BE.value = problem.B @ problem.E
             self.F.value = problem.F
         if self.kappa2 is not None:
-            self.kappa2.value = float(kappa) ** 2
+            self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
     def solve(self, problem: Problem, h: float, eps: float, solver: str) -> DescriptorSolution:
         self.eps.value = eps
@@ -426,7 +432,7 @@ class _DescriptorProgram:
                 solve_time=out.solve_time, eps=eps, X=np.array(self.X.value),
                 Y=np.array(self.Y.value), Pb=np.array(self.Pb.value),
                 Sb=np.array(self.Sb.value), Rb=np.array(self.Rb.value),
-                lam=None if self.lam is None else float(self.lam.value))
+                lam=None if self.lam is None else float(cast(np.ndarray, self.lam.value)))
         return DescriptorSolution(status=out.status, t=None if t is None else float(t),
                                   solve_time=out.solve_time, eps=eps)
 
@@ -442,18 +448,23 @@ def _t_of(sol: DescriptorSolution) -> float:
 
 def _certificate(problem: Problem, h: float, sol: DescriptorSolution, verify_tol: float
                  ) -> DelayDependentCertificate:
-    """Back transformation of a solver point to original coordinates, then verification."""
+    """Back transformation of a solver point to original coordinates, then verification.
+
+    ``sol`` is a usable point (``strictness > -inf``: ``X, Y, Pb, Sb, Rb`` are set).
+    """
+    X, Y, Pb, Sb, Rb = sol.X, sol.Y, sol.Pb, sol.Sb, sol.Rb
+    if X is None or Y is None or Pb is None or Sb is None or Rb is None:
+        # what np.linalg.inv(None) raised before: the callers treat it as no gain
+        raise np.linalg.LinAlgError('the solver returned no point')
     eps = float(sol.eps)
-    Xi = np.linalg.inv(sol.X)
-    K = sol.Y @ Xi
-    P1 = _sym(Xi.T @ _sym(sol.Pb) @ Xi)
-    S = _sym(Xi.T @ _sym(sol.Sb) @ Xi)
-    R = _sym(Xi.T @ _sym(sol.Rb) @ Xi)
+    Xi = np.linalg.inv(X)
+    K = Y @ Xi
+    P1 = _sym(Xi.T @ _sym(Pb) @ Xi)
+    S = _sym(Xi.T @ _sym(Sb) @ Xi)
+    R = _sym(Xi.T @ _sym(Rb) @ Xi)
     P2 = Xi
     P3 = eps * Xi
-    cert = DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
-                                     lam=sol.lam, verification=None)  # type: ignore[arg-type]
-    ver = verify_delay_dependent(problem, K, h, cert, tol=verify_tol)
+    ver = _verify(problem, K, float(h), P1, P2, P3, S, R, sol.lam, verify_tol)
     return DelayDependentCertificate(K=K, h=h, eps=eps, P1=P1, P2=P2, P3=P3, S=S, R=R,
                                      lam=sol.lam, verification=ver)
 
@@ -636,8 +647,8 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
     """
     if not (math.isfinite(h_hi) and h_hi > 0 and tol > 0):
         raise ValueError(f'need h_hi > 0 and tol > 0, got h_hi={h_hi!r}, tol={tol!r}')
-    kw = dict(nominal=nominal, gain_bound=gain_bound, margin=margin, solver=solver,
-              verify_tol=verify_tol)
+    kw: dict[str, Any] = dict(nominal=nominal, gain_bound=gain_bound, margin=margin,
+                              solver=solver, verify_tol=verify_tol)
     grid = sorted(float(e) for e in eps_grid)
     _check_args(problem, h_hi, grid, gain_bound)
     last: list[float] = []

@@ -63,7 +63,7 @@ def _try(problem: Problem, **kw) -> SynthesisResult | None:
 def max_perturbation_scale(problem: Problem, *, gain_bound: float, rel_tol: float = 1e-3,
                            hi_limit: float = 1e3) -> DesignResult:
     """Largest ``s`` with Theorem 1 feasible for ``F -> s F`` and ``||K||_2 <= gain_bound``."""
-    def feas(s: float):
+    def feas(s: float) -> SynthesisResult | None:
         return _try(problem.replace(F=s * problem.F), gain_bound=gain_bound)
 
     base = feas(1e-9)
@@ -79,7 +79,7 @@ def max_perturbation_scale(problem: Problem, *, gain_bound: float, rel_tol: floa
 def max_decay_rate(problem: Problem, *, gain_bound: float, nominal: bool = False,
                    rel_tol: float = 1e-3, hi_limit: float = 1e3) -> DesignResult:
     """Largest certified decay rate ``alpha >= 0`` under ``||K||_2 <= gain_bound``."""
-    def feas(a: float):
+    def feas(a: float) -> SynthesisResult | None:
         return _try(shifted_problem(problem, a), gain_bound=gain_bound, nominal=nominal)
 
     base = feas(0.0)

@@ -19,6 +19,7 @@ import math
 
 from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
                    step_time_ns)
+from .reference import RefSample
 from .simulate import TrackingRun, run_loop
 from .trajectory import Trajectory
 
@@ -66,7 +67,7 @@ class Follower:
         self.finished = False
         self.ended = False          # past t_end (still settling until finished)
         self.finished_at: float | None = None
-        self.last_ref = None
+        self.last_ref: RefSample | None = None
         self.tracker.reset()
 
     def step(self, x: float, y: float, th: float, t: float,

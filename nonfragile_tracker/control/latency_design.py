@@ -197,6 +197,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     if bound is not None:
         bound = _number(bound, 'gain bound', positive=True)
     syn_h1 = h1 + T
+    res: InputDelayResult | None
     if objective == 'decay':
         res = max_input_delay_decay_rate(problem, h0, syn_h1, gain_bound=bound)
         certified = certified_input_delay_of_gain(problem, res.K, h0, h_hi=max(4 * h1, 1.0),

@@ -41,7 +41,7 @@ import contextvars
 import time
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -259,7 +259,7 @@ class _Theorem1Program:
             self.BE.value = problem.B @ problem.E
             self.F.value = problem.F
         if self.kappa2 is not None:
-            self.kappa2.value = float(kappa) ** 2
+            self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
     def point(self, status: str, solve_time: float) -> tuple:
         """``(status, t, X, Q, R, eps, solve_time)`` with ``Q = W^-1`` (``None`` if singular)."""
@@ -430,7 +430,8 @@ class _ReducedProgram(_Theorem1Program):
         Z = np.zeros
         cols: list = []             # blocks right of ``top`` in the first block row
         diag: list = []             # their diagonal blocks
-        self.W = self.M = None
+        self.W: Any = None           # cvxpy Variable / Parameter when r > 0
+        self.M: Any = None
         if r:
             self.W = cp.Variable((r, r), symmetric=True, name='W_r')
             self.M = cp.Parameter((n, r), name='M')
@@ -476,7 +477,7 @@ class _ReducedProgram(_Theorem1Program):
                 _, sf, Vft, _ = _rank_split(problem.F @ T)
                 self.G.value = sf[:self.pr, None] * Vft[:self.pr]
         if self.kappa2 is not None:
-            self.kappa2.value = float(kappa) ** 2
+            self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
     def point(self, status: str, solve_time: float) -> tuple:
         """``(status, t, X, Q, R, eps, solve_time)`` in the original coordinates."""
@@ -792,14 +793,14 @@ def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: f
     K = np.zeros((m, n))
     P = np.zeros((n, n))
     Q = np.zeros((n, n))
-    parts = []
+    parts: list[SynthesisResult] = []
     for st, inp, qq, pp in blocks:
         sub = problem.replace(A=problem.A[np.ix_(st, st)], B=problem.B[np.ix_(st, inp)],
                               A_tau=problem.A_tau[np.ix_(st, st)],
                               E=problem.E[np.ix_(inp, qq)], F=problem.F[np.ix_(pp, st)],
                               perturbations={}, name=f'{problem.name}[block {len(parts)}]')
         r = synthesize(sub, nominal=nominal, verify_tol=verify_tol, **kw)
-        c = 1.0 if nominal else float(r.eps)
+        c = 1.0 if nominal else float(cast(float, r.eps))    # not nominal: eps is set
         K[np.ix_(inp, st)] = r.K
         P[np.ix_(st, st)] = c * r.P
         Q[np.ix_(st, st)] = c * r.Q

@@ -2,13 +2,21 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, TypeVar
+from typing import Callable, TypeVar, overload
 
 __all__ = ['largest_feasible', 'golden_section_max']
 
 T = TypeVar('T')
 
 
+@overload
+def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *,
+                     rel_tol: float = ..., hi_limit: float = ..., lo_result: T
+                     ) -> tuple[float, T, int]: ...
+@overload
+def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *,
+                     rel_tol: float = ..., hi_limit: float = ..., lo_result: None = None
+                     ) -> tuple[float, T | None, int]: ...
 def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *,
                      rel_tol: float = 1e-3, hi_limit: float = 1e6,
                      lo_result: T | None = None) -> tuple[float, T | None, int]:

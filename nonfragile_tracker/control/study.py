@@ -81,11 +81,11 @@ class StudySpec:
     cases: int = 1000
     seed: int = 0
     duration: float = 60.0
-    latency: tuple = (0.0, 0.0)
-    lag: tuple = (0.0, 0.0)
-    pose_spread: tuple = (0.0, 0.0)
+    latency: tuple[float, float] = (0.0, 0.0)
+    lag: tuple[float, float] = (0.0, 0.0)
+    pose_spread: tuple[float, float] = (0.0, 0.0)
     delta: str = 'constant'
-    delta_norm: tuple = (0.0, 1.0)
+    delta_norm: tuple[float, float] = (0.0, 1.0)
     hold: float = 1.0
     tolerance: float = 0.01
     steady_from: float | None = None
@@ -218,12 +218,17 @@ class StudyResult:
 def _concat(runs: list[BatchRun]) -> BatchRun:
     if len(runs) == 1:
         return runs[0]
-    fields = ('settling_time', 'first_within', 'final_error', 'rms_error', 'steady_error',
-              'peak_abs_v', 'peak_abs_w', 'finite')
+
+    def cat(field: str) -> np.ndarray:
+        return np.concatenate([getattr(r, field) for r in runs])
+
     first = runs[0]
     return BatchRun(steps=first.steps, dt=first.dt, tolerance=first.tolerance,
-                    steady_from=first.steady_from,
-                    **{f: np.concatenate([getattr(r, f) for r in runs]) for f in fields})
+                    steady_from=first.steady_from, settling_time=cat('settling_time'),
+                    first_within=cat('first_within'), final_error=cat('final_error'),
+                    rms_error=cat('rms_error'), steady_error=cat('steady_error'),
+                    peak_abs_v=cat('peak_abs_v'), peak_abs_w=cat('peak_abs_w'),
+                    finite=cat('finite'))
 
 
 def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path, E, F,
