@@ -137,6 +137,8 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
     if bad:
         raise RunError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
                        f'{run_dir}')
+    if res.bag is None:
+        raise RunError(f'scenario {scenario.name!r} recorded no bag; logs in {run_dir}')
     return res.bag
 
 

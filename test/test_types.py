@@ -23,7 +23,8 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/batch.py',
           'nonfragile_tracker/control/delay_dependent.py',
           'nonfragile_tracker/control/design.py', 'nonfragile_tracker/control/analysis.py',
-          'nonfragile_tracker/control/search.py')
+          'nonfragile_tracker/control/search.py', 'nonfragile_tracker/golden.py',
+          'nonfragile_tracker/bag/report.py', 'nonfragile_tracker/bag/repair.py')
 
 
 def _checked_files() -> list[str]:

@@ -258,14 +258,14 @@ def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) ->
             counts[topic] = 0
         for scan in scans:
             for msg in scan.messages:
-                ch = scan.channels.get(msg.channel_id)
-                if ch is not None and ch.topic in foreign:
+                channel = scan.channels.get(msg.channel_id)
+                if channel is not None and channel.topic in foreign:
                     continue
-                if ch is None or ch.topic not in channels:
+                if channel is None or channel.topic not in channels:
                     orphans += 1
                     continue
-                writer.write(ch.topic, msg.log_time, msg.data)
-                counts[ch.topic] += 1
+                writer.write(channel.topic, msg.log_time, msg.data)
+                counts[channel.topic] += 1
     finally:
         writer.close()
     return RepairResult(
