@@ -57,6 +57,49 @@ def paper_gains():
     return {k: np.array(v, dtype=float) for k, v in data.items()}
 
 
+#: The gain budget of the shipped gain (``options.gain_bound`` of ``config/paper_problem.yaml``).
+SHIPPED_NORM = 8.67
+#: The command that regenerates ``config/tracker_gains.yaml`` (README "The shipped gain").
+SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objective', 'decay',
+                       '--norm', str(SHIPPED_NORM)]
+
+
+@pytest.fixture(scope='session')
+def shipped_design(tmp_path_factory):
+    """The shipped gain's command run once in-process (its max-decay design costs seconds).
+
+    ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
+    ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records
+    each call and its :class:`DesignResult`.  Returns a namespace with ``code`` (exit
+    code), ``path`` (the gain file), ``stdout`` and ``calls`` (``(args, kwargs, result)``).
+    Shared by the CLI test, the shipped-gain test and the design tests (same computation).
+    """
+    import contextlib
+    import io
+    from types import SimpleNamespace
+
+    from nonfragile_tracker.cli import main
+    from nonfragile_tracker.control import design
+
+    real, calls = design.at_gain_norm, []
+
+    def spy(*args, **kwargs):
+        res = real(*args, **kwargs)
+        calls.append((args, kwargs, res))
+        return res
+
+    path = tmp_path_factory.mktemp('shipped_design') / 'gains.yaml'
+    out = io.StringIO()
+    patch = pytest.MonkeyPatch()
+    patch.setattr(design, 'at_gain_norm', spy)
+    try:
+        with contextlib.redirect_stdout(out):
+            code = main(SHIPPED_DESIGN_ARGV + ['-o', str(path)])
+    finally:
+        patch.undo()
+    return SimpleNamespace(code=code, path=path, stdout=out.getvalue(), calls=calls)
+
+
 @pytest.fixture
 def ros_env(tmp_path):
     """Environment for ROS subprocesses: an isolated domain on localhost."""

@@ -922,6 +922,52 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
 # ---------------------------------------------------------------------------------------------
 # Certify a given K.
 
+class _CertifyProgram:
+    """The fixed-gain certification LMI of :func:`certify_gain`, compiled once per shape.
+
+    ``A + B K``, ``A_tau``, ``F^T F`` and ``B E`` are parameters (cvxpy DPP): a re-solve
+    for another gain, problem or perturbation scale skips the compilation.
+    """
+
+    def __init__(self, n: int, q: int, p: int, nominal: bool):
+        import cvxpy as cp
+        self.nominal = nominal
+        self.A0 = cp.Parameter((n, n), name='A_BK')
+        self.Ad = cp.Parameter((n, n), name='A_tau')
+        self.P = cp.Variable((n, n), symmetric=True, name='P')
+        self.Q = cp.Variable((n, n), symmetric=True, name='Q')
+        self.t = cp.Variable(name='t')
+        P, Q, t = self.P, self.Q, self.t
+        top = P @ self.A0 + self.A0.T @ P + Q
+        PAd = P @ self.Ad
+        self.d: Any = None
+        if nominal:
+            V = cp.bmat([[top, PAd], [PAd.T, -Q]])
+            cons, norm = [], cp.trace(P) + cp.trace(Q)
+        else:
+            self.FtF = cp.Parameter((n, n), name='FtF')
+            self.BE = cp.Parameter((n, q), name='BE')
+            self.d = d = cp.Variable(name='d')
+            PBE = P @ self.BE
+            V = cp.bmat([[top + d * self.FtF, PAd, PBE],
+                         [PAd.T, -Q, np.zeros((n, q))],
+                         [PBE.T, np.zeros((q, n)), -d * np.eye(q)]])
+            cons, norm = [d >= t], cp.trace(P) + cp.trace(Q) + d
+        V = 0.5 * (V + V.T)
+        cons += [V << -t * np.eye(V.shape[0]), P >> t * np.eye(n), Q >> t * np.eye(n),
+                 norm <= 1]
+        self.problem = cp.Problem(cp.Maximize(t), cons)
+
+    def solve(self, problem: Problem, K: np.ndarray, solver: str) -> str:
+        """Solve for ``problem`` and ``K``; the status (values in ``t``, ``P``, ``Q``, ``d``)."""
+        self.A0.value = problem.A + problem.B @ K
+        self.Ad.value = problem.A_tau
+        if not self.nominal:
+            self.FtF.value = problem.F.T @ problem.F
+            self.BE.value = problem.B @ problem.E
+        return solve(self.problem, solver, what='the certification LMI for K').status
+
+
 def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | None = None,
                  solver: str | None = None, verify_tol: float = 1e-9) -> CertifyResult:
     """Decide whether Theorem 1's condition holds for the fixed gain ``K``.
@@ -930,42 +976,25 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     ``tr P + tr Q + d <= 1`` where ``d = 1/eps``; certified iff ``t >= margin`` and the
     resulting certificate passes :func:`verify_certificate`.
     """
-    import cvxpy as cp
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
     K = np.asarray(K, float)
     if K.shape != (problem.m, problem.n):
         raise ValueError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
-    n = problem.n
-    A0 = problem.A + problem.B @ K
-    P = cp.Variable((n, n), symmetric=True)
-    Q = cp.Variable((n, n), symmetric=True)
-    t = cp.Variable()
-    top = P @ A0 + A0.T @ P + Q
-    if nominal:
-        V = cp.bmat([[top, P @ problem.A_tau], [(P @ problem.A_tau).T, -Q]])
-        cons, norm, d = [], cp.trace(P) + cp.trace(Q), None
-    else:
-        q = problem.E.shape[1]
-        d = cp.Variable()
-        PBE = P @ problem.B @ problem.E
-        V = cp.bmat([[top + d * (problem.F.T @ problem.F), P @ problem.A_tau, PBE],
-                     [(P @ problem.A_tau).T, -Q, np.zeros((n, q))],
-                     [PBE.T, np.zeros((q, n)), -d * np.eye(q)]])
-        cons, norm = [d >= t], cp.trace(P) + cp.trace(Q) + d
-    V = 0.5 * (V + V.T)
-    cons += [V << -t * np.eye(V.shape[0]), P >> t * np.eye(n), Q >> t * np.eye(n), norm <= 1]
-    prob = cp.Problem(cp.Maximize(t), cons)
-    solve(prob, solver, what='the certification LMI for K')
-    if prob.status not in OK_STATUSES or t.value is None:
-        return CertifyResult(False, float('-inf'), None, prob.status)
-    tv = float(t.value)
+    key = ('theorem1_certify', problem.n, problem.E.shape[1], problem.F.shape[0], nominal)
+    prog = cached_program(key, lambda: _CertifyProgram(*key[1:]))
+    status = prog.solve(problem, K, solver)
+    t, P, Q = prog.t.value, prog.P.value, prog.Q.value
+    if status not in OK_STATUSES or t is None or P is None or Q is None:
+        return CertifyResult(False, float('-inf'), None, status)
+    tv = float(t)
     if tv < margin:
-        return CertifyResult(False, tv, None, prob.status)
-    eps = None if nominal else 1.0 / float(d.value)
-    ver = verify_certificate(problem, K, P.value, Q.value, eps, tol=verify_tol)
-    cert = Certificate(K=K, P=_sym(P.value), Q=_sym(Q.value), eps=eps, verification=ver)
-    return CertifyResult(ver.ok, tv, cert, prob.status)
+        return CertifyResult(False, tv, None, status)
+    eps = None if prog.d is None else 1.0 / float(prog.d.value)
+    P, Q = np.array(P), np.array(Q)
+    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
+    cert = Certificate(K=K, P=_sym(P), Q=_sym(Q), eps=eps, verification=ver)
+    return CertifyResult(ver.ok, tv, cert, status)
 
 
 def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,

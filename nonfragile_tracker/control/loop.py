@@ -547,8 +547,11 @@ class Tracker:
             first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))
             hist.extend([first] * cast(int, hist.maxlen))
         z, zdot = hist[0]
-        d = [sum(At[i][j] * z[j] for j in range(4)) for i in range(4)]
-        dd = [sum(At[i][j] * zdot[j] for j in range(4)) for i in range(4)]
+        # A_tau z and A_tau zdot, summed left to right from 0.0 (as sum() does on 3.11)
+        z0, z1, z2, z3 = z
+        y0, y1, y2, y3 = zdot
+        d = [0.0 + a0 * z0 + a1 * z1 + a2 * z2 + a3 * z3 for a0, a1, a2, a3 in At]
+        dd = [0.0 + a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3 for a0, a1, a2, a3 in At]
         xs = (ref.x, ref.vx - d[0], ref.y, ref.vy - d[2])
         us = (ref.ax - dd[0] - d[1], ref.ay - dd[2] - d[3])
         hist.append((xs, (p_dot[0], us[0] + d[1], p_dot[1], us[1] + d[3])))

@@ -72,11 +72,27 @@ def test_analyse_and_margins_of_the_papers_gains(tmp_path, capsys):
     assert 'measured' in capsys.readouterr().out
 
 
-def test_design_and_delay_dependent(tmp_path, capsys):
+def test_design_and_delay_dependent(tmp_path, capsys, monkeypatch, shipped_design):
+    # the max-decay design at --norm 8.67, computed once for the session (conftest)
+    assert shipped_design.code == 0
+    assert np.linalg.norm(read_gain_file(shipped_design.path), 2) <= 8.67
+    assert 'largest certified decay rate' in shipped_design.stdout
+    # without --norm the design runs at options.gain_bound (8.67): the same call, so its
+    # computed result stands in for a second identical design
+    from nonfragile_tracker.control import design
+    (fn, _, norm), kw, res = shipped_design.calls[0]
+    seen = []
+
+    def same_design(*args, **kwargs):
+        seen.append((args[0], args[2], kwargs))
+        return res
+    monkeypatch.setattr(design, 'at_gain_norm', same_design)
     out = tmp_path / 'decay.yaml'
     assert main(['design', PAPER, '--objective', 'decay', '-o', str(out)]) == 0
+    assert seen == [(fn, 8.67, kw)] and norm == 8.67
     assert np.linalg.norm(read_gain_file(out), 2) <= 8.67
     assert 'largest certified decay rate' in capsys.readouterr().out
+    monkeypatch.undo()
     out2 = tmp_path / 'dd.yaml'
     assert main(['delay-dependent', HARDER, '--delay', '0.2', '-o', str(out2)]) == 0
     assert 'certified for every constant delay in (0, 0.2]' in capsys.readouterr().out

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker.control import delay
-from nonfragile_tracker.control.design import (at_gain_norm, max_decay_rate,
+from nonfragile_tracker.control.design import (max_decay_rate,
                                                max_perturbation_scale, min_gain_norm,
                                                shifted_problem)
 from nonfragile_tracker.control.lmi import InfeasibleError, certify_gain
@@ -20,8 +20,16 @@ def worst(p, K):
 
 
 @pytest.fixture(scope='module')
-def decay_design(paper_problem):
-    return at_gain_norm(max_decay_rate, paper_problem, PAPER_NORM)
+def decay_design(paper_problem, shipped_design):
+    """``at_gain_norm(max_decay_rate, paper_problem, 8.67)``: the one the shipped gain's
+    command computed (conftest ``shipped_design``, the same call on the same problem)."""
+    assert shipped_design.code == 0 and len(shipped_design.calls) == 1
+    (fn, problem, norm), kw, res = shipped_design.calls[0]
+    assert fn is max_decay_rate and norm == PAPER_NORM and kw == {'nominal': False}
+    for name in ('A', 'B', 'A_tau', 'E', 'F'):
+        np.testing.assert_array_equal(getattr(problem, name), getattr(paper_problem, name))
+    assert problem.tau == paper_problem.tau
+    return res
 
 
 def test_perturbation_scale_at_paper_norm(paper_problem):

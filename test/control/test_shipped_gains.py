@@ -3,19 +3,20 @@ import numpy as np
 import pytest
 import yaml
 
-from nonfragile_tracker.cli import main
 from nonfragile_tracker.control.delay import worst_case_abscissa
 from nonfragile_tracker.control.gains import read_gain_design, read_gain_file
 from nonfragile_tracker.control.lmi import certify_gain
 
-from conftest import CONFIG
+from conftest import CONFIG, SHIPPED_DESIGN_ARGV
 
 PAPER = str(CONFIG / 'paper_problem.yaml')
 
 
-def test_shipped_gain_file_is_what_design_writes(tmp_path):
-    out = tmp_path / 'gains.yaml'
-    assert main(['design', PAPER, '--objective', 'decay', '--norm', '8.67', '-o', str(out)]) == 0
+def test_shipped_gain_file_is_what_design_writes(shipped_design):
+    # `design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE` (conftest)
+    assert shipped_design.code == 0
+    assert SHIPPED_DESIGN_ARGV == ['design', PAPER, '--objective', 'decay', '--norm', '8.67']
+    out = shipped_design.path
     np.testing.assert_allclose(read_gain_file(out), read_gain_file(CONFIG / 'tracker_gains.yaml'),
                                atol=1e-6)
     got, shipped = read_gain_design(out), read_gain_design(CONFIG / 'tracker_gains.yaml')
