@@ -6,9 +6,11 @@ flow) and the Jazzy shutdown pattern.  No control math lives here.
 """
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence, TypeVar
 
@@ -259,6 +261,39 @@ def _fatal(text: str) -> int:
     return 2
 
 
+_ENDED_EXECUTORS: list = []
+
+
+class _MissedStop:
+    """Spin-loop check for a stop signal that rclpy's handlers did not act on.
+
+    A SIGINT/SIGTERM normally reaches rclpy's handlers too: rclpy's signal thread shuts
+    the context down (tearing the executor down from there) and the spin ends with
+    ``ExternalShutdownException`` - the spin must go on until then, since ending it
+    while that thread still works races the executor's teardown (an EventsExecutor
+    aborts).  A signal that came before ``rclpy.init`` installed those handlers only set
+    the flag: after :data:`GRACE` s with the context still up, the context is shut down
+    here, in the main thread (nothing else is shutting it down then).
+    """
+
+    GRACE = 0.5
+
+    def __init__(self, context: Any):
+        self.context = context
+        self.since: float | None = None
+
+    def __call__(self) -> bool:
+        if not stop_requested():
+            return False
+        now = time.monotonic()
+        if self.since is None:
+            self.since = now
+        if now - self.since < self.GRACE or not self.context.ok():
+            return False
+        self.context.try_shutdown()
+        return True
+
+
 def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) -> int:
     """Process main of a node: the Jazzy pattern (init, spin, destroy, try_shutdown).
 
@@ -291,6 +326,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         return _fatal(f'cannot start: {exc}'.split(', at /')[0])
     context = rclpy.get_default_context()
     node = None
+    executor = None
     try:
         try:
             node = node_class()
@@ -306,11 +342,10 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             raise
         executor = make_executor()
         executor.add_node(node)
-        if stop_requested():                        # a signal before rclpy's handlers
-            return 0
         freeze_startup_objects()
         node.get_logger().info('started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
-        spin_until(executor, lambda: node.finished or stop_requested())
+        missed = _MissedStop(context)
+        spin_until(executor, lambda: node.finished or missed())
         if node.finished and context.ok() and not stop_requested():
             node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -320,6 +355,19 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             raise                                   # a real error, not the shutdown
     finally:
         ignore_stop_signals()                       # ending: a repeated signal changes nothing
+        if executor is not None:
+            # unregister the node's callbacks while the executor lives (idempotent after a
+            # context shutdown, which does the same): an EventsExecutor destroyed with
+            # callbacks still registered aborts ('Destroying callback manager with
+            # callbacks remaining')
+            with contextlib.suppress(Exception):
+                if node is not None:
+                    executor.remove_node(node)
+                executor.shutdown()
+            # never destroyed: rclpy 7.1.6's EventsExecutor can still abort in its destructor
+            # after a signal right after start (1 in ~30, also before this package's signal
+            # handling); the process entry (nodes/entry.main) then leaves with os._exit
+            _ENDED_EXECUTORS.append(executor)
         if node is not None:
             node.destroy_node()                     # close() first: the recorder's bag
         try:
