@@ -919,7 +919,9 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     finiteness, the commanded speed is kept as ``v + v_next`` (twice the mean: halving is
     exact), the arc's series are polynomials in ``w**2`` (``dt sin(h) / (2h)`` and
     ``cos h``, ``h = w dt / 2``), the new position is written into the ring of delayed
-    positions over the oldest one, constants are 0-d arrays (no conversion per call).
+    positions over the oldest one, constants are 0-d arrays (no conversion per call);
+    without a trace the heading advances once per metrics block by the sum of its rows of
+    ``w dt`` (its one use is the fresh cosine and sine at the block's start).
     ``delay`` is ``None`` or ``(Nd, ax, ay)`` (``d = (ax x, ay y)(t - tau)``), ``cmd_d``
     the command latencies in steps (``None``: none).  Returns the final position, heading
     and squared error (a row of ``metrics``).
@@ -993,13 +995,19 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     flush = metrics.flush
     wstep = wrap_wmax * dt * (1.0 + 1e-9)
     wrap_next = 0
-    pv = v0.copy() if trace is not None else None
+    pv = v0.copy()
+    # without a trace the heading advances once per block (the rows of w summed), the only
+    # use of it being the fresh cosine and sine at the block's start
+    lazy = trace is None
+    if lazy:
+        wblk = np.empty((_BLOCK, n)) if queue else cblk[:, 1]
+        maxred = np.maximum.reduce
     j = 0
     for k in range(steps + 1):
         j = k % _BLOCK
         rpos, rvel, racc = ref_rows[k] if ref_rows is not None else ref_at(k)
         v = tv
-        if k % _ANCHOR == 0:                        # fresh cosine and sine
+        if j == 0:                                  # fresh cosine and sine every block
             cos(th, out=cs[0])
             sin(th, out=cs[1])
         sub(pos, rpos, out=epos)
@@ -1046,6 +1054,8 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         if queue:
             np.put(cq_flat, put_idx[k % Rq], X)
             sv, w = cq[k % Rq]
+            if lazy:
+                wblk[j] = w
         else:
             sv = cv
         # ---- log row k and metrics (the squared error)
@@ -1053,7 +1063,14 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         add(tmp[0], tmp[1], out=eblk[j])
         if j == _BLOCK - 1 or k == steps:
             flush(k - j, j + 1)
-        if trace is not None:
+            if lazy:                                # the heading after the block's advances
+                m = j + 1 if k < steps else j
+                addred(wblk[:m], axis=0, out=thstep)
+                thstep *= dt_
+                th += thstep
+                if float(maxred(absolute(th, out=thstep))) > _PI:
+                    th = _wrap(th)
+        if not lazy:
             row = (step_time_ns(k, dt) * 1e-9, pos[0], pos[1], th, pv, rpos[0], rpos[1],
                    0.5 * X[0], X[1], 1.0)
             for name, val in zip(trace, row):
@@ -1083,15 +1100,15 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
             pos = old
         else:
             pos += tmp
-        mul(w, dt_, out=thstep)
-        th += thstep
-        if k >= wrap_next:
-            m = float(np.abs(th).max())
-            if m > _PI:
-                th = _wrap(th)
+        if not lazy:
+            mul(w, dt_, out=thstep)
+            th += thstep
+            if k >= wrap_next:
                 m = float(np.abs(th).max())
-            wrap_next = k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1
-        if pv is not None:
+                if m > _PI:
+                    th = _wrap(th)
+                    m = float(np.abs(th).max())
+                wrap_next = k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1
             pv = 0.5 * sv
     metrics.peak[0] *= 0.5
     return pos, th, eblk[j]
