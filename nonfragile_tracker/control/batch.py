@@ -917,8 +917,10 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     The same step as the general loop with fewer whole-array operations (at about 1,000
     cases their count sets the time): one reduction checks ``|v| >= min_speed`` and
     finiteness, the commanded speed is kept as ``v + v_next`` (twice the mean: halving is
-    exact), the arc's series are polynomials in ``w**2`` (``dt sin(h) / (2h)`` and
-    ``cos h``, ``h = w dt / 2``), the new position is written into the ring of delayed
+    exact), the arc's series is a polynomial in ``w**2`` (``dt sin(h) / (2h)``,
+    ``h = w dt / 2``; ``cos h = sqrt(1 - sin(h)**2)``), the next heading's cosine and sine
+    are ``2 cos(h) mid - (cos, sin)(th)`` from the midpoint direction ``mid`` (one
+    rotation per step), the new position is written into the ring of delayed
     positions over the oldest one, constants are 0-d arrays (no conversion per call);
     without a trace the heading advances once per metrics block by the sum of its rows of
     ``w dt`` (its one use is the fresh cosine and sine at the block's start).
@@ -953,6 +955,9 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     cs = np.empty((2, n))
     cs_rev = cs[::-1]
     mid = np.empty((2, n))
+    cs0, cs1 = cs
+    mid0, mid1 = mid
+    sqrt = np.sqrt
     # tracker
     E = np.empty((4, n))
     epos, evel = E[0::2], E[1::2]
@@ -968,11 +973,10 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     careful = not (float(minred(vabs)) >= vmin)
     Kc = None
     seg = -1
-    # plant: the arc's series in w**2: Q = hdt sin(h) / h, ch = cos h
+    # plant: the arc's series in w**2: Q = hdt sin(h) / h (sin h = w Q); ch = cos h
     W2 = np.empty(n)
     hh = hdt * hdt
     q3, q2, q1, q0 = (c0(hdt * c * hh ** i) for i, c in ((3, _S3), (2, _S2), (1, _S1), (0, 1.0)))
-    k3, k2, k1 = (c0(c * hh ** i) for i, c in ((3, _C3), (2, _C2), (1, _C1)))
     one = c0(1.0)
     Q = np.empty(n)
     ch = np.empty(n)
@@ -1079,17 +1083,23 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
             break
         # ---- UnicyclePlant.advance
         mul(w, w, out=W2)
-        for out, c3, c2, c1, c0_ in ((Q, q3, q2, q1, q0), (ch, k3, k2, k1, one)):
-            mul(W2, c3, out=out)
-            out += c2
-            out *= W2
-            out += c1
-            out *= W2
-            out += c0_
+        mul(W2, q3, out=Q)
+        Q += q2
+        Q *= W2
+        Q += q1
+        Q *= W2
+        Q += q0
         mul(w, Q, out=sh)                           # sin h
         mul(sv, Q, out=arc)                         # (v + v_next) hdt sin(h) / h
+        mul(sh, sh, out=ch)                         # cos h = sqrt(1 - sin(h)**2), |h| <= 0.01
+        sub(one, ch, out=ch)
+        sqrt(ch, out=ch)
         _rotate(cs, ch, sh, mid, uc)                # cos, sin (th + h)
-        _rotate(mid, ch, sh, cs, uc)                # cos, sin (th + 2 h)
+        add(ch, ch, out=ch)                         # cos, sin (th + 2 h) = 2 cos(h) mid - cs
+        mul(mid0, ch, out=uc0)
+        sub(uc0, cs0, out=cs0)
+        mul(mid1, ch, out=uc1)
+        sub(uc1, cs1, out=cs1)
         mul(mid, arc, out=tmp)
         if delay is not None:
             old = ring[(k + 1) % L]                 # (x, y) at step k - Nd - 1
