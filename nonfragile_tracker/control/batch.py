@@ -925,8 +925,9 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     without a trace the heading advances once per metrics block by the sum of its rows of
     ``w dt`` (its one use is the fresh cosine and sine at the block's start).
     ``delay`` is ``None`` or ``(Nd, ax, ay)`` (``d = (ax x, ay y)(t - tau)``), ``cmd_d``
-    the command latencies in steps (``None``: none).  Returns the final position, heading
-    and squared error (a row of ``metrics``).
+    the command latencies in steps (``None``: none).  ``K e`` and the squared error are
+    sums of products (``einsum``: one pass).  Returns the final position, heading and
+    squared error (a row of ``metrics``).
     """
     n = pos0.shape[1]
     vmax, wmax, vmin = lims
@@ -961,8 +962,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     # tracker
     E = np.empty((4, n))
     epos, evel = E[0::2], E[1::2]
-    prod = np.empty((2, 5, n))
-    prod_ud, prod_ke = prod[:, 0], prod[:, 1:]
+    einsum = np.einsum
     U = np.empty((2, n))
     uc = np.empty((2, n))
     uc0, uc1 = uc
@@ -1021,9 +1021,8 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         if sg != seg:
             Kc = np.ascontiguousarray((K + P[:, sg]).transpose(1, 2, 0))   # (2, 4, N)
             seg = sg
-        prod_ud[...] = racc
-        mul(Kc, E, out=prod_ke)
-        addred(prod, axis=1, out=U)
+        einsum('ijn,jn->in', Kc, E, out=U)          # K e, then u = K e + u*
+        U += racc
         if careful:
             absolute(v, out=vabs)
             vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
@@ -1063,8 +1062,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         else:
             sv = cv
         # ---- log row k and metrics (the squared error)
-        mul(epos, epos, out=tmp)
-        add(tmp[0], tmp[1], out=eblk[j])
+        einsum('in,in->n', epos, epos, out=eblk[j])
         if j == _BLOCK - 1 or k == steps:
             flush(k - j, j + 1)
             if lazy:                                # the heading after the block's advances
