@@ -971,6 +971,9 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     tvn = np.empty(n)
     vabs = np.abs(tv)
     careful = not (float(minred(vabs)) >= vmin)
+    vf_buf = np.empty(n)
+    vmin_, zero = np.full(n, vmin), np.zeros(n)
+    copysign = np.copysign
     Kc = None
     seg = -1
     # plant: the arc's series in w**2: Q = hdt sin(h) / h (sin h = w Q); ch = cos h
@@ -986,14 +989,19 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     thstep = np.empty(n)
     queue = cmd_d is not None
     if queue:
-        Rq = int(cmd_d.max()) + 2
-        cq = np.empty((Rq, 2, n))                   # (v + v_next, w) in force, by step
+        # the command sent at k is row k % Rq of a ring (a contiguous copy); case i reads
+        # row (k - d_i) % Rq (a gather), which holds the initial command in force, (v0, 0),
+        # until k = d_i; rows of the commands in force by block row (w: the heading's rows)
+        Rq = int(cmd_d.max()) + 1
+        cq = np.empty((Rq, 2, n))                   # (v + v_next, w) sent, by step
         cq[:, 0] = 2.0 * v0
         cq[:, 1] = 0.0
         cq_flat = cq.reshape(-1)
-        slots = (np.arange(Rq)[:, None] + cmd_d[None, :]) % Rq
-        put_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
-                   + np.arange(n)[None, None, :])
+        slots = (np.arange(Rq)[:, None] - cmd_d[None, :]) % Rq
+        take_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
+                    + np.arange(n)[None, None, :])
+        fblk = np.empty((_BLOCK, 2, n))
+        take = np.take
     # metrics
     cblk, eblk = metrics.cblk, metrics.eblk
     flush = metrics.flush
@@ -1004,7 +1012,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     # use of it being the fresh cosine and sine at the block's start
     lazy = trace is None
     if lazy:
-        wblk = np.empty((_BLOCK, n)) if queue else cblk[:, 1]
+        wblk = fblk[:, 1] if queue else cblk[:, 1]
         maxred = np.maximum.reduce
     j = 0
     for k in range(steps + 1):
@@ -1023,9 +1031,12 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
             seg = sg
         einsum('ijn,jn->in', Kc, E, out=U)          # K e, then u = K e + u*
         U += racc
-        if careful:
+        if careful:     # v, or +-min_speed (+ for v = -0.0: v + 0.0 is +0.0) where slower
             absolute(v, out=vabs)
-            vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
+            fmax(vabs, vmin_, out=vabs)
+            add(v, zero, out=vf_buf)
+            copysign(vabs, vf_buf, out=vf_buf)
+            vf = vf_buf
         else:
             vf = v
         X = cblk[j]                                 # (v_next, w), then (v + v_next, w)
@@ -1055,10 +1066,10 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
             X[...] = np.where(ok, X, 0.0)
             careful = True
         if queue:
-            np.put(cq_flat, put_idx[k % Rq], X)
-            sv, w = cq[k % Rq]
-            if lazy:
-                wblk[j] = w
+            r = k % Rq
+            cq[r] = X
+            take(cq_flat, take_idx[r], out=fblk[j], mode='clip')   # (indices are in range)
+            sv, w = fblk[j]
         else:
             sv = cv
         # ---- log row k and metrics (the squared error)

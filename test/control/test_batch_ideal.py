@@ -70,12 +70,12 @@ def worst_against_single_runs(plant, tracker, path, steps, cases):
 
 def test_paper_delay_latencies_and_slow_starts_equal_single_runs(ideal_calls):
     """The paper plant (d = (a x, b y)(t - tau)), command latencies 0-0.3 s, initial speeds
-    0 and below min_speed (the guarded division), headings next to +-pi (the wrap)."""
+    0, -0 and below min_speed (the guarded division), headings next to +-pi (the wrap)."""
     rng = np.random.default_rng(21)
     n = 6
     cases = BatchCases(n, perturbation=perturbations(rng, n),
                        cmd_latency=[0.0, 0.0, 0.07, 0.3, 0.01, 0.15],
-                       v0=[0.0, 0.0005, 0.05, -0.0002, 0.2, 0.0],
+                       v0=[0.0, 0.0005, 0.05, -0.0002, 0.2, -0.0],
                        x0=0.7 + rng.uniform(-0.2, 0.2, n),
                        th0=[3.14, -3.14, math.pi, -3.0, 0.5, 2.0])
     worst = worst_against_single_runs(paper_plant_config(),
