@@ -1103,7 +1103,12 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         mul(sh, sh, out=ch)                         # cos h = sqrt(1 - sin(h)**2), |h| <= 0.01
         sub(one, ch, out=ch)
         sqrt(ch, out=ch)
-        _rotate(cs, ch, sh, mid, uc)                # cos, sin (th + h)
+        mul(cs0, ch, out=mid0)                      # cos, sin (th + h) (_rotate)
+        mul(cs1, sh, out=uc0)
+        mid0 -= uc0
+        mul(cs1, ch, out=mid1)
+        mul(cs0, sh, out=uc0)
+        mid1 += uc0
         add(ch, ch, out=ch)                         # cos, sin (th + 2 h) = 2 cos(h) mid - cs
         mul(mid0, ch, out=uc0)
         sub(uc0, cs0, out=cs0)
