@@ -975,8 +975,8 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     vf_buf = np.empty(n)
     vmin_, zero = np.full(n, vmin), np.zeros(n)
     copysign = np.copysign
-    Kc = None
-    seg = -1
+    seg = 0                                         # segment_index(0, ...) is 0
+    Kc = np.ascontiguousarray((K + P[:, seg]).transpose(1, 2, 0))   # (2, 4, N)
     # plant: the arc's series in w**2: Q = hdt sin(h) / h (sin h = w Q); ch = cos h
     W2 = np.empty(n)
     hh = hdt * hdt
@@ -1078,8 +1078,8 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         if j == _BLOCK - 1 or k == steps:
             flush(k - j, j + 1)
             if lazy:                                # the heading after the block's advances
-                m = j + 1 if k < steps else j
-                addred(wblk[:m], axis=0, out=thstep)
+                rows = j + 1 if k < steps else j
+                addred(wblk[:rows], axis=0, out=thstep)
                 thstep *= dt_
                 th += thstep
                 if float(maxred(absolute(th, out=thstep))) > _PI:
