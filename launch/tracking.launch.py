@@ -6,6 +6,8 @@
         namespace:=robot1 enable_stamped_cmd_vel:=true gains:=/path/to/gains.yaml
 
 Arguments: mode (lockstep|realtime), record (true|false) and bag (directory to create),
+record_all (true|false: in lockstep record every topic instead of the lean set - odom,
+cmd_vel, run_done and the trajectory messages; real time always records every topic),
 namespace, gains, scenario, trajectory (waypoint file; "" = the scenario's path),
 enable_stamped_cmd_vel (true|false), rviz (true|false).  Standard launch/launch_ros API
 (Jazzy).  In lockstep the plant publishes the global /clock: one lockstep system per
@@ -25,6 +27,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
 from launch_ros.parameter_descriptions import ParameterValue
+
+from nonfragile_tracker.topics import LEAN_TOPICS, TYPES
 
 
 def generate_launch_description():
@@ -48,6 +52,14 @@ def generate_launch_description():
     follow_only = PythonExpression(["'", mode, "' == 'lockstep' or '", trajectory, "' != ''"])
     ref_subscribers = ParameterValue(PythonExpression(["1 if '", record, "' == 'true' else 0"]),
                                      value_type=int)
+    # lockstep records the lean set unless record_all (runner.recorded_topics); the
+    # reference publishes its per-step samples there only when they are recorded
+    record_all = LaunchConfiguration('record_all')
+    full = PythonExpression(["'", mode, "' == 'realtime' or '", record_all, "' == 'true'"])
+    recorded = PythonExpression([f"{list(TYPES)!r} if ", full, f" else {list(LEAN_TOPICS)!r}"])
+    samples = ParameterValue(PythonExpression(["'", mode, "' == 'realtime' or ('", record,
+                                               "' == 'true' and '", record_all,
+                                               "' == 'true')"]), value_type=bool)
     common = {'mode': ParameterValue(mode, value_type=str)}
     cmd = {'enable_stamped_cmd_vel': ParameterValue(stamped, value_type=bool)}
     plant = Node(package='nonfragile_tracker', executable='plant', name='plant',
@@ -61,6 +73,7 @@ def generate_launch_description():
                     parameters=[cmd, {'output': ParameterValue(LaunchConfiguration('bag'),
                                                                value_type=str),
                                       'use_sim_time': ParameterValue(lockstep, value_type=bool),
+                                      'topics': recorded,
                                       'lockstep_gate': ParameterValue(lockstep, value_type=bool)}],
                     output='screen')
     return LaunchDescription([
@@ -68,6 +81,10 @@ def generate_launch_description():
                               description='lockstep (deterministic, sim time) or realtime'),
         DeclareLaunchArgument('record', default_value='false', choices=['true', 'false'],
                               description='record a rosbag2 (MCAP) bag with the recorder node'),
+        DeclareLaunchArgument('record_all', default_value='false', choices=['true', 'false'],
+                              description='lockstep: record every topic (also /clock, pose and '
+                              'the reference samples) instead of odom, cmd_vel, run_done and '
+                              'the trajectory messages'),
         DeclareLaunchArgument('bag', default_value='nonfragile_bag',
                               description='bag directory to create when record:=true'),
         DeclareLaunchArgument('namespace', default_value='',
@@ -89,6 +106,7 @@ def generate_launch_description():
             Node(package='nonfragile_tracker', executable='reference', name='reference',
                  parameters=[scenario, common, {
                      'trajectory_file': ParameterValue(trajectory, value_type=str),
+                     'publish_samples': samples,
                      'lockstep_subscribers': ref_subscribers}],
                  output='screen'),
             Node(package='nonfragile_tracker', executable='tracker', name='tracker',

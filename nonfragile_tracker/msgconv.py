@@ -14,10 +14,13 @@ import numpy as np
 from .control.gains import gain_from_parameters
 from .control.loop import LoopConfigError, TrackerConfig, quaternion_to_yaw, yaw_to_quaternion
 from .control.reference import RefSample
+from .control.trajectory import (Trajectory, TrajectoryError, check_frame, from_poses,
+                                 from_states, from_waypoints)
 from .control.validate import as_matrix
 
 __all__ = ['stamp_ns', 'ns_to_stamp', 'fill_pose', 'pose_from_odom', 'fill_reference',
-           'reference_from_msgs', 'PREDICT_PARAMS', 'tracker_config']
+           'reference_from_msgs', 'path_to_trajectory', 'multidof_to_trajectory',
+           'PREDICT_PARAMS', 'tracker_config']
 
 
 def stamp_ns(stamp) -> int:
@@ -98,3 +101,74 @@ def tracker_config(values: dict) -> TrackerConfig:
                          A_tau=tuple(map(tuple, a_tau.tolist())),
                          tau=values['tau'],
                          **{n: values.get(n, 0.0) for n in PREDICT_PARAMS})
+
+
+def _yaw(q, source: str, i: int) -> float:
+    vals = (q.x, q.y, q.z, q.w)
+    norm = math.sqrt(sum(v * v for v in vals))
+    if not all(math.isfinite(v) for v in vals) or abs(norm - 1.0) > 1e-3:
+        raise TrajectoryError(f'{source}: point {i}: orientation {vals} is not a unit '
+                              'quaternion')
+    return quaternion_to_yaw(*vals)
+
+
+def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | None = None,
+                       max_accel: float | None = None,
+                       now_ns: int | None = None) -> tuple[Trajectory, int]:
+    """Trajectory and origin stamp (ns) of a nav_msgs/Path; :class:`TrajectoryError` if bad.
+
+    An untimed Path (all pose stamps zero) starts at its header stamp, or at ``now_ns``
+    (the receiver's clock) when that is zero too.
+    """
+    check_frame(msg.header.frame_id, frame, source)
+    n = len(msg.poses)
+    stamps = np.zeros(n, dtype=np.int64)
+    x, y, yaw = np.empty(n), np.empty(n), np.empty(n)
+    for i, ps in enumerate(msg.poses):
+        if ps.header.frame_id not in ('', frame):
+            raise TrajectoryError(f'{source}: point {i}: frame_id {ps.header.frame_id!r}; '
+                                  f'every pose must be in {frame!r}')
+        stamps[i] = stamp_ns(ps.header.stamp)
+        x[i], y[i] = ps.pose.position.x, ps.pose.position.y
+        yaw[i] = _yaw(ps.pose.orientation, source, i)
+    if n and np.all(stamps == 0):            # untimed: the time law along the path
+        traj = from_poses(np.zeros(n), x, y, yaw, cruise_speed=cruise_speed,
+                          max_accel=max_accel, source=source)
+        origin = stamp_ns(msg.header.stamp)
+        return traj, origin if origin or now_ns is None else int(now_ns)
+    origin = int(stamps[0]) if n else 0
+    return from_waypoints((stamps - origin) * 1e-9, x, y, yaw=yaw, source=source), origin
+
+
+def multidof_to_trajectory(msg, *, frame: str, source: str) -> tuple[Trajectory, int]:
+    """Trajectory and origin stamp (ns) of a trajectory_msgs/MultiDOFJointTrajectory."""
+    check_frame(msg.header.frame_id, frame, source)
+    if len(msg.joint_names) > 1:
+        raise TrajectoryError(f'{source}: {len(msg.joint_names)} joints '
+                              f'{list(msg.joint_names)}; expected one (the planar base)')
+    n = len(msg.points)
+    t, x, y, yaw = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    vel = np.full((n, 2), np.nan)
+    acc = np.full((n, 2), np.nan)
+    for i, p in enumerate(msg.points):
+        if len(p.transforms) != 1:
+            raise TrajectoryError(f'{source}: point {i}: {len(p.transforms)} transforms; '
+                                  'expected one')
+        t[i] = stamp_ns(p.time_from_start) * 1e-9
+        tr = p.transforms[0]
+        x[i], y[i] = tr.translation.x, tr.translation.y
+        yaw[i] = _yaw(tr.rotation, source, i)
+        if p.velocities:
+            vel[i] = (p.velocities[0].linear.x, p.velocities[0].linear.y)
+        if p.accelerations:
+            acc[i] = (p.accelerations[0].linear.x, p.accelerations[0].linear.y)
+    origin = stamp_ns(msg.header.stamp)
+    have_v = n > 0 and all(len(p.velocities) == 1 for p in msg.points)
+    have_a = n > 0 and all(len(p.accelerations) == 1 for p in msg.points)
+    if have_v:
+        traj = from_states(t, x, y, vel[:, 0], vel[:, 1],
+                           acc[:, 0] if have_a else None, acc[:, 1] if have_a else None,
+                           yaw=yaw, source=source)
+    else:
+        traj = from_waypoints(t, x, y, yaw=yaw, source=source)
+    return traj, origin

@@ -22,6 +22,7 @@ from typing import IO
 
 import yaml
 
+from . import topics
 from .errors import InputError
 from .files import read_yaml
 
@@ -128,19 +129,49 @@ def with_horizon(params: dict) -> dict:
     return params
 
 
-def lockstep_parameters(record: bool) -> dict[str, dict]:
+def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
     """Per-node parameters of a lockstep run: :func:`lockstep_handshake` and the message set.
 
     The tracker follows only the trajectory message (``wait_for_trajectory``: the
     reference publishes the built-in path as one in lockstep), so a step is ``odom`` in,
-    ``cmd_vel`` out; the reference publishes its per-step samples only for a recorder
-    (``publish_samples``; without one it has no ``/clock`` subscription either).  Real-time
-    runs keep the defaults (the tracker follows the samples of a built-in path there).
+    ``cmd_vel`` out; the reference publishes its per-step samples only for a recorder that
+    records them (``publish_samples`` = ``record and samples``; without them it has no
+    ``/clock`` subscription either).  Real-time runs keep the defaults (the tracker follows
+    the samples of a built-in path there).
     """
     out = lockstep_handshake(record)
     out['tracker']['wait_for_trajectory'] = True
-    out['reference']['publish_samples'] = record
+    out['reference']['publish_samples'] = record and samples
     return out
+
+
+#: The reference's per-step sample topics (published in lockstep only when recorded).
+SAMPLE_TOPICS = (topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
+
+
+def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
+                    record_all: bool = False) -> list[str]:
+    """The topics a recorded run records.
+
+    ``recorder_topics`` if given, else the recorder's ``topics`` parameter of ``params``,
+    else every topic (:data:`topics.TYPES`) with ``record_all`` or in real time (the
+    samples are what a real-time tracker follows), else the lean lockstep set
+    :data:`topics.LEAN_TOPICS` (per step only ``odom`` and ``cmd_vel``; the reference is
+    reconstructed from the recorded trajectory message by the bag reader).
+    """
+    if recorder_topics:
+        return list(recorder_topics)
+    configured = params.get('recorder', {}).get('ros__parameters', {}).get('topics')
+    if configured:
+        return [str(t) for t in configured]
+    if record_all or is_realtime(params):
+        return list(topics.TYPES)
+    return list(topics.LEAN_TOPICS)
+
+
+def records_samples(names: Sequence[str]) -> bool:
+    """True if ``names`` (recorder topics) include a per-step reference sample topic."""
+    return any(str(n).lstrip('/') in SAMPLE_TOPICS for n in names)
 
 
 def _ros_args(values: dict) -> list[str]:
@@ -214,7 +245,8 @@ def realtime_overrides() -> dict:
 
 def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
                   timeout: float = 600.0, progress=print,
-                  recorder_topics: list[str] | None = None) -> RunResult:
+                  recorder_topics: list[str] | None = None,
+                  record_all: bool = False) -> RunResult:
     """Run the scenario with one process per node; returns exit codes per node.
 
     Each node's output goes to ``<run_dir>/<node>.log``; the plant's progress lines
@@ -222,7 +254,8 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     run is stopped at once (its exit code tells which).  With the plant in
     ``mode: realtime`` (see :func:`realtime_overrides`) the recorder records on the
     wall clock (no sim time, no start gate) and is stopped once the plant has run its
-    ``duration``.
+    ``duration``.  The recorder records :func:`recorded_topics` (``recorder_topics``,
+    ``record_all``): in lockstep by default the lean set.
     """
     env = isolated_env(env)
     params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
@@ -246,13 +279,14 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                 progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
 
     realtime = is_realtime(params)
-    hand = lockstep_handshake(record) if realtime else lockstep_parameters(record)
+    names = recorded_topics(params, recorder_topics, record_all)
+    hand = lockstep_handshake(record) if realtime else \
+        lockstep_parameters(record, records_samples(names))
     try:
         if record:
             extra = ['-p', f'output:={bag}'] + ([] if realtime else [
                 '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
-            if recorder_topics:
-                extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in recorder_topics) + ']']
+            extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in names) + ']']
             start('recorder', extra)
         lockstep_args = (lambda node: []) if realtime else (lambda node: _ros_args(hand[node]))
         start('tracker', lockstep_args('tracker'))
@@ -314,8 +348,12 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
 
 
 def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
-                 timeout: float = 600.0, recorder_topics: list[str] | None = None) -> RunResult:
-    """Run the scenario with all nodes in this process on one executor."""
+                 timeout: float = 600.0, recorder_topics: list[str] | None = None,
+                 record_all: bool = False) -> RunResult:
+    """Run the scenario with all nodes in this process on one executor.
+
+    The recorder records :func:`recorded_topics` (in lockstep by default the lean set).
+    """
     import rclpy
 
     from .nodes.common import AdapterNode, make_executor, overrides
@@ -338,7 +376,9 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes: list[AdapterNode] = []
     bag = None
-    hand = lockstep_handshake(record) if is_realtime(params) else lockstep_parameters(record)
+    names = recorded_topics(params, recorder_topics, record_all)
+    hand = lockstep_handshake(record) if is_realtime(params) else \
+        lockstep_parameters(record, records_samples(names))
     try:
         if record:
             from .nodes.recorder import Recorder
@@ -347,8 +387,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
             bag = run_dir / 'bag'
             rec_params = {'output': str(bag), 'use_sim_time': True, **hand['recorder']}
             rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
-            if recorder_topics:
-                rec_params['topics'] = list(recorder_topics)
+            rec_params['topics'] = names
             nodes.append(Recorder(context=ctx, parameter_overrides=overrides(**rec_params)))
         nodes.append(TrackerNode(parameter_overrides=node_overrides('tracker', hand['tracker']),
                                  context=ctx))

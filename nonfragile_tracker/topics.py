@@ -48,8 +48,17 @@ TYPES: dict[str, str] = {
     CMD_VEL: 'geometry_msgs/msg/Twist',
     RUN_DONE: 'std_msgs/msg/UInt64',
     TRAJECTORY: 'nav_msgs/msg/Path',
+    TRAJECTORY_MULTIDOF: 'trajectory_msgs/msg/MultiDOFJointTrajectory',
     REF_PATH: 'nav_msgs/msg/Path',
 }
+
+#: A lean lockstep recording (the default of ``nonfragile_tracker run`` and the launch
+#: file in lockstep): per step only ``odom`` and ``cmd_vel``; the reference is kept as the
+#: trajectory message(s) the tracker follows, and the bag reader samples it at each
+#: odometry stamp as the tracker does.  ``/clock``, ``pose`` and the per-step reference
+#: samples are left out (``--record-all`` / ``record_all:=true`` records :data:`TYPES`).
+LEAN_TOPICS: tuple[str, ...] = (ODOM, CMD_VEL, RUN_DONE, TRAJECTORY, TRAJECTORY_MULTIDOF,
+                                REF_PATH)
 
 #: The topics a tracking run's analysis reads (bag reader, golden bags): pose, reference,
 #: command.  ``/clock`` and ``pose`` repeat ``odom``'s stamps and pose.

@@ -63,7 +63,7 @@ def _children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _processes_run(cfg, env, duration: float, record: bool) -> dict:
+def _processes_run(cfg, env, duration: float, record: bool, record_all: bool = False) -> dict:
     """One lockstep run with one process per node: in-run steps/s, wall, CPU of the nodes."""
     from nonfragile_tracker import runner
     params = runner.scenario_parameters(CONFIG / 'paper_scenario.yaml',
@@ -74,7 +74,7 @@ def _processes_run(cfg, env, duration: float, record: bool) -> dict:
     cpu0 = _children_cpu()
     with tempfile.TemporaryDirectory(prefix='nfbench_ls_') as d:
         r = runner.run_processes(params, Path(d), record=record, env=env,
-                                 timeout=120.0, progress=lines.append)
+                                 timeout=120.0, progress=lines.append, record_all=record_all)
         counts = None
         if record and r.bag is not None and r.bag.exists():
             from nonfragile_tracker.bag.reader import read_bag
@@ -114,20 +114,22 @@ def _cpu_per_step(runs: list[dict], startup: dict) -> float | None:
 
 
 def bench_lockstep(cfg, table: Table, raw: dict, domain: int) -> None:
-    res: dict = {'processes': [], 'recorded': [], 'composed': []}
+    res: dict = {'processes': [], 'recorded': [], 'recorded_full': [], 'composed': []}
     raw['lockstep'] = res
     env = ros_env(domain)
     # CPU time per step: the processes' utime + stime over the run, less that of a 5-step
     # run (imports, discovery, the trajectory): less load-sensitive than steps/s
     startup = {'processes': _processes_run(cfg, env, 0.05, False),
                'recorded': _processes_run(cfg, env, 0.05, True),
+               'recorded_full': _processes_run(cfg, env, 0.05, True, True),
                'composed': _composed_run(cfg, env, 0.05)}
     res['startup'] = startup
-    for key, record in (('processes', False), ('recorded', True)):
-        log(f'lockstep, 3 processes{" + recorder" if record else ""}: {cfg.ls_duration} s '
-            f'simulated x {cfg.ls_reps}')
+    for key, record, full in (('processes', False, False), ('recorded', True, False),
+                              ('recorded_full', True, True)):
+        what = (' + recorder (every topic)' if full else ' + recorder (lean)') if record else ''
+        log(f'lockstep, 3 processes{what}: {cfg.ls_duration} s simulated x {cfg.ls_reps}')
         for i in range(cfg.ls_reps):
-            r = _processes_run(cfg, env, cfg.ls_duration, record)
+            r = _processes_run(cfg, env, cfg.ls_duration, record, full)
             res[key].append(r)
             log(f'  rep {i}: {fmt(r["in_run_steps_per_s"])} steps/s in run, '
                 f'{fmt(r["with_startup_steps_per_s"])} with start-up, CPU {fmt(r["cpu_s"])} s, '
@@ -140,12 +142,13 @@ def bench_lockstep(cfg, table: Table, raw: dict, domain: int) -> None:
         log(f'  rep {i}: {fmt(r["in_run_steps_per_s"])} steps/s in run (rc {r["rc"]}), '
             f'load {r["load"]:.2f}')
     out = {}
-    for key in ('processes', 'recorded', 'composed'):
+    for key in ('processes', 'recorded', 'recorded_full', 'composed'):
         out[key] = (summary([r['in_run_steps_per_s'] for r in res[key]]),
                     summary([r['with_startup_steps_per_s'] for r in res[key]]),
                     _cpu_per_step(res[key], startup[key]),
                     summary([r['load'] for r in res[key]])['median'])
     res.update(processes_summary=out['processes'][0], recorded_summary=out['recorded'][0],
+               recorded_full_summary=out['recorded_full'][0],
                composed_summary=out['composed'][0])
 
     def detail(key: str, startup_what: str) -> str:
@@ -158,11 +161,19 @@ def bench_lockstep(cfg, table: Table, raw: dict, domain: int) -> None:
               detail('processes', 'start-up'),
               f"x{fmt(out['processes'][0]['median'] / 2800)} bare EventsExecutor exchange "
               '(2,800)')
+    unrec = max(out['processes'][0]['median'], 1e-9)
     table.add('4.1r', f'lockstep, 3 processes + recorder ({int(cfg.ls_duration / 0.01):,} '
-              'steps, run_processes, every topic recorded)', out['recorded'][0]['median'],
+              'steps, run_processes, lean recording (default): odom, cmd_vel, run_done, '
+              'trajectory messages)', out['recorded'][0]['median'],
               'steps/s', detail('recorded', 'start-up'),
-              f"x{fmt(out['recorded'][0]['median'] / max(out['processes'][0]['median'], 1e-9))}"
-              ' unrecorded', target='lockstep_processes')
+              f"x{fmt(out['recorded'][0]['median'] / unrec)} unrecorded, x"
+              f"{fmt(out['recorded'][0]['median'] / max(out['recorded_full'][0]['median'], 1e-9))}"
+              ' full recording', target='lockstep_processes')
+    table.add('4.1f', f'lockstep, 3 processes + recorder ({int(cfg.ls_duration / 0.01):,} '
+              'steps, run_processes, --record-all: every topic incl. /clock, pose, reference '
+              'samples)', out['recorded_full'][0]['median'],
+              'steps/s', detail('recorded_full', 'start-up'),
+              f"x{fmt(out['recorded_full'][0]['median'] / unrec)} unrecorded")
     table.add('4.2', f'lockstep, composed ({int(cfg.lc_duration / 0.01):,} steps, '
               'run_composed)', out['composed'][0]['median'], 'steps/s',
               detail('composed', 'node start-up'),

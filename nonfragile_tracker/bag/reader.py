@@ -31,7 +31,10 @@ from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefiniti
 from rosbags.rosbag2 import Reader, ReaderError
 
 from .. import topics
+from ..control.follow import reference_at
 from ..control.loop import quaternion_to_yaw
+from ..control.trajectory import TrajectoryError
+from ..msgconv import multidof_to_trajectory, path_to_trajectory
 from .writer import BagError, jazzy_typestore
 
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
@@ -410,6 +413,11 @@ PATH_TYPE = 'nav_msgs/msg/Path'
 #: Path topics used as the reference, in this order (the trajectory the tracker follows, then
 #: the displayed reference); otherwise the bag's only Path topic.
 PATH_TOPICS = ('trajectory', 'reference/path')
+#: Trajectory messages a tracker follows (a lean recording keeps these instead of the
+#: per-step samples), in the order the reader prefers them, with their types.
+TRAJECTORY_TOPICS = ((topics.TRAJECTORY_MULTIDOF, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                     (topics.TRAJECTORY, PATH_TYPE))
+_TRAJ_ROLE = 'trajectory message'
 
 
 def _by_type(by_topic: dict[str, Connection], types: tuple[str, ...], taken: set[str]
@@ -504,6 +512,39 @@ def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
     return ReferenceSeries(st, t, x, y, vx, vy, ax, ay, source=topic)
 
 
+def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
+                          stamps: np.ndarray, receive: np.ndarray) -> ReferenceSeries:
+    """The reference a lockstep tracker sampled from recorded trajectory messages.
+
+    Each message is converted as the tracker converts it (:mod:`msgconv`) and sampled at
+    each odometry stamp as :class:`control.follow.Follower` samples it
+    (:func:`control.follow.reference_at`); a stamp uses the latest message received no
+    later than its odometry (the first message before that).  :class:`TrajectoryError` if a
+    message cannot be converted (e.g. an untimed Path, whose times depend on the
+    tracker's parameters).
+    """
+    built = []
+    for _, msg in msgs:
+        frame = str(msg.header.frame_id)
+        if msgtype == PATH_TYPE:
+            if msg.poses and all(int(p.header.stamp.sec) == 0 and int(p.header.stamp.nanosec) == 0
+                                 for p in msg.poses):
+                raise TrajectoryError(f'{topic}: an untimed Path (its times depend on the '
+                                      "tracker's cruise_speed and max_accel)")
+            built.append(path_to_trajectory(msg, frame=frame, source=topic))
+        else:
+            built.append(multidof_to_trajectory(msg, frame=frame, source=topic))
+    recv = np.array([r for r, _ in msgs], dtype=np.int64)
+    which = np.maximum(np.searchsorted(recv, receive, side='right') - 1, 0)
+    rows = np.empty((stamps.size, 6))
+    for i, (s, k) in enumerate(zip(stamps, which)):
+        traj, origin = built[int(k)]
+        r = reference_at(traj, origin, int(s))
+        rows[i] = (r.x, r.y, r.vx, r.vy, r.ax, r.ay)
+    x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
+    return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)
+
+
 def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None,
              topic_overrides: dict[str, str] | None = None) -> BagData:
     """Read a run: counts and receive times of every topic, and the run arrays.
@@ -516,23 +557,30 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
     Bags from other systems: ``cmd_vel`` may be Twist or TwistStamped; odometry and
     commands under other names are found by type when unique, or named with
     ``topic_overrides`` (``{'odom': '/wheel/odometry', 'cmd_vel': '/cmd'}``).  When
-    the reference topics are absent but a nav_msgs/Path topic exists, the reference
-    is its last message (positions at the poses' stamps, velocities by differences).
+    the reference topics are absent, a lean lockstep recording's reference is rebuilt
+    from the recorded trajectory message (``trajectory_multidof``, else a timed
+    ``trajectory`` Path) at each odometry stamp, with the tracker's own conversion and
+    sampling; failing that, when a nav_msgs/Path topic exists, the reference is its last
+    message (positions at the poses' stamps, velocities by differences).
     """
     reader = open_reader(path)
     try:
         by_topic = _connections_by_topic(reader)
         topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
         topic_map = _complete_topic_map(by_topic, topic_map, topic_overrides)
-        path_topic = None
+        path_topic = traj_topic = None
         if any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
                                             topics.REF_ACCEL)):
+            for logical, msgtype in TRAJECTORY_TOPICS:
+                if logical in topic_map and by_topic[topic_map[logical]].msgtype == msgtype:
+                    traj_topic = topic_map[logical]
+                    break
             paths = [t for t, c in by_topic.items() if c.msgtype == PATH_TYPE]
             named = resolve_topics(paths, PATH_TOPICS, namespace)
             preferred = [named[n] for n in PATH_TOPICS if n in named]
             path_topic = preferred[0] if preferred else (paths[0] if len(paths) == 1 else None)
         missing = _missing_run_topics(topic_map)
-        if path_topic is not None:
+        if path_topic is not None or traj_topic is not None:
             missing = [m for m in missing if not m.startswith('reference/')]
         if missing and strict:
             raise MissingTopicsError(
@@ -550,6 +598,9 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                                           topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
         if path_topic is not None:
             role[path_topic] = PATH_TYPE
+        if traj_topic is not None:
+            role[traj_topic] = _TRAJ_ROLE
+        traj_msgs: list[tuple[int, Any]] = []
         ts = jazzy_typestore()
         receive: dict[str, list[int]] = {t: [] for t in by_topic}
         pose_rows: dict[int, tuple] = {}
@@ -571,6 +622,12 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                 add(timestamp)
                 name = role.get(conn.topic)
                 if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
+                    continue
+                if name == _TRAJ_ROLE:
+                    m_t = ts.deserialize_cdr(raw, conn.msgtype)
+                    traj_msgs.append((timestamp, m_t))
+                    if conn.topic == path_topic:
+                        last_path = m_t
                     continue
                 fast = fast_fields(raw, conn.msgtype, name == topics.CMD_VEL) \
                     if name != PATH_TYPE else None
@@ -625,7 +682,16 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
                       receive_ns=precv, frame_id=frames[0], child_frame_id=frames[1])
     common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
         & set(ref_parts[topics.REF_ACCEL])
-    if not common and last_path is not None and path_topic is not None:
+    reference = None
+    if not common and traj_msgs and traj_topic is not None:
+        try:
+            reference = _trajectory_reference(traj_msgs, by_topic[traj_topic].msgtype,
+                                              traj_topic, stamps, precv)
+        except TrajectoryError:
+            reference = None           # fall back to the Path by differences, if any
+    if reference is not None:
+        pass
+    elif not common and last_path is not None and path_topic is not None:
         reference = _path_reference(last_path, path_topic)
     else:
         rstamps = np.array(sorted(common), dtype=np.int64)

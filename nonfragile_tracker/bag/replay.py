@@ -36,9 +36,12 @@ import numpy as np
 import yaml
 
 from .. import topics
+from ..control.follow import REST_SPEED, Follower, trajectory_time
 from ..control.gains import read_gain_file
 from ..control.loop import Command, Tracker, TrackerConfig
-from ..msgconv import pose_from_odom, reference_from_msgs, stamp_ns, tracker_config
+from ..control.trajectory import TrajectoryError
+from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
+                       reference_from_msgs, stamp_ns, tracker_config)
 from ..resources import config_dir
 from ..runner import node_key
 from .compare import Comparison, compare_messages, format_differences
@@ -48,7 +51,7 @@ from .writer import BagError, jazzy_typestore
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
            'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
-           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK']
+           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'FollowerInputs']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
@@ -62,13 +65,16 @@ TRACKER_DEFAULTS: dict[str, Any] = {
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
 REF_INDEX = {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}
+#: Trajectory messages a lean lockstep bag carries instead of the reference samples
+#: (kind ``trajectory``), preferred in this order.
+_TRAJECTORY_TOPICS = (topics.TRAJECTORY_MULTIDOF, topics.TRAJECTORY)
 
 
 @dataclass(frozen=True)
 class ReplayEvent:
     """One recorded input or command, in bag order."""
 
-    kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd
+    kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd, trajectory
     receive_ns: int
     topic: str
     msgtype: str
@@ -103,15 +109,20 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
     reader = open_reader(path)
     try:
         by_topic = {c.topic: c for c in reader.connections}
-        tmap = resolve_topics(by_topic, list(_KINDS), namespace)
+        tmap = resolve_topics(by_topic, list(_KINDS) + list(_TRAJECTORY_TOPICS), namespace)
         missing = [n for n in (topics.ODOM, topics.REF_POSE, topics.REF_TWIST,
                                topics.REF_ACCEL) if n not in tmap]
+        lean = [n for n in _TRAJECTORY_TOPICS if n in tmap]
+        if missing and lean and topics.ODOM in tmap:
+            missing = []                   # a lean lockstep bag: the trajectory message
         if missing:
             raise MissingTopicsError(
                 f'bag {path} lacks {", ".join(missing)}: a replay feeds the recorded odometry '
-                f'and reference to the tracker (the bag has {sorted(by_topic) or "no topics"})',
-                missing)
+                'and reference (or trajectory message) to the tracker (the bag has '
+                f'{sorted(by_topic) or "no topics"})', missing)
         kinds = {tmap[n]: k for n, k in _KINDS.items() if n in tmap}
+        if not any(k in REF_INDEX for k in kinds.values()) and lean:
+            kinds[tmap[lean[0]]] = 'trajectory'   # the one the tracker followed
         ts = typestore_for(reader)
         conns = [c for c in reader.connections if c.topic in kinds]
         out = []
@@ -205,6 +216,100 @@ class TrackerInputs:
         speed = odom.twist.twist.linear.x
         return self.tracker.step(pose[0], pose[1], pose[2], ref,
                                  measured_speed=speed if math.isfinite(speed) else 0.0)
+
+
+class FollowerInputs:
+    """The lockstep tracker node following a trajectory message, ROS-free.
+
+    As the node: a trajectory message (``trajectory_multidof`` or a timed ``trajectory``
+    Path) starts a run on it, each odometry with an advancing stamp gets
+    :meth:`control.follow.Follower.step` at :func:`control.follow.trajectory_time`; an
+    odometry before any trajectory waits for it.  For lean lockstep bags.
+    """
+
+    def __init__(self, config: TrackerConfig, rest_speed: float = REST_SPEED,
+                 cruise_speed: float | None = None, max_accel: float | None = None,
+                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
+        self.tracker = Tracker(config)
+        self.rest_speed = rest_speed
+        self.cruise_speed, self.max_accel = cruise_speed, max_accel
+        self.max_jump_ns = max_stamp_jump * 1e9
+        self.follower: Follower | None = None
+        self.origin_ns = 0
+        self._odom = None
+        self.last_stamp = -1
+        self.last_odom_stamp = -1
+        self.ignored: dict[str, int] = {}
+
+    def _ignore(self, why: str) -> None:
+        self.ignored[why] = self.ignored.get(why, 0) + 1
+
+    def trajectory(self, e: ReplayEvent) -> Command | None:
+        """Take a trajectory message; the command for a waiting odometry, if any."""
+        try:
+            if e.msgtype == 'nav_msgs/msg/Path':
+                traj, origin = path_to_trajectory(
+                    e.msg, frame=topics.ODOM_FRAME, source=e.topic,
+                    cruise_speed=self.cruise_speed, max_accel=self.max_accel,
+                    now_ns=max(self.last_odom_stamp, 0))
+            else:
+                traj, origin = multidof_to_trajectory(e.msg, frame=topics.ODOM_FRAME,
+                                                      source=e.topic)
+        except TrajectoryError as exc:
+            return self._ignore(f'trajectory refused: {exc}')
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, self.rest_speed)
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        return self._compute()
+
+    def odom(self, msg) -> Command | None:
+        """Take an odometry message; the command it triggers, if any."""
+        if msg.header.frame_id != topics.ODOM_FRAME:
+            return self._ignore(f'odom frame {msg.header.frame_id!r} is not '
+                                f'{topics.ODOM_FRAME!r}')
+        s = stamp_ns(msg.header.stamp)
+        if s <= self.last_odom_stamp:
+            return self._ignore('odom stamp not advancing') if s < self.last_odom_stamp \
+                else None
+        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > self.max_jump_ns:
+            self.tracker.reset()
+        self._odom = msg
+        self.last_odom_stamp = s
+        return self._compute()
+
+    def _compute(self) -> Command | None:
+        odom, f = self._odom, self.follower
+        if odom is None or f is None:
+            return None
+        s = stamp_ns(odom.header.stamp)
+        if s <= self.last_stamp:
+            return None
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            return self._ignore(f'odom: {pose}')
+        self.last_stamp = s
+        speed = odom.twist.twist.linear.x
+        return f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
+                      measured_speed=speed if math.isfinite(speed) else 0.0)
+
+
+def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed,
+                 values: dict) -> ReplayPlan:
+    """A lean lockstep bag: the trajectory message(s) and odometry, in bag order."""
+    inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
+                            values.get('cruise_speed'), values.get('max_accel'),
+                            float(values.get('max_stamp_jump',
+                                             TRACKER_DEFAULTS['max_stamp_jump'])))
+    data = [e for e in events if e.kind in ('odom', 'trajectory')]
+    commands = []
+    for e in data:
+        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
+        if cmd is not None:
+            commands.append((e.receive_ns, _twist_msg(cmd)))
+    return ReplayPlan('lockstep', data, commands, recorded, fed, dict(inputs.ignored))
 
 
 def _param_section(path: Path) -> dict:
@@ -345,7 +450,8 @@ START_CHECK = 10
 
 def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump'],
-                use_recorded: bool = True, atol: float = 1e-9) -> ReplayPlan:
+                use_recorded: bool = True, atol: float = 1e-9,
+                values: dict | None = None) -> ReplayPlan:
     """Run the tracker over the events in process and fix what the recorder cannot tell.
 
     Lockstep bags are fed in stamp order, any other bag compared with another bag
@@ -366,12 +472,18 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     Every odometry after the start is paired with the next recorded command; once a
     command cannot be reproduced this way, the rest is fed in bag order (and the
     comparison shows the difference).
+
+    A lean lockstep bag (a trajectory message instead of the reference samples) is fed
+    to :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values)
+    give its ``rest_speed``, ``cruise_speed`` and ``max_accel``.
     """
-    mode = bag_mode(events)
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}
     for e in events:
         fed[e.kind] = fed.get(e.kind, 0) + 1
+    if 'trajectory' in fed:
+        return _plan_follow(events, config, recorded, fed, values or {})
+    mode = bag_mode(events)
     data = [e for e in events if e.kind != 'cmd']
     if use_recorded and mode == 'realtime' and recorded:
         plan = _plan_realtime(events, data, recorded, config, max_stamp_jump, atol)
@@ -538,7 +650,7 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
     config, values = load_tracker_parameters(gains, params)
     events = read_replay_events(bag, namespace=namespace)
     plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
-                       use_recorded=expected is None, atol=max(atol, 1e-9))
+                       use_recorded=expected is None, atol=max(atol, 1e-9), values=values)
     return finish_replay(bag, plan, plan.commands, expected=expected, atol=atol, rtol=rtol,
                          max_differences=max_differences)
 

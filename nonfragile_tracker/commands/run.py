@@ -74,9 +74,9 @@ def cmd_run(args: argparse.Namespace) -> int:
           f'{", delay compensation" if comp else ""}, {length}, '
           f'{"composed" if args.composed else "one process per node"}, lockstep')
     if args.composed:
-        res = runner.run_composed(params, run_dir, record=record)
+        res = runner.run_composed(params, run_dir, record=record, record_all=args.record_all)
     else:
-        res = runner.run_processes(params, run_dir, record=record)
+        res = runner.run_processes(params, run_dir, record=record, record_all=args.record_all)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None, -2)}
     if bad and all(code == EXIT_BAD_INPUT for code in bad.values()):
         # every failed node refused its parameters: bad input, say which and why
@@ -125,4 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument('--out', default='runs', help='directory for run directories (default runs/)')
     r.add_argument('--name', help='run directory name (default run_<date>_<time>)')
     r.add_argument('--no-record', action='store_true', help='do not record a bag')
+    r.add_argument('--record-all', action='store_true',
+                   help='record every topic (also /clock, pose and the per-step reference '
+                        'samples); default: the lean set - odom, cmd_vel, run_done and the '
+                        'trajectory messages')
     r.set_defaults(func=cmd_run)

@@ -23,7 +23,8 @@ from .reference import RefSample
 from .simulate import TrackingRun, run_loop
 from .trajectory import Trajectory
 
-__all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors']
+__all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors', 'trajectory_time',
+           'reference_at']
 
 #: Default speed (m/s) below which, after the trajectory's end, the robot is at rest.
 REST_SPEED = 0.01
@@ -39,6 +40,20 @@ def path_errors(x: float, y: float, th: float, ref) -> tuple[float, float, float
     dx, dy = x - ref.x, y - ref.y
     c, s = math.cos(ref.heading), math.sin(ref.heading)
     return (c * dx + s * dy, -s * dx + c * dy, math.remainder(th - ref.heading, math.tau))
+
+
+def trajectory_time(stamp_ns: int, origin_ns: int) -> float:
+    """Trajectory time (s) of a stamp: ``(stamp - origin) * 1e-9`` (integer ns difference).
+
+    What a lockstep tracker passes to :meth:`Follower.step` for the odometry stamp, and
+    what the bag reader samples a recorded trajectory message at (one formula).
+    """
+    return (int(stamp_ns) - int(origin_ns)) * 1e-9
+
+
+def reference_at(trajectory: Trajectory, origin_ns: int, stamp_ns: int) -> RefSample:
+    """The reference :meth:`Follower.step` uses for the odometry stamped ``stamp_ns``."""
+    return trajectory.sample(trajectory_time(stamp_ns, origin_ns))
 
 
 class Follower:

@@ -27,7 +27,7 @@ from nav_msgs.msg import Odometry
 from .. import topics
 from ..bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
                           load_tracker_parameters, plan_replay, read_replay_events)
-from ..bag.writer import jazzy_typestore
+from ..bag.writer import BagError, jazzy_typestore
 from ..errors import RunError
 from ..resources import config_dir
 from ..runner import isolated_env, scenario_parameters, write_parameter_file
@@ -59,6 +59,10 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
     config, values = load_tracker_parameters(gains, params)     # bad files: exit 2 first
     events = read_replay_events(bag, namespace=namespace)
+    if any(e.kind == 'trajectory' for e in events):
+        raise BagError(f'{bag} is a lean lockstep recording (a trajectory message, no '
+                       'reference samples): replay it in process (without --ros), or record '
+                       'with --record-all / record_all:=true to replay it over DDS')
     plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
                        use_recorded=expected is None)
     mode = plan.mode

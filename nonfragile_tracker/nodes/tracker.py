@@ -60,7 +60,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import REST_SPEED, Follower, path_errors
+from ..control.follow import REST_SPEED, Follower, path_errors, trajectory_time
 from ..control.loop import Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
@@ -426,7 +426,7 @@ class TrackerNode(AdapterNode):
         f = self.follower
         speed = odom.twist.twist.linear.x
         was_finished = f.finished
-        cmd = f.step(pose[0], pose[1], pose[2], (s - self.origin_ns) * 1e-9,
+        cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
                      measured_speed=speed if math.isfinite(speed) else 0.0)
         if f.finished and not was_finished:
             e = math.hypot(cmd.error[0], cmd.error[2])

@@ -79,10 +79,13 @@ def runs(tmp_path_factory):
     for name in ('processes', 'composed'):
         run_dir = tmp / name
         run_dir.mkdir()
+        # the true pose at every step is needed: record every topic (the lean default
+        # has odom and cmd_vel only)
         if name == 'processes':
-            res = run_processes(parameters(), run_dir, env=env, progress=lambda s: None)
+            res = run_processes(parameters(), run_dir, env=env, progress=lambda s: None,
+                                record_all=True)
         else:
-            res = run_composed(parameters(), run_dir)
+            res = run_composed(parameters(), run_dir, record_all=True)
         assert all(c == 0 for c in res.exit_codes.values()), (res.exit_codes, [
             (p.name, p.read_text()[-2000:]) for p in run_dir.glob('*.log')])
         out[name] = recorded(res.bag)

@@ -30,7 +30,8 @@ def arguments(path):
 
 
 @pytest.mark.parametrize('name,expected', [
-    ('tracking.launch.py', {'mode', 'record', 'bag', 'namespace', 'gains', 'scenario',
+    ('tracking.launch.py', {'mode', 'record', 'record_all', 'bag', 'namespace', 'gains',
+                            'scenario',
                             'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
     ('robot.launch.py', {'cmd_vel', 'odom', 'namespace', 'gains', 'scenario', 'trajectory',
                          'trajectory_topic', 'enable_stamped_cmd_vel', 'odom_frame',
