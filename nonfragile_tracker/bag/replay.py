@@ -149,23 +149,18 @@ def bag_mode(events: Iterable[ReplayEvent]) -> str:
     return 'lockstep' if odom and len(odom & ref) >= 0.5 * len(odom) else 'realtime'
 
 
-class TrackerInputs:
-    """The tracker node's input rules (frames, stamps, lockstep/real-time triggering), ROS-free.
+class _OdomInputs:
+    """The tracker node's odometry rules, shared by both replays.
 
-    ``odom(msg)`` and ``reference(i, msg)`` take messages (rclpy or rosbags) and return
-    the :class:`Command` the node would publish, or None.  ``ignored`` counts what was
-    ignored and why.
+    Frame ``odom``, an advancing stamp, a stamp jump above ``max_stamp_jump``
+    re-initialises the compensator; an accepted odometry is offered to ``_compute``
+    (the subclass's trigger).
     """
 
-    def __init__(self, config: TrackerConfig, mode: str = 'realtime',
-                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
-        if mode not in ('lockstep', 'realtime'):
-            raise BagError(f'mode must be lockstep or realtime, got {mode!r}')
+    def __init__(self, config: TrackerConfig, max_stamp_jump: float):
         self.tracker = Tracker(config)
-        self.mode = mode
         self.max_jump_ns = max_stamp_jump * 1e9
-        self._odom = None
-        self._ref: list[Any] = [None, None, None]
+        self._odom: Any = None
         self.last_stamp = -1
         self.last_odom_stamp = -1
         self.ignored: dict[str, int] = {}
@@ -189,6 +184,26 @@ class TrackerInputs:
         self._odom = msg
         self.last_odom_stamp = s
         return self._compute()
+
+    def _compute(self) -> Command | None:
+        raise NotImplementedError
+
+
+class TrackerInputs(_OdomInputs):
+    """The tracker node's input rules (frames, stamps, lockstep/real-time triggering), ROS-free.
+
+    ``odom(msg)`` and ``reference(i, msg)`` take messages (rclpy or rosbags) and return
+    the :class:`Command` the node would publish, or None.  ``ignored`` counts what was
+    ignored and why.
+    """
+
+    def __init__(self, config: TrackerConfig, mode: str = 'realtime',
+                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
+        if mode not in ('lockstep', 'realtime'):
+            raise BagError(f'mode must be lockstep or realtime, got {mode!r}')
+        super().__init__(config, max_stamp_jump)
+        self.mode = mode
+        self._ref: list[Any] = [None, None, None]
 
     def reference(self, i: int, msg) -> Command | None:
         """Take reference part ``i`` (pose, twist, accel); the command it triggers, if any."""
@@ -218,7 +233,7 @@ class TrackerInputs:
                                  measured_speed=speed if math.isfinite(speed) else 0.0)
 
 
-class FollowerInputs:
+class FollowerInputs(_OdomInputs):
     """The lockstep tracker node following a trajectory message, ROS-free.
 
     As the node: a trajectory message (``trajectory_multidof`` or a timed ``trajectory``
@@ -230,19 +245,11 @@ class FollowerInputs:
     def __init__(self, config: TrackerConfig, rest_speed: float = REST_SPEED,
                  cruise_speed: float | None = None, max_accel: float | None = None,
                  max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
-        self.tracker = Tracker(config)
+        super().__init__(config, max_stamp_jump)
         self.rest_speed = rest_speed
         self.cruise_speed, self.max_accel = cruise_speed, max_accel
-        self.max_jump_ns = max_stamp_jump * 1e9
         self.follower: Follower | None = None
         self.origin_ns = 0
-        self._odom = None
-        self.last_stamp = -1
-        self.last_odom_stamp = -1
-        self.ignored: dict[str, int] = {}
-
-    def _ignore(self, why: str) -> None:
-        self.ignored[why] = self.ignored.get(why, 0) + 1
 
     def trajectory(self, e: ReplayEvent) -> Command | None:
         """Take a trajectory message; the command for a waiting odometry, if any."""
@@ -262,21 +269,6 @@ class FollowerInputs:
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
-        return self._compute()
-
-    def odom(self, msg) -> Command | None:
-        """Take an odometry message; the command it triggers, if any."""
-        if msg.header.frame_id != topics.ODOM_FRAME:
-            return self._ignore(f'odom frame {msg.header.frame_id!r} is not '
-                                f'{topics.ODOM_FRAME!r}')
-        s = stamp_ns(msg.header.stamp)
-        if s <= self.last_odom_stamp:
-            return self._ignore('odom stamp not advancing') if s < self.last_odom_stamp \
-                else None
-        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > self.max_jump_ns:
-            self.tracker.reset()
-        self._odom = msg
-        self.last_odom_stamp = s
         return self._compute()
 
     def _compute(self) -> Command | None:
