@@ -27,6 +27,7 @@ import bisect
 import copy
 import math
 import os
+from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -149,7 +150,7 @@ def bag_mode(events: Iterable[ReplayEvent]) -> str:
     return 'lockstep' if odom and len(odom & ref) >= 0.5 * len(odom) else 'realtime'
 
 
-class _OdomInputs:
+class _OdomInputs(ABC):
     """The tracker node's odometry rules, shared by both replays.
 
     Frame ``odom``, an advancing stamp, a stamp jump above ``max_stamp_jump``
@@ -185,8 +186,9 @@ class _OdomInputs:
         self.last_odom_stamp = s
         return self._compute()
 
+    @abstractmethod
     def _compute(self) -> Command | None:
-        raise NotImplementedError
+        """The command the inputs received so far trigger, if any."""
 
 
 class TrackerInputs(_OdomInputs):

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from batch_checks import single_runs, trace_deviation
 from conftest import ROOT
 from nonfragile_tracker import cli
 from nonfragile_tracker.control import study as study_mod
@@ -24,7 +25,6 @@ from nonfragile_tracker.scenario import paper_plant_config
 
 CONFIG = ROOT / 'config'
 GAINS = CONFIG / 'tracker_gains.yaml'
-FIELDS = ('x', 'y', 'th', 'speed', 'cmd_v', 'cmd_w', 'commanded')
 
 
 def K():
@@ -40,12 +40,8 @@ def worst_deviation(plant, tracker, path, steps, cases, exact):
     """Largest |batch - single run| over every case and logged field; settling times."""
     br = simulate_batch(plant, tracker, path, steps, cases, record=True, exact=exact)
     worst = 0.0
-    for i in range(cases.n):
-        pci, tci = cases.configs(i, plant, tracker)
-        p = path.path(i) if isinstance(path, PathBatch) else path
-        run = simulate_tracking(pci, tci, p, steps)
-        for name in FIELDS:
-            worst = max(worst, float(np.max(np.abs(getattr(run, name) - br.trace[name][:, i]))))
+    for i, run in single_runs(plant, tracker, path, steps, cases):
+        worst = max(worst, trace_deviation(run, br, i))
         if exact:
             m = run.metrics(tolerance=br.tolerance)
             assert m.settling_time == pytest.approx(br.settling_time[i], abs=1e-12, nan_ok=True)

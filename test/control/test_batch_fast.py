@@ -8,27 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT
-from nonfragile_tracker.control.batch import (BatchCases, perturbation_schedule,
-                                              sample_deltas, simulate_batch)
-from nonfragile_tracker.control.gains import read_gain_file
+from batch_checks import (assert_metrics_equal, gain, perturbations, single_runs,
+                          trace_deviation)
+from nonfragile_tracker.control.batch import BatchCases, simulate_batch
 from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.problem import load_problem
 from nonfragile_tracker.control.reference import circle, figure_eight
-from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
-
-CONFIG = ROOT / 'config'
-FIELDS = ('x', 'y', 'th', 'speed', 'cmd_v', 'cmd_w', 'commanded')
-
-
-def gain():
-    return read_gain_file(CONFIG / 'tracker_gains.yaml')
-
-
-def perturbations(rng, n):
-    p = load_problem(CONFIG / 'paper_problem.yaml')
-    return perturbation_schedule(p.E, p.F, sample_deltas(rng, n, 1, (2, 2)))
 
 
 def check_against_single_runs(plant, tracker, path, steps, cases, exact, steady_from=None):
@@ -36,20 +21,9 @@ def check_against_single_runs(plant, tracker, path, steps, cases, exact, steady_
     br = simulate_batch(plant, tracker, path, steps, cases, record=True, exact=exact,
                         steady_from=steady_from)
     worst = 0.0
-    for i in range(cases.n):
-        pci, tci = cases.configs(i, plant, tracker)
-        run = simulate_tracking(pci, tci, path, steps)
-        for name in FIELDS:
-            worst = max(worst, float(np.max(np.abs(getattr(run, name) - br.trace[name][:, i]))))
-        m = run.metrics(tolerance=br.tolerance)
-        assert m.settling_time == pytest.approx(br.settling_time[i], abs=1e-12, nan_ok=True)
-        assert m.first_within == pytest.approx(br.first_within[i], abs=1e-12, nan_ok=True)
-        assert m.final_error == pytest.approx(br.final_error[i], abs=1e-12)
-        assert m.rms_error == pytest.approx(br.rms_error[i], abs=1e-12)
-        assert m.peak_abs_v == pytest.approx(br.peak_abs_v[i], abs=1e-12)
-        assert m.peak_abs_w == pytest.approx(br.peak_abs_w[i], abs=1e-12)
-        window = run.t >= br.steady_from - 1e-12
-        assert run.error[window].max() == pytest.approx(br.steady_error[i], abs=1e-12)
+    for i, run in single_runs(plant, tracker, path, steps, cases):
+        worst = max(worst, trace_deviation(run, br, i))
+        assert_metrics_equal(run, br, i, first_within=True)
     return worst
 
 

@@ -9,19 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from batch_checks import (FIELDS, assert_metrics_equal, gain, perturbations, single_runs,
+                          trace_deviation)
 from nonfragile_tracker.control import batch as batch_mod
-from nonfragile_tracker.control.batch import (BatchCases, PathBatch, perturbation_schedule,
-                                              sample_deltas, simulate_batch)
-from nonfragile_tracker.control.gains import read_gain_file
+from nonfragile_tracker.control.batch import BatchCases, PathBatch, simulate_batch
 from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.problem import load_problem
 from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
-
-CONFIG = ROOT / 'config'
-FIELDS = ('x', 'y', 'th', 'speed', 'cmd_v', 'cmd_w', 'commanded')
 
 
 @pytest.fixture
@@ -38,32 +32,16 @@ def ideal_calls(monkeypatch):
     return calls
 
 
-def perturbations(rng, n, segments=1):
-    p = load_problem(CONFIG / 'paper_problem.yaml')
-    return perturbation_schedule(p.E, p.F, sample_deltas(rng, n, segments, (2, 2)))
-
-
 def worst_against_single_runs(plant, tracker, path, steps, cases):
     """Worst |batch - single run| over the logged fields; metrics within 1e-12, with and
     without a trace (without, the heading advances once per metrics block)."""
     br = simulate_batch(plant, tracker, path, steps, cases, record=True, exact=False)
     bn = simulate_batch(plant, tracker, path, steps, cases, exact=False)
     worst = 0.0
-    for i in range(cases.n):
-        pci, tci = cases.configs(i, plant, tracker)
-        p = path.path(i) if isinstance(path, PathBatch) else path
-        run = simulate_tracking(pci, tci, p, steps)
-        for name in FIELDS:
-            worst = max(worst, float(np.max(np.abs(getattr(run, name) - br.trace[name][:, i]))))
-        m = run.metrics(tolerance=br.tolerance)
+    for i, run in single_runs(plant, tracker, path, steps, cases):
+        worst = max(worst, trace_deviation(run, br, i))
         for b in (br, bn):
-            assert m.settling_time == pytest.approx(b.settling_time[i], abs=1e-12, nan_ok=True)
-            assert m.final_error == pytest.approx(b.final_error[i], abs=1e-12)
-            assert m.rms_error == pytest.approx(b.rms_error[i], abs=1e-12)
-            assert m.peak_abs_v == pytest.approx(b.peak_abs_v[i], abs=1e-12)
-            assert m.peak_abs_w == pytest.approx(b.peak_abs_w[i], abs=1e-12)
-            window = run.t >= b.steady_from - 1e-12
-            assert run.error[window].max() == pytest.approx(b.steady_error[i], abs=1e-12)
+            assert_metrics_equal(run, b, i)
     assert bn.finite.all()
     return worst
 
@@ -79,7 +57,7 @@ def test_paper_delay_latencies_and_slow_starts_equal_single_runs(ideal_calls):
                        x0=0.7 + rng.uniform(-0.2, 0.2, n),
                        th0=[3.14, -3.14, math.pi, -3.0, 0.5, 2.0])
     worst = worst_against_single_runs(paper_plant_config(),
-                                      TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml')),
+                                      TrackerConfig(K=gain()),
                                       circle(), 1203, cases)
     assert worst < 1e-12
     assert ideal_calls == [1, 1]
@@ -94,7 +72,7 @@ def test_no_state_delay_and_per_case_paths_equal_single_runs(ideal_calls):
     path = PathBatch('figure_eight', radius=rng.uniform(0.5, 1.5, n),
                      rate=rng.uniform(0.1, 0.3, n), phase=rng.uniform(0, 1, n))
     worst = worst_against_single_runs(
-        pc, TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml')), path, 900, cases)
+        pc, TrackerConfig(K=gain()), path, 900, cases)
     assert worst < 1e-12
     assert ideal_calls == [1, 1]
 
@@ -108,7 +86,7 @@ def test_switching_perturbation_agrees_with_the_exact_mode(ideal_calls):
                        cmd_latency=rng.integers(0, 20, n) * 0.01,
                        x0=0.7 + rng.uniform(-0.3, 0.3, n), th0=rng.uniform(-math.pi, math.pi, n))
     pc = paper_plant_config()
-    tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'))
+    tc = TrackerConfig(K=gain())
     a = simulate_batch(pc, tc, circle(), 1500, cases, exact=True, record=True)
     b = simulate_batch(pc, tc, circle(), 1500, cases, exact=False, record=True)
     assert ideal_calls == [1]
