@@ -8,7 +8,8 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ['finite_float', 'positive_float', 'nonnegative_float']
+__all__ = ['finite_float', 'positive_float', 'nonnegative_float', 'positive_int',
+           'nonnegative_int']
 
 
 def finite_float(text: str) -> float:
@@ -36,3 +37,26 @@ def nonnegative_float(text: str) -> float:
     if x < 0:
         raise argparse.ArgumentTypeError(f'expected a number >= 0, got {text!r}')
     return x
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (a count)."""
+    n = _integer(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(f'expected an integer >= 1, got {text!r}')
+    return n
+
+
+def nonnegative_int(text: str) -> int:
+    """An integer >= 0 (a seed)."""
+    n = _integer(text)
+    if n < 0:
+        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
+    return n

@@ -7,33 +7,13 @@ import math
 import time
 from pathlib import Path
 
-from .argtypes import nonnegative_float, positive_float
+from .argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
 
 __all__ = ['register', 'cmd_study']
 
 
 def _fmt(v, unit: str = '', prec: str = '.4g') -> str:
     return '-' if v is None else f'{v:{prec}}{unit}'
-
-
-def _count(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f'expected an integer >= 1, got {text!r}')
-    return n
-
-
-def _seed(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
-    return n
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -145,8 +125,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument('--problem', help='problem file for E, F (default config/paper_problem.yaml)')
     p.add_argument('--scenario', help='node parameter file: plant, reference, tracker limits '
                    '(default config/paper_scenario.yaml)')
-    p.add_argument('--cases', type=_count, default=1000, help='number of cases (default 1000)')
-    p.add_argument('--seed', type=_seed, default=0, help='random seed (default 0)')
+    p.add_argument('--cases', type=positive_int, default=1000,
+                   help='number of cases (default 1000)')
+    p.add_argument('--seed', type=nonnegative_int, default=0, help='random seed (default 0)')
     p.add_argument('--duration', type=positive_float, default=60.0,
                    help='simulated seconds per case (default 60)')
     p.add_argument('--latency', type=nonnegative_float, nargs=2, metavar=('LO', 'HI'),
@@ -168,7 +149,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help='settling tolerance, m (default 0.01)')
     p.add_argument('--delay-compensation', action='store_true',
                    help='the zero steady-state error law (delay-consistent reference)')
-    p.add_argument('--jobs', type=_count, default=None,
+    p.add_argument('--jobs', type=positive_int, default=None,
                    help='worker processes (default: the cores available)')
     p.add_argument('--json', metavar='OUT', help='write the summary and every case as JSON')
     p.add_argument('--plot', metavar='OUT.png', help='write a PNG of the distributions')
