@@ -132,7 +132,7 @@ import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, SolverFailure
 from .problem import Problem
-from .search import golden_section_max
+from .search import eps_search
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
                   cached_program, solve)
 from .sdp import sym as _sym
@@ -532,14 +532,10 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         sols.append(sol)
         return _t_of(sol)
 
-    ts = [run(e) for e in grid]
-    if eps is None and refine > 0 and len(grid) > 1 and max(ts) > -math.inf:
-        order = sorted(range(len(grid)), key=lambda i: grid[i])
-        k = max(range(len(order)), key=lambda j: ts[order[j]])
-        lo = math.log(grid[order[max(k - 1, 0)]])
-        hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
-        if hi > lo:
-            golden_section_max(lambda u: run(math.exp(u)), lo, hi, refine)
+    if eps is not None:
+        run(float(eps))
+    else:
+        eps_search(run, grid, refine)
     solve_time = sum(s.solve_time for s in sols)
     scan = tuple((float(s.eps), _t_of(s)) for s in sols)
     best = max(sols, key=_t_of)
@@ -578,14 +574,15 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         gain_bound=gain_bound, eps_scan=scan, extra={'solves': len(sols)})
 
 
-def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gain_bound,
-                 margin, solver, verify_tol, refine: int = DEFAULT_REFINE) -> float | None:
+def _feasible_at(problem: Problem, h: float, grid: list[float], start: float | None, *,
+                 nominal, gain_bound, margin, solver, verify_tol,
+                 refine: int = DEFAULT_REFINE) -> float | None:
     """An eps giving a verified certificate at ``h`` (None if none is found).
 
-    Tries ``order`` and stops at the first success; if none succeeds, runs ``refine``
-    golden-section steps in ``log eps`` around the best grid point (near the largest
-    certifiable delay the feasible eps interval becomes narrow and can fall between
-    grid points).
+    :func:`.search.eps_search` over ``grid`` (locally from ``start``, the last success,
+    if given), stopping at the first success; ``refine`` golden-section steps around
+    the best grid point come last (near the largest certifiable delay the feasible eps
+    interval becomes narrow and can fall between grid points).
     """
     prog = _program(problem, nominal, gain_bound is not None)
     prog.set_data(problem, gain_bound)
@@ -593,12 +590,9 @@ def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gai
     class _Found(Exception):
         pass
 
-    tried: dict[float, float] = {}
-
     def attempt(e: float) -> float:
         sol = prog.solve(problem, h, e, solver)
         t = _t_of(sol)
-        tried[e] = t
         if t >= margin:
             try:
                 if _certificate(problem, h, sol, verify_tol).verification.ok:
@@ -608,14 +602,7 @@ def _feasible_at(problem: Problem, h: float, order: list[float], *, nominal, gai
         return t
 
     try:
-        for e in order:
-            attempt(e)
-        grid = sorted(tried)
-        k = max(range(len(grid)), key=lambda i: tried[grid[i]])
-        if refine > 0 and len(grid) > 1 and tried[grid[k]] > -math.inf:
-            lo = math.log(grid[max(k - 1, 0)])
-            hi = math.log(grid[min(k + 1, len(grid) - 1)])
-            golden_section_max(lambda u: attempt(math.exp(u)), lo, hi, refine)
+        eps_search(attempt, grid, refine, start=start, accept=margin)
     except _Found as found:
         return float(found.args[0])
     return None
@@ -631,10 +618,11 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
 
     Feasibility is monotone in ``h`` (module docstring, step 7).  A trial delay counts
     as certified iff some ``eps`` gives ``t >= margin`` and a verified certificate: the
-    last successful ``eps`` is tried first, then ``eps_grid`` (nearest first), then
-    ``refine`` golden-section steps around the best grid point; the first success
-    stops the search.  Because ``eps`` is searched heuristically the result is a
-    lower bound of the largest delay the LMI family certifies.  The bracket
+    whole ``eps_grid`` until the first success, then a local climb on it from the last
+    successful ``eps`` (:func:`.search.eps_search`), then ``refine`` golden-section steps
+    around the best grid point; the first success stops the search.  Because ``eps`` is
+    searched heuristically the result is a lower bound of the largest delay the LMI
+    family certifies.  The bracket
     ``[lo, hi]`` is found by halving ``h_hi`` and bisected until ``hi - lo <= tol``.
     Returns ``(lo, result)``, ``result`` the full line search (with refinement) at ``lo``
     (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi``
@@ -654,12 +642,7 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
     last: list[float] = []
 
     def ok(h: float) -> bool:
-        if last:                                  # the last success, then its nearest grid points
-            c = math.log(last[-1])
-            order = [last[-1]] + sorted(grid, key=lambda e: abs(math.log(e) - c))
-        else:
-            order = grid
-        e = _feasible_at(problem, h, order, refine=refine, **kw)
+        e = _feasible_at(problem, h, grid, last[-1] if last else None, refine=refine, **kw)
         if e is not None:
             last.append(e)
         return e is not None

@@ -122,7 +122,7 @@ from ..errors import CertificateError, InfeasibleError, InputError, SolverFailur
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
                   cached_program, solve, sym)
-from .search import golden_section_max, largest_feasible
+from .search import eps_search, largest_feasible
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
            'InputDelayResult', 'InputDelayCertification', 'certify_input_delay',
@@ -514,8 +514,8 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                            refine: int = DEFAULT_REFINE, nominal: bool = False,
                            gain_bound: float | None = None, state_delay: bool | None = None,
                            margin: float = DEFAULT_MARGIN, solver: str = DEFAULT_SOLVER,
-                           verify_tol: float = 1e-9, stop_at_first: bool = False
-                           ) -> InputDelayResult:
+                           verify_tol: float = 1e-9, stop_at_first: bool = False,
+                           eps_start: float | None = None) -> InputDelayResult:
     """A gain certified for every input delay ``h(t)`` in ``[h_min, h_max]``.
 
     Parameters
@@ -528,7 +528,8 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         Certified decay rate (1/s), ``>= 0``.
     eps : float, optional
         Tuning scalar ``P3 = eps P2``; default: grid ``eps_grid`` then ``refine``
-        golden-section steps in ``log eps`` maximizing the strictness ``t``.
+        golden-section steps in ``log eps`` maximizing the strictness ``t``
+        (:func:`.search.eps_search`).
     nominal : bool
         Drop the ``E D F`` terms.
     gain_bound : float, optional
@@ -537,6 +538,10 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         Include ``A_tau x(t - tau)``; default: iff ``A_tau != 0``.
     stop_at_first : bool
         Return the first ``eps`` giving a verified certificate (bisection uses this).
+    eps_start : float, optional
+        Warm start of the ``eps`` search: a local climb on ``eps_grid`` from this value
+        instead of the whole grid (the bisections pass the ``eps`` of their last
+        success).
 
     Returns
     -------
@@ -558,6 +563,9 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
     h0, h1 = _check_interval(h_min, h_max)
     grid = [float(eps)] if eps is not None else [float(e) for e in eps_grid]
     _check(gain_bound, alpha, grid)
+    if eps_start is not None and not (isinstance(eps_start, (int, float))
+                                      and math.isfinite(eps_start) and eps_start > 0):
+        raise InputError(f'eps_start must be a finite number > 0, got {eps_start!r}')
     alpha = float(alpha)
     sd = _uses_state_delay(problem, state_delay)
     prog = _program(problem, nominal, gain_bound is not None, sd)
@@ -588,14 +596,11 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         return t
 
     try:
-        ts = [run(e) for e in grid]
-        if eps is None and refine > 0 and len(grid) > 1 and max(ts) > -math.inf:
-            order = sorted(range(len(grid)), key=lambda i: grid[i])
-            k = max(range(len(order)), key=lambda j: ts[order[j]])
-            lo = math.log(grid[order[max(k - 1, 0)]])
-            hi = math.log(grid[order[min(k + 1, len(order) - 1)]])
-            if hi > lo:
-                golden_section_max(lambda u: run(math.exp(u)), lo, hi, refine)
+        if eps is not None:
+            run(float(eps))
+        else:
+            eps_search(run, grid, refine, start=eps_start,
+                       accept=margin if stop_at_first else math.inf)
     except _Stop:
         pass
     solve_time = sum(p.solve_time for p in points)
@@ -785,7 +790,8 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
                               solver: str = DEFAULT_SOLVER) -> InputDelayResult:
     """Largest certified ``h_max`` for the given ``h_min``, by bisection (docstring step 7).
 
-    Each trial stops at the first ``eps`` with a verified certificate; the result at
+    Each trial stops at the first ``eps`` with a verified certificate, searching
+    ``eps`` locally from the last success (:func:`.search.eps_search`); the result at
     the final ``h_max`` is the full ``eps`` search there (strictest point).  The
     returned ``h_max`` is within ``tol`` of the largest the LMI family certifies for
     the ``eps`` tried (a lower bound: ``eps`` is searched heuristically).  Returns the
@@ -805,11 +811,8 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     last: list[float] = []
 
     def trial(h1: float) -> InputDelayResult | None:
-        grid = list(eps_grid)
-        if last:
-            c = math.log(last[-1])
-            grid = [last[-1]] + sorted(grid, key=lambda e: abs(math.log(e) - c))
-        r = _try(problem, h0, h1, **{**kw, 'eps_grid': grid}, stop_at_first=True)
+        r = _try(problem, h0, h1, **kw, stop_at_first=True,
+                 eps_start=last[-1] if last else None)
         if r is not None:
             last.append(r.eps)
         return r
@@ -856,7 +859,8 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
                                solver: str = DEFAULT_SOLVER) -> InputDelayResult:
     """Largest certified decay rate ``alpha`` for input delays in ``[h_min, h_max]``.
 
-    Doubling then bisection on ``alpha`` (:func:`.search.largest_feasible`);
+    Doubling then bisection on ``alpha`` (:func:`.search.largest_feasible`), each
+    trial searching ``eps`` locally from the last success (:func:`.search.eps_search`);
     feasibility is not proven monotone in ``alpha``, so the result is a verified lower
     bound of the best rate.  Returns the full-``eps``-search result at that rate.
 
@@ -871,9 +875,16 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     base = _try(problem, h_min, h_max, alpha=0.0, **kw)
     if base is None:
         synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
-    a, best, _ = largest_feasible(
-        lambda a: _try(problem, h_min, h_max, alpha=a, stop_at_first=True, **kw),
-        0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit, lo_result=base)
+    last = [base.eps]   # type: ignore[union-attr]
+
+    def trial(a: float) -> InputDelayResult | None:
+        r = _try(problem, h_min, h_max, alpha=a, stop_at_first=True, eps_start=last[-1], **kw)
+        if r is not None:
+            last.append(r.eps)
+        return r
+
+    a, best, _ = largest_feasible(trial, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit,
+                                  lo_result=base)
     if a == 0.0:
         return base  # type: ignore[return-value]
     full = _try(problem, h_min, h_max, alpha=a, **kw)

@@ -1,10 +1,18 @@
-"""One bisection for every "largest value that is still certified/feasible" search."""
+"""The searches of the syntheses, one place each.
+
+* :func:`largest_feasible` - the one bisection for every "largest value that is still
+  certified/feasible" search (decay rate, perturbation scale, delay);
+* :func:`golden_section_max` - golden-section refinement of a scalar;
+* :func:`eps_search` - the line search over the tuning scalar ``eps`` of the
+  delay-dependent and input-delay LMIs: a whole log grid, or a local climb on it from
+  a warm start, then golden-section refinement around the best grid point.
+"""
 from __future__ import annotations
 
 import math
-from typing import Callable, TypeVar, overload
+from typing import Callable, Sequence, TypeVar, overload
 
-__all__ = ['largest_feasible', 'golden_section_max']
+__all__ = ['largest_feasible', 'golden_section_max', 'eps_search']
 
 T = TypeVar('T')
 
@@ -67,3 +75,57 @@ def golden_section_max(f: Callable[[float], float], a: float, b: float, steps: i
             a, c, fc = c, d, fd
             d = a + g * (b - a)
             fd = f(d)
+
+
+def eps_search(f: Callable[[float], float], grid: Sequence[float], refine: int, *,
+               start: float | None = None, accept: float = math.inf) -> None:
+    """Maximize ``f(eps)`` over the positive log grid ``grid``, then refine.
+
+    Without ``start``: ``f`` at every grid point, in the order given.  With ``start``
+    (a warm start, e.g. the ``eps`` that worked at the previous trial of a bisection):
+    ``f(start)``, then a climb on the sorted grid from the grid point nearest to
+    ``start`` (log distance) towards larger values, until both neighbours of a grid
+    point are lower (a local maximum of the grid).  The rest of the grid is scanned as
+    without ``start`` if no value found that way is finite, or if one is ``>= accept``
+    (``f`` was expected to stop the search there but did not, e.g. the solver's point
+    failed an independent check: other ``eps`` may give a good point).  Then ``refine``
+    golden-section steps in ``log eps`` between the neighbours of the best grid point.
+
+    Like :func:`golden_section_max`, nothing is returned: ``f`` records its points and
+    may stop the search by raising.  The warm start trades the global scan for a local
+    one: where ``f`` has several local maxima on the grid it may settle on a lower one
+    (a bisection using it then returns a smaller, still verified, value).
+    """
+    values: dict[float, float] = {}
+
+    def at(e: float) -> float:
+        if e not in values:
+            values[e] = f(e)
+        return values[e]
+
+    pts = sorted({float(e) for e in grid})
+    if start is None:
+        for e in grid:
+            at(float(e))
+    else:
+        at(float(start))
+        c = math.log(start)
+        i = min(range(len(pts)), key=lambda j: abs(math.log(pts[j]) - c))
+        while True:
+            here = at(pts[i])
+            left = at(pts[i - 1]) if i > 0 else -math.inf
+            right = at(pts[i + 1]) if i + 1 < len(pts) else -math.inf
+            if max(left, right) <= here:
+                break
+            i = i - 1 if left > right else i + 1
+        best = max(values.values())
+        if best == -math.inf or best >= accept:
+            for e in pts:
+                at(e)
+    on_grid = [e for e in pts if e in values]
+    k = max(range(len(on_grid)), key=lambda j: values[on_grid[j]])
+    if refine > 0 and len(pts) > 1 and values[on_grid[k]] > -math.inf:
+        j = pts.index(on_grid[k])
+        lo, hi = math.log(pts[max(j - 1, 0)]), math.log(pts[min(j + 1, len(pts) - 1)])
+        if hi > lo:
+            golden_section_max(lambda u: f(math.exp(u)), lo, hi, refine)

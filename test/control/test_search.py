@@ -1,0 +1,116 @@
+"""control.search: the bisection and the eps line search (plain functions, no solver)."""
+import math
+
+import numpy as np
+import pytest
+
+from nonfragile_tracker.control.search import eps_search, golden_section_max, largest_feasible
+
+GRID = [float(e) for e in np.logspace(-3, 2, 21)]
+
+
+def recorder(f):
+    calls = []
+
+    def g(e):
+        calls.append(e)
+        return f(e)
+    return g, calls
+
+
+def bump(peak: float, width: float = 1.0):
+    """Unimodal in log eps, maximum 1 at ``peak``."""
+    return lambda e: 1.0 - ((math.log(e) - math.log(peak)) / width) ** 2
+
+
+def test_full_scan_evaluates_the_grid_in_order_then_refines_around_the_best():
+    f, calls = recorder(bump(0.2))
+    eps_search(f, GRID, 8)
+    assert calls[:21] == GRID and len(calls) == 21 + 8
+    refined = calls[21:]
+    k = int(np.argmax([bump(0.2)(e) for e in GRID]))
+    assert all(GRID[k - 1] <= e <= GRID[k + 1] for e in refined)
+    best = max(calls, key=bump(0.2))
+    assert abs(math.log(best / 0.2)) < 0.02           # the grid step is 0.58 in log eps
+
+
+@pytest.mark.parametrize('start', [1e-3, 0.01, 0.2, 3.0, 100.0, 0.0042])
+def test_warm_start_finds_the_grid_maximum_of_a_unimodal_function(start):
+    full, full_calls = recorder(bump(0.2))
+    eps_search(full, GRID, 8)
+    warm, warm_calls = recorder(bump(0.2))
+    eps_search(warm, GRID, 8, start=start)
+    assert warm_calls[0] == start
+    on_grid = [e for e in warm_calls if e in GRID]
+    assert max(on_grid, key=bump(0.2)) == max(GRID, key=bump(0.2))
+    assert warm_calls[-8:] == full_calls[-8:]          # the same refinement
+    assert len(warm_calls) < len(full_calls)
+    assert len(set(warm_calls)) == len(warm_calls)     # no point solved twice
+
+
+def test_warm_start_near_the_peak_needs_a_handful_of_points():
+    f, calls = recorder(bump(0.2))
+    eps_search(f, GRID, 8, start=0.2)
+    assert len(calls) == 1 + 3 + 8                     # start, grid point and neighbours, refine
+
+
+def test_warm_start_scans_the_grid_when_nothing_finite_is_near():
+    def f(e):                                          # infeasible (-inf) except near 30
+        return 1.0 - abs(math.log(e / 30.0)) if e > 5.0 else -math.inf
+    g, calls = recorder(f)
+    eps_search(g, GRID, 4, start=1e-3)
+    assert set(GRID) <= set(calls)
+    assert max(calls, key=f) == pytest.approx(30.0, rel=0.2)
+
+
+def test_no_refinement_when_every_point_is_infeasible():
+    g, calls = recorder(lambda e: -math.inf)
+    eps_search(g, GRID, 8, start=0.5)
+    assert sorted(set(calls) - {0.5}) == GRID and len(calls) == 22
+
+
+def test_raising_from_f_stops_the_search():
+    class Found(Exception):
+        pass
+
+    def f(e):
+        if bump(0.2)(e) > 0.9:
+            raise Found(e)
+        return bump(0.2)(e)
+    with pytest.raises(Found) as info:
+        eps_search(f, GRID, 8)
+    assert bump(0.2)(info.value.args[0]) > 0.9
+
+
+def test_golden_section_converges_on_a_unimodal_function():
+    xs = []
+    golden_section_max(lambda u: xs.append(u) or -(u - 0.3) ** 2, -1.0, 2.0, 20)
+    assert len(xs) == 20 and min(abs(x - 0.3) for x in xs) < 1e-3
+
+
+def test_largest_feasible_bisects_to_the_relative_tolerance():
+    x, r, n = largest_feasible(lambda v: v if v <= 1.37 else None, 0.0, 0.5, rel_tol=1e-3,
+                               lo_result=0.0)
+    assert 1.37 * (1 - 2e-3) <= x <= 1.37 and r == x and n > 3
+    x, r, _ = largest_feasible(lambda v: v, 0.0, 0.5, hi_limit=8.0, lo_result=0.0)
+    assert (x, r) == (8.0, 8.0)
+
+
+def test_a_value_past_accept_that_did_not_stop_the_search_scans_the_rest():
+    """The local maximum is good enough but ``f`` did not stop there (its point failed a
+    check): the other grid points are tried, and the one that passes stops the search."""
+    class Found(Exception):
+        pass
+
+    def f(e):
+        if e == GRID[15]:
+            raise Found(e)
+        return bump(0.2)(e)
+    g, calls = recorder(f)
+    with pytest.raises(Found):
+        eps_search(g, GRID, 8, start=0.2, accept=0.5)
+    assert calls[-1] == GRID[15] and GRID[0] in calls
+    # below accept: the local search alone
+    g, calls = recorder(lambda e: bump(0.2)(e) - 2.0)
+    eps_search(g, GRID, 8, start=0.2, accept=0.5)
+    assert len(calls) == 1 + 3 + 8
