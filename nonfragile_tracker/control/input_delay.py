@@ -872,7 +872,9 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     kw: dict[str, Any] = dict(gain_bound=gain_bound, nominal=nominal,
                               state_delay=state_delay, eps_grid=eps_grid, refine=refine,
                               margin=margin, solver=solver)
-    base = _try(problem, h_min, h_max, alpha=0.0, **kw)
+    # alpha = 0 decides feasibility (the first verified eps is enough); the full eps
+    # search runs once, at the rate found
+    base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, **kw)
     if base is None:
         synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
     last = [base.eps]   # type: ignore[union-attr]
@@ -885,7 +887,5 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
 
     a, best, _ = largest_feasible(trial, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit,
                                   lo_result=base)
-    if a == 0.0:
-        return base  # type: ignore[return-value]
     full = _try(problem, h_min, h_max, alpha=a, **kw)
     return full if full is not None else best  # type: ignore[return-value]
