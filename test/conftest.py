@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +32,16 @@ def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
     of :data:`SLOW_MODULES`."""
     nodes_dir = Path(__file__).resolve().parent / 'nodes'
+    # pytest-xdist runs the tests on every core (``-n auto --dist loadgroup`` in setup.cfg).
+    # ROS tests start processes and keep time: unless the mark expression leaves them out,
+    # every test goes to one group, i.e. one worker, one test after another as without xdist.
+    ros_may_run = not re.search(r'\bnot\s+ros\b', config.getoption('markexpr') or '')
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else ''
         if module in ROS_MODULES or nodes_dir in Path(str(item.fspath)).resolve().parents:
             item.add_marker(pytest.mark.ros)
+        if ros_may_run:
+            item.add_marker(pytest.mark.xdist_group('serial'))
         if module in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
 
