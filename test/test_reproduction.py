@@ -1,4 +1,10 @@
-"""The committed reproduction report (docs/) matches a fresh computation."""
+"""The committed reproduction report (docs/) matches a fresh computation.
+
+The fresh computation is the ``reproduce`` command's, ROS run of Fig. 6 included (three
+node processes in lockstep and their bag): the tests that use it are marked ``ros``.  The
+checks of the committed numbers alone (markdown, claims, Fig. 6 against the in-process
+simulation) are ROS-free.
+"""
 import json
 import math
 
@@ -11,7 +17,7 @@ from nonfragile_tracker.control.reference import circle
 from nonfragile_tracker.control.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG, ROOT, unique_domain_id
 
 DOCS = ROOT / 'docs'
 
@@ -25,7 +31,8 @@ def committed():
 def fresh(tmp_path_factory, shipped_design):
     """A fresh computation of the report; its max-decay design at the paper's gain budget is
     the identical call the shipped gain's command made this session (conftest
-    ``shipped_design``), every other number is computed here."""
+    ``shipped_design``), every other number is computed here, Fig. 6 from a ROS run of 60 s
+    (the command's default)."""
     from nonfragile_tracker.control.design import max_decay_rate
     (fn, problem, norm), kw, result = shipped_design.calls[0]
     assert fn is max_decay_rate and kw == {'nominal': False}
@@ -43,8 +50,9 @@ def fresh(tmp_path_factory, shipped_design):
     real = reproduce.at_gain_norm
     patch = pytest.MonkeyPatch()
     patch.setattr(reproduce, 'at_gain_norm', at_gain_norm)
+    patch.setenv('ROS_DOMAIN_ID', str(unique_domain_id('reproduce')))
     try:
-        out = reproduce.compute(CONFIG, tmp_path_factory.mktemp('repro'), ros=False)
+        out = reproduce.compute(CONFIG, tmp_path_factory.mktemp('repro'))
     finally:
         patch.undo()
     assert reused == [norm]
@@ -65,6 +73,7 @@ def test_markdown_is_rendered_from_the_committed_numbers(committed):
         assert (DOCS / fig).stat().st_size > 10_000, fig
 
 
+@pytest.mark.ros
 def test_gain_table_matches_fresh_computation(committed, fresh):
     assert list(committed['gains']) == list(fresh['gains'])
     tol = {'norm': 1e-6, 'abscissa_nominal': 1e-6, 'abscissa_delta1': 1e-6,
@@ -82,12 +91,23 @@ def test_gain_table_matches_fresh_computation(committed, fresh):
                 assert close(val, new[part][key], 1e-6, 1e-9), (name, part, key)
 
 
+@pytest.mark.ros
 def test_harder_delay_section_matches(committed, fresh):
     a, b = committed['harder'], fresh['harder']
     assert a['theorem1_feasible'] is False and b['theorem1_feasible'] is False
     assert close(a['h_max'], b['h_max'], 0, 2e-3)
     for k, v in a['true_delay_margin'].items():
         assert v > a['h_max'] and close(v, b['true_delay_margin'][k], 1e-3)
+
+
+@pytest.mark.ros
+def test_fig6_of_a_fresh_ros_run_matches(committed, fresh):
+    """Fig. 6's numbers from a fresh lockstep ROS run (and its bag) equal the committed ones."""
+    a, b = committed['fig6'], fresh['fig6']
+    assert a['duration'] == b['duration'] and a['steps'] == b['steps']
+    for key in ('final_error', 'first_within_1cm', 'rms_error', 'peak_abs_w'):
+        assert b[key] == pytest.approx(a[key], rel=1e-9, abs=1e-12), key
+    assert 'fig6_xy.png' in fresh['figures']
 
 
 def test_claims_are_backed_by_the_numbers(committed):
