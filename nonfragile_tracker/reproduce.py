@@ -68,7 +68,8 @@ def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
         20 s), ``final_error`` (m), ``peak_abs_w`` (rad/s).
     """
     pc = paper_plant_config()
-    tc = TrackerConfig(K=K, max_angular_speed=2.0, delay_compensation=compensation,
+    tc = TrackerConfig(K=tuple(map(tuple, np.asarray(K).tolist())),
+                       max_angular_speed=2.0, delay_compensation=compensation,
                        A_tau=pc.A_tau, tau=pc.tau)
     run = simulate_tracking(pc, tc, circle(), TRACK_STEPS)
     m = run.metrics()
@@ -181,9 +182,14 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
         res = run_processes(params, run_dir, record=True, progress=lambda s: None)
         if any(c not in (0, None) for c in res.exit_codes.values()):
             raise RuntimeError(f'ROS run for Fig. 6 failed: {res.exit_codes}')
+        if res.bag is None:
+            raise RuntimeError('ROS run for Fig. 6 recorded no bag')
         rep = bag_report(res.bag, run_dir)
         shutil.copy(run_dir / 'xy.png', out / 'fig6_xy.png')
         m = rep.metrics
+        if m is None:
+            raise RuntimeError(f'ROS run for Fig. 6: bag {res.bag} has no tracking metrics '
+                               '(no reference or no pose recorded)')
         return {'duration': duration, 'final_error': m.final_error,
                 'first_within_1cm': m.first_within, 'rms_error': m.rms_error,
                 'peak_abs_w': m.peak_abs_w, 'steps': m.steps}
@@ -215,7 +221,7 @@ def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = 
                   'harder': harder}
         if fig6 is not None:
             result['fig6'] = fig6.result()
-            result['figures'].append('fig6_xy.png')
+            figures.append('fig6_xy.png')
     result['wall_time'] = time.monotonic() - t0
     return result
 

@@ -23,6 +23,7 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from rosbags.rosbag2 import ReaderError
@@ -33,6 +34,12 @@ from ..control.identify import CommandSamples, OdometrySamples
 from ..control.loop import quaternion_to_yaw
 from .reader import MissingTopicsError, NotABagError, open_reader
 from .writer import jazzy_typestore
+
+if TYPE_CHECKING:
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as TwistMsg
+    from rosbags.typesys.stores.ros2_jazzy import \
+        geometry_msgs__msg__TwistStamped as TwistStampedMsg
+    from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as OdometryMsg
 
 __all__ = ['MotionData', 'read_motion', 'pick_topic', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
            'CMD_TYPES', 'ODOM_TYPES']
@@ -166,24 +173,29 @@ def read_motion(path: str | os.PathLike, *, cmd_topic: str = topics.CMD_VEL,
         orows: list[tuple[int, int, float, float, float, float, float]] = []
         try:
             for conn, timestamp, raw in reader.messages(connections=conns):
+                # the connection's msgtype (checked against CMD_TYPES / ODOM_TYPES by
+                # pick_topic) decides the class deserialize_cdr returns
                 msg = ts.deserialize_cdr(raw, conn.msgtype)
                 if conn.topic == ctopic:
+                    tw: TwistMsg
                     if ctype == TWIST_STAMPED:
-                        st = msg.header.stamp
+                        cmd = cast('TwistStampedMsg', msg)
+                        st = cmd.header.stamp
                         stamp = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-                        tw = msg.twist
+                        tw = cmd.twist
                     else:
-                        stamp, tw = 0, msg
+                        stamp, tw = 0, cast('TwistMsg', msg)
                     crows.append((timestamp, stamp, float(tw.linear.x), float(tw.angular.z)))
                 else:
-                    st = msg.header.stamp
-                    p = msg.pose.pose
+                    odom = cast('OdometryMsg', msg)
+                    st = odom.header.stamp
+                    p = odom.pose.pose
                     q = p.orientation
                     orows.append((timestamp, int(st.sec) * 1_000_000_000 + int(st.nanosec),
                                   float(p.position.x), float(p.position.y),
                                   quaternion_to_yaw(q.x, q.y, q.z, q.w),
-                                  float(msg.twist.twist.linear.x),
-                                  float(msg.twist.twist.angular.z)))
+                                  float(odom.twist.twist.linear.x),
+                                  float(odom.twist.twist.angular.z)))
         except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
             raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
                                'damaged - try `nonfragile_tracker bag repair`') from None
@@ -194,7 +206,7 @@ def read_motion(path: str | os.PathLike, *, cmd_topic: str = topics.CMD_VEL,
         if not rows:
             raise MissingTopicsError(f'{what}: topic {topic} in {path} has no messages', [topic])
 
-    c = np.array(crows, dtype=np.float64).reshape(-1, 4)
+    cv = np.array(crows, dtype=np.float64).reshape(-1, 4)
     c_recv = np.array([r[0] for r in crows], dtype=np.int64)
     c_stamp = np.array([r[1] for r in crows], dtype=np.int64)
     use_stamp = ctype == TWIST_STAMPED and cmd_time != 'receive' and bool(np.any(c_stamp > 0))
@@ -202,7 +214,7 @@ def read_motion(path: str | os.PathLike, *, cmd_topic: str = topics.CMD_VEL,
         raise MissingTopicsError(f'--cmd-time stamp: {ctopic} has zero header stamps', [ctopic])
     c_ns = c_stamp if use_stamp else c_recv
     order = np.argsort(c_ns, kind='stable')
-    commands = CommandSamples((c_ns[order] * 1e-9), c[order, 2], c[order, 3])
+    commands = CommandSamples((c_ns[order] * 1e-9), cv[order, 2], cv[order, 3])
 
     o = np.array([r[2:] for r in orows], dtype=float).reshape(-1, 5)
     o_recv = np.array([r[0] for r in orows], dtype=np.int64)

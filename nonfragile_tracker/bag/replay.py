@@ -173,12 +173,13 @@ class _OdomInputs(ABC):
     def odom(self, msg) -> Command | None:
         """Take an odometry message; the command it triggers, if any."""
         if msg.header.frame_id != topics.ODOM_FRAME:
-            return self._ignore(f'odom frame {msg.header.frame_id!r} is not '
-                                f'{topics.ODOM_FRAME!r}')
+            self._ignore(f'odom frame {msg.header.frame_id!r} is not {topics.ODOM_FRAME!r}')
+            return None
         s = stamp_ns(msg.header.stamp)
         if s <= self.last_odom_stamp:
-            return self._ignore('odom stamp not advancing') if s < self.last_odom_stamp \
-                else None
+            if s < self.last_odom_stamp:
+                self._ignore('odom stamp not advancing')
+            return None
         if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > self.max_jump_ns:
             self.jumps += 1
             self.tracker.reset()
@@ -210,7 +211,8 @@ class TrackerInputs(_OdomInputs):
     def reference(self, i: int, msg) -> Command | None:
         """Take reference part ``i`` (pose, twist, accel); the command it triggers, if any."""
         if msg.header.frame_id != topics.ODOM_FRAME:
-            return self._ignore(f'reference frame {msg.header.frame_id!r}')
+            self._ignore(f'reference frame {msg.header.frame_id!r}')
+            return None
         self._ref[i] = msg
         return self._compute() if self.mode == 'lockstep' else None
 
@@ -225,10 +227,12 @@ class TrackerInputs(_OdomInputs):
         pose = pose_from_odom(odom.pose.pose)
         if isinstance(pose, str):
             self._odom = None
-            return self._ignore(f'odom: {pose}')
+            self._ignore(f'odom: {pose}')
+            return None
         ref = reference_from_msgs(stamp_ns(self._ref[0].header.stamp) * 1e-9, *self._ref)
         if isinstance(ref, str):
-            return self._ignore(ref)
+            self._ignore(ref)
+            return None
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
         return self.tracker.step(pose[0], pose[1], pose[2], ref,
@@ -265,7 +269,8 @@ class FollowerInputs(_OdomInputs):
                 traj, origin = multidof_to_trajectory(e.msg, frame=topics.ODOM_FRAME,
                                                       source=e.topic)
         except TrajectoryError as exc:
-            return self._ignore(f'trajectory refused: {exc}')
+            self._ignore(f'trajectory refused: {exc}')
+            return None
         if self.follower is None:
             self.follower = Follower(self.tracker, traj, self.rest_speed)
         else:
@@ -283,7 +288,8 @@ class FollowerInputs(_OdomInputs):
         pose = pose_from_odom(odom.pose.pose)
         if isinstance(pose, str):
             self._odom = None
-            return self._ignore(f'odom: {pose}')
+            self._ignore(f'odom: {pose}')
+            return None
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
         return f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
@@ -541,7 +547,7 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerIn
         if limit is not None and k >= limit:
             break
         default = max(tl.before[id(od)], applied)
-        chosen = None
+        chosen: tuple[int, TrackerInputs, Command | None] | None = None
         if matching and k < len(recorded):
             t_o, t_c = od.receive_ns, recorded[k][0]
             lo, hi = tl.window(t_o - window, max(t_c, t_o + window))
@@ -605,7 +611,8 @@ def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> Repl
                 continue
             inputs, order, commands, swaps, _ = _run(tl, [start] + odoms[j + 1:], recorded,
                                                      _snapshot(base), s, atol)
-            head, seen = [], set()
+            head: list[ReplayEvent] = []
+            seen: set[str] = set()
             for e in reversed(tl.events[:s]):
                 if e.kind not in seen:
                     seen.add(e.kind)

@@ -88,7 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if bad:
         print(f'error: node(s) failed: {bad}; logs in {run_dir}', file=sys.stderr)
         return EXIT_RUN
-    if record:
+    if res.bag is not None:                      # set exactly when the run recorded
         from ..bag.report import bag_report, format_report
         rep = bag_report(res.bag, run_dir)
         print(format_report(rep))

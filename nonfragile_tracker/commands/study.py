@@ -43,7 +43,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise InputError(f'{scenario}: the study does not simulate the latency predictor '
                          '(predict_* tracker parameters); use a scenario without it')
     tracker = TrackerConfig(
-        K=K, dt=float(tparams.get('dt', plant.dt)),
+        K=tuple(map(tuple, K.tolist())), dt=float(tparams.get('dt', plant.dt)),
         max_linear_speed=float(tparams.get('max_linear_speed', 1.0)),
         max_angular_speed=float(tparams.get('max_angular_speed', 2.0)),
         min_speed=float(tparams.get('min_speed', 1e-3)),

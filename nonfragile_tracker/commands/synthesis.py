@@ -94,6 +94,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     from ..control.problem import load_problem
     problem = load_problem(args.problem)
     fn = {'decay': design.max_decay_rate, 'scale': design.max_perturbation_scale}
+    bound: float | None = None                   # the norm bound; None for min-norm
     if args.objective == 'min-norm':
         res = design.min_gain_norm(problem, nominal=args.nominal)
         what = f'smallest certified ||K||_2 bound = {res.value:.4g}'
@@ -102,11 +103,12 @@ def cmd_design(args: argparse.Namespace) -> int:
         if norm is None:
             raise InputError('--objective decay/scale needs --norm (or options.gain_bound in '
                              f'{args.problem})')
+        bound = float(norm)
         kw = {'nominal': args.nominal} if args.objective == 'decay' else {}
-        res = design.at_gain_norm(fn[args.objective], problem, float(norm), **kw)
+        res = design.at_gain_norm(fn[args.objective], problem, bound, **kw)
         what = (f'largest certified decay rate = {res.value:.4g} 1/s' if args.objective ==
                 'decay' else f'largest certified perturbation scale = {res.value:.4g}')
-        what += f' at ||K||_2 <= {float(norm):g}'
+        what += f' at ||K||_2 <= {bound:g}'
     ver = res.synthesis.certificate.verification
     summary = (f'{res.objective} for problem {problem.name!r}: {what}\n'
                f'K =\n{np.array2string(res.K, precision=6, suppress_small=True)}\n'
@@ -121,8 +123,8 @@ def cmd_design(args: argparse.Namespace) -> int:
         record = {'method': f'Theorem 1 {res.objective}', 'problem': problem.name,
                   'objective': args.objective, 'certified_value': float(res.value),
                   'gain_norm': float(np.linalg.norm(res.K, 2)), **lat}
-        if args.objective != 'min-norm':
-            record['gain_bound'] = float(norm)
+        if bound is not None:
+            record['gain_bound'] = bound
     _write_gains(args, res.K, summary, record)
     return 0
 
