@@ -25,6 +25,7 @@ from .control.loop import TrackerConfig
 from .control.problem import Problem, load_problem
 from .control.reference import circle
 from .control.simulate import simulate_delay_loop, simulate_tracking
+from .errors import RunError
 from .scenario import paper_plant_config
 
 #: Initial condition of Figs. 2-5 (the paper does not state one).
@@ -181,15 +182,15 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
         run_dir.mkdir()
         res = run_processes(params, run_dir, record=True, progress=lambda s: None)
         if any(c not in (0, None) for c in res.exit_codes.values()):
-            raise RuntimeError(f'ROS run for Fig. 6 failed: {res.exit_codes}')
+            raise RunError(f'ROS run for Fig. 6 failed: {res.exit_codes}')
         if res.bag is None:
-            raise RuntimeError('ROS run for Fig. 6 recorded no bag')
+            raise RunError('ROS run for Fig. 6 recorded no bag')
         rep = bag_report(res.bag, run_dir)
         shutil.copy(run_dir / 'xy.png', out / 'fig6_xy.png')
         m = rep.metrics
         if m is None:
-            raise RuntimeError(f'ROS run for Fig. 6: bag {res.bag} has no tracking metrics '
-                               '(no reference or no pose recorded)')
+            raise RunError(f'ROS run for Fig. 6: bag {res.bag} has no tracking metrics '
+                           '(no reference or no pose recorded)')
         return {'duration': duration, 'final_error': m.final_error,
                 'first_within_1cm': m.first_within, 'rms_error': m.rms_error,
                 'peak_abs_w': m.peak_abs_w, 'steps': m.steps}

@@ -25,7 +25,10 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/control/delay_dependent.py',
           'nonfragile_tracker/control/design.py', 'nonfragile_tracker/control/analysis.py',
           'nonfragile_tracker/control/search.py', 'nonfragile_tracker/golden.py',
-          'nonfragile_tracker/bag/report.py', 'nonfragile_tracker/bag/repair.py')
+          'nonfragile_tracker/bag/report.py', 'nonfragile_tracker/bag/repair.py',
+          'nonfragile_tracker/bag/motion.py', 'nonfragile_tracker/bag/replay.py',
+          'nonfragile_tracker/reproduce.py', 'nonfragile_tracker/cli.py',
+          'nonfragile_tracker/commands/argtypes.py')
 
 
 def _checked_files() -> list[str]:
