@@ -44,6 +44,10 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.xdist_group('serial'))
         if module in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+    if not ros_may_run:
+        # the workers take tests in this order: the long ones first, so that none of them
+        # starts last and leaves the other workers idle at the end (a stable sort)
+        items.sort(key=lambda item: item.get_closest_marker('slow') is None)
 
 
 def unique_domain_id(salt: str = '') -> int:
