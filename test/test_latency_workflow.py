@@ -124,7 +124,7 @@ def test_identification_of_the_simulated_run(recorded):
 
 
 def test_chain_gain_certified_for_the_plan_tracks_to_millimetres(recorded):
-    """Design-step check without the 40 s synthesis: the shipped (max-decay) gain is
+    """Design-step check without the synthesis (about 14 s): the shipped (max-decay) gain is
     certified on the plan's residual interval with the identified lag, and a run with
     the plan's predictor settings tracks within the issue's 5 mm at 100 ms."""
     res, path = recorded
@@ -198,7 +198,7 @@ def test_cli_refuses_bad_combinations(argv, match, capsys):
 
 @pytest.mark.slow
 def test_full_chain_with_the_paper_design(recorded, tmp_path, capsys):
-    """record -> identify -> latency-design (the real 30-60 s synthesis) -> run."""
+    """record -> identify -> latency-design (the real synthesis, about 14 s) -> run."""
     _, path = recorded
     out = tmp_path / 'g.yaml'
     assert main(['latency-design', str(CONFIG / 'paper_problem.yaml'), '--identification',
