@@ -170,6 +170,15 @@ class _OdomInputs(ABC):
     def _ignore(self, why: str) -> None:
         self.ignored[why] = self.ignored.get(why, 0) + 1
 
+    def _pose(self, odom: Any) -> tuple[float, float, float] | None:
+        """The pose of the odometry ``odom``; None (odometry dropped, counted) if it is bad."""
+        pose = pose_from_odom(odom.pose.pose)
+        if isinstance(pose, str):
+            self._odom = None
+            self._ignore(f'odom: {pose}')
+            return None
+        return pose
+
     def odom(self, msg) -> Command | None:
         """Take an odometry message; the command it triggers, if any."""
         if msg.header.frame_id != topics.ODOM_FRAME:
@@ -224,10 +233,8 @@ class TrackerInputs(_OdomInputs):
         if self.mode == 'lockstep' and (s <= self.last_stamp or any(
                 stamp_ns(r.header.stamp) != s for r in self._ref)):
             return None
-        pose = pose_from_odom(odom.pose.pose)
-        if isinstance(pose, str):
-            self._odom = None
-            self._ignore(f'odom: {pose}')
+        pose = self._pose(odom)
+        if pose is None:
             return None
         ref = reference_from_msgs(stamp_ns(self._ref[0].header.stamp) * 1e-9, *self._ref)
         if isinstance(ref, str):
@@ -285,10 +292,8 @@ class FollowerInputs(_OdomInputs):
         s = stamp_ns(odom.header.stamp)
         if s <= self.last_stamp:
             return None
-        pose = pose_from_odom(odom.pose.pose)
-        if isinstance(pose, str):
-            self._odom = None
-            self._ignore(f'odom: {pose}')
+        pose = self._pose(odom)
+        if pose is None:
             return None
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
