@@ -316,6 +316,19 @@ def segment_index(k, dt: float, hold_ns: int, segments: int):
 # ---------------------------------------------------------------------------------------------
 # Vectorized step pieces (the same operations as the scalar functions)
 
+def _wrap_due(th: np.ndarray, k: int, wstep: float) -> tuple[np.ndarray, int]:
+    """Wrap the headings ``th`` into [-pi, pi] if any left it; the next step to look again.
+
+    ``wstep`` bounds the heading change per step, so no heading can leave [-pi, pi]
+    before the returned step; a non-finite heading (nan) is looked at every step.
+    """
+    m = float(np.abs(th).max())
+    if m > _PI:
+        th = _wrap(th)
+        m = float(np.abs(th).max())
+    return th, (k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1)
+
+
 def _wrap(x: np.ndarray) -> np.ndarray:
     """``math.remainder(x, tau)`` element-wise (exact: one subtraction, Sterbenz)."""
     ax = np.abs(x)
@@ -878,12 +891,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
             pos = pos + step
             th = th + w * dt
             if k >= wrap_next:
-                m = float(np.abs(th).max())
-                if m > _PI:
-                    th = _wrap(th)
-                    m = float(np.abs(th).max())
-                # nan (a non-finite case): look at every step
-                wrap_next = k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1
+                th, wrap_next = _wrap_due(th, k, wstep)
             if act_on:
                 pv, pw = v_end, w_end
             else:
@@ -1129,11 +1137,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
             mul(w, dt_, out=thstep)
             th += thstep
             if k >= wrap_next:
-                m = float(np.abs(th).max())
-                if m > _PI:
-                    th = _wrap(th)
-                    m = float(np.abs(th).max())
-                wrap_next = k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1
+                th, wrap_next = _wrap_due(th, k, wstep)
             pv = 0.5 * sv
     metrics.peak[0] *= 0.5
     return pos, th, eblk[j]
