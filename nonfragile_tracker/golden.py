@@ -125,7 +125,7 @@ def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Sce
 def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
                  env: dict | None = None, duration: float = DURATION) -> Path:
     """Run a scenario in lockstep and return its bag directory."""
-    from .runner import run_composed, run_processes
+    from .runner import log_tail, run_composed, run_processes
     params = scenario_params(scenario, duration)
     run_dir.mkdir(parents=True, exist_ok=True)
     if composed:
@@ -135,8 +135,10 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
                             recorder_topics=TOPICS)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None)}
     if bad:
+        tails = ''.join(f'\n--- {name}.log (end) ---\n{log_tail(run_dir, name)}'
+                        for name in bad)
         raise RunError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
-                       f'{run_dir}')
+                       f'{run_dir}{tails}')
     if res.bag is None:
         raise RunError(f'scenario {scenario.name!r} recorded no bag; logs in {run_dir}')
     return res.bag

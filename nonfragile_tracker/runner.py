@@ -212,6 +212,8 @@ def _doubles(value):
 REALTIME_TAIL_S = 0.3
 #: Real time: longest wait for the recorder to start before the plant is started (s).
 REALTIME_START_WAIT_S = 30.0
+#: How long a node may take to exit after the runner's SIGINT before it is killed (s).
+STOP_WAIT_S = 10.0
 
 
 def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> bool:
@@ -335,16 +337,30 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                 p.send_signal(signal.SIGINT)
         for name, p in procs.items():
             try:
-                p.wait(timeout=10)
+                p.wait(timeout=STOP_WAIT_S)
             except subprocess.TimeoutExpired:
+                # hung: its stacks into its log (nodes/entry.dump_stacks_on_sigusr1), then kill
+                p.send_signal(signal.SIGUSR1)
+                time.sleep(0.5)
                 p.kill()
                 p.wait()
+                progress(f'[runner] {name} did not exit within {STOP_WAIT_S:g} s of SIGINT; '
+                         f'killed it (its stacks are in {run_dir / (name + ".log")})')
         for fh in logs.values():
             fh.close()
     codes = {name: p.returncode for name, p in procs.items()}
     steps = int(round(params['plant']['ros__parameters'].get('duration', 60.0)
                       / params['plant']['ros__parameters'].get('dt', 0.01)))
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
+
+
+def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:
+    """The last ``lines`` lines of node ``name``'s log in ``run_dir`` ('' if it has none)."""
+    try:
+        text = (run_dir / f'{name}.log').read_text(errors='replace')
+    except OSError:
+        return ''
+    return '\n'.join(text.splitlines()[-lines:])
 
 
 def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,

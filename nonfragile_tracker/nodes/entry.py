@@ -16,6 +16,8 @@ ended).  What remains is the interpreter's own start-up (tens of ms) before this
 """
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import importlib
 import os
 import signal
@@ -54,6 +56,19 @@ def ignore_stop_signals() -> None:
         signal.signal(sig, signal.SIG_IGN)
 
 
+def dump_stacks_on_sigusr1() -> None:
+    """Make SIGUSR1 write the Python stack of every thread to stderr (the node's log).
+
+    It has no other effect on the run.  For a node that does not end after a stop
+    signal: :func:`nonfragile_tracker.runner.run_processes` sends SIGUSR1 before its
+    SIGKILL, so the log tells where the node hung (``kill -USR1 PID`` does the same by
+    hand).  The dump is written from C, also while the main thread is blocked inside rcl
+    or DDS.
+    """
+    with contextlib.suppress(AttributeError, ValueError, OSError, RuntimeError):
+        faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
+
+
 def stop_requested() -> bool:
     """Whether SIGINT or SIGTERM arrived since :func:`catch_stop_signals`."""
     return bool(_received)
@@ -62,6 +77,7 @@ def stop_requested() -> bool:
 def main(name: str, args: list[str] | None = None) -> int:
     """Run node ``name`` (one of :data:`NODES`) with ROS arguments ``args``; its exit code."""
     catch_stop_signals()
+    dump_stacks_on_sigusr1()
     if name not in NODES:
         print(f'[FATAL] unknown node {name!r}; one of {", ".join(NODES)}', file=sys.stderr)
         return 2

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import CONFIG
+from conftest import CONFIG, kill_with_stacks
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag, read_messages
 
 CMD_TIMEOUT = 0.5          # plant: a command older than this is replaced by a stop
@@ -126,12 +126,13 @@ def test_link_cut_stops_and_resumes(tmp_path, ros_env):
         time.sleep(3.0)
         for p in procs.values():
             p.send_signal(signal.SIGINT)
-        codes = {n: p.wait(20) for n, p in procs.items()}
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and any(p.poll() is None for p in procs.values()):
+            time.sleep(0.05)
+        codes = {n: 'hung' if p.poll() is None else p.returncode for n, p in procs.items()}
     finally:
         for p in procs.values():
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+            kill_with_stacks(p)                 # a hung node's log shows where
         hosts.delete()
     text = {n: f.read_text() for n, f in logs.items()}
     assert codes == dict.fromkeys(procs, 0), (codes, text)

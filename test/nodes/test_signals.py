@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CONFIG, ROOT, unique_domain_id
+from conftest import CONFIG, ROOT, kill_with_stacks, unique_domain_id
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag
 from nonfragile_tracker.runner import lockstep_handshake, scenario_parameters, write_parameter_file
 
@@ -104,9 +104,7 @@ class Launch:
 
     def kill(self) -> None:
         for p in self.procs.values():
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+            kill_with_stacks(p)                 # a hung node's log shows where
 
 
 def _trial(tmp_path: Path, env: dict, pattern: str, mode: str, i: int, seed: int) -> dict:
@@ -230,7 +228,7 @@ def test_signal_during_start_up_ends_every_node_cleanly(tmp_path, ros_env):
         try:
             code = p.wait(30)
         except subprocess.TimeoutExpired:
-            p.kill()
+            kill_with_stacks(p)
             code = 'hung'
         return name, sig.name, frac, code, (run_dir / f'{name}.log').read_text()
 
@@ -288,3 +286,30 @@ def test_callback_running_into_a_shutdown_ends_quietly():
         assert node.timer.callback() is None        # ... the guarded callback does not
     finally:
         node.destroy_node()
+
+
+@pytest.mark.ros
+def test_sigusr1_dumps_the_stacks_and_the_node_goes_on(tmp_path, ros_env):
+    """SIGUSR1 (what the runner and these tests send before killing a node that did not
+    end) writes where every thread is into the node's log; the node keeps running and still
+    ends with 0 on SIGINT."""
+    p = _start_one('reference', CONFIG / 'paper_scenario.yaml', tmp_path, ros_env)
+    try:
+        t0 = time.monotonic()
+        while 'started;' not in (tmp_path / 'reference.log').read_text():
+            assert p.poll() is None and time.monotonic() - t0 < 60
+            time.sleep(0.01)
+        p.send_signal(signal.SIGUSR1)
+        t0 = time.monotonic()
+        while 'in spin_until' not in (tmp_path / 'reference.log').read_text():
+            assert p.poll() is None and time.monotonic() - t0 < 10, \
+                (tmp_path / 'reference.log').read_text()
+            time.sleep(0.01)
+        time.sleep(0.3)
+        assert p.poll() is None                              # a dump, not an end
+        p.send_signal(signal.SIGINT)
+        assert p.wait(30) == 0
+    finally:
+        kill_with_stacks(p)
+    text = (tmp_path / 'reference.log').read_text()
+    assert 'nodes/common.py' in text and 'in run' in text and 'Traceback' not in text
