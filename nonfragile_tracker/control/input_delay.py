@@ -792,7 +792,8 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
 
     Each trial stops at the first ``eps`` with a verified certificate, searching
     ``eps`` locally from the last success (:func:`.search.eps_search`); the result at
-    the final ``h_max`` is the full ``eps`` search there (strictest point).  The
+    the final ``h_max`` is the strictest point of an ``eps`` climb from there (with
+    refinement; the whole grid if the climb finds nothing).  The
     returned ``h_max`` is within ``tol`` of the largest the LMI family certifies for
     the ``eps`` tried (a lower bound: ``eps`` is searched heuristically).  Returns the
     result at ``h_max`` (``result.h_max``); ``h_hi`` itself if it is certified.
@@ -843,7 +844,7 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
                 hi_h = mid
             else:
                 lo_h = mid
-    full = _try(problem, h0, lo_h, **kw)
+    full = _try(problem, h0, lo_h, eps_start=last[-1], **kw)
     if full is None:
         full = synthesize_input_delay(problem, h0, lo_h, eps=last[-1], **{
             k: v for k, v in kw.items() if k != 'eps_grid'})
@@ -862,7 +863,9 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     Doubling then bisection on ``alpha`` (:func:`.search.largest_feasible`), each
     trial searching ``eps`` locally from the last success (:func:`.search.eps_search`);
     feasibility is not proven monotone in ``alpha``, so the result is a verified lower
-    bound of the best rate.  Returns the full-``eps``-search result at that rate.
+    bound of the best rate.  Returns the strictest point at that rate of an ``eps``
+    climb (with refinement) from the last success; on the paper problem and the test
+    problems it is the point of the whole grid, in 11 solves instead of 29.
 
     Raises
     ------
@@ -872,8 +875,8 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     kw: dict[str, Any] = dict(gain_bound=gain_bound, nominal=nominal,
                               state_delay=state_delay, eps_grid=eps_grid, refine=refine,
                               margin=margin, solver=solver)
-    # alpha = 0 decides feasibility (the first verified eps is enough); the full eps
-    # search runs once, at the rate found
+    # alpha = 0 decides feasibility (the first verified eps is enough); the strictest
+    # point is searched once, at the rate found, climbing from the last eps that worked
     base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, **kw)
     if base is None:
         synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
@@ -887,5 +890,5 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
 
     a, best, _ = largest_feasible(trial, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit,
                                   lo_result=base)
-    full = _try(problem, h_min, h_max, alpha=a, **kw)
+    full = _try(problem, h_min, h_max, alpha=a, eps_start=last[-1], **kw)
     return full if full is not None else best  # type: ignore[return-value]
