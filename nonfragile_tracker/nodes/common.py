@@ -208,7 +208,7 @@ class AdapterNode(Node):
             self._configure(self.parameter_values(changes))
         except ValueError as exc:
             reason = f'{exc}; keeping the old value'
-            self.get_logger().error(f'rejected parameter set: {reason}')
+            self.log('error', f'rejected parameter set: {reason}')
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
@@ -218,7 +218,7 @@ class AdapterNode(Node):
             return
         old, self.config = self.config, self._configure(self.parameter_values())
         self.apply_config(old, self.config)
-        self.get_logger().info(f'accepted parameter set: {changed}')
+        self.log('info', f'accepted parameter set: {changed}')
 
     def apply_config(self, old: Any, new: Any) -> None:
         """Hook: make derived state follow an accepted runtime change (default: nothing)."""
@@ -242,6 +242,29 @@ class AdapterNode(Node):
 
     def create_timer(self, timer_period_sec, callback, *args, **kwargs):  # noqa: D102
         return super().create_timer(timer_period_sec, self._guarded(callback), *args, **kwargs)
+
+    # ------------------------------------------------------------------ logging
+    def log(self, level: str, text: str) -> None:
+        """Log ``text`` at ``level`` ('info', 'warn' or 'error'), guarded against shutdown.
+
+        Through the node's logger while the context is up and no stop signal came; to
+        stderr in the same form after.  rclpy's signal thread shuts the context down while
+        the main thread runs on; a node log then ends in rcl's 'Failed to publish log
+        message to rosout: publisher's context is invalid'.  Callbacks, the start-up line
+        and the nodes' ``close`` all log here, so only a signal landing during the log call
+        itself (microseconds) is left.
+        """
+        if self.context.ok() and not stop_requested():
+            logger = self.get_logger()
+            # one call site per severity: rclpy refuses a severity change at one site
+            if level == 'info':
+                logger.info(text)
+            elif level == 'warn':
+                logger.warning(text)
+            else:
+                logger.error(text)
+        else:
+            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
 
     # ------------------------------------------------------------------ ending
     def drain(self) -> None:
@@ -343,7 +366,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         executor = make_executor()
         executor.add_node(node)
         freeze_startup_objects()
-        node.get_logger().info('started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
+        node.log('info', 'started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
         missed = _MissedStop(context)
         spin_until(executor, lambda: node.finished or missed())
         if node.finished and context.ok() and not stop_requested():

@@ -176,14 +176,14 @@ class PlantNode(AdapterNode):
             value = getattr(cfg, name)
             n = delay_steps(value, cfg.dt)[0]
             if abs(n * cfg.dt - value) > 1e-9:
-                self.get_logger().warn(
+                self.log('warn',
                     f'{name} = {value} s is not a multiple of dt = {cfg.dt} s: using '
                     f'{n} steps = {n * cfg.dt:.6g} s')
         period, rate = odometry_period_steps(cfg.odom_rate, cfg.dt)
         if cfg.odom_rate and abs(rate - cfg.odom_rate) > 1e-9 * rate:
-            self.get_logger().warn(f'odom_rate = {cfg.odom_rate} Hz does not divide the plant '
-                                   f'rate {1 / cfg.dt:g} Hz: odometry every {period} steps '
-                                   f'= {rate:.6g} Hz')
+            self.log('warn', f'odom_rate = {cfg.odom_rate} Hz does not divide the plant '
+                             f'rate {1 / cfg.dt:g} Hz: odometry every {period} steps '
+                             f'= {rate:.6g} Hz')
         self.plant = UnicyclePlant(cfg)
         self.dt = cfg.dt
         self.dt_ns = step_time_ns(1, cfg.dt)
@@ -261,7 +261,7 @@ class PlantNode(AdapterNode):
     # ------------------------------------------------------------------ lockstep
     def _on_recorder_ready(self, msg: UInt64) -> None:
         if not self.recorder_ready:
-            self.get_logger().info('recorder ready: its subscriptions are matched')
+            self.log('info', 'recorder ready: its subscriptions are matched')
         self.recorder_ready = True
 
     def _on_recorder_progress(self, msg: UInt64) -> None:
@@ -303,8 +303,8 @@ class PlantNode(AdapterNode):
         if not self.started:
             if self._peers_ready():
                 self.started = True
-                self.get_logger().info(f'peers matched: starting lockstep run of '
-                                       f'{self.final_step} steps (dt = {self.dt} s)')
+                self.log('info', f'peers matched: starting lockstep run of '
+                                 f'{self.final_step} steps (dt = {self.dt} s)')
                 self.waiting_since = now
                 self._publish_step()
             elif now - self.waiting_since > self.config.startup_timeout:
@@ -319,9 +319,9 @@ class PlantNode(AdapterNode):
             self._publish_state(step_time_ns(self.plant.k, self.dt))   # same sample again
 
     def _abort(self, why: str, limit: str = 'lockstep_timeout') -> None:
-        self.get_logger().error(f'lockstep run aborted at step {self.plant.k}: {why} within '
-                                f'{getattr(self.config, limit)} s ({limit}); is the tracker '
-                                'running on the same ROS_DOMAIN_ID and namespace?')
+        self.log('error', f'lockstep run aborted at step {self.plant.k}: {why} within '
+                          f'{getattr(self.config, limit)} s ({limit}); is the tracker '
+                          'running on the same ROS_DOMAIN_ID and namespace?')
         self.exit_code = 5
         self._finish()
 
@@ -344,7 +344,7 @@ class PlantNode(AdapterNode):
     def _on_cmd(self, msg: Twist) -> None:
         v, w = msg.linear.x, msg.angular.z
         if not (math.isfinite(v) and math.isfinite(w)):
-            self.get_logger().warn(f'ignoring non-finite cmd_vel ({v}, {w})')
+            self.log('warn', f'ignoring non-finite cmd_vel ({v}, {w})')
             return
         self.commands += 1
         if self.mode != 'lockstep':
@@ -368,8 +368,8 @@ class PlantNode(AdapterNode):
     def _advance(self) -> None:
         self.plant.advance()
         if self.plant.k % self.progress_every == 0:
-            self.get_logger().info(f'progress: t = {self.plant.t:.2f} s of '
-                                   f'{self.final_step * self.dt:.2f} s')
+            self.log('info', f'progress: t = {self.plant.t:.2f} s of '
+                             f'{self.final_step * self.dt:.2f} s')
 
     def _publish_step(self) -> None:
         """Publish step k; where no odometry is due, hold the command and step on."""
@@ -381,8 +381,8 @@ class PlantNode(AdapterNode):
 
     def _complete(self) -> None:
         held = f', waited for the recorder {self.holds} times' if self.paced else ''
-        self.get_logger().info(f'lockstep run complete: {self.plant.k} steps, '
-                               f't = {self.plant.t:.3f} s{held}')
+        self.log('info', f'lockstep run complete: {self.plant.k} steps, '
+                         f't = {self.plant.t:.3f} s{held}')
         self._finish()
 
     # ------------------------------------------------------------------ real time

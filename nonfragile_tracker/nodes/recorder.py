@@ -250,8 +250,8 @@ class Recorder(AdapterNode):
         self._done_sub = None if topics.RUN_DONE in names else self.create_subscription(
             UInt64, topics.RUN_DONE, self._on_run_done, _LATCHED_QOS)
         self._flush_timer = self.create_timer(cfg.flush_period, self._flush, clock=self._steady)
-        self._log('info', f'recording {len(names)} topics to {self.bag_path}: '
-                               f'{", ".join(self._resolved[n] for n in names)}')
+        self.log('info', f'recording {len(names)} topics to {self.bag_path}: '
+                         f'{", ".join(self._resolved[n] for n in names)}')
 
     # ------------------------------------------------------------------ setup
     def _subscribe(self, name: str) -> None:
@@ -277,12 +277,12 @@ class Recorder(AdapterNode):
         if waiting and elapsed < self.config.gate_timeout:
             return
         if waiting:
-            self._log('warn', f'gate timeout: no publisher matched yet on '
-                                   f'{", ".join(waiting)}; announcing readiness anyway')
+            self.log('warn', f'gate timeout: no publisher matched yet on '
+                             f'{", ".join(waiting)}; announcing readiness anyway')
         self._gate_timer.cancel()
         self.ready = True
         self.pub_ready.publish(UInt64(data=len(self._subs)))
-        self._log('info', 'lockstep gate open: every recorded lockstep topic matched')
+        self.log('info', 'lockstep gate open: every recorded lockstep topic matched')
 
     @staticmethod
     def _output_path(output: str) -> Path:
@@ -319,7 +319,7 @@ class Recorder(AdapterNode):
             topic = self._resolved[name]
             if not writer.has_connection(topic):
                 writer.add_connection(topic, self._msgtypes[name], self._offered_qos(name))
-                self._log('info', f'first message on {topic}')
+                self.log('info', f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
             if topic_stamps is not None:
@@ -335,8 +335,8 @@ class Recorder(AdapterNode):
             infos = self.get_publishers_info_by_topic(self._resolved[name])
             profiles = [qos_from_rclpy(i.qos_profile) for i in infos]
         except Exception as exc:          # noqa: BLE001 - never lose data over QoS metadata
-            self._log('warn', f'offered QoS of {self._resolved[name]} unavailable ({exc}); '
-                                   'storing the package defaults')
+            self.log('warn', f'offered QoS of {self._resolved[name]} unavailable ({exc}); '
+                             'storing the package defaults')
             profiles = []
         return profiles or [default_qos(name)]
 
@@ -393,8 +393,8 @@ class Recorder(AdapterNode):
         timeout = self.config.drain_timeout
         self._drain_deadline = time.monotonic() + timeout
         odom = '' if self.odom_count is None else f' ({self.odom_count} odom/cmd_vel)'
-        self._log('info', f'run_done: last step {self.final_step}; waiting up to {timeout} s '
-                               f'for {self.final_step + 1} samples per lockstep topic{odom}')
+        self.log('info', f'run_done: last step {self.final_step}; waiting up to {timeout} s '
+                         f'for {self.final_step + 1} samples per lockstep topic{odom}')
         if self._drained():
             self._finish()
         else:
@@ -413,11 +413,11 @@ class Recorder(AdapterNode):
         got = ', '.join(f'{self._resolved[n]} {self._received(n)}' for n in self.counts)
         if short:
             miss = ', '.join(f'{self._resolved[n]} short by {k}' for n, k in short.items())
-            self._log('warn', f'run_done {self.final_step}: drain timeout '
-                                   f'({self.config.drain_timeout} s) with {miss}; got {got}')
+            self.log('warn', f'run_done {self.final_step}: drain timeout '
+                             f'({self.config.drain_timeout} s) with {miss}; got {got}')
         else:
-            self._log('info', f'run_done {self.final_step}: all samples received ({got}; '
-                                   f'{self.repeats} republished samples not written again)')
+            self.log('info', f'run_done {self.final_step}: all samples received ({got}; '
+                             f'{self.repeats} republished samples not written again)')
         self.close()
 
     # ------------------------------------------------------------------ closing
@@ -434,31 +434,12 @@ class Recorder(AdapterNode):
         if writer is not None:
             try:
                 writer.close()
-                self._log('info', f'bag closed: {writer.path} ({writer.message_count} messages)')
+                self.log('info', f'bag closed: {writer.path} ({writer.message_count} messages)')
             except BagError as exc:
                 self.exit_code = 1
-                self._log('error', str(exc))
+                self.log('error', str(exc))
             if not self.done.done():
                 self.done.set_result(dict(self.counts))
-
-    def _log(self, level: str, text: str) -> None:
-        """Log through the node, or print once the context is shut down.
-
-        After SIGINT/SIGTERM rosout is gone and a node log would end in rcl's 'publisher's
-        context is invalid' error; the recorder logs from callbacks that can run while the
-        signal shuts the context down, and from its close after it.
-        """
-        if self.context.ok():
-            logger = self.get_logger()
-            # one call site per severity: rclpy refuses a severity change at one site
-            if level == 'info':
-                logger.info(text)
-            elif level == 'warn':
-                logger.warning(text)
-            else:
-                logger.error(text)
-        else:
-            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
 
 
 def main(args: list[str] | None = None) -> int:

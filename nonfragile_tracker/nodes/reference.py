@@ -209,8 +209,8 @@ class ReferenceNode(AdapterNode):
                                                            source=f'path {self.path.name}')
         self.pub_multidof.publish(msg)
         self._display(Trajectory.analytic(self.path), origin_ns)
-        self.get_logger().info(f'trajectory: path {self.path.name} as {len(t_ns)} knots over '
-                               f'{self.config.horizon:g} s on {self.pub_multidof.topic_name}')
+        self.log('info', f'trajectory: path {self.path.name} as {len(t_ns)} knots over '
+                         f'{self.config.horizon:g} s on {self.pub_multidof.topic_name}')
 
     def _follow(self, msg: PathMsg, source: str) -> None:
         """Adopt the trajectory of a timed Path that this node built, and publish it.
@@ -222,8 +222,8 @@ class ReferenceNode(AdapterNode):
         self.traj, self.origin_ns = traj, origin
         self.pub_traj.publish(msg)
         self._display(traj, origin)
-        self.get_logger().info(f'trajectory from {source}: {len(traj.knots)} points, '
-                               f'{traj.duration:.3f} s')
+        self.log('info', f'trajectory from {source}: {len(traj.knots)} points, '
+                         f'{traj.duration:.3f} s')
 
     def _relay(self, msg: PathMsg, source: str) -> None:
         """Validate a Path (time law if untimed) and follow its timed form."""
@@ -239,7 +239,7 @@ class ReferenceNode(AdapterNode):
             self._relay(msg, source)
         except TrajectoryError as exc:
             self.last_refusal = str(exc)
-            self.get_logger().error(f'refused trajectory: {exc}; keeping the previous one')
+            self.log('error', f'refused trajectory: {exc}; keeping the previous one')
 
     def publish_sample(self, t_ns: int, t: float) -> None:
         """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``.

@@ -264,7 +264,7 @@ class TrackerNode(AdapterNode):
     def _reject(self, what: str) -> None:
         self.rejected += 1
         if self.rejected <= 10 or self.rejected % 1000 == 0:
-            self.get_logger().warn(f'ignored {what} (rejected so far: {self.rejected})')
+            self.log('warn', f'ignored {what} (rejected so far: {self.rejected})')
 
     def _new_trajectory(self, build, source: str) -> None:
         try:
@@ -273,16 +273,16 @@ class TrackerNode(AdapterNode):
             self.rejected += 1
             self.last_refusal = str(exc)
             keep = 'the previous trajectory' if self.follower else 'the reference topics'
-            self.get_logger().error(f'refused trajectory: {exc}; keeping {keep}')
+            self.log('error', f'refused trajectory: {exc}; keeping {keep}')
             return
         if self.follower is None:
             self.follower = Follower(self.tracker, traj, self.config.rest_speed)
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
-        self.get_logger().info(f'new trajectory from {source}: {len(traj.knots)} points '
-                               f'({traj.kind}), {traj.duration:.3f} s from stamp '
-                               f'{origin * 1e-9:.3f} s: starting a new run')
+        self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
+                         f'({traj.kind}), {traj.duration:.3f} s from stamp '
+                         f'{origin * 1e-9:.3f} s: starting a new run')
         self._try_compute()                # a pose not yet answered gets its command now
 
     def _on_path(self, msg: PathMsg) -> None:
@@ -319,8 +319,8 @@ class TrackerNode(AdapterNode):
         jump = s - self.last_odom_stamp
         if self.last_odom_stamp >= 0 and jump > self.config.max_stamp_jump * 1e9:
             self.jumps += 1
-            self.get_logger().warn(f'odom stamp jumped {jump * 1e-9:.3f} s '
-                                   'ahead: re-initialising the compensator from odom')
+            self.log('warn', f'odom stamp jumped {jump * 1e-9:.3f} s '
+                             'ahead: re-initialising the compensator from odom')
             self.tracker.reset()
         if self.last_odom_stamp >= 0:
             gap = (s - self.last_odom_stamp) * 1e-9
@@ -430,7 +430,7 @@ class TrackerNode(AdapterNode):
                      measured_speed=speed if math.isfinite(speed) else 0.0)
         if f.finished and not was_finished:
             e = math.hypot(cmd.error[0], cmd.error[2])
-            self.get_logger().info(
+            self.log('info',
                 f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
                 f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
                 'a new trajectory')
@@ -548,14 +548,14 @@ class TrackerNode(AdapterNode):
         stale = [name for name, t in inputs if now - t > limit]
         if stale:
             if not self._stopped:
-                self.get_logger().warn(f'no {" or ".join(stale)} for more than '
-                                       f'{self.config.input_timeout} s: publishing stop')
+                self.log('warn', f'no {" or ".join(stale)} for more than '
+                                 f'{self.config.input_timeout} s: publishing stop')
                 self._stopped = True
                 self.stale_stops += 1
                 self.tracker.reset()
             self._publish(0.0, 0.0)
         elif not stale and self._stopped:
-            self.get_logger().info('inputs fresh again: resuming')
+            self.log('info', 'inputs fresh again: resuming')
             self._stopped = False
 
 
