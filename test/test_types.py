@@ -28,7 +28,9 @@ PUBLIC = ('nonfragile_tracker/errors.py', 'nonfragile_tracker/control/validate.p
           'nonfragile_tracker/bag/report.py', 'nonfragile_tracker/bag/repair.py',
           'nonfragile_tracker/bag/motion.py', 'nonfragile_tracker/bag/replay.py',
           'nonfragile_tracker/reproduce.py', 'nonfragile_tracker/cli.py',
-          'nonfragile_tracker/commands/argtypes.py')
+          'nonfragile_tracker/commands/argtypes.py',
+          *(f'nonfragile_tracker/nodes/{n}.py' for n in ('entry', 'common', 'reference',
+                                                          'plant', 'tracker', 'recorder')))
 
 
 def _checked_files() -> list[str]:

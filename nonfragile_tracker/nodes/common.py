@@ -12,7 +12,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Sequence, TypeVar
+from typing import Any, Callable, Generic, Iterable, Sequence, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
@@ -138,12 +138,12 @@ def overrides(**values: Any) -> list[Parameter]:
 C = TypeVar('C')
 
 
-class AdapterNode(Node):
+class AdapterNode(Node, Generic[C]):
     """Base of the package's nodes: one constructor shape, one parameter flow, one way to end.
 
     Every node is built the same way (rclpy ``Node`` keyword arguments pass through)::
 
-        class XNode(AdapterNode):
+        class XNode(AdapterNode[XConfig]):
             def __init__(self, node_name: str = 'x', **node_kwargs):
                 super().__init__(node_name, **node_kwargs)
                 self.config = self.bind_parameters(PARAMS, x_config)   # declare, read, validate
@@ -167,6 +167,8 @@ class AdapterNode(Node):
     own thread), whatever fails in it because of the shutdown (a publish, a count of
     matched endpoints) ends that callback quietly instead of raising out of the executor.
     """
+
+    config: C        #: the validated configuration (replaced when a runtime change is applied)
 
     def __init__(self, node_name: str, **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
@@ -398,4 +400,4 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         except Exception:  # noqa: BLE001 - rclpy's signal thread shut it down meanwhile
             if context.ok():
                 raise
-    return int(node.exit_code or 0)
+    return int(node.exit_code or 0) if node is not None else 0

@@ -139,8 +139,8 @@ def plant_settings(values: dict) -> PlantSettings:
         raise StartupError(f'lockstep_subscribers must be at least 1, got '
                            f'{values["lockstep_subscribers"]}')
     cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
-                      A_tau=as_matrix(values['A_tau'], 'A_tau', (4, 4), flat=True,
-                                      error=LoopConfigError),
+                      A_tau=tuple(map(tuple, as_matrix(values['A_tau'], 'A_tau', (4, 4),
+                                                       flat=True, error=LoopConfigError))),
                       x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'],
                       **{n: values[n] for n in LATENCY_PARAMS})
     odo = cfg.odometry
@@ -164,7 +164,7 @@ def plant_settings(values: dict) -> PlantSettings:
                          odom_frame=values['odom_frame'], base_frame=values['base_frame'])
 
 
-class PlantNode(AdapterNode):
+class PlantNode(AdapterNode[PlantSettings]):
     """ROS adapter around :class:`UnicyclePlant`."""
 
     def __init__(self, node_name: str = 'plant', **node_kwargs):
@@ -230,7 +230,7 @@ class PlantNode(AdapterNode):
             self.last_publish = 0.0
             self.watchdog = self.create_timer(0.02, self._lockstep_watchdog)
         else:
-            self.last_cmd_time = None
+            self.last_cmd_time: float | None = None
             self.timer = self.create_timer(cfg.dt, self._realtime_step)
 
     # ------------------------------------------------------------------ publishing

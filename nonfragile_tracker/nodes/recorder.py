@@ -182,7 +182,7 @@ def _topic_list(values) -> list[str]:
     return names
 
 
-class Recorder(AdapterNode):
+class Recorder(AdapterNode[RecorderSettings]):
     """Raw-CDR recorder node; ``done`` completes after a ``run_done`` drain (or on close)."""
 
     def __init__(self, node_name: str = 'recorder', **node_kwargs: Any):
@@ -227,7 +227,7 @@ class Recorder(AdapterNode):
         self._latest: dict[str, int] = {n: -1 for n in paced}
         self._paced_count = 0
         self._progress_sent = -1
-        self._subs = {}
+        self._subs: dict[str, Any] = {}
         self._resolved: dict[str, str] = {}
         for name in names:
             self.counts[name] = 0
@@ -279,9 +279,11 @@ class Recorder(AdapterNode):
         if waiting:
             self.log('warn', f'gate timeout: no publisher matched yet on '
                              f'{", ".join(waiting)}; announcing readiness anyway')
-        self._gate_timer.cancel()
+        if self._gate_timer is not None:
+            self._gate_timer.cancel()
         self.ready = True
-        self.pub_ready.publish(UInt64(data=len(self._subs)))
+        if self.pub_ready is not None:
+            self.pub_ready.publish(UInt64(data=len(self._subs)))
         self.log('info', 'lockstep gate open: every recorded lockstep topic matched')
 
     @staticmethod
@@ -313,7 +315,7 @@ class Recorder(AdapterNode):
                 self._paced_count += 1
                 if self._paced_count % PROGRESS_EVERY == 0:
                     self._publish_progress()
-            if skip_repeats and stamp in topic_stamps:
+            if skip_repeats and topic_stamps is not None and stamp in topic_stamps:
                 self.repeats += 1          # a lockstep step republished: recorded once
                 return
             topic = self._resolved[name]
@@ -322,7 +324,7 @@ class Recorder(AdapterNode):
                 self.log('info', f'first message on {topic}')
             writer.write(topic, self.get_clock().now().nanoseconds, raw)
             self.counts[name] += 1
-            if topic_stamps is not None:
+            if topic_stamps is not None and stamp is not None:
                 topic_stamps.add(stamp)
             if is_done:
                 self._on_run_done(deserialize_message(raw, UInt64))
@@ -403,7 +405,8 @@ class Recorder(AdapterNode):
     def _check_drain(self) -> None:
         if self.finished:
             return
-        if self._drained() or time.monotonic() >= self._drain_deadline:
+        deadline = self._drain_deadline
+        if self._drained() or (deadline is not None and time.monotonic() >= deadline):
             self._finish()
 
     def _finish(self) -> None:

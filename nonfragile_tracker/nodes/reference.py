@@ -130,7 +130,7 @@ def reference_settings(values: dict) -> ReferenceSettings:
                              display_points=values['display_points'])
 
 
-class ReferenceNode(AdapterNode):
+class ReferenceNode(AdapterNode[ReferenceSettings]):
     """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`."""
 
     def __init__(self, node_name: str = 'reference', **node_kwargs):

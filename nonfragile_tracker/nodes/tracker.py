@@ -183,7 +183,7 @@ def tracker_settings(values: dict) -> TrackerSettings:
                            rest_speed=values['rest_speed'])
 
 
-class TrackerNode(AdapterNode):
+class TrackerNode(AdapterNode[TrackerSettings]):
     """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`."""
 
     def __init__(self, node_name: str = 'tracker', **node_kwargs):
@@ -252,7 +252,8 @@ class TrackerNode(AdapterNode):
         if self.mode == 'realtime':
             self.create_timer(cfg.diagnostics_period, self._diagnostics)
         if self.mode == 'realtime':
-            self._last_odom_wall = self._last_ref_wall = None
+            self._last_odom_wall: int | None = None     # wall ns of the last input
+            self._last_ref_wall: int | None = None
             self.create_timer(0.05, self._watchdog)
 
     def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
@@ -412,8 +413,8 @@ class TrackerNode(AdapterNode):
 
     def _follow(self) -> None:
         """One command from the own trajectory, sampled at the odometry stamp."""
-        odom = self._odom
-        if odom is None or (self.mode == 'realtime' and self._stopped):
+        odom, f = self._odom, self.follower
+        if odom is None or f is None or (self.mode == 'realtime' and self._stopped):
             return
         s = stamp_ns(odom.header.stamp)
         if s <= self.last_stamp:
@@ -423,7 +424,6 @@ class TrackerNode(AdapterNode):
             self._odom = None
             return self._reject(f'odom: {pose}')
         self.last_stamp = s
-        f = self.follower
         speed = odom.twist.twist.linear.x
         was_finished = f.finished
         cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
@@ -538,13 +538,14 @@ class TrackerNode(AdapterNode):
 
     def _watchdog(self) -> None:
         own = self.follower is not None      # own trajectory: reference samples not needed
-        if self._last_odom_wall is None or (self._last_ref_wall is None and not own):
+        odom_t, ref_t = self._last_odom_wall, self._last_ref_wall
+        if odom_t is None or (ref_t is None and not own):
             return                          # not started yet: nothing has been commanded
         now = self.get_clock().now().nanoseconds
         limit = self.config.input_timeout * 1e9
-        inputs = [('odom', self._last_odom_wall)]
-        if not own:
-            inputs.append(('reference', self._last_ref_wall))
+        inputs = [('odom', odom_t)]
+        if not own and ref_t is not None:
+            inputs.append(('reference', ref_t))
         stale = [name for name, t in inputs if now - t > limit]
         if stale:
             if not self._stopped:
