@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from .. import topics
 from ..errors import InputError
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
-from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
+from .entry import arm_exit_deadline, catch_stop_signals, ignore_stop_signals, stop_requested
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
@@ -380,6 +380,10 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             raise                                   # a real error, not the shutdown
     finally:
         ignore_stop_signals()                       # ending: a repeated signal changes nothing
+        if node is not None:
+            node.close()                            # own resources first: the recorder's bag
+        # the DDS tear-down below can deadlock inside Fast DDS 2.14 (entry.arm_exit_deadline)
+        arm_exit_deadline(int(node.exit_code or 0) if node is not None else 0)
         if executor is not None:
             # unregister the node's callbacks while the executor lives (idempotent after a
             # context shutdown, which does the same): an EventsExecutor destroyed with
@@ -394,7 +398,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             # handling); the process entry (nodes/entry.main) then leaves with os._exit
             _ENDED_EXECUTORS.append(executor)
         if node is not None:
-            node.destroy_node()                     # close() first: the recorder's bag
+            node.destroy_node()                     # (close() again: a no-op)
         try:
             rclpy.try_shutdown()
         except Exception:  # noqa: BLE001 - rclpy's signal thread shut it down meanwhile

@@ -25,8 +25,12 @@ import sys
 
 #: The node modules a process can run.
 NODES = ('reference', 'plant', 'tracker', 'recorder')
+#: Longest DDS tear-down (s) once a node has released its own resources (bag closed):
+#: past it the process dumps its stacks and ends with its exit code (:func:`arm_exit_deadline`).
+TEARDOWN_DEADLINE_S = 4.0
 
 _received: list[int] = []
+_node_process = False        # set by main(): this process is a node started through it
 
 
 def _note(signum: int, frame: object) -> None:
@@ -69,6 +73,63 @@ def dump_stacks_on_sigusr1() -> None:
         faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
 
 
+def arm_exit_deadline(code: int, seconds: float = TEARDOWN_DEADLINE_S) -> bool:
+    """End this node process with ``code`` if it is still alive ``seconds`` from now.
+
+    For the DDS tear-down after a node's own clean-up (bag closed, outputs flushed): with
+    the Fast DDS 2.14 of the rclpy 7.1.6 wheels, destroying the last node destroys the
+    participant, whose ``set_listener(nullptr)`` waits forever when a discovery callback
+    (a peer removing an endpoint, e.g. every node of a launch file stopping at once) is
+    running at that moment - a deadlock of two middleware threads, seen about once in a
+    few hundred stops under load, that otherwise ends only with SIGKILL.  The deadline
+    is a C timer (glibc ``timer_create`` with ``SIGEV_THREAD`` calling ``_exit``): it
+    fires also while the main thread is blocked inside rcl with the GIL held, where no
+    Python code can run.  Just before, faulthandler writes every thread's Python stack
+    to stderr under ``Timeout (0:00:04)!``.  Only in a process started by :func:`main`
+    (never in a test or an embedding process); returns whether the deadline is armed
+    (False where glibc timers are unavailable).
+    """
+    if not _node_process:
+        return False
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    try:
+        import ctypes
+
+        class _Thread(ctypes.Structure):
+            _fields_ = [('function', ctypes.c_void_p), ('attribute', ctypes.c_void_p)]
+
+        class _Union(ctypes.Union):
+            _fields_ = [('pad', ctypes.c_int * 12), ('tid', ctypes.c_int), ('thread', _Thread)]
+
+        class _Sigevent(ctypes.Structure):         # struct sigevent (Linux, 64 bytes)
+            _fields_ = [('value', ctypes.c_void_p), ('signo', ctypes.c_int),
+                        ('notify', ctypes.c_int), ('un', _Union)]
+
+        class _Timespec(ctypes.Structure):
+            _fields_ = [('sec', ctypes.c_long), ('nsec', ctypes.c_long)]
+
+        class _Itimerspec(ctypes.Structure):
+            _fields_ = [('interval', _Timespec), ('value', _Timespec)]
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        event = _Sigevent(value=int(code) & 0xFF, notify=2)      # SIGEV_THREAD
+        # the notify function gets the sigval (in the first argument register): _exit(code)
+        event.un.thread.function = ctypes.cast(libc._exit, ctypes.c_void_p).value
+        timer = ctypes.c_void_p()
+        if libc.timer_create(1, ctypes.byref(event), ctypes.byref(timer)) != 0:  # MONOTONIC
+            return False
+        whole = int(seconds)
+        spec = _Itimerspec(value=_Timespec(whole, int((seconds - whole) * 1e9)))
+        if libc.timer_settime(timer, 0, ctypes.byref(spec), None) != 0:
+            return False
+    except (OSError, AttributeError, TypeError, ValueError):
+        return False
+    faulthandler.dump_traceback_later(max(seconds - 0.2, 0.1), exit=False)
+    return True
+
+
 def stop_requested() -> bool:
     """Whether SIGINT or SIGTERM arrived since :func:`catch_stop_signals`."""
     return bool(_received)
@@ -76,8 +137,10 @@ def stop_requested() -> bool:
 
 def main(name: str, args: list[str] | None = None) -> int:
     """Run node ``name`` (one of :data:`NODES`) with ROS arguments ``args``; its exit code."""
+    global _node_process
     catch_stop_signals()
     dump_stacks_on_sigusr1()
+    _node_process = True
     if name not in NODES:
         print(f'[FATAL] unknown node {name!r}; one of {", ".join(NODES)}', file=sys.stderr)
         return 2
