@@ -22,6 +22,7 @@ import importlib
 import os
 import signal
 import sys
+from typing import Sequence
 
 #: The node modules a process can run.
 NODES = ('reference', 'plant', 'tracker', 'recorder')
@@ -135,10 +136,15 @@ def stop_requested() -> bool:
     return bool(_received)
 
 
-def main(name: str, args: list[str] | None = None) -> int:
-    """Run node ``name`` (one of :data:`NODES`) with ROS arguments ``args``; its exit code."""
+def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) -> int:
+    """Run node ``name`` (one of :data:`NODES`) with ROS arguments ``args``; its exit code.
+
+    ``noted``: stop signals a caller noted before (``python -m``'s ``__main__`` copy of
+    this module, while it imported this one).
+    """
     global _node_process
     catch_stop_signals()
+    _received.extend(noted)
     dump_stacks_on_sigusr1()
     _node_process = True
     if name not in NODES:
@@ -168,4 +174,8 @@ if __name__ == '__main__':
         print('usage: python -m nonfragile_tracker.nodes.entry NODE [--ros-args ...]',
               file=sys.stderr)
         sys.exit(2)
-    sys.exit(main(sys.argv[1], [sys.argv[0], *sys.argv[2:]]))
+    # run the importable module's main, not this __main__ copy: the node modules import
+    # nonfragile_tracker.nodes.entry, whose state (the stop flag, the node-process mark of
+    # arm_exit_deadline) must be the one main() sets
+    from nonfragile_tracker.nodes import entry as _entry
+    sys.exit(_entry.main(sys.argv[1], [sys.argv[0], *sys.argv[2:]], noted=_received))

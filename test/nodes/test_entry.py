@@ -40,3 +40,27 @@ def test_the_deadline_is_never_armed_outside_a_node_process():
     assert entry._node_process is False
     assert entry.arm_exit_deadline(0, 0.01) is False
     time.sleep(0.05)                               # and this process lives on
+
+
+_AS_MAIN = '''
+import runpy, sys, types
+fake = types.ModuleType('nonfragile_tracker.nodes.reference')
+
+def main(args):
+    import nonfragile_tracker.nodes.entry as imported    # what the node modules import
+    return 7 if imported._node_process else 3
+
+fake.main = main
+sys.modules['nonfragile_tracker.nodes.reference'] = fake
+sys.argv = ['entry', 'reference']
+runpy.run_module('nonfragile_tracker.nodes.entry', run_name='__main__', alter_sys=True)
+'''
+
+
+def test_python_dash_m_runs_the_importable_module():
+    """``python -m nonfragile_tracker.nodes.entry NODE`` (the runner's and the tests' way to
+    start a node) marks the module the node code imports as a node process - the deadline
+    was never armed when ``__main__``, a second copy of the module, ran main() itself."""
+    proc = subprocess.run([sys.executable, '-c', _AS_MAIN], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 7, proc.stdout + proc.stderr
