@@ -135,8 +135,8 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
                             recorder_topics=TOPICS)
     bad = {k: v for k, v in res.exit_codes.items() if v not in (0, None)}
     if bad:
-        tails = ''.join(f'\n--- {name}.log (end) ---\n{log_tail(run_dir, name)}'
-                        for name in bad)
+        tails = ''.join(f'\n--- {name}.log (end) ---\n{tail}' for name in bad
+                        if (tail := log_tail(run_dir, name)))
         raise RunError(f'scenario {scenario.name!r} failed: exit codes {bad}; logs in '
                        f'{run_dir}{tails}')
     if res.bag is None:

@@ -11,6 +11,7 @@ import gc
 import os
 import sys
 import time
+import traceback
 from dataclasses import dataclass
 from typing import Any, Callable, Generic, Iterable, Sequence, TypeVar
 
@@ -266,7 +267,9 @@ class AdapterNode(Node, Generic[C]):
             else:
                 logger.error(text)
         else:
-            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
+            ns = time.time_ns()                     # rcutils' console format
+            print(f'[{level.upper()}] [{ns // 10**9}.{ns % 10**9:09d}] [{self.get_name()}]: '
+                  f'{text}', file=sys.stderr)
 
     # ------------------------------------------------------------------ ending
     def drain(self) -> None:
@@ -279,6 +282,30 @@ class AdapterNode(Node, Generic[C]):
         """Close (:meth:`close`), then destroy the rclpy node."""
         self.close()
         super().destroy_node()
+
+
+def _tear_down(context: Any, node: AdapterNode | None, executor: Any) -> None:
+    """Executor, node and rclpy shut down (after the node's own clean-up)."""
+    if executor is not None:
+        # unregister the node's callbacks while the executor lives (idempotent after a
+        # context shutdown, which does the same): an EventsExecutor destroyed with
+        # callbacks still registered aborts ('Destroying callback manager with
+        # callbacks remaining')
+        with contextlib.suppress(Exception):
+            if node is not None:
+                executor.remove_node(node)
+            executor.shutdown()
+        # never destroyed: rclpy 7.1.6's EventsExecutor can still abort in its destructor
+        # after a signal right after start (1 in ~30, also before this package's signal
+        # handling); the process entry (nodes/entry.main) then leaves with os._exit
+        _ENDED_EXECUTORS.append(executor)
+    if node is not None:
+        node.destroy_node()                         # (close() again: a no-op)
+    try:
+        rclpy.try_shutdown()
+    except Exception:  # noqa: BLE001 - rclpy's signal thread shut it down meanwhile
+        if context.ok():
+            raise
 
 
 def _fatal(text: str) -> int:
@@ -324,7 +351,9 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
 
     Exit code: 0 after SIGINT/SIGTERM or a normal end, the node's ``exit_code`` if it set
     one (5: lockstep abort), 2 when it refuses to start (a :class:`StartupError` or other
-    ``ValueError``, a bad parameter, arguments rcl cannot parse) with a ``[FATAL]`` line.
+    ``ValueError``, a bad parameter, arguments rcl cannot parse) with a ``[FATAL]`` line, 1
+    after an unexpected error (its traceback printed before the tear-down).  The same code
+    ends the process if the DDS tear-down hangs (:func:`entry.arm_exit_deadline`).
 
     Signals: rclpy's own handlers (installed by ``rclpy.init`` for SIGINT and SIGTERM)
     shut the context down from rclpy's signal thread; the executor then raises
@@ -352,6 +381,7 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
     context = rclpy.get_default_context()
     node = None
     executor = None
+    failed: int | None = None                       # 2: refused to start, 1: an error
     try:
         try:
             node = node_class()
@@ -361,10 +391,12 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
             if isinstance(exc, ParameterException):
                 hint = (' Write doubles as 1.0, not 1, in parameter files.'
                         if isinstance(exc, InvalidParameterTypeException) else '')
-                return _fatal(f'invalid parameter: {exc}.{hint}')
-            if isinstance(exc, ValueError):         # StartupError, InputError
-                return _fatal(str(exc))
-            raise
+                failed = _fatal(f'invalid parameter: {exc}.{hint}')
+            elif isinstance(exc, ValueError):       # StartupError, InputError
+                failed = _fatal(str(exc))
+            else:
+                raise
+            return failed
         executor = make_executor()
         executor.add_node(node)
         freeze_startup_objects()
@@ -376,32 +408,24 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if context.ok():
-            raise                                   # a real error, not the shutdown
+        if not context.ok():
+            pass                                    # only the shutdown racing the main thread
+        else:
+            # a real error: said now, before the tear-down (which may end the process at
+            # its deadline), and the exit code 1 a traceback would have given
+            traceback.print_exc()
+            failed = 1
     finally:
         ignore_stop_signals()                       # ending: a repeated signal changes nothing
-        if node is not None:
-            node.close()                            # own resources first: the recorder's bag
-        # the DDS tear-down below can deadlock inside Fast DDS 2.14 (entry.arm_exit_deadline)
-        arm_exit_deadline(int(node.exit_code or 0) if node is not None else 0)
-        if executor is not None:
-            # unregister the node's callbacks while the executor lives (idempotent after a
-            # context shutdown, which does the same): an EventsExecutor destroyed with
-            # callbacks still registered aborts ('Destroying callback manager with
-            # callbacks remaining')
-            with contextlib.suppress(Exception):
-                if node is not None:
-                    executor.remove_node(node)
-                executor.shutdown()
-            # never destroyed: rclpy 7.1.6's EventsExecutor can still abort in its destructor
-            # after a signal right after start (1 in ~30, also before this package's signal
-            # handling); the process entry (nodes/entry.main) then leaves with os._exit
-            _ENDED_EXECUTORS.append(executor)
-        if node is not None:
-            node.destroy_node()                     # (close() again: a no-op)
         try:
-            rclpy.try_shutdown()
-        except Exception:  # noqa: BLE001 - rclpy's signal thread shut it down meanwhile
-            if context.ok():
-                raise
-    return int(node.exit_code or 0) if node is not None else 0
+            if node is not None:
+                node.close()                        # own resources first: the recorder's bag
+        finally:
+            code = failed if failed is not None else \
+                int(node.exit_code or 0) if node is not None else 0
+            # the DDS tear-down below can deadlock inside Fast DDS 2.14 (see
+            # entry.arm_exit_deadline): past the deadline the process ends with this code
+            arm_exit_deadline(code)
+            _tear_down(context, node, executor)
+    return code
+

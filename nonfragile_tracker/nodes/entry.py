@@ -74,8 +74,10 @@ def dump_stacks_on_sigusr1() -> None:
         faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
 
 
-def arm_exit_deadline(code: int, seconds: float = TEARDOWN_DEADLINE_S) -> bool:
+def arm_exit_deadline(code: int, seconds: float | None = None) -> bool:
     """End this node process with ``code`` if it is still alive ``seconds`` from now.
+
+    ``seconds`` defaults to :data:`TEARDOWN_DEADLINE_S` (read at the call).
 
     For the DDS tear-down after a node's own clean-up (bag closed, outputs flushed): with
     the Fast DDS 2.14 of the rclpy 7.1.6 wheels, destroying the last node destroys the
@@ -86,12 +88,14 @@ def arm_exit_deadline(code: int, seconds: float = TEARDOWN_DEADLINE_S) -> bool:
     is a C timer (glibc ``timer_create`` with ``SIGEV_THREAD`` calling ``_exit``): it
     fires also while the main thread is blocked inside rcl with the GIL held, where no
     Python code can run.  Just before, faulthandler writes every thread's Python stack
-    to stderr under ``Timeout (0:00:04)!``.  Only in a process started by :func:`main`
+    to stderr under ``Timeout (0:00:03.800000)!``.  Only in a process started by :func:`main`
     (never in a test or an embedding process); returns whether the deadline is armed
     (False where glibc timers are unavailable).
     """
     if not _node_process:
         return False
+    if seconds is None:
+        seconds = TEARDOWN_DEADLINE_S
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(OSError, ValueError):
             stream.flush()

@@ -64,6 +64,7 @@ from .. import topics
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
                           default_qos, make_qos, new_run_dir)
 from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run
+from .entry import stop_requested
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -337,8 +338,9 @@ class Recorder(AdapterNode[RecorderSettings]):
             infos = self.get_publishers_info_by_topic(self._resolved[name])
             profiles = [qos_from_rclpy(i.qos_profile) for i in infos]
         except Exception as exc:          # noqa: BLE001 - never lose data over QoS metadata
-            self.log('warn', f'offered QoS of {self._resolved[name]} unavailable ({exc}); '
-                             'storing the package defaults')
+            if self.context.ok() and not stop_requested():   # else: the shutdown, not news
+                self.log('warn', f'offered QoS of {self._resolved[name]} unavailable '
+                                 f'({exc}); storing the package defaults')
             profiles = []
         return profiles or [default_qos(name)]
 
@@ -451,4 +453,7 @@ def main(args: list[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    # `python -m nonfragile_tracker.nodes.recorder` is the console script's process: the
+    # entry's signal handling, stack dumps on SIGUSR1 and tear-down deadline
+    from nonfragile_tracker.nodes.entry import main as node_main
+    sys.exit(node_main('recorder', sys.argv))

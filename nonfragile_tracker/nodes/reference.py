@@ -286,4 +286,9 @@ def main(args=None) -> int:
 
 
 if __name__ == '__main__':
-    raise SystemExit(main())
+    # `python -m nonfragile_tracker.nodes.reference` is the console script's process: the
+    # entry's signal handling, stack dumps on SIGUSR1 and tear-down deadline
+    import sys
+
+    from nonfragile_tracker.nodes.entry import main as node_main
+    sys.exit(node_main('reference', sys.argv))

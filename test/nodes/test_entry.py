@@ -1,6 +1,7 @@
 """The node processes' entry: the exit deadline of the DDS tear-down (nodes/entry.py)."""
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -64,3 +65,45 @@ def test_python_dash_m_runs_the_importable_module():
     proc = subprocess.run([sys.executable, '-c', _AS_MAIN], cwd=ROOT, capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 7, proc.stdout + proc.stderr
+
+
+# a node process whose rclpy shut-down hangs in C with the GIL held, as the Fast DDS
+# participant deadlock does: run() must still end it with the node's own exit code
+_STUCK_SHUTDOWN = '''
+import re, sys
+import rclpy
+def stuck(*args, **kwargs):
+    re.match(r'(a+)+$', 'a' * 64 + 'b')
+rclpy.try_shutdown = stuck
+from nonfragile_tracker.nodes import entry
+entry.TEARDOWN_DEADLINE_S = 1.0
+sys.exit(entry.main('plant', ['plant', '--ros-args', *sys.argv[1:]]))
+'''
+
+
+def _node_with_stuck_shutdown(ros_env, *ros_args: str, stop_after: float | None = None):
+    proc = subprocess.Popen([sys.executable, '-c', _STUCK_SHUTDOWN, *ros_args], cwd=ROOT,
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        if stop_after is not None:
+            time.sleep(stop_after)
+            proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out
+
+
+def test_run_ends_a_stuck_teardown_with_the_refusal_code(ros_env):
+    code, out = _node_with_stuck_shutdown(ros_env, '-p', 'dt:=-1.0')
+    assert code == 2, out
+    assert '[FATAL]' in out and 'Timeout (0:00:00.800000)!' in out and 'Traceback' not in out
+
+
+def test_run_ends_a_stuck_teardown_after_sigint_with_0(ros_env):
+    code, out = _node_with_stuck_shutdown(ros_env, stop_after=4.0)
+    assert code == 0, out
+    assert 'started;' in out and 'Timeout (0:00:00.800000)!' in out and 'Traceback' not in out

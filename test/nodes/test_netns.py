@@ -127,9 +127,11 @@ def test_link_cut_stops_and_resumes(tmp_path, ros_env):
                 (dead, {n: f.read_text()[-800:] for n, f in logs.items()})
             time.sleep(0.05)
         time.sleep(1.5)                                  # tracking over the link
-        # the link is certainly down from cut_end to up_start; the `ip` commands themselves
-        # take a few ms, more under load (a retransmission burst once arrived before a
-        # time taken after link_up() returned)
+        # the link went down somewhere in [t_cut, cut_end] and came back somewhere in
+        # [t_up, up_end]: the `ip` commands take a few ms, more under load (a retransmission
+        # burst once arrived before a time taken after link_up() returned).  Bounds use the
+        # end of a bracket that cannot fail a correct run: "at least" from the earliest,
+        # "at most" from the latest possible instant; the link is certainly down in between
         t_cut, cut_end = hosts.link_down()
         time.sleep(CUT)
         t_up, up_end = hosts.link_up()
@@ -172,15 +174,22 @@ def test_link_cut_stops_and_resumes(tmp_path, ros_env):
     # tracker: a stop within input_timeout of losing its inputs (said once, in its log)
     stops = [t for t in _log_times(text['tracker'], 'publishing stop') if t > t_cut]
     resumes = [t for t in _log_times(text['tracker'], 'resuming') if t > t_cut]
-    assert len(stops) == 1 and len(resumes) == 1, text['tracker']
-    assert INPUT_TIMEOUT - 0.02 <= stops[0] - cut_end, stops[0] - cut_end
-    assert stops[0] - t_cut <= INPUT_TIMEOUT + SLACK, stops[0] - t_cut
+    during = [t for t in stops if t < t_up]
+    assert len(during) == 1, text['tracker']                  # one stop for the cut
+    assert INPUT_TIMEOUT - 0.02 <= stops[0] - t_cut, stops[0] - t_cut
+    assert stops[0] - cut_end <= INPUT_TIMEOUT + SLACK, stops[0] - cut_end
 
     # both resume within 1 s of the link's return
-    assert resumes[0] - t_up <= 1.0, resumes[0] - t_up
+    assert resumes and resumes[0] - up_end <= 1.0, resumes[0] - up_end
     t_move = t_odom[(t_odom > t_up) & (v_odom != 0.0)].min()
-    assert t_move - t_up <= 1.0, t_move - t_up
-    assert np.all(v_odom[t_odom > t_move + 0.5] != 0.0)     # and keep tracking
+    assert t_move - up_end <= 1.0, t_move - up_end
+    # and keep tracking.  Once in a dozen loaded runs the odometry over the returned link
+    # stalled again for about input_timeout while DDS repaired the backlog of the cut: the
+    # tracker then stopped and resumed once more - the same rule at work, stop and resume
+    # alternating - so what is checked is that it ends tracking with every stop resumed
+    assert len(stops) - len(during) <= 1 and len(resumes) == len(stops), text['tracker']
+    assert resumes[-1] > stops[-1], text['tracker']
+    assert np.all(v_odom[t_odom > max(t_move, resumes[-1]) + 0.5] != 0.0)
     print(f'plant stop {t_stop - last_cmd:.3f} s after its last command; tracker stop '
           f'{stops[0] - t_cut:.3f} s after the cut; resumed {resumes[0] - t_up:.3f} s '
           f'(tracker) and {t_move - t_up:.3f} s (plant) after the link returned (the ip '
