@@ -339,11 +339,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
             try:
                 p.wait(timeout=STOP_WAIT_S)
             except subprocess.TimeoutExpired:
-                # hung: its stacks into its log (nodes/entry.dump_stacks_on_sigusr1), then kill
-                p.send_signal(signal.SIGUSR1)
-                time.sleep(0.5)
-                p.kill()
-                p.wait()
+                kill_with_stacks(p)
                 progress(f'[runner] {name} did not exit within {STOP_WAIT_S:g} s of SIGINT; '
                          f'killed it (its stacks are in {run_dir / (name + ".log")})')
         for fh in logs.values():
@@ -352,6 +348,24 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     steps = int(round(params['plant']['ros__parameters'].get('duration', 60.0)
                       / params['plant']['ros__parameters'].get('dt', 0.01)))
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
+
+
+def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
+    """Kill a node process that did not end, after asking it for its stacks (SIGUSR1).
+
+    A node process writes every thread's Python stack to its output (its log) on SIGUSR1
+    (:func:`nonfragile_tracker.nodes.entry.dump_stacks_on_sigusr1`) and goes on; ``grace``
+    s later it is killed.  Nothing happens to a process that has ended.
+    """
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGUSR1)
+        try:
+            proc.wait(grace)
+        except subprocess.TimeoutExpired:
+            pass
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:

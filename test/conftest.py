@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import os
 import re
-import signal
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+# a node that did not end: its stacks into its log, then killed (the runner's helper)
+from nonfragile_tracker.runner import kill_with_stacks  # noqa: F401
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'
@@ -122,20 +123,3 @@ def ros_env(tmp_path):
     env['PYTHONPATH'] = str(ROOT) + os.pathsep + env.get('PYTHONPATH', '')
     return env
 
-
-def kill_with_stacks(proc) -> None:
-    """Kill a node process that did not end, after asking it for its stacks (SIGUSR1).
-
-    The node's entry writes every thread's Python stack to its output on SIGUSR1
-    (``nodes/entry.dump_stacks_on_sigusr1``), so the log a failing test prints shows where
-    the node hung.
-    """
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGUSR1)
-        try:
-            proc.wait(0.5)
-        except subprocess.TimeoutExpired:
-            pass
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()

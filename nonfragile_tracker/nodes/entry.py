@@ -96,9 +96,7 @@ def arm_exit_deadline(code: int, seconds: float | None = None) -> bool:
         return False
     if seconds is None:
         seconds = TEARDOWN_DEADLINE_S
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError, ValueError):
-            stream.flush()
+    _flush_output()
     try:
         import ctypes
 
@@ -135,6 +133,13 @@ def arm_exit_deadline(code: int, seconds: float | None = None) -> bool:
     return True
 
 
+def _flush_output() -> None:
+    """Flush Python's stdout/stderr buffers (``os._exit`` and ``_exit`` would drop them)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+
+
 def stop_requested() -> bool:
     """Whether SIGINT or SIGTERM arrived since :func:`catch_stop_signals`."""
     return bool(_received)
@@ -164,11 +169,7 @@ def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) ->
     # interpreter's finalization, in which the experimental EventsExecutor of rclpy 7.1.6
     # can abort in its destructor ('Destroying callback manager with callbacks
     # remaining', seen about once in 30 stops right after start)
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
+    _flush_output()
     os._exit(code)
 
 
