@@ -247,6 +247,11 @@ class AdapterNode(Node, Generic[C]):
         return super().create_timer(timer_period_sec, self._guarded(callback), *args, **kwargs)
 
     # ------------------------------------------------------------------ logging
+    @property
+    def stopping(self) -> bool:
+        """Whether the node is being stopped: a stop signal came or the context is down."""
+        return stop_requested() or not self.context.ok()
+
     def log(self, level: str, text: str) -> None:
         """Log ``text`` at ``level`` ('info', 'warn' or 'error'), guarded against shutdown.
 
@@ -257,7 +262,7 @@ class AdapterNode(Node, Generic[C]):
         and the nodes' ``close`` all log here, so only a signal landing during the log call
         itself (microseconds) is left.
         """
-        if self.context.ok() and not stop_requested():
+        if not self.stopping:
             logger = self.get_logger()
             # one call site per severity: rclpy refuses a severity change at one site
             if level == 'info':
@@ -403,14 +408,12 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
         node.log('info', 'started; SIGINT (Ctrl-C) or SIGTERM ends it cleanly')
         missed = _MissedStop(context)
         spin_until(executor, lambda: node.finished or missed())
-        if node.finished and context.ok() and not stop_requested():
+        if node.finished and not node.stopping:
             node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if not context.ok():
-            pass                                    # only the shutdown racing the main thread
-        else:
+        if context.ok():                            # else the shutdown racing the main thread
             # a real error: said now, before the tear-down (which may end the process at
             # its deadline), and the exit code 1 a traceback would have given
             traceback.print_exc()

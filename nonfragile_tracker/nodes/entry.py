@@ -65,7 +65,7 @@ def dump_stacks_on_sigusr1() -> None:
     """Make SIGUSR1 write the Python stack of every thread to stderr (the node's log).
 
     It has no other effect on the run.  For a node that does not end after a stop
-    signal: :func:`nonfragile_tracker.runner.run_processes` sends SIGUSR1 before its
+    signal: :func:`nonfragile_tracker.runner.kill_with_stacks` sends SIGUSR1 before its
     SIGKILL, so the log tells where the node hung (``kill -USR1 PID`` does the same by
     hand).  The dump is written from C, also while the main thread is blocked inside rcl
     or DDS.

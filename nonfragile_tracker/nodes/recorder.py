@@ -64,7 +64,6 @@ from .. import topics
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
                           default_qos, make_qos, new_run_dir)
 from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run
-from .entry import stop_requested
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -338,7 +337,7 @@ class Recorder(AdapterNode[RecorderSettings]):
             infos = self.get_publishers_info_by_topic(self._resolved[name])
             profiles = [qos_from_rclpy(i.qos_profile) for i in infos]
         except Exception as exc:          # noqa: BLE001 - never lose data over QoS metadata
-            if self.context.ok() and not stop_requested():   # else: the shutdown, not news
+            if not self.stopping:         # else the shutdown took it: nothing to report
                 self.log('warn', f'offered QoS of {self._resolved[name]} unavailable '
                                  f'({exc}); storing the package defaults')
             profiles = []
