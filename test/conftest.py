@@ -31,26 +31,41 @@ SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_fa
                 'test_ros_lockstep'}
 
 
+def ros_may_run(config) -> bool:
+    """Whether the mark expression may select ``ros`` tests (all but ``-m "... not ros ..."``)."""
+    return not re.search(r'\bnot\s+ros\b', config.getoption('markexpr') or '')
+
+
+@pytest.hookimpl(tryfirst=True)        # before pytest-xdist reads the number of workers
+def pytest_cmdline_main(config):
+    """Serial run (as ``-n 0``) whenever ROS tests may run.
+
+    pytest-xdist runs the tests on every core (``-n auto --dist loadfile`` in setup.cfg, whole
+    modules per worker so that module fixtures are computed once).  ROS tests start processes
+    and keep time: they must run one after another with the machine to themselves.  (xdist's
+    ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no effect,
+    pytest-xdist issue 1386.)
+    """
+    if ros_may_run(config) and getattr(config.option, 'numprocesses', None):
+        config.option.numprocesses = 0
+
+
+def pytest_report_header(config):
+    if ros_may_run(config) and getattr(config.option, 'numprocesses', None) == 0:
+        return 'ROS tests may run: one test after another (pytest-xdist off)'
+    return None
+
+
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
     of :data:`SLOW_MODULES`."""
     nodes_dir = Path(__file__).resolve().parent / 'nodes'
-    # pytest-xdist runs the tests on every core (``-n auto --dist loadgroup`` in setup.cfg).
-    # ROS tests start processes and keep time: unless the mark expression leaves them out,
-    # every test goes to one group, i.e. one worker, one test after another as without xdist.
-    ros_may_run = not re.search(r'\bnot\s+ros\b', config.getoption('markexpr') or '')
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else ''
         if module in ROS_MODULES or nodes_dir in Path(str(item.fspath)).resolve().parents:
             item.add_marker(pytest.mark.ros)
-        if ros_may_run:
-            item.add_marker(pytest.mark.xdist_group('serial'))
         if module in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
-    if not ros_may_run:
-        # the workers take tests in this order: the long ones first, so that none of them
-        # starts last and leaves the other workers idle at the end (a stable sort)
-        items.sort(key=lambda item: item.get_closest_marker('slow') is None)
 
 
 def unique_domain_id(salt: str = '') -> int:
