@@ -1,9 +1,14 @@
 """Shared fixtures: paths to the shipped configuration and the paper's data."""
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import io
 import os
+import pickle
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -93,20 +98,8 @@ SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objectiv
                        '--norm', str(SHIPPED_NORM)]
 
 
-@pytest.fixture(scope='session')
-def shipped_design(tmp_path_factory):
-    """The shipped gain's command run once in-process (its max-decay design costs seconds).
-
-    ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
-    ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records
-    each call and its :class:`DesignResult`.  Returns a namespace with ``code`` (exit
-    code), ``path`` (the gain file), ``stdout`` and ``calls`` (``(args, kwargs, result)``).
-    Shared by the CLI test, the shipped-gain test and the design tests (same computation).
-    """
-    import contextlib
-    import io
-    from types import SimpleNamespace
-
+def _design_shipped_gain(path: Path) -> SimpleNamespace:
+    """``design ... -o path`` through ``cli.main`` with a spy on ``design.at_gain_norm``."""
     from nonfragile_tracker.cli import main
     from nonfragile_tracker.control import design
 
@@ -117,7 +110,6 @@ def shipped_design(tmp_path_factory):
         calls.append((args, kwargs, res))
         return res
 
-    path = tmp_path_factory.mktemp('shipped_design') / 'gains.yaml'
     out = io.StringIO()
     patch = pytest.MonkeyPatch()
     patch.setattr(design, 'at_gain_norm', spy)
@@ -127,6 +119,31 @@ def shipped_design(tmp_path_factory):
     finally:
         patch.undo()
     return SimpleNamespace(code=code, path=path, stdout=out.getvalue(), calls=calls)
+
+
+@pytest.fixture(scope='session')
+def shipped_design(request, tmp_path_factory):
+    """The shipped gain's command run once per test run (its max-decay design costs seconds).
+
+    ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
+    ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records
+    each call and its :class:`DesignResult`.  Returns a namespace with ``code`` (exit
+    code), ``path`` (the gain file), ``stdout`` and ``calls`` (``(args, kwargs, result)``).
+    Shared by the CLI test, the shipped-gain test and the design tests (same computation);
+    under pytest-xdist the first worker to need it computes it and the others read its
+    pickle (the run's shared temporary directory, a file lock between them).
+    """
+    if not hasattr(request.config, 'workerinput'):           # one process: no sharing
+        return _design_shipped_gain(tmp_path_factory.mktemp('shipped_design') / 'gains.yaml')
+    shared = tmp_path_factory.getbasetemp().parent           # this run's, all workers'
+    with open(shared / 'shipped_design.lock', 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = shared / 'shipped_design.pickle'
+        if done.is_file():
+            return pickle.loads(done.read_bytes())
+        res = _design_shipped_gain(shared / 'shipped_design.yaml')
+        done.write_bytes(pickle.dumps(res))
+        return res
 
 
 @pytest.fixture
