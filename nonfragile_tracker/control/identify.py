@@ -77,8 +77,6 @@ from typing import Any, cast
 
 import numpy as np
 import yaml
-from scipy.optimize import minimize
-from scipy.signal import lfilter
 
 from ..errors import InputError
 
@@ -309,6 +307,7 @@ class _Channel:
 
     def signals(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
         """Forced (zero initial state) and free (unit initial state) responses on the grid."""
+        from scipy.signal import lfilter      # here: scipy.signal costs ~0.8 s to import
         n = self.u_avg.size + 1
         a = math.exp(-self.h / tau) if tau > 0 else 0.0
         forced = np.empty(n)
@@ -708,6 +707,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
     j0 = objective(x0)
     simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
+    from scipy.optimize import minimize
     polish = minimize(objective, x0, method='Nelder-Mead',
                       bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h), (0.0, max_tau_s / h)],
                       options={'initial_simplex': simplex, 'xatol': 0.01,
