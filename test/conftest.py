@@ -20,6 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'
 #: Golden bags and the gain they pin (``test/data``).
 DATA = ROOT / 'test' / 'data'
+#: Every test module under it starts nodes or an rclpy context (all marked ``ros``).
+_NODES_DIR = ROOT / 'test' / 'nodes'
 
 # Tests keep DDS discovery on this host, whatever the caller's environment says.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -55,6 +57,16 @@ def pytest_cmdline_main(config):
         config.option.numprocesses = 0
 
 
+def pytest_ignore_collect(collection_path, config):
+    """Without ROS tests, the modules holding nothing else are not even imported (their
+    ``rclpy`` imports cost each worker ~0.7 s); ``None`` leaves the decision to pytest."""
+    if ros_may_run(config) or collection_path.suffix != '.py':
+        return None
+    if collection_path.stem in ROS_MODULES or _NODES_DIR in collection_path.resolve().parents:
+        return True
+    return None
+
+
 def pytest_report_header(config):
     if ros_may_run(config) and getattr(config.option, 'numprocesses', None) == 0:
         return 'ROS tests may run: one test after another (pytest-xdist off)'
@@ -64,10 +76,9 @@ def pytest_report_header(config):
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
     of :data:`SLOW_MODULES`."""
-    nodes_dir = Path(__file__).resolve().parent / 'nodes'
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else ''
-        if module in ROS_MODULES or nodes_dir in Path(str(item.fspath)).resolve().parents:
+        if module in ROS_MODULES or _NODES_DIR in Path(str(item.fspath)).resolve().parents:
             item.add_marker(pytest.mark.ros)
         if module in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
