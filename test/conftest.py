@@ -4,6 +4,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import io
+import itertools
 import os
 import pickle
 import re
@@ -39,8 +40,32 @@ SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_fa
 
 
 def ros_may_run(config) -> bool:
-    """Whether the mark expression may select ``ros`` tests (all but ``-m "... not ros ..."``)."""
-    return not re.search(r'\bnot\s+ros\b', config.getoption('markexpr') or '')
+    """Whether the ``-m`` mark expression may select a test marked ``ros``.
+
+    True unless the expression is false for ``ros`` whatever the other marks it names
+    (``slow``, ...) are: ``-m "not ros"`` and ``-m "not ros and not slow"`` exclude ROS
+    tests, ``-m "not ros or slow"`` does not.  An expression pytest cannot parse counts as
+    selecting them (pytest itself then reports the error).
+    """
+    return mark_expression_may_select(config.getoption('markexpr') or '', 'ros')
+
+
+def mark_expression_may_select(expr: str, mark: str) -> bool:
+    """Whether ``-m expr`` is true for some test carrying ``mark`` (every combination of
+    the other names in ``expr``, present or absent, is tried)."""
+    if not expr.strip():
+        return True
+    from _pytest.mark.expression import Expression     # pytest's own -m parser
+    try:
+        compiled = Expression.compile(expr)
+    except SyntaxError:                     # pytest reports the error itself
+        return True
+    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not', mark})
+    for bits in itertools.product((False, True), repeat=len(names)):
+        marks = dict(zip(names, bits), **{mark: True})
+        if compiled.evaluate(lambda name, **kwargs: marks.get(name, False)):
+            return True
+    return False
 
 
 @pytest.hookimpl(tryfirst=True)        # before pytest-xdist reads the number of workers
@@ -147,13 +172,16 @@ def shipped_design(request, tmp_path_factory):
     if not hasattr(request.config, 'workerinput'):           # one process: no sharing
         return _design_shipped_gain(tmp_path_factory.mktemp('shipped_design') / 'gains.yaml')
     shared = tmp_path_factory.getbasetemp().parent           # this run's, all workers'
-    with open(shared / 'shipped_design.lock', 'w') as lock:
+    name = f'shipped_design_{request.config.workerinput["testrunuid"]}'   # and this run's only
+    with open(shared / f'{name}.lock', 'w') as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        done = shared / 'shipped_design.pickle'
+        done = shared / f'{name}.pickle'
         if done.is_file():
             return pickle.loads(done.read_bytes())
-        res = _design_shipped_gain(shared / 'shipped_design.yaml')
-        done.write_bytes(pickle.dumps(res))
+        res = _design_shipped_gain(shared / f'{name}.yaml')
+        part = done.with_suffix('.part')
+        part.write_bytes(pickle.dumps(res))
+        os.replace(part, done)                                # whole, or not there
         return res
 
 

@@ -4,7 +4,9 @@ import re
 import subprocess
 import sys
 
-from conftest import ROOT
+import pytest
+
+from conftest import ROOT, mark_expression_may_select
 
 MODULES = ['test/control/test_model.py', 'test/control/test_trajectory.py']
 
@@ -32,3 +34,14 @@ def test_the_ros_free_run_gives_each_worker_whole_modules():
         workers.setdefault(module, set()).add(gw)
     assert sorted(workers) == MODULES
     assert all(len(gws) == 1 for gws in workers.values()), workers
+
+
+@pytest.mark.parametrize('expr, ros', [
+    ('', True), ('ros', True), ('slow', True), ('not slow', True), ('not ros or slow', True),
+    ('not (not ros)', True), ('ros or not ros', True), ('not ros and slow or ros', True),
+    ('not ros (', True),                                    # pytest reports the syntax error
+    ('not ros', False), ('not (ros)', False), ('not ros and not slow', False),
+    ('(not ros) and slow', False)])
+def test_which_mark_expressions_may_select_ros_tests(expr, ros):
+    """From the expression, not its text: serial and every ROS module collected iff True."""
+    assert mark_expression_may_select(expr, 'ros') is ros
