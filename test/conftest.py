@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import io
 import itertools
 import os
@@ -50,6 +51,7 @@ def ros_may_run(config) -> bool:
     return mark_expression_may_select(config.getoption('markexpr') or '', 'ros')
 
 
+@functools.lru_cache(maxsize=None)      # asked for every collected path: parse once
 def mark_expression_may_select(expr: str, mark: str) -> bool:
     """Whether ``-m expr`` is true for some test carrying ``mark`` (every combination of
     the other names in ``expr``, present or absent, is tried)."""
@@ -87,9 +89,12 @@ def pytest_ignore_collect(collection_path, config):
     ``rclpy`` imports cost each worker ~0.7 s); ``None`` leaves the decision to pytest."""
     if ros_may_run(config) or collection_path.suffix != '.py':
         return None
-    if collection_path.stem in ROS_MODULES or _NODES_DIR in collection_path.resolve().parents:
-        return True
-    return None
+    return True if _ros_only(collection_path) else None
+
+
+def _ros_only(module_path: Path) -> bool:
+    """Whether every test of the module is a ROS test (under test/nodes/ or in ROS_MODULES)."""
+    return module_path.stem in ROS_MODULES or _NODES_DIR in module_path.resolve().parents
 
 
 def pytest_report_header(config):
@@ -102,10 +107,9 @@ def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
     of :data:`SLOW_MODULES`."""
     for item in items:
-        module = item.module.__name__.rpartition('.')[2] if item.module else ''
-        if module in ROS_MODULES or _NODES_DIR in Path(str(item.fspath)).resolve().parents:
+        if _ros_only(item.path):
             item.add_marker(pytest.mark.ros)
-        if module in SLOW_MODULES:
+        if item.path.stem in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
 
 
