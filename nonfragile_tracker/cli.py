@@ -72,20 +72,42 @@ def main(argv: list[str] | None = None) -> int:
     and ``errors`` (no imports) run: a SIGINT that early ends the process by the signal
     itself (status -2 / 130 in a shell) or, once Python's handler is installed, with a
     short KeyboardInterrupt traceback.
+
+    A SIGINT can also reach Python inside C code that replaces the KeyboardInterrupt by
+    an error of its own (numpy's C extension, interrupted while it imports ``datetime``,
+    raises ImportError): main() notes every SIGINT (its handler, installed for the call
+    where Python's own is, raises KeyboardInterrupt just the same), and any error after
+    one is the interruption, 130.
     """
-    try:
-        args = build_parser().parse_args(argv)
+    import signal
+    noted: list[int] = []
+
+    def on_sigint(signum: int, frame: object) -> None:
+        noted.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.getsignal(signal.SIGINT)
+    ours = previous is signal.default_int_handler
+    if ours:
         try:
+            signal.signal(signal.SIGINT, on_sigint)
+        except ValueError:           # not the main thread: Python's handler stays
+            ours = False
+    try:
+        try:
+            args = build_parser().parse_args(argv)
             return int(args.func(args) or 0)
         except (NonfragileError, OSError) as exc:
+            if noted:
+                return EXIT_INTERRUPTED
             print(f'error: {exc}', file=sys.stderr)
             return exit_code(exc)
         except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request
             cause: BaseException | None = exc
             while cause is not None and not isinstance(cause, KeyboardInterrupt):
                 cause = cause.__cause__ or cause.__context__
-            if cause is not None:       # Ctrl-C wrapped by Python (RuntimeError of __set_name__
-                raise cause from None   # while a class body was being created at import)
+            if cause is not None or noted:   # Ctrl-C wrapped or replaced (see above)
+                return EXIT_INTERRUPTED
             if os.environ.get('NONFRAGILE_DEBUG') == '1':
                 raise
             print(f'internal error: {type(exc).__name__}: {exc} (this is a bug; re-run with '
@@ -93,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
             return exit_code(exc)
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
+    finally:
+        if ours:
+            signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == '__main__':
