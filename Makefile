@@ -7,12 +7,17 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# setuptools of a Jazzy install (Ubuntu 24.04) and the newest colcon-core accepts, each in a
+# directory of its own: test/package/test_colcon_setuptools.py builds the package with each
+COLCON_SETUPTOOLS := 68.1.2 79.0.1
 
 .PHONY: demo test venv bench bench-env tdcpy-env reproduce clean
 
 $(STAMP): requirements.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	for v in $(COLCON_SETUPTOOLS); do $(PY) -m pip install --quiet --disable-pip-version-check \
+	  --no-deps --target $(VENV)/colcon-setuptools/$$v setuptools==$$v || exit 1; done
 	$(PY) -c "import pathlib, site; pathlib.Path(site.getsitepackages()[0], 'nonfragile_tracker_dev.pth').write_text(str(pathlib.Path('.').resolve()) + '\n')"
 	touch $(STAMP)
 

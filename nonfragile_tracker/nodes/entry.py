@@ -1,9 +1,10 @@
 """Process entry points of the nodes: a stop signal is honoured from the first line on.
 
-``ros2 run``/``ros2 launch`` start the scripts ``reference``, ``plant``, ``tracker`` and
-``recorder`` (``scripts/`` of the source tree, installed into ``lib/nonfragile_tracker``),
-which call :func:`main` (``python -m nonfragile_tracker.nodes.entry NAME [--ros-args
-...]`` does the same).  This module
+``ros2 run``/``ros2 launch`` start the executables ``reference``, ``plant``, ``tracker``
+and ``recorder`` (console scripts installed into ``lib/nonfragile_tracker``; their
+wrappers import only this module and call :func:`reference_main` ... :func:`recorder_main`,
+see ``setup.py``), which call :func:`main` (``python -m nonfragile_tracker.nodes.entry
+NAME [--ros-args ...]`` does the same).  This module
 imports nothing heavy: before anything else it notes SIGINT and SIGTERM in a flag
 instead of Python's default actions (KeyboardInterrupt with a traceback, or death by
 SIGTERM), then imports the node module (numpy, rclpy, rosbags: a second or more on a
@@ -171,6 +172,26 @@ def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) ->
     # remaining', seen about once in 30 stops right after start)
     _flush_output()
     os._exit(code)
+
+
+def reference_main() -> int:
+    """Console script ``reference``: :func:`main` of the reference node."""
+    return main('reference')
+
+
+def plant_main() -> int:
+    """Console script ``plant``: :func:`main` of the plant node."""
+    return main('plant')
+
+
+def tracker_main() -> int:
+    """Console script ``tracker``: :func:`main` of the tracker node."""
+    return main('tracker')
+
+
+def recorder_main() -> int:
+    """Console script ``recorder``: :func:`main` of the recorder node."""
+    return main('recorder')
 
 
 if __name__ == '__main__':
