@@ -14,7 +14,7 @@ import yaml
 
 from .errors import InputError
 
-__all__ = ['read_yaml']
+__all__ = ['node_key', 'read_yaml']
 
 
 def read_yaml(path: str | os.PathLike, what: str, *, error: type[InputError] = InputError,
@@ -65,3 +65,22 @@ def read_yaml(path: str | os.PathLike, what: str, *, error: type[InputError] = I
         got = 'an empty file' if data is None else f'a {type(data).__name__}'
         raise error(f'{path}: expected a YAML mapping ({what}), got {got}')
     return data
+
+
+def node_key(key: str) -> str:
+    """Node name of a ROS 2 parameter-file key.
+
+    Parameters
+    ----------
+    key : str
+        A top-level key of a parameter file: ``tracker``, ``/tracker`` or ``/**/tracker``.
+
+    Returns
+    -------
+    str
+        The bare node name (``tracker``).
+    """
+    for prefix in ('/**/', '/'):
+        if key.startswith(prefix):
+            return key[len(prefix):]
+    return key

@@ -24,7 +24,7 @@ import yaml
 
 from . import topics
 from .errors import InputError
-from .files import read_yaml
+from .files import node_key, read_yaml
 
 NODES = ('tracker', 'reference', 'plant')
 
@@ -49,14 +49,6 @@ def merge(dst: dict, src: dict) -> dict:
         else:
             dst[k] = v
     return dst
-
-
-def node_key(key: str) -> str:
-    """Node name of a parameter-file key: ``tracker``, ``/tracker``, ``/**/tracker`` -> tracker."""
-    for prefix in ('/**/', '/'):
-        if key.startswith(prefix):
-            return key[len(prefix):]
-    return key
 
 
 def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | None = None

@@ -1,4 +1,5 @@
-"""Package structure: CLI layering, no import cycles, no private name across modules."""
+"""Package structure: a table of layers checked from the source, CLI layering, no import
+cycles, no private name across modules."""
 from __future__ import annotations
 
 import ast
@@ -20,9 +21,9 @@ def _module_name(path: Path) -> str:
 MODULES = {_module_name(p): p for p in sorted(PKG.rglob('*.py'))}
 
 
-def _imports(name: str, path: Path, top_level_only: bool):
+def _imports(name: str, path: Path, top_level_only: bool, source: str | None = None):
     """(imported module, imported names, line) of ``path``, package-internal only."""
-    tree = ast.parse(path.read_text())
+    tree = ast.parse(path.read_text() if source is None else source)
     package = name if path.name == '__init__.py' else name.rpartition('.')[0]
     nodes = tree.body if top_level_only else list(ast.walk(tree))
     for node in nodes:
@@ -42,6 +43,98 @@ def _imports(name: str, path: Path, top_level_only: bool):
             for alias in node.names:
                 if alias.name.startswith('nonfragile_tracker'):
                     yield alias.name, None, node.lineno
+
+
+def _external_imports(path: Path, source: str | None = None):
+    """(top-level package, line) of every import of ``path`` outside the package."""
+    for node in ast.walk(ast.parse(path.read_text() if source is None else source)):
+        if isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names = [node.module]
+        elif isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        else:
+            continue
+        for full in names:
+            if not full.startswith('nonfragile_tracker') and full != '__future__':
+                yield full.split('.')[0], node.lineno
+
+
+#: The layers, lowest first: a module imports modules of its own layer or lower ones only.
+#: A subpackage is named by its folder, a top-level module by its name ('' = the package).
+LAYERS = (
+    ('foundation', {'', 'errors', 'files'}),
+    ('control', {'control'}),
+    ('conversions', {'topics', 'msgconv', 'resources', 'scenario'}),
+    ('bag', {'bag'}),
+    ('nodes', {'nodes'}),
+    ('orchestration', {'runner', 'replayer', 'golden', 'reproduce'}),
+    ('top', {'commands', 'cli'}),
+)
+#: The ROS client library and the message packages of the ROS 2 wheels.
+ROS = {'rclpy', 'rosidl_runtime_py', 'builtin_interfaces', 'geometry_msgs', 'nav_msgs',
+       'std_msgs', 'rosgraph_msgs', 'trajectory_msgs', 'visualization_msgs', 'diagnostic_msgs',
+       'sensor_msgs', 'lifecycle_msgs', 'std_srvs', 'rcl_interfaces'}
+#: Bag libraries.
+BAGS = {'rosbags', 'mcap', 'mcap_ros2'}
+#: Third-party packages a layer must not import, wherever in a module (lazy imports too).
+FORBIDDEN = {'foundation': ROS | BAGS, 'control': ROS | BAGS, 'conversions': ROS | BAGS,
+             'bag': ROS}
+
+
+def layer_of(name: str) -> int:
+    """Index in :data:`LAYERS` of module ``name`` (KeyError when no layer lists it)."""
+    parts = name.split('.')[1:]
+    unit = parts[0] if parts else ''
+    for index, (_, units) in enumerate(LAYERS):
+        if unit in units:
+            return index
+    raise KeyError(f'{name} is in no layer of LAYERS: add it where it belongs')
+
+
+def layer_violations(sources: dict[str, str] | None = None) -> list[str]:
+    """Every import that breaks the layer table, as readable lines.
+
+    ``sources`` replaces the text of the named modules (the probe tests plant an import).
+    """
+    sources = sources or {}
+    bad = []
+    for name, path in MODULES.items():
+        source = sources.get(name)
+        layer = layer_of(name)
+        for mod, _, line in _imports(name, path, False, source):
+            target = mod if mod in MODULES else mod.rpartition('.')[0]
+            if target in MODULES and layer_of(target) > layer:
+                bad.append(f'{name}:{line} imports {mod} ({LAYERS[layer_of(target)][0]}, above '
+                           f'{LAYERS[layer][0]})')
+        forbidden = FORBIDDEN.get(LAYERS[layer][0], set())
+        for package, line in _external_imports(path, source):
+            if package in forbidden:
+                bad.append(f'{name}:{line} imports {package} (not allowed in '
+                           f'{LAYERS[layer][0]})')
+    return bad
+
+
+def test_every_module_has_a_layer():
+    assert all(layer_of(name) >= 0 for name in MODULES)
+
+
+def test_layers_hold():
+    assert layer_violations() == []
+
+
+@pytest.mark.parametrize('module, line, words', [
+    ('nonfragile_tracker.control.model', 'import rclpy', 'imports rclpy (not allowed in control)'),
+    ('nonfragile_tracker.control.model', 'from ..bag import reader',
+     'imports nonfragile_tracker.bag.reader (bag, above control)'),
+    ('nonfragile_tracker.bag.motion', 'from rclpy.node import Node', 'imports rclpy'),
+    ('nonfragile_tracker.bag.report', 'from .. import runner', 'nonfragile_tracker.runner'),
+    ('nonfragile_tracker.nodes.tracker', 'from ..runner import merge', '(orchestration, above nodes)'),
+    ('nonfragile_tracker.control.loop', 'def f():\n    import rosbags', 'imports rosbags'),
+])
+def test_the_layer_check_fails_on_a_planted_import(module, line, words):
+    source = MODULES[module].read_text() + '\n' + line + '\n'
+    bad = layer_violations({module: source})
+    assert len(bad) == 1 and words in bad[0], bad
 
 
 def test_every_module_is_seen():

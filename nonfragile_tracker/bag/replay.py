@@ -41,10 +41,10 @@ from ..control.follow import REST_SPEED, Follower, trajectory_time
 from ..control.gains import read_gain_file
 from ..control.loop import Command, Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
+from ..files import node_key
 from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
                        reference_from_msgs, stamp_ns, tracker_config)
 from ..resources import config_dir
-from ..runner import node_key
 from .compare import Comparison, compare_messages, format_differences
 from .reader import MissingTopicsError, open_reader, resolve_topics, typestore_for
 from .writer import BagError, jazzy_typestore

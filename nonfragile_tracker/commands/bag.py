@@ -60,7 +60,7 @@ def cmd_replay(args) -> int:
               expected=Path(args.expected) if args.expected else None,
               atol=args.atol, rtol=args.rtol, max_differences=args.max_diffs)
     if args.ros:
-        from ..nodes.replayer import replay_over_dds
+        from ..replayer import replay_over_dds
         res = replay_over_dds(Path(args.bag), **kw)
     else:
         res = replay(Path(args.bag), **kw)

@@ -24,14 +24,14 @@ import rclpy
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 
-from .. import topics
-from ..bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
+from . import topics
+from .bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
                           load_tracker_parameters, plan_replay, read_replay_events)
-from ..bag.writer import BagError, jazzy_typestore
-from ..errors import RunError
-from ..resources import config_dir
-from ..runner import isolated_env, scenario_parameters, write_parameter_file
-from .common import DATA_QOS
+from .bag.writer import BagError, jazzy_typestore
+from .errors import RunError
+from .resources import config_dir
+from .nodes.common import DATA_QOS
+from .runner import isolated_env, scenario_parameters, write_parameter_file
 
 __all__ = ['replay_over_dds']
 
