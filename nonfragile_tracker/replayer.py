@@ -27,7 +27,8 @@ from nav_msgs.msg import Odometry
 from . import topics
 from .bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
                           load_tracker_parameters, plan_replay, read_replay_events)
-from .bag.writer import BagError, jazzy_typestore
+from .bag.errors import BagError
+from .bag.typestore import jazzy_typestore
 from .errors import RunError
 from .resources import config_dir
 from .nodes.common import DATA_QOS

@@ -19,20 +19,21 @@ A user's regression test needs only these, e.g.::
     assert res.comparison.equal, format_differences(res.comparison)
 
 None of these import rclpy; the ROS side is :mod:`nonfragile_tracker.nodes.recorder` and
-:func:`nonfragile_tracker.nodes.replayer.replay_over_dds`.
+:func:`nonfragile_tracker.replayer.replay_over_dds`.
 """
 from __future__ import annotations
 
-from .compare import (Comparison, Difference, Tolerance, ToleranceError, compare_bags,
-                      compare_messages, format_differences, parse_tolerance)
-from .reader import (BagData, BagNotFoundError, BagTruncatedError, CommandSeries,
-                     MissingTopicsError, NotABagError, PoseSeries, ReferenceSeries, RunData,
-                     read_bag, read_messages)
-from .repair import NothingToRepairError, RepairError, RepairResult, repair_bag
+from .compare import (Comparison, Difference, Tolerance, compare_bags, compare_messages,
+                      format_differences, parse_tolerance)
+from .errors import (BagError, BagExistsError, BagNotFoundError, BagTruncatedError,
+                     InvalidRunNameError, MissingTopicsError, NotABagError, NothingToRepairError,
+                     RepairError, ToleranceError)
+from .reader import (BagData, CommandSeries, PoseSeries, ReferenceSeries, RunData, read_bag,
+                     read_messages)
+from .repair import RepairResult, repair_bag
 from .replay import ReplayResult, format_replay, replay
 from .report import Report, TimingMetrics, bag_report, format_report
-from .writer import (BagError, BagExistsError, BagWriter, InvalidRunNameError, default_qos,
-                     make_qos, new_run_dir)
+from .writer import BagWriter, default_qos, make_qos, new_run_dir
 
 __all__ = ['BagError', 'BagExistsError', 'BagNotFoundError', 'BagTruncatedError',
            'InvalidRunNameError', 'MissingTopicsError', 'NotABagError', 'RepairError',

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .reader import open_reader, typestore_for
-from .writer import BagError
+from .errors import BagError, ToleranceError
 
 __all__ = ['Difference', 'Comparison', 'TopicSummary', 'Tolerance', 'ToleranceError',
            'flatten', 'parse_tolerance', 'compare_bags', 'compare_messages',
@@ -50,10 +50,6 @@ ALIGNMENTS = ('auto', 'stamp', 'index', 'time')
 DEFAULT_TIME_TOLERANCE = 0.005
 
 Message = tuple[int, Any]            # (receive time ns, deserialized message)
-
-
-class ToleranceError(BagError):
-    """A ``--tol`` rule cannot be parsed; the message shows the expected form."""
 
 
 @dataclass(frozen=True)

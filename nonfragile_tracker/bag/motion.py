@@ -33,7 +33,7 @@ from ..errors import InputError
 from ..control.identify import CommandSamples, OdometrySamples
 from ..control.loop import quaternion_to_yaw
 from .reader import MissingTopicsError, NotABagError, open_reader
-from .writer import jazzy_typestore
+from .typestore import jazzy_typestore
 
 if TYPE_CHECKING:
     from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as TwistMsg

@@ -35,7 +35,9 @@ from ..control.follow import reference_at
 from ..control.loop import quaternion_to_yaw
 from ..control.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
-from .writer import BagError, jazzy_typestore
+from .errors import (BagError, BagNotFoundError, BagTruncatedError, MissingTopicsError,
+                     NotABagError)
+from .typestore import jazzy_typestore
 
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
@@ -46,26 +48,6 @@ __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
 RUN_TOPICS = topics.RUN_TOPICS
-
-
-class BagNotFoundError(BagError, FileNotFoundError):
-    """The bag directory does not exist."""
-
-
-class NotABagError(BagError):
-    """The path exists but is not a readable rosbag2 bag."""
-
-
-class BagTruncatedError(BagError):
-    """An MCAP file was never closed (recorder killed); it needs ``bag repair``."""
-
-
-class MissingTopicsError(BagError):
-    """The bag lacks topics that are needed; ``missing`` names them."""
-
-    def __init__(self, message: str, missing: Iterable[str] = ()):
-        super().__init__(message)
-        self.missing = tuple(missing)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -35,20 +35,13 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
 from .reader import MCAP_MAGIC, BagNotFoundError, NotABagError, mcap_is_complete, open_reader
-from .writer import BagError, BagExistsError, BagWriter
+from .errors import BagError, BagExistsError, NothingToRepairError, RepairError
+from .writer import BagWriter
 
 __all__ = ['RepairError', 'NothingToRepairError', 'McapScan', 'RepairResult', 'scan_mcap',
            'repair_bag']
 
 _RECORD_HEADER = 9          # opcode (1 byte) + record length (uint64)
-
-
-class RepairError(BagError):
-    """A bag cannot be repaired; the message says why."""
-
-
-class NothingToRepairError(RepairError):
-    """The bag is complete (closed MCAP and metadata.yaml); read it directly."""
 
 
 @dataclass

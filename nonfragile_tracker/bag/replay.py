@@ -47,7 +47,8 @@ from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odo
 from ..resources import config_dir
 from .compare import Comparison, compare_messages, format_differences
 from .reader import MissingTopicsError, open_reader, resolve_topics, typestore_for
-from .writer import BagError, jazzy_typestore
+from .errors import BagError
+from .typestore import jazzy_typestore
 
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',

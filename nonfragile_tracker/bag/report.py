@@ -30,7 +30,7 @@ from matplotlib.figure import Figure
 from .. import topics
 from ..control.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
-from .writer import BagError
+from .errors import BagError
 
 __all__ = ['Gap', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'find_gaps',
            'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH']

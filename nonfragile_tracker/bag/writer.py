@@ -11,8 +11,8 @@ typestore and adds what a recorder needs:
   is killed loses little (see *Flush policy* in :class:`BagWriter`).
 
 Also :func:`new_run_dir`, which makes a fresh ``run_YYYYmmdd_HHMMSS[_N]``
-directory that is never reused, and the error hierarchy of the ``bag``
-package (:class:`BagError` and subclasses).
+directory that is never reused.  The package's errors are in :mod:`.errors`, its
+typestore in :mod:`.typestore`.
 
 Nothing here imports ROS (rclpy); only rosbags.
 """
@@ -32,11 +32,12 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, Q
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.rosbag2.storage_mcap import McapWriter
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
 from .. import topics
-from ..errors import InputError
+from .errors import BagError, BagExistsError, InvalidRunNameError
+from .typestore import jazzy_typestore
 
 __all__ = ['BagError', 'BagExistsError', 'InvalidRunNameError', 'BagWriter', 'make_qos',
            'default_qos', 'qos_to_dicts', 'new_run_dir', 'jazzy_typestore', 'BAG_VERSION',
@@ -58,32 +59,7 @@ ConnectionSpec = Union[str, tuple[str, Sequence[QosSpec]]]
 
 
 # ---------------------------------------------------------------------------------------------
-# Errors (shared by the whole bag package)
-
-class BagError(InputError):
-    """A bag cannot be written, read, repaired or reported; the message says what to do."""
-
-
-class BagExistsError(BagError, FileExistsError):
-    """The target bag directory exists already; bags are never overwritten."""
-
-
-class InvalidRunNameError(BagError, ValueError):
-    """A run directory name would escape its root (path separator, ``..``) or is empty."""
-
-
-# ---------------------------------------------------------------------------------------------
-# Typestore and QoS
-
-_TYPESTORE: Typestore | None = None
-
-
-def jazzy_typestore() -> Typestore:
-    """The shared ROS 2 Jazzy typestore (message definitions and RIHS01 hashes)."""
-    global _TYPESTORE
-    if _TYPESTORE is None:
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-    return _TYPESTORE
+# QoS
 
 
 def _enum(kind: type[Enum], value: Any, what: str) -> Any:
