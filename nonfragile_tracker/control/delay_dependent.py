@@ -307,10 +307,8 @@ def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDepe
     ``P1, S, R > 0``, ``lam > 0`` (unless nominal) and
     ``max eig(Psi) < -tol * ||Psi||``.  Never raises for a failed check: see ``ok``.
     """
-    K = np.asarray(K, float)
+    K = problem.gain(K)
     h = float(h)
-    if K.shape != (problem.m, problem.n):
-        raise ValueError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
     if not (math.isfinite(h) and h >= 0):
         raise ValueError(f'h must be a finite delay >= 0, got {h!r}')
     c = certificate

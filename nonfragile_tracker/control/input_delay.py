@@ -288,9 +288,7 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
     from the solver but the matrices in ``certificate``.  Never raises for a failed
     check: see ``ok``.
     """
-    K = np.asarray(K, float)
-    if K.shape != (problem.m, problem.n):
-        raise InputError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    K = problem.gain(K)
     _check_interval(h_min, h_max)
     c = certificate
     Psi = input_delay_verification_matrix(problem.A, problem.B, problem.A_tau, problem.tau,
@@ -720,9 +718,7 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
     """
     h0, h1 = _check_interval(h_min, h_max)
     _check(None, alpha, [1.0])
-    K = np.asarray(K, float)
-    if K.shape != (problem.m, problem.n):
-        raise InputError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    K = problem.gain(K)
     sd = _uses_state_delay(problem, state_delay)
     key = ('input_delay_certify', problem.n, problem.E.shape[1], problem.F.shape[0], nominal,
            sd)

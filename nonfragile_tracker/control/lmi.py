@@ -978,9 +978,7 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     """
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
-    K = np.asarray(K, float)
-    if K.shape != (problem.m, problem.n):
-        raise ValueError(f'K must have shape {(problem.m, problem.n)}, got {K.shape}')
+    K = problem.gain(K)
     key = ('theorem1_certify', problem.n, problem.E.shape[1], problem.F.shape[0], nominal)
     prog = cached_program(key, lambda: _CertifyProgram(*key[1:]))
     status = prog.solve(problem, K, solver)

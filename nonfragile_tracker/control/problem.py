@@ -79,6 +79,30 @@ class Problem:
         """Number of inputs."""
         return self.B.shape[1]
 
+    def gain(self, K: Any) -> np.ndarray:
+        """``K`` as a float array of this problem's gain shape ``(m, n)``: the one K-shape check.
+
+        Parameters
+        ----------
+        K : array_like
+            A state-feedback gain.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``K`` as a float array (its values are not checked: a certificate check of a
+            non-finite gain fails on its own).
+
+        Raises
+        ------
+        InputError
+            (a :class:`ValueError`) when the shape is not ``(m, n)``.
+        """
+        K = np.asarray(K, float)
+        if K.shape != (self.m, self.n):
+            raise InputError(f'K must have shape {(self.m, self.n)}, got {K.shape}')
+        return K
+
     def replace(self, **changes: Any) -> 'Problem':
         """Return a validated copy with some fields changed."""
         data = dict(A=self.A, B=self.B, A_tau=self.A_tau, tau=self.tau, E=self.E, F=self.F,
