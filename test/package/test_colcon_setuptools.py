@@ -104,17 +104,35 @@ def test_installed_executables_start_and_refuse_clearly(installed, tmp_path, run
         assert out.returncode == 2 and 'missing.yaml' in out.stderr, (version, mode, out.stderr)
 
 
+def _loaded(pid: int, marker: str) -> bool:
+    """Whether a shared object whose path holds ``marker`` is mapped into process ``pid``."""
+    try:
+        with open(f'/proc/{pid}/maps') as fh:
+            return marker in fh.read()
+    except OSError:
+        return False
+
+
+#: Moments of a node's start-up, as the first shared object mapped after them: the entry's
+#: main() notes stop signals before it imports the node module (numpy, then rclpy).
+MOMENTS = ('_multiarray_umath', '_rclpy_pybind11')
+
+
 def test_sigint_while_an_installed_node_starts_ends_it_cleanly(installed, tmp_path, run_env):
     """The lean wrapper imports only ``nodes.entry`` before it notes stop signals."""
     version, prefixes = installed
     prefix = prefixes['install']
     assert 'importlib' not in (prefix / 'lib' / 'nonfragile_tracker' / 'plant').read_text()
-    for delay in (0.4, 0.8):           # after the interpreter's start-up, while importing
+    for marker in MOMENTS:
         proc = subprocess.Popen(_ros2_run(prefix, 'plant', '--ros-args', '-p', 'mode:=realtime'),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=run_env, cwd=tmp_path)
-        time.sleep(delay)
+        deadline = time.monotonic() + 60
+        while not _loaded(proc.pid, marker) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.002)
+        assert proc.poll() is None, (version, marker, proc.communicate())
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
-        assert proc.returncode == 0, (version, delay, err)
-        assert 'Traceback' not in err and 'KeyboardInterrupt' not in err, (version, delay, err)
+        assert proc.returncode == 0, (version, marker, err)
+        assert 'Traceback' not in err and 'KeyboardInterrupt' not in err, (version, marker, err)
