@@ -47,6 +47,8 @@ def _default(param: Any) -> str:
     value = param.default
     if value is None:
         return '(none: from a file or -p)'
+    if isinstance(value, bool):
+        return 'true' if value else 'false'     # as in a parameter file
     if isinstance(value, list) and len(value) > 4 and len(set(value)) == 1:
         return f'[{value[0]!r}] x {len(value)}'
     return repr(value) if isinstance(value, str) else str(value).replace("'", '')
