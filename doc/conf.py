@@ -8,10 +8,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-# the package from this source tree (not an installed copy) and the local extensions
-sys.path[:0] = [str(HERE.parent), str(HERE / '_ext')]
-
 project = 'nonfragile_tracker'
 author = 'nonfragile_tracker maintainers'
 copyright = '2026, nonfragile_tracker maintainers'
@@ -22,11 +18,12 @@ extensions = [
     'sphinx.ext.autodoc',
     'sphinx.ext.napoleon',
     'sphinx.ext.mathjax',
-    'nonfragile_docs',
 ]
 source_suffix = {'.md': 'markdown', '.rst': 'restructuredtext'}
 root_doc = 'index'
-exclude_patterns = ['_build']
+# rosdoc2 runs sphinx-apidoc for ament_python packages, writing modules.rst and one stub per
+# module into this directory; api/ documents every module already, so the stubs are ignored
+exclude_patterns = ['_build', 'modules.rst', 'nonfragile_tracker.rst', 'nonfragile_tracker.*.rst']
 myst_enable_extensions = ['dollarmath', 'amsmath', 'deflist', 'colon_fence']
 myst_heading_anchors = 3
 
@@ -48,3 +45,16 @@ napoleon_use_param = False
 html_theme = 'sphinx_rtd_theme'
 html_title = 'nonfragile_tracker'
 html_static_path: list[str] = []
+
+
+def setup(app):
+    """Put the package of this source tree and doc/_ext on the path, load the extension.
+
+    Done here, from ``app.srcdir``, not from ``__file__``: rosdoc2 runs this file through
+    ``exec`` from a wrapping conf.py elsewhere, where ``__file__`` names the wrapper.
+    """
+    src = Path(app.srcdir).resolve()
+    for path in (str(src / '_ext'), str(src.parent)):
+        if path not in sys.path:
+            sys.path.insert(0, path)
+    app.setup_extension('nonfragile_docs')

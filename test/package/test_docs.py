@@ -129,12 +129,30 @@ def test_pages_build_without_warnings(tmp_path):
     assert '(reproduction.html' not in ros and (out / '_images').is_dir()
 
 
+#: What rosdoc2 (0.2) puts around a package's doc/conf.py: its own conf.py in a build folder
+#: exec's ours (so ``__file__`` is not doc/conf.py), then adds its extensions and theme.
+ROSDOC2_WRAPPER = """\
+import os
+import sys
+exec(open({conf!r}).read())
+extensions.append('sphinx.ext.autodoc')
+extensions.append('sphinx.ext.intersphinx')
+extensions.append('sphinx_rtd_theme')
+html_theme = 'sphinx_rtd_theme'
+extensions.append('myst_parser')
+"""
+
+
 @pytest.mark.slow
 def test_full_docs_build_without_warnings(tmp_path):
     """The whole site with the API reference (autodoc + napoleon over every module; about
-    10 s of CPU): docstring markup that breaks fails, and every module has its entry."""
+    10 s of CPU), built the way rosdoc2 builds it (``-c`` a wrapping conf.py that exec's
+    ours): docstring markup that breaks fails, and every module has its entry."""
+    wrapper = tmp_path / 'rosdoc2_wrapper'
+    wrapper.mkdir()
+    (wrapper / 'conf.py').write_text(ROSDOC2_WRAPPER.format(conf=str(DOC / 'conf.py')))
     out = tmp_path / 'html'
-    proc = _sphinx(out)
+    proc = _sphinx(out, '-c', str(wrapper))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stderr.strip() == '', proc.stderr
     api = ''.join(p.read_text() for p in (out / 'api').glob('*.html'))
