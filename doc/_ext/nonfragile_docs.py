@@ -4,6 +4,10 @@
     The parameter table of one node, rendered from the node module's ``PARAMS`` (the
     :class:`nonfragile_tracker.nodes.common.Param` declarations the node declares with
     descriptors): name, type, default, range, read-only, description.
+``launch-arguments FILE``
+    The arguments a launch file in ``launch/`` declares (``DeclareLaunchArgument``: name,
+    default, choices, description), read from its source with ``ast`` (launch itself need
+    not be installed).
 ``cli-help COMMAND [SUBCOMMAND]``
     The ``--help`` text of a command of ``nonfragile_tracker`` (argparse, as the user
     sees it), so the CLI reference lists every option of today's code.
@@ -112,6 +116,50 @@ class NodeParameters(SphinxDirective):
         return [_table(header, parameter_rows(node), [14, 8, 10, 8, 6, 54])]
 
 
+def _launch_value(node: Any) -> str:
+    """A launch argument's default as the user sees it (``config`` = the installed config)."""
+    import ast
+    if isinstance(node, ast.Constant):
+        return str(node.value) if node.value != '' else '(empty)'
+    if (isinstance(node, ast.Call) and ast.unparse(node.func) == 'os.path.join'
+            and len(node.args) == 2 and isinstance(node.args[1], ast.Constant)):
+        return f'<share>/{ast.unparse(node.args[0])}/{node.args[1].value}'
+    return ast.unparse(node)
+
+
+def launch_argument_rows(path: Any) -> list[list[str]]:
+    """Rows (name, default, choices, description) of each ``DeclareLaunchArgument``."""
+    import ast
+    rows = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.Call)
+                and getattr(node.func, 'id', None) == 'DeclareLaunchArgument'):
+            continue
+        keywords = {k.arg: k.value for k in node.keywords}
+        choices = keywords.get('choices')
+        rows.append([
+            node.args[0].value,
+            _launch_value(keywords['default_value']) if 'default_value' in keywords else '',
+            ', '.join(ast.literal_eval(choices)) if choices is not None else '',
+            ast.literal_eval(keywords['description']) if 'description' in keywords else ''])
+    return rows
+
+
+class LaunchArguments(SphinxDirective):
+    """``launch-arguments FILE``: the launch file's declared arguments as a table."""
+
+    required_arguments = 1
+
+    def run(self) -> list[nodes.Node]:
+        from pathlib import Path
+        path = Path(self.env.srcdir).parent / 'launch' / self.arguments[0]
+        if not path.is_file():
+            raise self.error(f'launch-arguments: no launch file {path}')
+        self.env.note_dependency(str(path))
+        header = ['argument', 'default', 'choices', 'description']
+        return [_table(header, launch_argument_rows(path), [18, 30, 14, 38])]
+
+
 def command_parsers() -> dict[str, Any]:
     """Command name (``'bag report'`` for nested ones) -> its argparse parser."""
     import argparse
@@ -132,7 +180,11 @@ def command_parsers() -> dict[str, Any]:
 
 
 class CliHelp(SphinxDirective):
-    """``cli-help COMMAND [SUBCOMMAND]``: the command's ``--help`` as a literal block."""
+    """``launch-arguments FILE``
+    The arguments a launch file in ``launch/`` declares (``DeclareLaunchArgument``: name,
+    default, choices, description), read from its source with ``ast`` (launch itself need
+    not be installed).
+``cli-help COMMAND [SUBCOMMAND]``: the command's ``--help`` as a literal block."""
 
     required_arguments = 1
     optional_arguments = 1
@@ -158,7 +210,11 @@ class CliHelp(SphinxDirective):
 
 
 class AutoModules(SphinxDirective):
-    """``cli-help COMMAND [SUBCOMMAND]``
+    """``launch-arguments FILE``
+    The arguments a launch file in ``launch/`` declares (``DeclareLaunchArgument``: name,
+    default, choices, description), read from its source with ``ast`` (launch itself need
+    not be installed).
+``cli-help COMMAND [SUBCOMMAND]``
     The ``--help`` text of a command of ``nonfragile_tracker`` (argparse, as the user
     sees it), so the CLI reference lists every option of today's code.
 ``automodules PACKAGE``: ``automodule`` for each module of the package."""
@@ -205,4 +261,5 @@ def setup(app: Any) -> dict[str, Any]:
     app.add_directive('node-parameters', NodeParameters)
     app.add_directive('automodules', AutoModules)
     app.add_directive('cli-help', CliHelp)
+    app.add_directive('launch-arguments', LaunchArguments)
     return {'version': '1', 'parallel_read_safe': True, 'parallel_write_safe': True}

@@ -87,6 +87,17 @@ def test_every_node_has_its_generated_parameter_table():
     assert by_name['K_shape'][1:5] == ['integer[]', '[2, 4]', '', 'yes']
 
 
+def test_every_launch_file_has_its_generated_argument_table():
+    text = (DOC / 'ros-interface.md').read_text()
+    tables = re.findall(r'^```\{launch-arguments\} (\S+)$', text, flags=re.MULTILINE)
+    assert sorted(tables) == sorted(p.name for p in (ROOT / 'launch').glob('*.launch.py'))
+    rows = {r[0]: r for r in nonfragile_docs.launch_argument_rows(
+        ROOT / 'launch' / 'robot.launch.py')}
+    assert rows['gains'][1] == '<share>/config/tracker_gains.yaml'
+    assert rows['use_sim_time'][1:3] == ['false', 'true, false']
+    assert rows['namespace'][1] == '(empty)'
+
+
 @pytest.mark.parametrize('module, section', [
     ('lmi', 'theorem-1'), ('delay_dependent', 'delay-dependent-design'),
     ('input_delay', 'input-delay-command-latency'), ('predictor', 'latency-predictor')])
