@@ -3,6 +3,7 @@
 #                 in the recommended configuration (shipped gain, delay compensation);
 #                 make demo ARGS=--paper: the paper's configuration (K_nf, no compensation)
 #   make test   - create .venv if needed and run the whole test suite
+#   (make docs  - build the documentation in doc/ into doc/_build/html, warnings as errors)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -11,7 +12,7 @@ STAMP := $(VENV)/.installed
 # directory of its own: test/package/test_colcon_setuptools.py builds the package with each
 COLCON_SETUPTOOLS := 68.1.2 79.0.1
 
-.PHONY: demo test venv bench bench-env tdcpy-env reproduce clean
+.PHONY: demo test docs venv bench bench-env tdcpy-env reproduce clean
 
 $(STAMP): requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +35,11 @@ test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 0 -m ros test $(ARGS); b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	for rc in $$a $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
+
+# The Sphinx + MyST project in doc/ (rosdoc2's layout), as test/package/test_docs.py builds it.
+docs: $(STAMP)
+	$(PY) -m sphinx -W --keep-going -q -b html doc doc/_build/html
+	@echo "docs: doc/_build/html/index.html"
 
 # tdcpy (peer of the delay-analysis rows 2.4) in its own environment benchmarks/tdcpy-venv,
 # made by `make bench` if missing (skipped when TDCPY_PYTHON names an interpreter that has
@@ -67,4 +73,4 @@ bench: $(STAMP) tdcpy-env
 	$(PY) benchmarks/run.py $(ARGS)
 
 clean:
-	rm -rf build install log
+	rm -rf build install log doc/_build

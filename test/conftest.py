@@ -133,7 +133,7 @@ def paper_gains():
 
 #: The gain budget of the shipped gain (``options.gain_bound`` of ``config/paper_problem.yaml``).
 SHIPPED_NORM = 8.67
-#: The command that regenerates ``config/tracker_gains.yaml`` (README "The shipped gain").
+#: The command that regenerates ``config/tracker_gains.yaml`` (doc/getting-started.md).
 SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objective', 'decay',
                        '--norm', str(SHIPPED_NORM)]
 

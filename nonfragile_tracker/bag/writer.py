@@ -11,8 +11,8 @@ typestore and adds what a recorder needs:
   is killed loses little (see *Flush policy* in :class:`BagWriter`).
 
 Also :func:`new_run_dir`, which makes a fresh ``run_YYYYmmdd_HHMMSS[_N]``
-directory that is never reused.  The package's errors are in :mod:`.errors`, its
-typestore in :mod:`.typestore`.
+directory that is never reused.  The package's errors are in
+:mod:`nonfragile_tracker.bag.errors`, its typestore in :mod:`nonfragile_tracker.bag.typestore`.
 
 Nothing here imports ROS (rclpy); only rosbags.
 """

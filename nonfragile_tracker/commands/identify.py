@@ -71,7 +71,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         bare = plan_from_identification(res, predictor=False)
         out = args.output or 'FILE'
         print('next: gains certified for the residual delay after the tracker\'s predictor '
-              '(README "From the interval to h_min, h_max"):\n'
+              '(docs: tutorial, "From the interval to h_min, h_max"):\n'
               f'  nonfragile_tracker latency-design PROBLEM --identification {out} -o g.yaml\n'
               f'  = --delay-interval {plan.h_min:.4f} {plan.h_max:.4f} --lag {plan.lag:.4f} '
               f'with predict_latency {plan.predict_latency:.4f}, predict_odom_latency '

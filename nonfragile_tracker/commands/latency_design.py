@@ -68,7 +68,7 @@ def register(subparsers) -> None:
                    metavar=('H_MIN', 'H_MAX'), help='latency interval in seconds')
     p.add_argument('--identification', metavar='FILE',
                    help='identification file from `identify BAG -o FILE`: the interval, lag '
-                   'and predictor settings follow README "From the interval to h_min, h_max" '
+                   'and predictor settings follow the docs\' "From the interval to h_min, h_max" '
                    '(instead of --delay-interval); the gain file then sets the predictor')
     p.add_argument('--no-predictor', action='store_true',
                    help='with --identification: design for the uncompensated law (the whole '

@@ -4,122 +4,17 @@ Closed loop (constant delay ``h``, time-varying gain perturbation)::
 
     x'(t) = A_c(t) x(t) + A_d x(t - h),   A_c(t) = A + B (K + E D(t) F),  D^T D <= I,
 
-with ``A_d = problem.A_tau``.  Theorem 1 (:mod:`.lmi`) does not depend on the delay;
-here the condition depends on ``h``, so it can certify loops that Theorem 1 cannot
-(e.g. a delayed term that is destabilizing for large delays but not for small ones).
+with ``A_d = problem.A_tau``.  Unlike Theorem 1 (:mod:`.lmi`) the condition depends on
+``h``, so it can certify loops that Theorem 1 cannot.  Sources: Fridman and Shaked, IEEE TAC
+47(11), 2002 (descriptor method, ``P3 = eps P2``); Fridman, European J. Control 20(6), 2014
+(Jensen's inequality).  For fixed ``eps`` the synthesis is an LMI; ``eps`` is found on a log
+grid refined by golden section, ``h_max`` by bisection (the LMI is monotone in ``h``), and
+every certificate is verified in numpy (:func:`verify_delay_dependent`).
 
-Source
-------
-E. Fridman, U. Shaked, "An improved stabilization method for linear time-delay
-systems", IEEE Trans. Automat. Control 47(11):1931-1937, 2002 (descriptor
-representation, free matrices ``P2, P3``, the choice ``P3 = eps P2`` with a tuning
-scalar and the congruence with ``X = P2^{-1}``, ``Y = K X`` that makes the synthesis
-an LMI for fixed ``eps``); E. Fridman, "Tutorial on Lyapunov-based methods for
-time-delay systems", European J. Control 20(6):271-283, 2014 (the functional below
-with the ``h``-weighted double integral bounded by Jensen's inequality, which
-replaces the cross-term bounding of the earlier descriptor papers).  Taken from the
-sources: the functional, the descriptor identity, Jensen's inequality and the
-``P3 = eps P2`` / congruence device.  Derived here, self-contained (the sources were
-not at hand in full text, so nothing below relies on their printed formulas) and
-checked by :func:`verify_delay_dependent` and the tests: the matrix entries, the
-Petersen step for ``E D F`` (as in the paper's Lemma 1 / Theorem 1), the
-normalization, the gain-bound constraint for a non-symmetric ``X`` and the back
-transformation of the certificate.
-
-Functional::
-
-    V = x^T P1 x + int_{t-h}^t x^T(s) S x(s) ds
-        + h int_{-h}^0 int_{t+th}^t x'^T(s) R x'(s) ds dth,     P1, S, R > 0.
-
-Derivation
-----------
-1. ``V' = 2 x^T P1 x' + x^T S x - x_h^T S x_h + h^2 x'^T R x' - h int_{t-h}^t x'^T R x'``
-   (``x_h = x(t - h)``).
-2. Jensen: ``h int_{t-h}^t x'^T R x' >= (x - x_h)^T R (x - x_h)``.
-3. Descriptor identity (zero along solutions), ``P2, P3`` free ``n x n``::
-
-       0 = 2 [x^T P2^T + x'^T P3^T] [-x' + A_c x + A_d x_h].
-
-4. Adding 2-3 to 1 gives ``V' <= eta^T Phi eta``, ``eta = (x, x', x_h)``::
-
-       Phi = [ He(P2^T A_c) + S - R   P1 - P2^T + A_c^T P3    P2^T A_d + R ]
-             [  *                     -He(P3) + h^2 R          P3^T A_d     ]
-             [  *                      *                       -S - R       ]
-
-   ``Phi < 0`` (with ``P1 > 0``, ``S, R > 0``) gives ``V' <= -c |x|^2``: the loop is
-   exponentially stable (Lyapunov-Krasovskii).
-5. Uncertainty: ``Phi = Phi_0 + He(U D(t) V)`` with ``U = [P2^T B E; P3^T B E; 0]``,
-   ``V = [F, 0, 0]``; by Petersen's lemma (Young's inequality) ``Phi < 0`` for every
-   ``||D|| <= 1`` if, for some ``lam > 0``, ``Phi_0 + lam U U^T + V^T V / lam < 0``,
-   i.e. (Schur) ::
-
-       Psi = [ Phi_0      lam U     V^T    ]
-             [  *         -lam I    0      ]  < 0                  (original coordinates)
-             [  *          *        -lam I ]
-
-   This is what :func:`verify_delay_dependent` evaluates with numpy from
-   ``(K, h, P1, P2, P3, S, R, lam)``; ``D(t)`` may vary in time arbitrarily.
-6. Synthesis: ``P3 = eps P2`` (``eps > 0`` fixed); ``Phi_22 < 0`` forces
-   ``He(P2) > 0``, so ``P2`` is invertible; put ``X = P2^{-1}`` (not symmetric),
-   ``Y = K X`` and apply the congruence ``diag(X, X, X, I, I)`` (left factor
-   ``X^T``).  With ``Pb = X^T P1 X``, ``Sb = X^T S X``, ``Rb = X^T R X`` and
-   ``G = A X + B Y`` the condition becomes the LMI in ``(X, Y, Pb, Sb, Rb, lam)``::
-
-       [ He(G) + Sb - Rb   Pb - X + eps G^T    A_d X + Rb   lam B E       X^T F^T ]
-       [  *                -eps He(X) + h^2 Rb  eps A_d X   lam eps B E   0       ]
-       [  *                 *                   -Sb - Rb    0             0       ] < 0
-       [  *                 *                   *           -lam I        0       ]
-       [  *                 *                   *           *             -lam I  ]
-
-   (block sizes ``n, n, n, q, p``; ``U, V`` transform into ``[B E; eps B E; 0]`` and
-   ``[F X, 0, 0]``, so ``lam`` is the same number in both coordinates).  Back:
-   ``K = Y X^{-1}``, ``P2 = X^{-1}``, ``P3 = eps P2``, ``P1 = X^{-T} Pb X^{-1}`` and
-   likewise ``S, R``.  The nominal design drops the last two block rows/columns.
-   This is the form of math-notes section 6 plus the Petersen rows.
-7. Monotone in ``h``: the LMI depends on ``h`` only through ``+h^2 Rb``, ``Rb > 0``, so a
-   point feasible at ``h`` is feasible at every ``h' < h``: a certificate at ``h``
-   certifies every constant delay in ``(0, h]``.  This justifies bisection on ``h``.
-
-Normalization (as in :mod:`.lmi`)
----------------------------------
-The LMI is homogeneous in ``(X, Y, Pb, Sb, Rb, lam)`` for fixed ``eps``; we solve ::
-
-    maximize t  s.t.  LMI <= -t I,  Pb, Sb, Rb >= t I,  lam >= t,
-                      tr Pb + tr Sb + tr Rb + tr X + lam <= 1
-
-(``tr X = tr He(X) / 2 > 0`` at any feasible point) and accept iff ``t >= margin``.
-
-Gain bound ``||K||_2 <= kappa``: ``(X + X^T)/2 >= I`` (fixes the scale, replacing the
-trace bound; with ``t <= 1``) and ``[[kappa^2 (X + X^T - I), Y^T], [Y, I]] >= 0``.
-Sound for non-symmetric ``X``: ``(X - I)^T (X - I) >= 0`` gives
-``X^T X >= X + X^T - I``, so ``Y^T Y <= kappa^2 (X + X^T - I) <= kappa^2 X^T X``, i.e.
-``||Y w|| <= kappa ||X w||`` for all ``w``; with ``w = X^{-1} v`` this is
-``||K v|| <= kappa ||v||``.  For symmetric ``X`` it is exactly the form of :mod:`.lmi`
-(``2X - I``).
-
-Tuning scalar ``eps``
----------------------
-For fixed ``eps`` the condition is an LMI; ``eps`` itself enters bilinearly.  When it
-is not given, :func:`synthesize_delay_dependent` solves the LMI on a log-spaced grid
-(``DEFAULT_EPS_GRID``, 1e-3 .. 1e2) and keeps the ``eps`` with the largest strictness
-``t``, then refines it by a golden-section search in ``log eps`` on the bracket of
-grid neighbours (``refine`` steps; ``t(eps)`` need not be unimodal, so this is a
-heuristic: the returned point is always a verified certificate, only optimality of
-``eps`` is not guaranteed).
-
-Caveats
--------
-* Constant delays only (the functional's derivative uses ``x(t - h)`` with constant
-  ``h``); the certificate covers every constant delay in ``(0, h]`` and every
-  time-varying ``D(t)``, ``||D|| <= 1``.
-* The strictness ``t`` is in normalized units.  Without a gain bound high gains can
-  certify very large delays with ever smaller ``t`` (for the Fridman-Shaked example
-  the plant is stabilizable for every ``h``), so ``max_certified_delay`` is then
-  limited by ``margin`` rather than by the plant; pair it with a gain bound.
-* With a gain bound ``t`` is capped at 1 (as in :mod:`.lmi`); for easy cases (small
-  ``h``) several ``eps`` reach the cap and the first one found is kept.
-* With ``A_tau = 0`` the condition holds for every ``h`` but ``t`` decays roughly like
-  ``1 / h^2`` (``Rb >= t I`` meets ``h^2 Rb``): very large ``h`` fall below ``margin``.
+The functional, the derivation step by step, the normalisation, the gain bound for a
+non-symmetric ``X``, the ``eps`` search and the caveats (constant delays only; ``t`` in
+normalised units) are in the documentation: doc/theory.md, section "Delay-dependent design"
+(#delay-dependent-design).
 """
 from __future__ import annotations
 

@@ -5,109 +5,16 @@ Closed loop (the command computed from the state acts ``h(t)`` seconds later)::
     x'(t) = A x(t) + A_tau x(t - tau) + B (K + E D(t) F) x(t - h(t)),
     h_min <= h(t) <= h_max,   D(t)^T D(t) <= I,
 
-``A_tau x(t - tau)`` is the problem's own (constant) state delay; it is included when
-``A_tau != 0`` (``state_delay=None``) and handled delay-independently, as in Theorem 1
-(:mod:`.lmi`).  ``h(t)`` may vary in time arbitrarily fast inside ``[h_min, h_max]``
-(no bound on ``h'`` is used; a constant latency is a special case), ``D(t)`` may vary
-in time arbitrarily.
+with ``h(t)`` and ``D(t)`` time-varying without a rate bound; ``A_tau`` is handled
+delay-independently, as in Theorem 1 (:mod:`.lmi`).  Sources: Fridman, *Introduction to
+Time-Delay Systems*, Birkhaeuser 2014 (descriptor method, decay-rate weights); Park, Ko,
+Jeong, Automatica 47(1), 2011 (reciprocally convex combination).  Certificates are verified
+in numpy (:func:`verify_input_delay`); ``h_max`` is found by bisection (monotone), the decay
+rate by bisection too (a verified lower bound).
 
-Source
-------
-E. Fridman, *Introduction to Time-Delay Systems: Analysis and Control*, Birkhaeuser
-2014, Sections 3.6 and 4.x (descriptor method; interval time-varying delay with the
-functional below; the exponential weights ``e^{2 alpha (s - t)}`` for a decay rate;
-``P3 = eps P2`` and the congruence with ``X = P2^{-1}`` that makes the state feedback
-synthesis an LMI for fixed ``eps``); P. Park, J. W. Ko, C. Jeong, "Reciprocally convex
-approach to stability of systems with time-varying delays", Automatica 47(1):235-238,
-2011 (the reciprocally convex combination lemma).  Taken from the sources: the
-functional, Jensen's inequality, the reciprocally convex lemma, the descriptor identity
-and the ``P3 = eps P2`` device.  Derived here (self-contained, checked by
-:func:`verify_input_delay` and by the exact delay-loop analysis in the tests): the
-block entries with the state delay and the Petersen rows for ``E D F`` acting on the
-*delayed* state, the congruence, the normalization and the gain bound for a
-non-symmetric ``X`` (as in :mod:`.delay_dependent`).
-
-Functional (``h0 = h_min``, ``h1 = h_max``, ``h10 = h1 - h0``, ``alpha >= 0``)::
-
-    V = x^T P x + int_{t-tau}^t e^{2a(s-t)} x^T Q x ds
-        + int_{t-h0}^t e^{2a(s-t)} x^T S0 x ds + int_{t-h1}^{t-h0} e^{2a(s-t)} x^T S1 x ds
-        + h0  int_{-h0}^0    int_{t+th}^t e^{2a(s-t)} x'^T R0 x' ds dth
-        + h10 int_{-h1}^{-h0} int_{t+th}^t e^{2a(s-t)} x'^T R1 x' ds dth.
-
-Derivation
-----------
-With ``w0 = e^{-2 a h0}``, ``w1 = e^{-2 a h1}``, ``wt = e^{-2 a tau}`` and
-``eta = (x, x', x(t-h0), x(t-h), x(t-h1), x(t-tau))``:
-
-1. ``V' + 2 a V <= 2 x^T P x' + 2a x^T P x + x^T (S0 + Q) x - w0 x0^T (S0 - S1) x0
-   - w1 x1^T S1 x1 - wt xt^T Q xt + x'^T (h0^2 R0 + h10^2 R1) x'
-   - w0 h0 int_{t-h0}^t x'^T R0 x' - w1 h10 int_{t-h1}^{t-h0} x'^T R1 x'``.
-2. Jensen: ``h0 int_{t-h0}^t x'^T R0 x' >= (x - x0)^T R0 (x - x0)``.  Splitting the
-   second integral at ``t - h(t)`` and applying Jensen to both parts gives
-   ``(h10/(h-h0)) a^T R1 a + (h10/(h1-h)) b^T R1 b`` with ``a = x0 - xh``,
-   ``b = xh - x1``; the reciprocally convex lemma bounds it below by
-   ``[a; b]^T [[R1, S12], [S12^T, R1]] [a; b]`` whenever that matrix is ``>= 0``
-   (for ``h = h0`` or ``h1`` one of ``a, b`` is 0 and the bound still holds).
-3. Descriptor identity, ``P2, P3`` free::
-   ``0 = 2 (x^T P2^T + x'^T P3^T) (-x' + A x + A_tau xt + A1 xh)``,
-   ``A1 = B (K + E D F)``.
-4. Hence ``V' + 2 a V <= eta^T Phi eta`` with (``He(M) = M + M^T``)::
-
-       Phi11 = He(P2^T A) + 2a P + S0 + Q - w0 R0   Phi12 = P - P2^T + A^T P3
-       Phi13 = w0 R0      Phi14 = P2^T A1          Phi16 = P2^T A_tau
-       Phi22 = -He(P3) + h0^2 R0 + h10^2 R1
-       Phi24 = P3^T A1    Phi26 = P3^T A_tau
-       Phi33 = w0 (S1 - S0 - R0) - w1 R1   Phi34 = w1 (R1 - S12)   Phi35 = w1 S12
-       Phi44 = w1 (He(S12) - 2 R1)         Phi45 = w1 (R1 - S12)
-       Phi55 = -w1 (S1 + R1)               Phi66 = -wt Q
-
-   (other blocks 0).  ``Phi < 0`` with ``P, Q, S0, S1, R0, R1 > 0`` gives
-   ``V' <= -2 a V``, so ``|x(t)| <= c e^{-a t} ||x_0||``: exponential stability with
-   decay rate ``alpha`` (``alpha = 0``: asymptotic stability with a strict margin).
-5. Uncertainty: ``Phi = Phi_0 + He(U D V)``, ``U = [P2^T B E; P3^T B E; 0; 0; 0; 0]``,
-   ``V = [0, 0, 0, F, 0, 0]`` (the perturbation multiplies the *delayed* state).
-   Petersen's lemma: ``Phi < 0`` for all ``||D|| <= 1`` if ``Phi_0 + lam U U^T +
-   V^T V / lam < 0`` for some ``lam > 0``; Schur::
-
-       Psi = [[Phi_0, lam U, V^T], [*, -lam I, 0], [*, *, -lam I]] < 0.
-
-   :func:`verify_input_delay` evaluates ``Psi`` and every side condition with numpy
-   from the returned matrices only.
-6. Synthesis: ``P3 = eps P2`` (``eps > 0`` fixed; ``Phi22 < 0`` gives ``He(P3) > 0``
-   so ``P2`` is invertible), ``X = P2^{-1}``, ``Y = K X``, congruence with
-   ``diag(X, ..., X, I, I)`` and ``Mb = X^T M X`` for ``M`` in
-   ``P, Q, S0, S1, R0, R1, S12``.  Linear in ``(X, Y, Pb, Qb, S0b, S1b, R0b, R1b,
-   S12b, lam)``::
-
-       b11 = He(A X) + 2a Pb + S0b + Qb - w0 R0b   b12 = Pb - X + eps (A X)^T
-       b13 = w0 R0b   b14 = B Y   b16 = A_tau X
-       b22 = -eps He(X) + h0^2 R0b + h10^2 R1b    b24 = eps B Y   b26 = eps A_tau X
-       b33..b66 as Phi33..Phi66 with barred matrices
-       Petersen columns: lam [B E; eps B E; 0; 0; 0; 0] and [0; 0; 0; (F X)^T; 0; 0]
-
-   plus ``[[R1b, S12b], [S12b^T, R1b]] >= t I``.  Back: ``K = Y X^{-1}``,
-   ``P2 = X^{-1}``, ``P3 = eps P2``, ``M = X^{-T} Mb X^{-1}``.
-7. Monotone in ``h_max``: the ``w1`` terms of ``Phi33..Phi55`` are
-   ``-w1 ([a; b]^T [[R1, S12], [S12^T, R1]] [a; b] + x1^T S1 x1) <= 0`` and ``h1`` enters
-   only through them and ``+h10^2 R1``.  For ``h0 <= h1' < h1``, ``w1' >= w1`` and
-   ``h10'^2 <= h10^2``, so ``Phi(h1') <= Phi(h1)``: a point feasible for ``h1`` is
-   feasible for ``h1'`` (same matrices), and bisection on ``h_max`` is sound.  The decay
-   rate is searched by bisection too, but feasibility is not proven monotone in
-   ``alpha``: the returned rate is a verified lower bound, not the optimum.
-
-Normalization, gain bound and ``eps`` search are those of :mod:`.delay_dependent`:
-``maximize t`` with ``LMI <= -t I``, every Lyapunov matrix ``>= t I``, ``lam >= t``
-and either a trace bound or, with ``||K||_2 <= kappa``, ``He(X)/2 >= I``,
-``[[kappa^2 (He(X) - I), Y^T], [Y, I]] >= 0``, ``t <= 1``; ``eps`` from a log grid
-refined by golden section (heuristic; every returned point is verified).
-
-Caveats
--------
-* ``D(t)`` and ``h(t)`` time-varying: the exact analysis in :mod:`.delay` covers
-  constant ``D`` and constant delays only, so it can only refute, never confirm, a
-  certificate; the tests check that the exact delay margin of every certified gain
-  (constant ``D`` at ``0`` and at the vertices) exceeds the certified ``h_max``.
-* The state delay ``A_tau`` is treated delay-independently (as Theorem 1 does).
+The functional, the derivation with the Petersen rows for ``E D F`` on the delayed state,
+the congruence, normalisation and caveats are in the documentation: doc/theory.md, section
+"Input delay (command latency)" (#input-delay-command-latency).
 """
 from __future__ import annotations
 

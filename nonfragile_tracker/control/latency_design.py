@@ -259,7 +259,7 @@ def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
 class LatencyPlan:
     """What to certify and what the tracker predicts, derived from an identification.
 
-    The one rule (README "From the interval to h_min, h_max"), with ``[L_lo, L_hi]`` the
+    The one rule (doc/tutorial.md, "From the interval to h_min, h_max"), with ``[L_lo, L_hi]`` the
     identified command-to-motion latency interval, ``[a_lo, a_hi]`` the age of the newest
     odometry when a command is sent, ``T`` the command period and ``tau_v``, ``tau_w`` the
     identified lags:

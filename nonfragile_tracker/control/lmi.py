@@ -4,36 +4,16 @@ Closed loop (paper eq. 7)::
 
     xi' = (A + B (K + E D(t) F)) xi + A_tau xi(t - tau),   D^T D <= I.
 
-Synthesis (paper eq. 8/16, written with ``X = P^-1``, ``W = Q^-1``, ``R = K X``)::
+The synthesis LMI (paper eq. 8/16) is solved in ``X = P^-1``, ``W = Q^-1``, ``R = K X``
+(``K = R X^-1``), normalised by maximising the strictness ``t`` under a trace bound and
+accepted only if ``t >= margin``.  Every returned gain passes an independent numpy check
+(:func:`verify_certificate`, from ``(K, P, Q, eps)`` only); with ``K`` fixed the condition
+is linear in ``(P, Q, 1/eps)`` (:func:`certify_gain`).
 
-    [ He(A X + B R)  eps B E   A_tau W   X    X F^T  ]
-    [  *             -eps I    0         0    0      ]
-    [  *              *        -W        0    0      ]  < 0,   K = R X^-1
-    [  *              *         *        -W   0      ]
-    [  *              *         *         *   -eps I ]
-
-(the paper prints ``K = R P``; with its own definition ``R = K P^-1`` that is
-``K = R X^-1`` here).  The LMI is homogeneous in ``(X, W, R, eps)``, so a bare
-feasibility problem returns a point of arbitrary scale.  We make the result
-well defined and strictly feasible by solving::
-
-    maximize t  s.t.  LMI <= -t I,  X >= t I,  W >= t I,  eps >= t,
-                      tr X + tr W + eps <= 1
-
-and accept it only if ``t >= margin`` (default 1e-6): ``t`` is the achieved
-strictness in these normalized units and is reported with the certificate.
-
-Independent verification (:func:`verify_certificate`) uses only
-``(K, P, Q, eps)``: by Schur complements the synthesis LMI is equivalent to ::
-
-    V = [ He(P (A + B K)) + Q + F^T F / eps   P A_tau   P B E    ]
-        [  *                                  -Q        0        ]  < 0
-        [  *                                   *        -I / eps ]
-
-and ``V < 0`` implies, by Petersen's lemma (paper Lemma 1), that the
-Lyapunov-Krasovskii matrix ``M`` of eq. (10) is negative definite for every
-``||D|| <= 1``.  With ``K`` fixed, ``V`` is linear in ``(P, Q, 1/eps)``: that
-is :func:`certify_gain`.
+The LMI, the normalisation, the equivalent verification matrix and Petersen's lemma are
+written out in the documentation: doc/theory.md, section "Theorem 1" (#theorem-1), and the
+synthesis choices (gain bound, moderate gains, fallbacks, reduced LMI) in the section after
+it.
 """
 from __future__ import annotations
 

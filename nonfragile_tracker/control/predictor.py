@@ -1,27 +1,16 @@
 """Latency predictor of the tracker: the state at the time the next command will act.
 
-A command computed now acts on the wheels ``L_c`` later (command-to-motion latency),
-and the pose it is computed from was measured ``L_o`` ago (odometry latency).  The
-tracker's notion of *now* is the odometry stamp plus the assumed ``L_o`` - never the
-wall or simulation clock, so a lockstep run is deterministic - and the command acts
-from ``t_act = stamp + L_o + L_c``.  :class:`LatencyPredictor` keeps the tracker's own
-commands with the times they act and predicts the state at ``t_act``:
+A command computed now acts ``L_c`` later and the pose it uses was measured ``L_o`` ago; the
+tracker's *now* is the odometry stamp plus the assumed ``L_o`` (never a clock, so lockstep
+runs stay deterministic) and the command acts from ``t_act = stamp + L_o + L_c``.
+:class:`LatencyPredictor` keeps the commands sent with the times they act, integrates the
+unicycle (and the actuator lag) from the measured pose through them to ``t_act``, and
+extrapolates the reference there (third order); :func:`invert_lag` is the command that brings
+a first-order actuator exactly to a target within one command interval.  The law evaluated
+on the prediction is in :class:`control.loop.Tracker`.  Plain floats.
 
-1. the actuator state (actual ``v, w``; :mod:`control.actuator`) at the odometry stamp
-   is the model's, run from the start on the commands sent (the first command is
-   preceded by the measured speed and ``w = 0``);
-2. from the measured pose at the stamp, the unicycle (exact arcs, actuator lag if the
-   tracker is given time constants) is integrated through the commands that act in
-   ``[stamp, t_act)``, each held until the next acts, in sub-steps of at most ``dt``
-   (the step functions of the plant: with exact knowledge the prediction is exact);
-3. the reference at ``t_act`` is extrapolated from the sample at hand with its
-   velocity, acceleration and the jerk estimated from the previous sample
-   (``a(t) - a(t')) / (t - t')``, ``t - t' <= 1 s``) - a third-order Taylor step whose
-   error grows with the fourth derivative of the path times ``(t_act - t_ref)^4``.
-
-:func:`invert_lag` is the command that brings a first-order actuator from its
-predicted state exactly to a target at the end of the command's interval.  The
-law evaluated on the prediction is in :class:`control.loop.Tracker`.  Plain floats.
+The three steps and their error terms are in the documentation: doc/theory.md, section
+"Latency predictor" (#latency-predictor).
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""README's *Layout* section matches the tree: every path it lists exists, and every package
-module, configuration file and test directory is listed."""
+"""The docs' *Layout* section (doc/developing.md) matches the tree: every path it lists exists,
+and every package module, configuration file and test directory is listed."""
 from __future__ import annotations
 
 import re
@@ -11,16 +11,18 @@ from conftest import ROOT
 PKG = ROOT / 'nonfragile_tracker'
 
 
+LAYOUT_PAGE = ROOT / 'doc' / 'developing.md'
+
+
 def _layout_rows() -> list[tuple[list[str], str]]:
-    """(paths of the first column, description) of each row of the Layout table."""
-    text = (ROOT / 'README.md').read_text()
+    """(paths of an entry's heading, its description) of each ``### `path` `` entry of the
+    Layout section."""
+    text = LAYOUT_PAGE.read_text()
     section = text.split('\n## Layout\n', 1)[1].split('\n## ', 1)[0]
     rows = []
-    for line in section.splitlines():
-        if not line.startswith('| `'):
-            continue
-        first, desc = line[1:].split('|', 2)[:2]
-        rows.append((re.findall(r'`([^`]+)`', first), desc))
+    for entry in section.split('\n### ')[1:]:
+        heading, _, desc = entry.partition('\n')
+        rows.append((re.findall(r'`([^`]+)`', heading), desc))
     return rows
 
 
@@ -44,7 +46,7 @@ def _names_in(row_path: str) -> set[str]:
     for paths, desc in _layout_rows():
         if row_path in paths:
             return set(re.findall(r'`([A-Za-z_][\w]*)`', desc))
-    raise AssertionError(f'README Layout has no row for {row_path}')
+    raise AssertionError(f'{LAYOUT_PAGE.name} Layout has no entry for {row_path}')
 
 
 def test_layout_section_has_rows():
@@ -53,14 +55,15 @@ def test_layout_section_has_rows():
 
 @pytest.mark.parametrize('path', _listed_paths())
 def test_every_listed_path_exists(path):
-    assert (ROOT / path).exists(), f'README Layout lists {path}, which does not exist'
+    assert (ROOT / path).exists(), f'{LAYOUT_PAGE.name} Layout lists {path}, which does not exist'
 
 
 @pytest.mark.parametrize('sub', ['control', 'nodes', 'bag', 'commands'])
 def test_every_module_of_a_subpackage_is_listed(sub):
     modules = {p.stem for p in (PKG / sub).glob('*.py') if p.stem != '__init__'}
     missing = modules - _names_in(f'nonfragile_tracker/{sub}/')
-    assert not missing, f'README Layout row nonfragile_tracker/{sub}/ misses {sorted(missing)}'
+    assert not missing, (f'{LAYOUT_PAGE.name} Layout entry nonfragile_tracker/{sub}/ misses '
+                         f'{sorted(missing)}')
 
 
 def test_every_top_level_module_is_listed():
