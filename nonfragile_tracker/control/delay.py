@@ -64,7 +64,9 @@ def _pair(A0: Any, A1: Any, tau: Any) -> tuple[np.ndarray, np.ndarray, float]:
     return a0, as_square(A1, 'A1', a0.shape[0]), _delay(tau)
 
 
-def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any):
+def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray,
+                     np.ndarray]:
     a = as_square(A, 'A')
     n = a.shape[0]
     b = as_matrix(B, 'B', (n, None))
@@ -853,7 +855,8 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
 class _Perturbed:
     """Spectral abscissa of A + B (K + scale E Delta F) with A_tau, and its gradient in Delta."""
 
-    def __init__(self, A, B, K, A_tau, tau, E, F) -> None:
+    def __init__(self, A: np.ndarray, B: np.ndarray, K: np.ndarray, A_tau: np.ndarray,
+                 tau: float, E: np.ndarray, F: np.ndarray) -> None:
         self.A0 = A + B @ K
         self.BE = B @ E
         self.F = F
@@ -1123,7 +1126,8 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
         lo, w_lo = hi, w_hi
         hi, (w_hi, D_hi) = x, w(x, quick)
 
-    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray, opts: dict):
+    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray, opts: dict
+               ) -> tuple[float, float, float, float, np.ndarray]:
         """Illinois regula falsi with a bisection safeguard."""
         side = 0
         while hi - lo > rtol * hi:
