@@ -15,6 +15,7 @@ import os
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -119,7 +120,7 @@ certificate requires.
 """
 
 
-def _gain_row(config: str, name: str, K) -> dict:
+def _gain_row(config: str, name: str, K: np.ndarray) -> dict:
     """Analysis and tracking numbers of one gain (runs in a worker process)."""
     problem = load_problem(Path(config) / 'paper_problem.yaml')
     a = analyse_gain(problem, K, name=name)
@@ -197,7 +198,30 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
 
 
 def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = True) -> dict:
-    """All numbers of the report (and the figures into ``out``)."""
+    """All numbers of the report (and the figures into ``out``).
+
+    Parameters
+    ----------
+    config : pathlib.Path
+        The folder with ``paper_problem.yaml``, ``paper_gains.yaml`` and
+        ``harder_delay_problem.yaml`` (the package's ``config/``).
+    out : pathlib.Path
+        Folder for the figures (created).
+    ros_duration : float, optional
+        Simulated time of Fig. 6's ROS run [s].
+    ros : bool, optional
+        Run the ROS nodes for Fig. 6 (three processes, lockstep); without, no Fig. 6.
+
+    Returns
+    -------
+    dict
+        The report's numbers (JSON-ready), as :func:`render_markdown` reads them.
+
+    Raises
+    ------
+    RunError
+        If Fig. 6's ROS run fails.
+    """
     import yaml
     t0 = time.monotonic()
     problem = load_problem(config / 'paper_problem.yaml')
@@ -227,7 +251,7 @@ def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = 
     return result
 
 
-def _f(x, nd: int = 3) -> str:
+def _f(x: Any, nd: int = 3) -> str:
     if isinstance(x, bool):
         return 'yes' if x else 'no'
     if x is None or (isinstance(x, float) and math.isnan(x)):
@@ -240,12 +264,23 @@ def _f(x, nd: int = 3) -> str:
 
 
 def render_markdown(r: dict) -> str:
-    """The report, every claim backed by a number in its tables."""
+    """The report, every claim backed by a number in its tables.
+
+    Parameters
+    ----------
+    r : dict
+        The result of :func:`compute`.
+
+    Returns
+    -------
+    str
+        Markdown.
+    """
     g = r['gains']
     names = list(g)
     head = '| | ' + ' | '.join(names) + ' |\n|---|' + '---|' * len(names) + '\n'
 
-    def row(label, key, sub=None, nd=3):
+    def row(label: str, key: str, sub: str | None = None, nd: int = 3) -> str:
         vals = [(g[n][sub][key] if sub else g[n][key]) for n in names]
         return f'| {label} | ' + ' | '.join(_f(v, nd) for v in vals) + ' |\n'
 
@@ -359,6 +394,13 @@ error {_f(f6['final_error'])} m, first within 1 cm at {_f(f6['first_within_1cm']
 def write_report(res: dict, out: Path) -> str:
     """Write ``paper_reproduction.md`` and ``reproduction.json`` of ``res`` into ``out``.
 
+    Parameters
+    ----------
+    res : dict
+        The result of :func:`compute`.
+    out : pathlib.Path
+        An existing folder.
+
     Returns
     -------
     str
@@ -376,6 +418,20 @@ def write_docs(res: dict, out: Path, docs: Path) -> Path:
     ``docs/paper_reproduction.md`` and ``docs/paper_reproduction.json`` are the
     committed copies the tests check; the caller chooses ``docs`` (the command
     defaults to ``docs/`` of a source checkout and requires it when installed).
+
+    Parameters
+    ----------
+    res : dict
+        The result of :func:`compute`.
+    out : pathlib.Path
+        The folder holding the figures ``res`` lists.
+    docs : pathlib.Path
+        The destination (created).
+
+    Returns
+    -------
+    pathlib.Path
+        ``docs``.
     """
     docs.mkdir(parents=True, exist_ok=True)
     for name in res['figures']:

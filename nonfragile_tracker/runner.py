@@ -18,7 +18,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any, Callable
 
 import yaml
 
@@ -30,7 +30,20 @@ NODES = ('tracker', 'reference', 'plant')
 
 
 def isolated_env(base: dict | None = None) -> dict:
-    """Environment for a run: localhost discovery and a domain id of our own, unless set."""
+    """Environment for a run: localhost discovery and a domain id of our own, unless set.
+
+    Parameters
+    ----------
+    base : dict, optional
+        The environment to start from (copied); this process's when ``None``.
+
+    Returns
+    -------
+    dict
+        ``base`` with ``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_DOMAIN_ID`` and
+        ``PYTHONUNBUFFERED`` set unless present, and this package first on
+        ``PYTHONPATH``.
+    """
     env = dict(os.environ if base is None else base)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
@@ -42,7 +55,20 @@ def isolated_env(base: dict | None = None) -> dict:
 
 
 def merge(dst: dict, src: dict) -> dict:
-    """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced)."""
+    """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced).
+
+    Parameters
+    ----------
+    dst : dict
+        Changed in place.
+    src : dict
+        Its values win (not copied: ``dst`` may share them).
+
+    Returns
+    -------
+    dict
+        ``dst``.
+    """
     for k, v in src.items():
         if isinstance(v, dict) and isinstance(dst.get(k), dict):
             merge(dst[k], v)
@@ -57,6 +83,24 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
 
     File keys may be ``node``, ``/node`` or ``/**/node`` (any namespace); the mapping uses
     the bare node name and :func:`write_parameter_file` writes ``/**/node`` again.
+
+    Parameters
+    ----------
+    scenario : pathlib.Path
+        A ROS 2 parameter file.
+    gains : pathlib.Path or None
+        A second parameter file merged over the first (the tracker's gains), if any.
+    overrides : dict, optional
+        ``{node: {'ros__parameters': {...}}}`` merged last.
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    InputError
+        If a file cannot be read or is not a ROS 2 parameter file.
     """
     params: dict = {}
     for path in (scenario, gains):
@@ -74,7 +118,21 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
 
 
 def write_parameter_file(params: dict, path: Path) -> Path:
-    """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too."""
+    """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}``; lists mixing ints and floats are written
+        as doubles (rcl refuses mixed sequences).
+    path : pathlib.Path
+        The file to write.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path.write_text(yaml.safe_dump({f'/**/{k}': v for k, v in _doubles(params).items()},
                                    sort_keys=False))
     return path
@@ -93,6 +151,15 @@ def lockstep_handshake(record: bool) -> dict[str, dict]:
     only, and steps seen before it matched are published then.  Without a recorder the
     plant waits for its one subscriber and the tracker answers at once (a lost first
     sample there is made good by the plant's republished step).
+
+    Parameters
+    ----------
+    record : bool
+        Whether a recorder takes part.
+
+    Returns
+    -------
+    dict
     """
     n = 2 if record else 0
     out = {'plant': {'lockstep_subscribers': max(n, 1), 'lockstep_recorder': record},
@@ -110,6 +177,16 @@ def with_horizon(params: dict) -> dict:
     tracker brings the robot to rest.  A lockstep run ends after ``duration``: the
     horizon is ``duration`` + 1 s unless the parameters give one (then at least that);
     a real-time plant with ``duration`` 0 runs until stopped: the default horizon stays.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}``, changed in place.
+
+    Returns
+    -------
+    dict
+        ``params``.
     """
     plant = params.get('plant', {}).get('ros__parameters', {})
     ref = params.setdefault('reference', {}).setdefault('ros__parameters', {})
@@ -130,6 +207,17 @@ def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
     records them (``publish_samples`` = ``record and samples``; without them it has no
     ``/clock`` subscription either).  Real-time runs keep the defaults (the tracker follows
     the samples of a built-in path there).
+
+    Parameters
+    ----------
+    record : bool
+        Whether a recorder takes part.
+    samples : bool, optional
+        Whether it records the reference's per-step samples.
+
+    Returns
+    -------
+    dict
     """
     out = lockstep_handshake(record)
     out['tracker']['wait_for_trajectory'] = True
@@ -150,6 +238,19 @@ def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
     samples are what a real-time tracker follows), else the lean lockstep set
     :data:`topics.LEAN_TOPICS` (per step only ``odom`` and ``cmd_vel``; the reference is
     reconstructed from the recorded trajectory message by the bag reader).
+
+    Parameters
+    ----------
+    params : dict
+        The run's node parameters.
+    recorder_topics : sequence of str, optional
+        Topics named by the caller.
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    list of str
     """
     if recorder_topics:
         return list(recorder_topics)
@@ -162,7 +263,17 @@ def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
 
 
 def records_samples(names: Sequence[str]) -> bool:
-    """True if ``names`` (recorder topics) include a per-step reference sample topic."""
+    """True if ``names`` (recorder topics) include a per-step reference sample topic.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Topic names, with or without a leading ``/``.
+
+    Returns
+    -------
+    bool
+    """
     return any(str(n).lstrip('/') in SAMPLE_TOPICS for n in names)
 
 
@@ -186,12 +297,24 @@ class RunResult:
 
 
 def new_run_dir(root: Path, name: str | None) -> Path:
-    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``)."""
+    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``).
+
+    Parameters
+    ----------
+    root : pathlib.Path
+        The parent folder.
+    name : str or None
+        The directory's name (a time stamp when ``None``).
+
+    Returns
+    -------
+    pathlib.Path
+    """
     from .bag.writer import new_run_dir as _new
     return _new(root, name)
 
 
-def _doubles(value):
+def _doubles(value: Any) -> Any:
     """Lists mixing ints and floats are written as doubles (rcl rejects mixed sequences)."""
     if isinstance(value, dict):
         return {k: _doubles(v) for k, v in value.items()}
@@ -222,7 +345,17 @@ def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float)
 
 
 def is_realtime(params: dict) -> bool:
-    """True if the plant of ``params`` runs in ``mode: realtime``."""
+    """True if the plant of ``params`` runs in ``mode: realtime``.
+
+    Parameters
+    ----------
+    params : dict
+        The run's node parameters.
+
+    Returns
+    -------
+    bool
+    """
     return params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime'
 
 
@@ -238,7 +371,7 @@ def realtime_overrides() -> dict:
 
 
 def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
-                  timeout: float = 600.0, progress=print,
+                  timeout: float = 600.0, progress: Callable[[str], object] = print,
                   recorder_topics: list[str] | None = None,
                   record_all: bool = False) -> RunResult:
     """Run the scenario with one process per node; returns exit codes per node.
@@ -250,6 +383,29 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     wall clock (no sim time, no start gate) and is stopped once the plant has run its
     ``duration``.  The recorder records :func:`recorded_topics` (``recorder_topics``,
     ``record_all``): in lockstep by default the lean set.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}`` (:func:`scenario_parameters`).
+    run_dir : pathlib.Path
+        Existing folder of the run: parameter file, logs and the bag (``bag``).
+    record : bool, optional
+        Start the recorder.
+    env : dict, optional
+        Base environment of the nodes (:func:`isolated_env`).
+    timeout : float, optional
+        Wall time [s] after which the run is stopped.
+    progress : callable, optional
+        Called with each progress line.
+    recorder_topics : list of str, optional
+        The topics to record (default :func:`recorded_topics`).
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    RunResult
     """
     env = isolated_env(env)
     params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
@@ -266,7 +422,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
                                        stderr=subprocess.STDOUT, text=True)
 
-    def report_plant(reader, final: bool = False) -> None:
+    def report_plant(reader: IO[str], final: bool = False) -> None:
         for line in reader.readlines():
             line = line.rstrip()
             if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
@@ -282,7 +438,9 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                 '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
             extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in names) + ']']
             start('recorder', extra)
-        lockstep_args = (lambda node: []) if realtime else (lambda node: _ros_args(hand[node]))
+        def lockstep_args(node: str) -> list[str]:
+            return [] if realtime else _ros_args(hand[node])
+
         start('tracker', lockstep_args('tracker'))
         if realtime and record:
             # the real-time plant steps and the reference's time runs from their start:
@@ -348,6 +506,13 @@ def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
     A node process writes every thread's Python stack to its output (its log) on SIGUSR1
     (:func:`nonfragile_tracker.nodes.entry.dump_stacks_on_sigusr1`) and goes on; ``grace``
     s later it is killed.  Nothing happens to a process that has ended.
+
+    Parameters
+    ----------
+    proc : subprocess.Popen
+        The node process.
+    grace : float, optional
+        Seconds between SIGUSR1 and the kill.
     """
     if proc.poll() is None:
         proc.send_signal(signal.SIGUSR1)
@@ -361,7 +526,21 @@ def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
 
 
 def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:
-    """The last ``lines`` lines of node ``name``'s log in ``run_dir`` ('' if it has none)."""
+    """The last ``lines`` lines of node ``name``'s log in ``run_dir`` ('' if it has none).
+
+    Parameters
+    ----------
+    run_dir : pathlib.Path
+        The run's folder.
+    name : str
+        The node (its log is ``<name>.log``).
+    lines : int, optional
+        How many lines.
+
+    Returns
+    -------
+    str
+    """
     try:
         text = (run_dir / f'{name}.log').read_text(errors='replace')
     except OSError:
@@ -375,6 +554,30 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     """Run the scenario with all nodes in this process on one executor.
 
     The recorder records :func:`recorded_topics` (in lockstep by default the lean set).
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}`` (:func:`scenario_parameters`).
+    run_dir : pathlib.Path or None
+        Folder of the bag (``bag``); required with ``record``.
+    record : bool, optional
+        Add the recorder node.
+    timeout : float, optional
+        Wall time [s] after which the run is stopped.
+    recorder_topics : list of str, optional
+        The topics to record (default :func:`recorded_topics`).
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    InputError
+        If ``record`` is set without a ``run_dir``.
     """
     import rclpy
 
