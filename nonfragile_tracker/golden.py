@@ -15,7 +15,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import yaml
 
@@ -39,7 +39,7 @@ class Scenario:
 
     name: str
     description: str
-    overrides: dict = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None           # scenario parameter file (None: config/paper_scenario)
     gains: Path | None = None          # gain file (None: config/tracker_gains.yaml)
 
@@ -103,8 +103,8 @@ def golden_bag(name: str, out: Path | None = None) -> Path:
     return base / f'golden_{name}'
 
 
-def _overrides(scenario: Scenario, duration: float) -> dict:
-    ov: dict = {node: {'ros__parameters': {'mode': 'lockstep'}}
+def _overrides(scenario: Scenario, duration: float) -> dict[str, Any]:
+    ov: dict[str, Any] = {node: {'ros__parameters': {'mode': 'lockstep'}}
                 for node in ('plant', 'reference', 'tracker')}
     ov['plant']['ros__parameters']['duration'] = float(duration)
     for node, section in scenario.overrides.items():
@@ -113,7 +113,7 @@ def _overrides(scenario: Scenario, duration: float) -> dict:
     return ov
 
 
-def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
+def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict[str, Any]:
     """Node parameters of a scenario (its file, its gains, lockstep, ``duration`` s).
 
     Parameters

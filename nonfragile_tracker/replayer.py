@@ -47,9 +47,9 @@ NO_WATCHDOG = 1e5
 SETTLE = 1.0
 
 
-def replay_over_dds(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
-                    params: str | os.PathLike | None = None,
-                    expected: str | os.PathLike | None = None, atol: float = 1e-9,
+def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str] | None = None,
+                    params: str | os.PathLike[str] | None = None,
+                    expected: str | os.PathLike[str] | None = None, atol: float = 1e-9,
                     rtol: float = 0.0, max_differences: int = 20, namespace: str | None = None,
                     env: dict[str, str] | None = None, timeout: float = 10.0) -> ReplayResult:
     """Like :func:`nonfragile_tracker.bag.replay.replay`, through a tracker node over DDS.

@@ -15,7 +15,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Callable
@@ -29,7 +29,7 @@ from .files import node_key, read_yaml
 NODES = ('tracker', 'reference', 'plant')
 
 
-def isolated_env(base: dict | None = None) -> dict:
+def isolated_env(base: dict[str, Any] | None = None) -> dict[str, Any]:
     """Environment for a run: localhost discovery and a domain id of our own, unless set.
 
     Parameters
@@ -54,7 +54,7 @@ def isolated_env(base: dict | None = None) -> dict:
     return env
 
 
-def merge(dst: dict, src: dict) -> dict:
+def merge(dst: dict[str, Any], src: dict[str, Any]) -> dict[str, Any]:
     """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced).
 
     Parameters
@@ -77,8 +77,8 @@ def merge(dst: dict, src: dict) -> dict:
     return dst
 
 
-def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | None = None
-                        ) -> dict:
+def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict[str, Any] | None = None
+                        ) -> dict[str, Any]:
     """One parameter mapping {node: {'ros__parameters': {...}}} from the files and overrides.
 
     File keys may be ``node``, ``/node`` or ``/**/node`` (any namespace); the mapping uses
@@ -102,7 +102,7 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
     InputError
         If a file cannot be read or is not a ROS 2 parameter file.
     """
-    params: dict = {}
+    params: dict[str, Any] = {}
     for path in (scenario, gains):
         if path is None:
             continue
@@ -117,7 +117,7 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
     return params
 
 
-def write_parameter_file(params: dict, path: Path) -> Path:
+def write_parameter_file(params: dict[str, Any], path: Path) -> Path:
     """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too.
 
     Parameters
@@ -138,7 +138,7 @@ def write_parameter_file(params: dict, path: Path) -> Path:
     return path
 
 
-def lockstep_handshake(record: bool) -> dict[str, dict]:
+def lockstep_handshake(record: bool) -> dict[str, dict[str, Any]]:
     """Start-up handshake parameters of a lockstep run, per node (``{node: {name: value}}``).
 
     With a recorder the lockstep publishers wait for two matched subscribers (the
@@ -170,7 +170,7 @@ def lockstep_handshake(record: bool) -> dict[str, dict]:
     return out
 
 
-def with_horizon(params: dict) -> dict:
+def with_horizon(params: dict[str, Any]) -> dict[str, Any]:
     """``params`` with the reference's ``horizon`` fitted to the plant's ``duration``.
 
     A built-in path is published as a trajectory over ``[0, horizon]``; after it the
@@ -198,7 +198,7 @@ def with_horizon(params: dict) -> dict:
     return params
 
 
-def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
+def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict[str, Any]]:
     """Per-node parameters of a lockstep run: :func:`lockstep_handshake` and the message set.
 
     The tracker follows only the trajectory message (``wait_for_trajectory``: the
@@ -229,7 +229,7 @@ def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
 SAMPLE_TOPICS = (topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
 
 
-def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
+def recorded_topics(params: dict[str, Any], recorder_topics: Sequence[str] | None = None,
                     record_all: bool = False) -> list[str]:
     """The topics a recorded run records.
 
@@ -277,7 +277,7 @@ def records_samples(names: Sequence[str]) -> bool:
     return any(str(n).lstrip('/') in SAMPLE_TOPICS for n in names)
 
 
-def _ros_args(values: dict) -> list[str]:
+def _ros_args(values: dict[str, Any]) -> list[str]:
     """``-p name:=value`` arguments (booleans and integers only)."""
     out: list[str] = []
     for k, v in values.items():
@@ -291,7 +291,7 @@ class RunResult:
 
     run_dir: Path | None        # None: a run without a directory (nothing recorded)
     bag: Path | None
-    exit_codes: dict
+    exit_codes: Mapping[str, int | None]
     wall_time: float
     steps: int
 
@@ -331,7 +331,7 @@ REALTIME_START_WAIT_S = 30.0
 STOP_WAIT_S = 10.0
 
 
-def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> bool:
+def _wait_for_line(log: Path, text: str, proc: subprocess.Popen[str], timeout: float) -> bool:
     """Wait until ``log`` contains ``text`` (True), ``proc`` exits or ``timeout`` s pass."""
     end = time.monotonic() + timeout
     while time.monotonic() < end and proc.poll() is None:
@@ -344,7 +344,7 @@ def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float)
     return False
 
 
-def is_realtime(params: dict) -> bool:
+def is_realtime(params: dict[str, Any]) -> bool:
     """True if the plant of ``params`` runs in ``mode: realtime``.
 
     Parameters
@@ -359,7 +359,7 @@ def is_realtime(params: dict) -> bool:
     return params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime'
 
 
-def realtime_overrides() -> dict:
+def realtime_overrides() -> dict[str, Any]:
     """Overrides that put plant, reference and tracker in real-time mode (wall timers).
 
     The plant steps on a wall timer for its ``duration`` (0: forever), the reference
@@ -370,7 +370,8 @@ def realtime_overrides() -> dict:
                                                                    'tracker')}
 
 
-def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
+def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
+                  env: dict[str, Any] | None = None,
                   timeout: float = 600.0, progress: Callable[[str], object] = print,
                   recorder_topics: list[str] | None = None,
                   record_all: bool = False) -> RunResult:
@@ -410,7 +411,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     env = isolated_env(env)
     params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
     py = sys.executable
-    procs: dict[str, subprocess.Popen] = {}
+    procs: dict[str, subprocess.Popen[str]] = {}
     logs: dict[str, IO[str]] = {}
     bag = run_dir / 'bag' if record else None
     t0 = time.monotonic()
@@ -500,7 +501,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
 
 
-def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
+def kill_with_stacks(proc: subprocess.Popen[Any], grace: float = 0.5) -> None:
     """Kill a node process that did not end, after asking it for its stacks (SIGUSR1).
 
     A node process writes every thread's Python stack to its output (its log) on SIGUSR1
@@ -548,7 +549,7 @@ def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:
     return '\n'.join(text.splitlines()[-lines:])
 
 
-def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
+def run_composed(params: dict[str, Any], run_dir: Path | None, *, record: bool = True,
                  timeout: float = 600.0, recorder_topics: list[str] | None = None,
                  record_all: bool = False) -> RunResult:
     """Run the scenario with all nodes in this process on one executor.
@@ -588,7 +589,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
 
     params = with_horizon(params)
 
-    def node_overrides(name: str, extra: dict | None = None) -> list:
+    def node_overrides(name: str, extra: dict[str, Any] | None = None) -> list[Any]:
         vals = dict(params.get(name, {}).get('ros__parameters', {}))
         vals.update(extra or {})
         return overrides(**vals)
@@ -599,7 +600,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', env['ROS_AUTOMATIC_DISCOVERY_RANGE'])
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
-    nodes: list[AdapterNode] = []
+    nodes: list[AdapterNode[Any]] = []
     bag = None
     names = recorded_topics(params, recorder_topics, record_all)
     hand = lockstep_handshake(record) if is_realtime(params) else \

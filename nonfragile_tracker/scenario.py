@@ -44,7 +44,7 @@ def scenario_file(name: str = PAPER_SCENARIO) -> Path:
 
 
 @lru_cache(maxsize=8)
-def _load(path: str) -> dict:
+def _load(path: str) -> dict[str, Any]:
     return read_yaml(path, 'ROS 2 parameter file', mapping=True)
 
 

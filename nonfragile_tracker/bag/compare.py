@@ -174,7 +174,7 @@ class TopicSummary:
     paired: int = 0
     differing: int = 0               # paired messages with at least one field out of tolerance
     unpaired: int = 0                # expected messages with no partner (and extra ones)
-    fields: set = field(default_factory=set)
+    fields: set[str] = field(default_factory=set)
     max_abs_error: float = 0.0
 
 
@@ -235,7 +235,7 @@ def _stamp(msg: Any) -> tuple[int, int] | None:
     return int(header.stamp.sec), int(header.stamp.nanosec)
 
 
-def read_topic_messages(path: str | os.PathLike, topics: Iterable[str] | None = None
+def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
                         ) -> tuple[dict[str, list[Message]], dict[str, int], int]:
     """Messages per topic in bag order, the repeats dropped, and the bag's first time (ns).
 
@@ -266,7 +266,7 @@ def read_topic_messages(path: str | os.PathLike, topics: Iterable[str] | None = 
     """
     out: dict[str, list[Message]] = {}
     repeats: dict[str, int] = {}
-    seen: dict[str, set] = {}
+    seen: dict[str, set[tuple[int, int]]] = {}
     wanted = None if topics is None else set(topics)
     first = None
     reader = open_reader(path)
@@ -469,7 +469,7 @@ def _describe(how: str, item: Message, t0: int) -> str:
     return f'at {(t - t0) * 1e-9:.6f} s'
 
 
-def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
+def compare_bags(expected: str | os.PathLike[str], got: str | os.PathLike[str], *,
                  topics: Iterable[str] | None = None, rtol: float = 0.0, atol: float = 1e-9,
                  tolerances: Iterable[tuple[str, str, Tolerance] | str] = (),
                  align: str | Mapping[str, str] = 'auto',

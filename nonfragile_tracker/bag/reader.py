@@ -160,7 +160,7 @@ class BagData:
 # ---------------------------------------------------------------------------------------------
 # Opening
 
-def mcap_is_complete(path: str | os.PathLike) -> bool:
+def mcap_is_complete(path: str | os.PathLike[str]) -> bool:
     """True if the MCAP file starts and ends with the MCAP magic (i.e. it was closed).
 
     Parameters
@@ -186,7 +186,7 @@ def mcap_is_complete(path: str | os.PathLike) -> bool:
     return head == MCAP_MAGIC and tail == MCAP_MAGIC
 
 
-def check_bag(path: str | os.PathLike) -> Path:
+def check_bag(path: str | os.PathLike[str]) -> Path:
     """Check that ``path`` is a readable bag directory and return the path to open.
 
     That is the directory (with metadata.yaml) or, when metadata.yaml is
@@ -243,7 +243,7 @@ def check_bag(path: str | os.PathLike) -> Path:
                        f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
 
 
-def open_reader(path: str | os.PathLike) -> Reader:
+def open_reader(path: str | os.PathLike[str]) -> Reader:
     """An opened rosbags :class:`Reader` after :func:`check_bag`; close it when done.
 
     Parameters
@@ -404,7 +404,7 @@ def _fast_header(raw: bytes | memoryview) -> tuple[int, int]:
 
 
 def fast_fields(raw: bytes | memoryview, msgtype: str, command: bool = False
-                ) -> tuple | None:
+                ) -> tuple[Any, ...] | None:
     """The report's fields of a CDR message, or None when the fast path does not apply.
 
     Odometry -> (stamp, x, y, qx, qy, qz, qw, twist.linear.x); PoseStamped -> (stamp, x, y,
@@ -459,7 +459,7 @@ def _connections_by_topic(reader: Reader) -> dict[str, Connection]:
     return out
 
 
-def read_messages(path: str | os.PathLike, topic: str, *, namespace: str | None = None
+def read_messages(path: str | os.PathLike[str], topic: str, *, namespace: str | None = None
                   ) -> Iterator[tuple[int, Any]]:
     """Yield ``(timestamp_ns, message)`` of ``topic`` in bag order (receive time).
 
@@ -560,7 +560,7 @@ def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
     return missing
 
 
-def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
+def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple[Any, ...]:
     """Like :func:`fast_fields` from a deserialized message: (fields, frames).
 
     A TwistStamped command gives (stamp, v, w) - its angular.z, not linear.y.
@@ -647,7 +647,7 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)
 
 
-def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None,
+def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: str | None = None,
              topic_overrides: dict[str, str] | None = None) -> BagData:
     """Read a run: counts and receive times of every topic, and the run arrays.
 
@@ -728,11 +728,11 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
         traj_msgs: list[tuple[int, Any]] = []
         ts = jazzy_typestore()
         receive: dict[str, list[int]] = {t: [] for t in by_topic}
-        pose_rows: dict[int, tuple] = {}
+        pose_rows: dict[int, tuple[Any, ...]] = {}
         pose_recv: dict[int, int] = {}
         frames = ['', '']
-        ref_parts: dict[str, dict[int, tuple]] = {topics.REF_POSE: {}, topics.REF_TWIST: {},
-                                                   topics.REF_ACCEL: {}}
+        ref_parts: dict[str, dict[int, tuple[Any, ...]]] = {
+            topics.REF_POSE: {}, topics.REF_TWIST: {}, topics.REF_ACCEL: {}}
         cmds: list[tuple[int, float, float, int]] = []
         cmd_stamped = False
         last_path = None

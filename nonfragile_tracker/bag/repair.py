@@ -73,7 +73,7 @@ def _take(scan: McapScan, record: object) -> None:
         scan.messages.append(record)
 
 
-def scan_mcap(path: str | os.PathLike) -> McapScan:
+def scan_mcap(path: str | os.PathLike[str]) -> McapScan:
     """Read every complete record of an MCAP file, tolerating a cut anywhere.
 
     Parameters
@@ -196,7 +196,8 @@ def _opens(path: Path) -> bool:
     return True
 
 
-def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) -> RepairResult:
+def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None = None
+               ) -> RepairResult:
     """Write a closed copy of a bag that was not closed; return what was recovered.
 
     ``out`` defaults to ``<path>_repaired``; an existing ``out`` is never

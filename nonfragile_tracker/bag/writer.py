@@ -193,7 +193,7 @@ def _as_qos(item: QosSpec) -> Qos:
     raise TypeError(f'offered QoS profile must be a rosbags Qos or a dict, got {item!r}')
 
 
-def qos_to_dicts(profiles: Sequence[Qos]) -> list[dict]:
+def qos_to_dicts(profiles: Sequence[Qos]) -> list[dict[str, Any]]:
     """Profiles as the plain dicts stored in metadata.yaml v9 (see :func:`make_qos`).
 
     Parameters
@@ -223,7 +223,7 @@ def _check_run_name(name: str) -> str:
     return name
 
 
-def new_run_dir(root: str | os.PathLike, name: str | None = None) -> Path:
+def new_run_dir(root: str | os.PathLike[str], name: str | None = None) -> Path:
     """Create and return a fresh, empty run directory under ``root``.
 
     The name is ``name`` or ``run_YYYYmmdd_HHMMSS`` (local time); if that exists
@@ -323,7 +323,7 @@ class BagWriter:
         If the bag cannot be created, or a connection is invalid.
     """
 
-    def __init__(self, path: str | os.PathLike,
+    def __init__(self, path: str | os.PathLike[str],
                  *, connections: Mapping[str, ConnectionSpec] | None = None,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period: float | None = DEFAULT_FLUSH_PERIOD,

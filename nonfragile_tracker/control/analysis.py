@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,13 +24,13 @@ class GainAnalysis:
     """Certificates, delay-loop abscissae and fragility margins of a gain."""
 
     name: str
-    K: list
+    K: list[list[float]]
     norm: float                          # ||K||_2
     certified_nominal: bool              # Theorem 1 with D = 0
     certified_nonfragile: bool           # Theorem 1 with E D F, ||D|| <= 1
     certify_margin: float                # best normalized strictness t of the non-fragile check
     abscissa_nominal: float              # spectral abscissa of the delay loop, D = 0
-    abscissa: dict = field(default_factory=dict)   # per named perturbation D
+    abscissa: dict[str, float] = field(default_factory=dict)   # per named perturbation D
     worst_abscissa: float = math.nan     # worst case over ||D|| <= 1 (measured)
     measured_margin: float = math.nan    # largest scale keeping every ||D|| <= 1 stable
     certified_margin: float = math.nan   # largest scale Theorem 1 certifies
@@ -38,7 +39,7 @@ class GainAnalysis:
     certified_delay: float = math.nan    # inf when Theorem 1 (delay-independent) certifies K
     tau: float = 0.0
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready dict."""
         return asdict(self)
 

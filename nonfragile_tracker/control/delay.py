@@ -905,8 +905,9 @@ def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int
     return out
 
 
-def _ascent(f: Callable, D: np.ndarray, val: float, grad: np.ndarray, scale: float,
-            maxit: int) -> tuple[float, np.ndarray]:
+def _ascent(f: Callable[[np.ndarray, float], tuple[float, np.ndarray]], D: np.ndarray,
+            val: float, grad: np.ndarray, scale: float, maxit: int
+            ) -> tuple[float, np.ndarray]:
     """Projected gradient ascent of the abscissa on the unit ball (adaptive step)."""
     step = 0.25
     for _ in range(maxit):
@@ -1103,7 +1104,7 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
     quick = dict(n_random=0, n_starts=1, maxit=maxit)
     warm: list[np.ndarray] = []
 
-    def w(alpha: float, opts: dict) -> tuple[float, np.ndarray]:
+    def w(alpha: float, opts: dict[str, Any]) -> tuple[float, np.ndarray]:
         v, D = _search(fn, alpha, rng, warm=warm[-2:], **opts)
         warm.append(D)
         return v, D
@@ -1126,8 +1127,8 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
         lo, w_lo = hi, w_hi
         hi, (w_hi, D_hi) = x, w(x, quick)
 
-    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray, opts: dict
-               ) -> tuple[float, float, float, float, np.ndarray]:
+    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray,
+               opts: dict[str, Any]) -> tuple[float, float, float, float, np.ndarray]:
         """Illinois regula falsi with a bisection safeguard."""
         side = 0
         while hi - lo > rtol * hi:

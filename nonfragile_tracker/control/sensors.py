@@ -27,7 +27,8 @@ class OdometryModel:
 
     latency_steps: int = 0             # a measurement of step k is published at step k + this
     period_steps: int = 1              # measure at every period-th step
-    noise: tuple = (0.0, 0.0, 0.0)     # standard deviation of x (m), y (m), yaw (rad)
+    #: standard deviation of x (m), y (m), yaw (rad)
+    noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
 
     @property
@@ -63,7 +64,7 @@ class Odometer:
 
     def reset(self) -> None:
         """Forget pending measurements and restart the noise from the seed."""
-        self._pending: deque = deque()
+        self._pending: deque[OdometrySample] = deque()
         self._rng = np.random.default_rng(self.model.seed) if self._noisy else None
 
     def measure(self, k: int, x: float, y: float, th: float, v: float, w: float) -> None:
