@@ -356,7 +356,7 @@ def is_realtime(params: dict[str, Any]) -> bool:
     -------
     bool
     """
-    return params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime'
+    return bool(params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime')
 
 
 def realtime_overrides() -> dict[str, Any]:

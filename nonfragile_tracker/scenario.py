@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from .control.loop import PlantConfig
 from .control.validate import as_matrix
@@ -45,7 +45,7 @@ def scenario_file(name: str = PAPER_SCENARIO) -> Path:
 
 @lru_cache(maxsize=8)
 def _load(path: str) -> dict[str, Any]:
-    return read_yaml(path, 'ROS 2 parameter file', mapping=True)
+    return cast(dict[str, Any], read_yaml(path, 'ROS 2 parameter file', mapping=True))
 
 
 def node_parameters(node: str, path: str | Path | None = None) -> dict[str, Any]:

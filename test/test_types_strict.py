@@ -1,6 +1,6 @@
 """Types, strict part: every module whose docstrings are checked (test_docstrings.CHECKED) is
-also type-checked with every per-module flag of mypy's --strict but ``warn_return_any``
-(setup.cfg ``[mypy-...]`` sections; test_types.py runs mypy itself)."""
+also type-checked with every per-module flag of mypy's --strict (setup.cfg ``[mypy-...]``
+sections; test_types.py runs mypy itself)."""
 from __future__ import annotations
 
 import configparser
@@ -12,7 +12,7 @@ from test_docstrings import CHECKED
 #: The per-module flags of ``mypy --strict`` the checked modules are held to.
 STRICT = ('disallow_untyped_defs', 'disallow_incomplete_defs', 'disallow_any_generics',
           'disallow_untyped_calls', 'disallow_untyped_decorators', 'disallow_subclassing_any',
-          'no_implicit_reexport', 'strict_equality', 'extra_checks')
+          'no_implicit_reexport', 'strict_equality', 'extra_checks', 'warn_return_any')
 
 
 def strict_flags(cfg: configparser.ConfigParser, module: str) -> set[str]:

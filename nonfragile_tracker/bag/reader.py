@@ -394,7 +394,7 @@ def _align8(pos: int) -> int:
 
 def _string_end(raw: bytes | memoryview, pos: int) -> int:
     pos = 4 + ((pos - 4 + 3) & ~3)
-    return pos + 4 + _U32.unpack_from(raw, pos)[0]
+    return pos + 4 + int(_U32.unpack_from(raw, pos)[0])
 
 
 def _fast_header(raw: bytes | memoryview) -> tuple[int, int]:
@@ -560,8 +560,8 @@ def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
     return missing
 
 
-def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple[Any, ...]:
-    """Like :func:`fast_fields` from a deserialized message: (fields, frames).
+def _slow_fields(msg: Any, name: str, timestamp: int) -> Any:
+    """Like :func:`fast_fields` from a deserialized message: (fields, frames); a Path as it is.
 
     A TwistStamped command gives (stamp, v, w) - its angular.z, not linear.y.
     """

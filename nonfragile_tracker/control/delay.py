@@ -29,7 +29,7 @@ import math
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import scipy.linalg as sla
@@ -114,9 +114,9 @@ def closed_loop_matrix(A: Any, B: Any, K: Any, E: Any = None, F: Any = None,
     e = np.eye(m) if E is None else as_matrix(E, 'E', (m, None))
     f = np.eye(n) if F is None else as_matrix(F, 'F', (None, n))
     if Delta is None:
-        return a + b @ k
+        return cast(np.ndarray, a + b @ k)
     d = as_matrix(Delta, 'Delta', (e.shape[1], f.shape[0]))
-    return a + b @ (k + e @ d @ f)
+    return cast(np.ndarray, a + b @ (k + e @ d @ f))
 
 
 # ----------------------------------------------------------------------------- roots
@@ -255,10 +255,10 @@ class _Char:
         return self._bounds
 
     def T(self, s: complex) -> np.ndarray:
-        return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
+        return cast(np.ndarray, s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau))
 
     def dT(self, s: complex) -> np.ndarray:
-        return self.I + (self.tau * np.exp(-s * self.tau)) * self.A1
+        return cast(np.ndarray, self.I + (self.tau * np.exp(-s * self.tau)) * self.A1)
 
     def residual(self, s: complex) -> float:
         sv = np.linalg.svd(self.T(s), compute_uv=False)
@@ -673,7 +673,7 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
 
 def _is_int(value: Any, minimum: int) -> bool:
     try:
-        return int(value) == value and value >= minimum
+        return bool(int(value) == value and value >= minimum)
     except (TypeError, ValueError):
         return False
 
@@ -881,7 +881,7 @@ class _Perturbed:
 def _project(M: np.ndarray) -> np.ndarray:
     """Nearest point of the unit spectral-norm ball (clip singular values at 1)."""
     U, S, Vt = np.linalg.svd(M, full_matrices=False)
-    return (U * np.minimum(S, 1.0)) @ Vt
+    return cast(np.ndarray, (U * np.minimum(S, 1.0)) @ Vt)
 
 
 def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int

@@ -41,12 +41,12 @@ class LinearizedModel:
     @property
     def n(self) -> int:
         """Number of states."""
-        return self.A.shape[0]
+        return int(self.A.shape[0])
 
     @property
     def m(self) -> int:
         """Number of inputs."""
-        return self.B.shape[1]
+        return int(self.B.shape[1])
 
 
 def double_integrator_model(axes: int = 2) -> LinearizedModel:

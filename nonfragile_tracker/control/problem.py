@@ -104,12 +104,12 @@ class Problem:
     @property
     def n(self) -> int:
         """Number of states."""
-        return self.A.shape[0]
+        return int(self.A.shape[0])
 
     @property
     def m(self) -> int:
         """Number of inputs."""
-        return self.B.shape[1]
+        return int(self.B.shape[1])
 
     def gain(self, K: Any) -> np.ndarray:
         """``K`` as a float array of this problem's gain shape ``(m, n)``: the one K-shape check.
@@ -130,10 +130,10 @@ class Problem:
         InputError
             (a :class:`ValueError`) when the shape is not ``(m, n)``.
         """
-        K = np.asarray(K, float)
-        if K.shape != (self.m, self.n):
-            raise InputError(f'K must have shape {(self.m, self.n)}, got {K.shape}')
-        return K
+        gain = np.asarray(K, float)
+        if gain.shape != (self.m, self.n):
+            raise InputError(f'K must have shape {(self.m, self.n)}, got {gain.shape}')
+        return gain
 
     def replace(self, **changes: Any) -> 'Problem':
         """Return a validated copy with some fields changed.

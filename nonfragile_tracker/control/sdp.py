@@ -26,7 +26,7 @@ from __future__ import annotations
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Callable, Hashable, TypeVar
+from typing import Any, Callable, Hashable, TypeVar, cast
 
 import numpy as np
 
@@ -62,7 +62,7 @@ def sym(M: np.ndarray) -> np.ndarray:
     numpy.ndarray, shape (n, n)
     """
     M = np.asarray(M, float)
-    return 0.5 * (M + M.T)
+    return cast(np.ndarray, 0.5 * (M + M.T))
 
 
 @dataclass(frozen=True)
@@ -153,7 +153,7 @@ class _LruCache:
     def get(self, key: Hashable, factory: Callable[[], T]) -> T:
         if key in self.items:
             self.items.move_to_end(key)
-            return self.items[key]
+            return cast(T, self.items[key])
         value = factory()
         self.items[key] = value
         while len(self.items) > self.size:

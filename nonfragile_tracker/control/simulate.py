@@ -10,7 +10,7 @@ the command in force (held at steps without odometry).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -92,7 +92,7 @@ class TrackingRun:
     @property
     def error(self) -> np.ndarray:
         """Position error ``|p - p_d|`` in m at every sample."""
-        return np.hypot(self.x - self.xd, self.y - self.yd)
+        return cast(np.ndarray, np.hypot(self.x - self.xd, self.y - self.yd))
 
 
 def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, path: Path,
