@@ -83,6 +83,15 @@ def exit_code(exc: BaseException) -> int:
     ``FileNotFoundError``/``FileExistsError``/``IsADirectoryError``/``PermissionError``
     raised by ``open`` on a user's path are bad input (2); ``KeyboardInterrupt`` is
     130; anything else is a bug, 1 (the CLI then prints a short report, no traceback).
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception that ends the process.
+
+    Returns
+    -------
+    int
     """
     if isinstance(exc, NonfragileError):
         return int(exc.exit_code)

@@ -17,7 +17,7 @@ from .errors import InputError
 __all__ = ['node_key', 'read_yaml']
 
 
-def read_yaml(path: str | os.PathLike, what: str, *, error: type[InputError] = InputError,
+def read_yaml(path: str | os.PathLike[str], what: str, *, error: type[InputError] = InputError,
               mapping: bool = False) -> Any:
     """Parse the YAML file ``path``; any problem is ``error`` naming the file.
 

@@ -15,6 +15,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
 
 import yaml
 
@@ -38,7 +39,7 @@ class Scenario:
 
     name: str
     description: str
-    overrides: dict = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None           # scenario parameter file (None: config/paper_scenario)
     gains: Path | None = None          # gain file (None: config/tracker_gains.yaml)
 
@@ -76,7 +77,25 @@ def golden_gains() -> Path:
 
 
 def golden_bag(name: str, out: Path | None = None) -> Path:
-    """Where the golden bag of scenario ``name`` lives (``out`` or the source tree)."""
+    """Where the golden bag of scenario ``name`` lives (``out`` or the source tree).
+
+    Parameters
+    ----------
+    name : str
+        The scenario's name (the bag is ``golden_<name>``).
+    out : pathlib.Path, optional
+        The folder of the golden bags; the checkout's ``test/data`` when ``None``.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag directory (it may not exist yet).
+
+    Raises
+    ------
+    GoldenError
+        Without ``out`` when the package is installed (no source tree).
+    """
     base = Path(out) if out is not None else data_dir()
     if base is None:
         raise GoldenError(f'no place for the golden bag of {name!r}: the package is installed, '
@@ -84,8 +103,8 @@ def golden_bag(name: str, out: Path | None = None) -> Path:
     return base / f'golden_{name}'
 
 
-def _overrides(scenario: Scenario, duration: float) -> dict:
-    ov: dict = {node: {'ros__parameters': {'mode': 'lockstep'}}
+def _overrides(scenario: Scenario, duration: float) -> dict[str, Any]:
+    ov: dict[str, Any] = {node: {'ros__parameters': {'mode': 'lockstep'}}
                 for node in ('plant', 'reference', 'tracker')}
     ov['plant']['ros__parameters']['duration'] = float(duration)
     for node, section in scenario.overrides.items():
@@ -94,8 +113,26 @@ def _overrides(scenario: Scenario, duration: float) -> dict:
     return ov
 
 
-def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
-    """Node parameters of a scenario (its file, its gains, lockstep, ``duration`` s)."""
+def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict[str, Any]:
+    """Node parameters of a scenario (its file, its gains, lockstep, ``duration`` s).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario (its parameter file, gain file and overrides).
+    duration : float, optional
+        Simulated time of the run [s].
+
+    Returns
+    -------
+    dict
+        ``{node: {'ros__parameters': {...}}}`` for plant, reference and tracker.
+
+    Raises
+    ------
+    GoldenError
+        If a file is missing or is not a ROS 2 parameter file.
+    """
     from .runner import scenario_parameters
     path = scenario.path if scenario.path is not None else config_dir() / 'paper_scenario.yaml'
     gains = scenario.gains if scenario.gains is not None else golden_gains()
@@ -110,7 +147,25 @@ def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict:
 
 
 def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Scenario:
-    """A user's scenario: a parameter file (plant, reference, tracker sections) and gains."""
+    """A user's scenario: a parameter file (plant, reference, tracker sections) and gains.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The ROS 2 parameter file; its stem names the scenario (letters, digits, ``-``,
+        ``_``).
+    gains : str or pathlib.Path, optional
+        A gain file; the golden gains (:func:`golden_gains`) when ``None``.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    GoldenError
+        If the file does not exist or its name is not usable for a bag.
+    """
     p = Path(path)
     if not p.is_file():
         raise GoldenError(f'scenario file {p} does not exist')
@@ -123,8 +178,35 @@ def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Sce
 
 
 def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
-                 env: dict | None = None, duration: float = DURATION) -> Path:
-    """Run a scenario in lockstep and return its bag directory."""
+                 env: dict[str, str] | None = None, duration: float = DURATION) -> Path:
+    """Run a scenario in lockstep and return its bag directory.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario to run.
+    run_dir : pathlib.Path
+        Folder of the run (created): logs, parameter file and the bag.
+    composed : bool, optional
+        Run the nodes in one process (:func:`runner.run_composed`) instead of separate
+        processes.
+    env : dict, optional
+        Environment of the node processes (separate processes only).
+    duration : float, optional
+        Simulated time of the run [s].
+
+    Returns
+    -------
+    pathlib.Path
+        The recorded bag directory.
+
+    Raises
+    ------
+    GoldenError
+        If the scenario's files are missing or malformed.
+    RunError
+        If a node fails (the end of its log is in the message) or no bag is recorded.
+    """
     from .runner import log_tail, run_composed, run_processes
     params = scenario_params(scenario, duration)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -145,10 +227,36 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
 
 
 def check_golden(scenarios: list[Scenario], *, out: Path | None = None, write: bool = False,
-                 duration: float = DURATION, atol: float = ATOL, echo=print) -> int:
+                 duration: float = DURATION, atol: float = ATOL,
+                 echo: Callable[[str], object] = print) -> int:
     """Re-run ``scenarios``, compare with their golden bags, optionally replace them.
 
-    Returns the number of scenarios whose golden bag is new or changed.
+    Parameters
+    ----------
+    scenarios : list of Scenario
+        The scenarios to run.
+    out : pathlib.Path, optional
+        The folder of the golden bags; required for scenarios from user files.
+    write : bool, optional
+        Replace a new or changed golden bag by the new run's (after printing the diff).
+    duration : float, optional
+        Simulated time of each run [s].
+    atol : float, optional
+        Absolute tolerance of the comparison.
+    echo : callable, optional
+        Called with each line of the report.
+
+    Returns
+    -------
+    int
+        The number of scenarios whose golden bag is new or changed.
+
+    Raises
+    ------
+    GoldenError
+        For a user scenario without ``out``, or no place for a golden bag.
+    RunError
+        If a run fails.
     """
     from .bag.compare import compare_bags, format_differences
     own = [sc.name for sc in scenarios if sc.path is not None]

@@ -13,12 +13,14 @@ not the robot's timing.
 """
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 import rclpy
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
@@ -45,16 +47,46 @@ NO_WATCHDOG = 1e5
 SETTLE = 1.0
 
 
-def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float = 1e-9,
+def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str] | None = None,
+                    params: str | os.PathLike[str] | None = None,
+                    expected: str | os.PathLike[str] | None = None, atol: float = 1e-9,
                     rtol: float = 0.0, max_differences: int = 20, namespace: str | None = None,
-                    env: dict | None = None, timeout: float = 10.0) -> ReplayResult:
+                    env: dict[str, str] | None = None, timeout: float = 10.0) -> ReplayResult:
     """Like :func:`nonfragile_tracker.bag.replay.replay`, through a tracker node over DDS.
 
     The inputs are those of :func:`~nonfragile_tracker.bag.replay.plan_replay` (same start,
     recovered initial speed and order as the in-process replay).
 
-    ``timeout`` bounds the wait for the node (start-up, discovery, each command).
-    Raises :class:`~nonfragile_tracker.errors.RunError` if the node dies or stays silent.
+    Parameters
+    ----------
+    bag : path-like
+        A real-time recording, or a lockstep one made with ``record_all`` (the reference
+        samples are what is published).
+    gains, params : path-like, optional
+        Gain file and parameter file with a tracker section (defaults: the shipped ones).
+    expected : path-like, optional
+        Compare with this bag's ``cmd_vel`` instead of the recorded one.
+    atol, rtol : float, optional
+        Tolerance of the command comparison.
+    max_differences : int, optional
+        How many differing commands the result lists.
+    namespace : str, optional
+        The namespace of the bag's topics.
+    env : dict, optional
+        Base environment of the node process (:func:`runner.isolated_env`).
+    timeout : float, optional
+        Bound [s] of each wait for the node (start-up, discovery, each command).
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    BagError
+        For a lean lockstep recording (no reference samples to publish).
+    RunError
+        If the node dies or stays silent.
     """
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
@@ -87,7 +119,7 @@ def replay_over_dds(bag, *, gains=None, params=None, expected=None, atol: float 
         ex = rclpy.executors.SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
 
-        def wait(pred, what: str) -> None:
+        def wait(pred: Callable[[], bool], what: str) -> None:
             end = time.monotonic() + timeout
             while not pred():
                 if proc.poll() is not None:

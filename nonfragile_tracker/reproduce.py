@@ -15,6 +15,7 @@ import os
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,7 +41,7 @@ def track_pose() -> tuple[float, float, float, float]:
     return (pc.x0, pc.y0, pc.th0, pc.v0)
 
 
-def _gains(problem: Problem, paper: dict) -> dict[str, np.ndarray]:
+def _gains(problem: Problem, paper: dict[str, Any]) -> dict[str, np.ndarray]:
     # the bound of the comparison: the norm of the paper's K_nf, options.gain_bound of the file
     norm = float(problem.options['gain_bound'])
     out = {'paper K_nf': paper['K_nf'], 'paper K_normal': paper['K_normal']}
@@ -52,7 +53,7 @@ def _gains(problem: Problem, paper: dict) -> dict[str, np.ndarray]:
     return out
 
 
-def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
+def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict[str, Any]:
     """Tracking figures of gain ``K`` on the paper circle from :func:`track_pose`.
 
     Parameters
@@ -80,7 +81,7 @@ def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict:
             'peak_abs_w': m.peak_abs_w}
 
 
-def _harder(problem: Problem) -> dict:
+def _harder(problem: Problem) -> dict[str, Any]:
     """Theorem 1 vs the delay-dependent design on the harder delay (velocity rows)."""
     from .control import delay
     from .control.delay_dependent import max_certified_delay
@@ -102,7 +103,7 @@ def _harder(problem: Problem) -> dict:
             'true_delay_margin': margins}
 
 
-def _harder_md(h: dict) -> str:
+def _harder_md(h: dict[str, Any]) -> str:
     diag = ', '.join(f'{v:g}' for v in h['A_tau_diag'])
     margins = ', '.join(f'{k}: {_f(v)} s' for k, v in h['true_delay_margin'].items())
     return f"""
@@ -119,7 +120,7 @@ certificate requires.
 """
 
 
-def _gain_row(config: str, name: str, K) -> dict:
+def _gain_row(config: str, name: str, K: np.ndarray) -> dict[str, Any]:
     """Analysis and tracking numbers of one gain (runs in a worker process)."""
     problem = load_problem(Path(config) / 'paper_problem.yaml')
     a = analyse_gain(problem, K, name=name)
@@ -136,7 +137,7 @@ def _gain_row(config: str, name: str, K) -> dict:
             'tracking_compensated': paper_circle_tracking(K, True)}
 
 
-def _figures(problem: Problem, paper: dict, out: Path) -> list[str]:
+def _figures(problem: Problem, paper: dict[str, Any], out: Path) -> list[str]:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -166,7 +167,7 @@ def _figures(problem: Problem, paper: dict, out: Path) -> list[str]:
     return names
 
 
-def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
+def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict[str, Any]:
     """The paper's Fig. 6 from a real ROS run (three processes, lockstep) and its bag."""
     import tempfile
 
@@ -196,8 +197,32 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict:
                 'peak_abs_w': m.peak_abs_w, 'steps': m.steps}
 
 
-def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = True) -> dict:
-    """All numbers of the report (and the figures into ``out``)."""
+def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = True
+            ) -> dict[str, Any]:
+    """All numbers of the report (and the figures into ``out``).
+
+    Parameters
+    ----------
+    config : pathlib.Path
+        The folder with ``paper_problem.yaml``, ``paper_gains.yaml`` and
+        ``harder_delay_problem.yaml`` (the package's ``config/``).
+    out : pathlib.Path
+        Folder for the figures (created).
+    ros_duration : float, optional
+        Simulated time of Fig. 6's ROS run [s].
+    ros : bool, optional
+        Run the ROS nodes for Fig. 6 (three processes, lockstep); without, no Fig. 6.
+
+    Returns
+    -------
+    dict
+        The report's numbers (JSON-ready), as :func:`render_markdown` reads them.
+
+    Raises
+    ------
+    RunError
+        If Fig. 6's ROS run fails.
+    """
     import yaml
     t0 = time.monotonic()
     problem = load_problem(config / 'paper_problem.yaml')
@@ -227,7 +252,7 @@ def compute(config: Path, out: Path, *, ros_duration: float = 60.0, ros: bool = 
     return result
 
 
-def _f(x, nd: int = 3) -> str:
+def _f(x: Any, nd: int = 3) -> str:
     if isinstance(x, bool):
         return 'yes' if x else 'no'
     if x is None or (isinstance(x, float) and math.isnan(x)):
@@ -239,13 +264,24 @@ def _f(x, nd: int = 3) -> str:
     return f'{x:.{nd}f}'
 
 
-def render_markdown(r: dict) -> str:
-    """The report, every claim backed by a number in its tables."""
+def render_markdown(r: dict[str, Any]) -> str:
+    """The report, every claim backed by a number in its tables.
+
+    Parameters
+    ----------
+    r : dict
+        The result of :func:`compute`.
+
+    Returns
+    -------
+    str
+        Markdown.
+    """
     g = r['gains']
     names = list(g)
     head = '| | ' + ' | '.join(names) + ' |\n|---|' + '---|' * len(names) + '\n'
 
-    def row(label, key, sub=None, nd=3):
+    def row(label: str, key: str, sub: str | None = None, nd: int = 3) -> str:
         vals = [(g[n][sub][key] if sub else g[n][key]) for n in names]
         return f'| {label} | ' + ' | '.join(_f(v, nd) for v in vals) + ' |\n'
 
@@ -356,8 +392,15 @@ error {_f(f6['final_error'])} m, first within 1 cm at {_f(f6['first_within_1cm']
     return text
 
 
-def write_report(res: dict, out: Path) -> str:
+def write_report(res: dict[str, Any], out: Path) -> str:
     """Write ``paper_reproduction.md`` and ``reproduction.json`` of ``res`` into ``out``.
+
+    Parameters
+    ----------
+    res : dict
+        The result of :func:`compute`.
+    out : pathlib.Path
+        An existing folder.
 
     Returns
     -------
@@ -370,12 +413,26 @@ def write_report(res: dict, out: Path) -> str:
     return md
 
 
-def write_docs(res: dict, out: Path, docs: Path) -> Path:
+def write_docs(res: dict[str, Any], out: Path, docs: Path) -> Path:
     """Copy the report of ``res`` (figures from ``out``) into the explicit directory ``docs``.
 
     ``docs/paper_reproduction.md`` and ``docs/paper_reproduction.json`` are the
     committed copies the tests check; the caller chooses ``docs`` (the command
     defaults to ``docs/`` of a source checkout and requires it when installed).
+
+    Parameters
+    ----------
+    res : dict
+        The result of :func:`compute`.
+    out : pathlib.Path
+        The folder holding the figures ``res`` lists.
+    docs : pathlib.Path
+        The destination (created).
+
+    Returns
+    -------
+    pathlib.Path
+        ``docs``.
     """
     docs.mkdir(parents=True, exist_ok=True)
     for name in res['figures']:

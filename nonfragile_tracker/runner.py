@@ -15,10 +15,10 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any, Callable
 
 import yaml
 
@@ -29,8 +29,21 @@ from .files import node_key, read_yaml
 NODES = ('tracker', 'reference', 'plant')
 
 
-def isolated_env(base: dict | None = None) -> dict:
-    """Environment for a run: localhost discovery and a domain id of our own, unless set."""
+def isolated_env(base: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Environment for a run: localhost discovery and a domain id of our own, unless set.
+
+    Parameters
+    ----------
+    base : dict, optional
+        The environment to start from (copied); this process's when ``None``.
+
+    Returns
+    -------
+    dict
+        ``base`` with ``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_DOMAIN_ID`` and
+        ``PYTHONUNBUFFERED`` set unless present, and this package first on
+        ``PYTHONPATH``.
+    """
     env = dict(os.environ if base is None else base)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
@@ -41,8 +54,21 @@ def isolated_env(base: dict | None = None) -> dict:
     return env
 
 
-def merge(dst: dict, src: dict) -> dict:
-    """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced)."""
+def merge(dst: dict[str, Any], src: dict[str, Any]) -> dict[str, Any]:
+    """Merge ``src`` into ``dst`` recursively (nested dicts merged, other values replaced).
+
+    Parameters
+    ----------
+    dst : dict
+        Changed in place.
+    src : dict
+        Its values win (not copied: ``dst`` may share them).
+
+    Returns
+    -------
+    dict
+        ``dst``.
+    """
     for k, v in src.items():
         if isinstance(v, dict) and isinstance(dst.get(k), dict):
             merge(dst[k], v)
@@ -51,14 +77,32 @@ def merge(dst: dict, src: dict) -> dict:
     return dst
 
 
-def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | None = None
-                        ) -> dict:
+def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict[str, Any] | None = None
+                        ) -> dict[str, Any]:
     """One parameter mapping {node: {'ros__parameters': {...}}} from the files and overrides.
 
     File keys may be ``node``, ``/node`` or ``/**/node`` (any namespace); the mapping uses
     the bare node name and :func:`write_parameter_file` writes ``/**/node`` again.
+
+    Parameters
+    ----------
+    scenario : pathlib.Path
+        A ROS 2 parameter file.
+    gains : pathlib.Path or None
+        A second parameter file merged over the first (the tracker's gains), if any.
+    overrides : dict, optional
+        ``{node: {'ros__parameters': {...}}}`` merged last.
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    InputError
+        If a file cannot be read or is not a ROS 2 parameter file.
     """
-    params: dict = {}
+    params: dict[str, Any] = {}
     for path in (scenario, gains):
         if path is None:
             continue
@@ -73,14 +117,28 @@ def scenario_parameters(scenario: Path, gains: Path | None, overrides: dict | No
     return params
 
 
-def write_parameter_file(params: dict, path: Path) -> Path:
-    """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too."""
+def write_parameter_file(params: dict[str, Any], path: Path) -> Path:
+    """ROS 2 parameter file with ``/**/node`` keys, so namespaced nodes match too.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}``; lists mixing ints and floats are written
+        as doubles (rcl refuses mixed sequences).
+    path : pathlib.Path
+        The file to write.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path.write_text(yaml.safe_dump({f'/**/{k}': v for k, v in _doubles(params).items()},
                                    sort_keys=False))
     return path
 
 
-def lockstep_handshake(record: bool) -> dict[str, dict]:
+def lockstep_handshake(record: bool) -> dict[str, dict[str, Any]]:
     """Start-up handshake parameters of a lockstep run, per node (``{node: {name: value}}``).
 
     With a recorder the lockstep publishers wait for two matched subscribers (the
@@ -93,6 +151,15 @@ def lockstep_handshake(record: bool) -> dict[str, dict]:
     only, and steps seen before it matched are published then.  Without a recorder the
     plant waits for its one subscriber and the tracker answers at once (a lost first
     sample there is made good by the plant's republished step).
+
+    Parameters
+    ----------
+    record : bool
+        Whether a recorder takes part.
+
+    Returns
+    -------
+    dict
     """
     n = 2 if record else 0
     out = {'plant': {'lockstep_subscribers': max(n, 1), 'lockstep_recorder': record},
@@ -103,13 +170,23 @@ def lockstep_handshake(record: bool) -> dict[str, dict]:
     return out
 
 
-def with_horizon(params: dict) -> dict:
+def with_horizon(params: dict[str, Any]) -> dict[str, Any]:
     """``params`` with the reference's ``horizon`` fitted to the plant's ``duration``.
 
     A built-in path is published as a trajectory over ``[0, horizon]``; after it the
     tracker brings the robot to rest.  A lockstep run ends after ``duration``: the
     horizon is ``duration`` + 1 s unless the parameters give one (then at least that);
     a real-time plant with ``duration`` 0 runs until stopped: the default horizon stays.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}``, changed in place.
+
+    Returns
+    -------
+    dict
+        ``params``.
     """
     plant = params.get('plant', {}).get('ros__parameters', {})
     ref = params.setdefault('reference', {}).setdefault('ros__parameters', {})
@@ -121,7 +198,7 @@ def with_horizon(params: dict) -> dict:
     return params
 
 
-def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
+def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict[str, Any]]:
     """Per-node parameters of a lockstep run: :func:`lockstep_handshake` and the message set.
 
     The tracker follows only the trajectory message (``wait_for_trajectory``: the
@@ -130,6 +207,17 @@ def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
     records them (``publish_samples`` = ``record and samples``; without them it has no
     ``/clock`` subscription either).  Real-time runs keep the defaults (the tracker follows
     the samples of a built-in path there).
+
+    Parameters
+    ----------
+    record : bool
+        Whether a recorder takes part.
+    samples : bool, optional
+        Whether it records the reference's per-step samples.
+
+    Returns
+    -------
+    dict
     """
     out = lockstep_handshake(record)
     out['tracker']['wait_for_trajectory'] = True
@@ -141,7 +229,7 @@ def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict]:
 SAMPLE_TOPICS = (topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
 
 
-def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
+def recorded_topics(params: dict[str, Any], recorder_topics: Sequence[str] | None = None,
                     record_all: bool = False) -> list[str]:
     """The topics a recorded run records.
 
@@ -150,6 +238,19 @@ def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
     samples are what a real-time tracker follows), else the lean lockstep set
     :data:`topics.LEAN_TOPICS` (per step only ``odom`` and ``cmd_vel``; the reference is
     reconstructed from the recorded trajectory message by the bag reader).
+
+    Parameters
+    ----------
+    params : dict
+        The run's node parameters.
+    recorder_topics : sequence of str, optional
+        Topics named by the caller.
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    list of str
     """
     if recorder_topics:
         return list(recorder_topics)
@@ -162,11 +263,21 @@ def recorded_topics(params: dict, recorder_topics: Sequence[str] | None = None,
 
 
 def records_samples(names: Sequence[str]) -> bool:
-    """True if ``names`` (recorder topics) include a per-step reference sample topic."""
+    """True if ``names`` (recorder topics) include a per-step reference sample topic.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Topic names, with or without a leading ``/``.
+
+    Returns
+    -------
+    bool
+    """
     return any(str(n).lstrip('/') in SAMPLE_TOPICS for n in names)
 
 
-def _ros_args(values: dict) -> list[str]:
+def _ros_args(values: dict[str, Any]) -> list[str]:
     """``-p name:=value`` arguments (booleans and integers only)."""
     out: list[str] = []
     for k, v in values.items():
@@ -180,18 +291,30 @@ class RunResult:
 
     run_dir: Path | None        # None: a run without a directory (nothing recorded)
     bag: Path | None
-    exit_codes: dict
+    exit_codes: Mapping[str, int | None]
     wall_time: float
     steps: int
 
 
 def new_run_dir(root: Path, name: str | None) -> Path:
-    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``)."""
+    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``).
+
+    Parameters
+    ----------
+    root : pathlib.Path
+        The parent folder.
+    name : str or None
+        The directory's name (a time stamp when ``None``).
+
+    Returns
+    -------
+    pathlib.Path
+    """
     from .bag.writer import new_run_dir as _new
     return _new(root, name)
 
 
-def _doubles(value):
+def _doubles(value: Any) -> Any:
     """Lists mixing ints and floats are written as doubles (rcl rejects mixed sequences)."""
     if isinstance(value, dict):
         return {k: _doubles(v) for k, v in value.items()}
@@ -208,7 +331,7 @@ REALTIME_START_WAIT_S = 30.0
 STOP_WAIT_S = 10.0
 
 
-def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> bool:
+def _wait_for_line(log: Path, text: str, proc: subprocess.Popen[str], timeout: float) -> bool:
     """Wait until ``log`` contains ``text`` (True), ``proc`` exits or ``timeout`` s pass."""
     end = time.monotonic() + timeout
     while time.monotonic() < end and proc.poll() is None:
@@ -221,12 +344,22 @@ def _wait_for_line(log: Path, text: str, proc: subprocess.Popen, timeout: float)
     return False
 
 
-def is_realtime(params: dict) -> bool:
-    """True if the plant of ``params`` runs in ``mode: realtime``."""
-    return params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime'
+def is_realtime(params: dict[str, Any]) -> bool:
+    """True if the plant of ``params`` runs in ``mode: realtime``.
+
+    Parameters
+    ----------
+    params : dict
+        The run's node parameters.
+
+    Returns
+    -------
+    bool
+    """
+    return bool(params.get('plant', {}).get('ros__parameters', {}).get('mode') == 'realtime')
 
 
-def realtime_overrides() -> dict:
+def realtime_overrides() -> dict[str, Any]:
     """Overrides that put plant, reference and tracker in real-time mode (wall timers).
 
     The plant steps on a wall timer for its ``duration`` (0: forever), the reference
@@ -237,8 +370,9 @@ def realtime_overrides() -> dict:
                                                                    'tracker')}
 
 
-def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict | None = None,
-                  timeout: float = 600.0, progress=print,
+def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
+                  env: dict[str, Any] | None = None,
+                  timeout: float = 600.0, progress: Callable[[str], object] = print,
                   recorder_topics: list[str] | None = None,
                   record_all: bool = False) -> RunResult:
     """Run the scenario with one process per node; returns exit codes per node.
@@ -250,11 +384,34 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     wall clock (no sim time, no start gate) and is stopped once the plant has run its
     ``duration``.  The recorder records :func:`recorded_topics` (``recorder_topics``,
     ``record_all``): in lockstep by default the lean set.
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}`` (:func:`scenario_parameters`).
+    run_dir : pathlib.Path
+        Existing folder of the run: parameter file, logs and the bag (``bag``).
+    record : bool, optional
+        Start the recorder.
+    env : dict, optional
+        Base environment of the nodes (:func:`isolated_env`).
+    timeout : float, optional
+        Wall time [s] after which the run is stopped.
+    progress : callable, optional
+        Called with each progress line.
+    recorder_topics : list of str, optional
+        The topics to record (default :func:`recorded_topics`).
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    RunResult
     """
     env = isolated_env(env)
     params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
     py = sys.executable
-    procs: dict[str, subprocess.Popen] = {}
+    procs: dict[str, subprocess.Popen[str]] = {}
     logs: dict[str, IO[str]] = {}
     bag = run_dir / 'bag' if record else None
     t0 = time.monotonic()
@@ -266,7 +423,7 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
         procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
                                        stderr=subprocess.STDOUT, text=True)
 
-    def report_plant(reader, final: bool = False) -> None:
+    def report_plant(reader: IO[str], final: bool = False) -> None:
         for line in reader.readlines():
             line = line.rstrip()
             if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
@@ -282,7 +439,9 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
                 '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
             extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in names) + ']']
             start('recorder', extra)
-        lockstep_args = (lambda node: []) if realtime else (lambda node: _ros_args(hand[node]))
+        def lockstep_args(node: str) -> list[str]:
+            return [] if realtime else _ros_args(hand[node])
+
         start('tracker', lockstep_args('tracker'))
         if realtime and record:
             # the real-time plant steps and the reference's time runs from their start:
@@ -342,12 +501,19 @@ def run_processes(params: dict, run_dir: Path, *, record: bool = True, env: dict
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
 
 
-def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
+def kill_with_stacks(proc: subprocess.Popen[Any], grace: float = 0.5) -> None:
     """Kill a node process that did not end, after asking it for its stacks (SIGUSR1).
 
     A node process writes every thread's Python stack to its output (its log) on SIGUSR1
     (:func:`nonfragile_tracker.nodes.entry.dump_stacks_on_sigusr1`) and goes on; ``grace``
     s later it is killed.  Nothing happens to a process that has ended.
+
+    Parameters
+    ----------
+    proc : subprocess.Popen
+        The node process.
+    grace : float, optional
+        Seconds between SIGUSR1 and the kill.
     """
     if proc.poll() is None:
         proc.send_signal(signal.SIGUSR1)
@@ -361,7 +527,21 @@ def kill_with_stacks(proc: subprocess.Popen, grace: float = 0.5) -> None:
 
 
 def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:
-    """The last ``lines`` lines of node ``name``'s log in ``run_dir`` ('' if it has none)."""
+    """The last ``lines`` lines of node ``name``'s log in ``run_dir`` ('' if it has none).
+
+    Parameters
+    ----------
+    run_dir : pathlib.Path
+        The run's folder.
+    name : str
+        The node (its log is ``<name>.log``).
+    lines : int, optional
+        How many lines.
+
+    Returns
+    -------
+    str
+    """
     try:
         text = (run_dir / f'{name}.log').read_text(errors='replace')
     except OSError:
@@ -369,12 +549,36 @@ def log_tail(run_dir: Path, name: str, lines: int = 25) -> str:
     return '\n'.join(text.splitlines()[-lines:])
 
 
-def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
+def run_composed(params: dict[str, Any], run_dir: Path | None, *, record: bool = True,
                  timeout: float = 600.0, recorder_topics: list[str] | None = None,
                  record_all: bool = False) -> RunResult:
     """Run the scenario with all nodes in this process on one executor.
 
     The recorder records :func:`recorded_topics` (in lockstep by default the lean set).
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {'ros__parameters': {...}}}`` (:func:`scenario_parameters`).
+    run_dir : pathlib.Path or None
+        Folder of the bag (``bag``); required with ``record``.
+    record : bool, optional
+        Add the recorder node.
+    timeout : float, optional
+        Wall time [s] after which the run is stopped.
+    recorder_topics : list of str, optional
+        The topics to record (default :func:`recorded_topics`).
+    record_all : bool, optional
+        Record every topic.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    InputError
+        If ``record`` is set without a ``run_dir``.
     """
     import rclpy
 
@@ -385,7 +589,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
 
     params = with_horizon(params)
 
-    def node_overrides(name: str, extra: dict | None = None) -> list:
+    def node_overrides(name: str, extra: dict[str, Any] | None = None) -> list[Any]:
         vals = dict(params.get(name, {}).get('ros__parameters', {}))
         vals.update(extra or {})
         return overrides(**vals)
@@ -396,7 +600,7 @@ def run_composed(params: dict, run_dir: Path | None, *, record: bool = True,
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', env['ROS_AUTOMATIC_DISCOVERY_RANGE'])
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
-    nodes: list[AdapterNode] = []
+    nodes: list[AdapterNode[Any]] = []
     bag = None
     names = recorded_topics(params, recorder_topics, record_all)
     hand = lockstep_handshake(record) if is_realtime(params) else \

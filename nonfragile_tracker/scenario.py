@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from .control.loop import PlantConfig
 from .control.validate import as_matrix
@@ -28,19 +28,47 @@ PAPER_PROBLEM = 'paper_problem.yaml'
 
 
 def scenario_file(name: str = PAPER_SCENARIO) -> Path:
-    """Path of a shipped file in ``config/``."""
+    """Path of a shipped file in ``config/``.
+
+    Parameters
+    ----------
+    name : str, optional
+        The file name (default: the paper scenario).
+
+    Returns
+    -------
+    pathlib.Path
+        The path (not checked to exist).
+    """
     return config_dir() / name
 
 
 @lru_cache(maxsize=8)
-def _load(path: str) -> dict:
-    return read_yaml(path, 'ROS 2 parameter file', mapping=True)
+def _load(path: str) -> dict[str, Any]:
+    return cast(dict[str, Any], read_yaml(path, 'ROS 2 parameter file', mapping=True))
 
 
 def node_parameters(node: str, path: str | Path | None = None) -> dict[str, Any]:
     """The ``ros__parameters`` of ``node`` in a parameter file (default: the paper scenario).
 
     Keys ``node``, ``/node`` and ``/**/node`` are accepted, as ROS 2 does.
+
+    Parameters
+    ----------
+    node : str
+        The node name (``plant``, ``tracker``, ...).
+    path : str or pathlib.Path, optional
+        The ROS 2 parameter file; the paper scenario when ``None``.
+
+    Returns
+    -------
+    dict
+        A copy of the node's ``ros__parameters`` (empty if the section has none).
+
+    Raises
+    ------
+    InputError
+        If the file has no section for ``node`` (or cannot be read as a mapping).
     """
     path = str(path if path is not None else scenario_file())
     data = _load(path)
@@ -61,6 +89,15 @@ def plant_config(params: dict[str, Any], **overrides: Any) -> PlantConfig:
         ``[x, y, yaw]`` and ``initial_speed``; absent ones keep the neutral defaults.
     **overrides
         :class:`PlantConfig` fields replacing the file's values (``x0=...``, ``dt=...``).
+
+    Returns
+    -------
+    PlantConfig
+
+    Raises
+    ------
+    InputError
+        For a malformed ``A_tau`` or ``initial_pose`` (and ``PlantConfig``'s own checks).
     """
     kw: dict[str, Any] = {}
     for name in ('dt', 'tau'):
@@ -80,7 +117,17 @@ def plant_config(params: dict[str, Any], **overrides: Any) -> PlantConfig:
 
 
 def paper_plant_config(**overrides: Any) -> PlantConfig:
-    """The paper scenario's plant (``config/paper_scenario.yaml``), with ``overrides``."""
+    """The paper scenario's plant (``config/paper_scenario.yaml``), with ``overrides``.
+
+    Parameters
+    ----------
+    **overrides
+        :class:`PlantConfig` fields replacing the file's values.
+
+    Returns
+    -------
+    PlantConfig
+    """
     return plant_config(node_parameters('plant'), **overrides)
 
 

@@ -60,7 +60,17 @@ class Tolerance:
     rtol: float = 0.0
 
     def ok(self, expected: float, got: float) -> bool:
-        """Whether ``got`` is within ``atol + rtol |expected|`` of ``expected``."""
+        """Whether ``got`` is within ``atol + rtol |expected|`` of ``expected``.
+
+        Parameters
+        ----------
+        expected, got : float
+            The two values.
+
+        Returns
+        -------
+        bool
+        """
         return abs(got - expected) <= self.atol + self.rtol * abs(expected)
 
 
@@ -71,6 +81,22 @@ def parse_tolerance(spec: str) -> tuple[str, str, Tolerance]:
     ``FIELD`` a dotted field (``pose.pose.position.x``), a prefix of one
     (``pose.pose.position``) or a glob (``*.x``); without ``.FIELD`` the rule covers
     the whole topic, and ``*`` as topic covers every topic.
+
+    Parameters
+    ----------
+    spec : str
+        The rule, e.g. ``/odom.pose.pose.position.x=1e-3`` or ``cmd_vel=1e-6,1e-3``.
+
+    Returns
+    -------
+    (topic, field, Tolerance)
+        ``topic`` with a leading ``/`` (or ``*``); ``field`` is ``*`` for the whole
+        topic.
+
+    Raises
+    ------
+    ToleranceError
+        If the rule is malformed or a tolerance is not a finite number >= 0.
     """
     if not isinstance(spec, str) or '=' not in spec:
         raise ToleranceError(f'tolerance {spec!r} is not TOPIC.FIELD=ABS[,REL] (e.g. '
@@ -95,7 +121,8 @@ def parse_tolerance(spec: str) -> tuple[str, str, Tolerance]:
 class _Rules:
     """Tolerance lookup: the most specific matching rule wins, else the default."""
 
-    def __init__(self, default: Tolerance, rules: Iterable[tuple[str, str, Tolerance]]):
+    def __init__(self, default: Tolerance, rules: Iterable[tuple[str, str, Tolerance]]
+                 ) -> None:
         self.default = default
         # more specific first: exact topic before '*', longer field pattern first
         self.rules = sorted(rules, key=lambda r: (r[0] == '*', -len(r[1].strip('*'))))
@@ -147,7 +174,7 @@ class TopicSummary:
     paired: int = 0
     differing: int = 0               # paired messages with at least one field out of tolerance
     unpaired: int = 0                # expected messages with no partner (and extra ones)
-    fields: set = field(default_factory=set)
+    fields: set[str] = field(default_factory=set)
     max_abs_error: float = 0.0
 
 
@@ -171,7 +198,19 @@ class Comparison:
 
 
 def flatten(msg: Any, prefix: str = '') -> Iterator[tuple[str, Any]]:
-    """Yield ``(dotted.field, value)`` for every leaf of a deserialized message."""
+    """Yield ``(dotted.field, value)`` for every leaf of a deserialized message.
+
+    Parameters
+    ----------
+    msg : object
+        A rosbags message (a dataclass), a sequence, an array or a leaf value.
+    prefix : str, optional
+        The dotted path of ``msg`` itself (array items get ``[i]``).
+
+    Yields
+    ------
+    (str, object)
+    """
     fields = getattr(msg, '__dataclass_fields__', None)
     if fields is None:
         if isinstance(msg, np.ndarray):
@@ -196,17 +235,38 @@ def _stamp(msg: Any) -> tuple[int, int] | None:
     return int(header.stamp.sec), int(header.stamp.nanosec)
 
 
-def read_topic_messages(path: str | os.PathLike, topics: Iterable[str] | None = None
+def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
                         ) -> tuple[dict[str, list[Message]], dict[str, int], int]:
     """Messages per topic in bag order, the repeats dropped, and the bag's first time (ns).
 
     A stamped message repeating a header stamp already seen on its topic is dropped
     and counted.  Types unknown to the Jazzy typestore are read with the definitions
     stored in the bag.
+
+    Parameters
+    ----------
+    path : path-like
+        A bag directory or an MCAP file.
+    topics : iterable of str, optional
+        Stored topic names to read (default: all).
+
+    Returns
+    -------
+    messages : dict
+        ``{topic: [(receive ns, message), ...]}``.
+    repeats : dict
+        ``{topic: number of dropped repeats}``.
+    first : int
+        The earliest receive time read [ns] (0 for none).
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be opened or a message cannot be read.
     """
     out: dict[str, list[Message]] = {}
     repeats: dict[str, int] = {}
-    seen: dict[str, set] = {}
+    seen: dict[str, set[tuple[int, int]]] = {}
     wanted = None if topics is None else set(topics)
     first = None
     reader = open_reader(path)
@@ -289,6 +349,38 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
     ``tolerances`` are rules from :func:`parse_tolerance` (or their strings); other
     fields use ``atol``/``rtol``.  ``align`` is one of :data:`ALIGNMENTS` or a mapping
     topic -> alignment.  Differences beyond ``max_differences`` are counted, not kept.
+
+    Parameters
+    ----------
+    expected, got : mapping
+        ``{topic: [(receive ns, message), ...]}`` (:func:`read_topic_messages`).
+    topics : iterable of str, optional
+        Topics to compare (default: every topic of either side).
+    rtol, atol : float, optional
+        Default tolerance of numeric fields.
+    tolerances : iterable of str or rule, optional
+        Per topic/field rules ``TOPIC.FIELD=ABS[,REL]`` (:func:`parse_tolerance`).
+    align : str or mapping, optional
+        ``auto``, ``stamp``, ``index`` or ``time`` (per topic with a mapping).
+    time_tolerance : float, optional
+        Largest receive-time distance [s] of a pair in ``time`` alignment.
+    expected_start_ns, got_start_ns : int, optional
+        Time origin of each side [ns] (default: its first message).
+    receive_time : bool, optional
+        Also compare the receive times (stamp/index alignment).
+    max_differences : int, optional
+        Differences kept in ``Comparison.differences`` (all are counted).
+
+    Returns
+    -------
+    Comparison
+
+    Raises
+    ------
+    BagError
+        For a bad ``max_differences``, ``time_tolerance`` or alignment.
+    ToleranceError
+        For a malformed tolerance rule.
     """
     rules = _Rules(Tolerance(atol, rtol), (parse_tolerance(r) if isinstance(r, str) else r
                                            for r in tolerances))
@@ -298,7 +390,7 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
         raise BagError(f'time tolerance must be a finite number >= 0 s, got {time_tolerance!r}')
     names = sorted(topics) if topics is not None else sorted(set(expected) | set(got))
 
-    def start(side):
+    def start(side: Mapping[str, Sequence[Message]]) -> int:
         firsts = [msgs[0][0] for msgs in side.values() if msgs]
         return min(firsts) if firsts else 0
 
@@ -377,7 +469,7 @@ def _describe(how: str, item: Message, t0: int) -> str:
     return f'at {(t - t0) * 1e-9:.6f} s'
 
 
-def compare_bags(expected: str | os.PathLike, got: str | os.PathLike, *,
+def compare_bags(expected: str | os.PathLike[str], got: str | os.PathLike[str], *,
                  topics: Iterable[str] | None = None, rtol: float = 0.0, atol: float = 1e-9,
                  tolerances: Iterable[tuple[str, str, Tolerance] | str] = (),
                  align: str | Mapping[str, str] = 'auto',
@@ -429,6 +521,17 @@ def format_differences(cmp: Comparison, limit: int | None = None) -> str:
 
     The first ``limit`` differences (default: all that were kept), then one summary
     line per topic: alignment, messages, pairs, messages that differ, fields, worst error.
+
+    Parameters
+    ----------
+    cmp : Comparison
+        The comparison.
+    limit : int, optional
+        How many differences to list.
+
+    Returns
+    -------
+    str
     """
     if cmp.equal:
         return ''

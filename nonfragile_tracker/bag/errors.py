@@ -41,9 +41,17 @@ class BagTruncatedError(BagError):
 
 
 class MissingTopicsError(BagError):
-    """The bag lacks topics that are needed; ``missing`` names them."""
+    """The bag lacks topics that are needed; ``missing`` names them.
 
-    def __init__(self, message: str, missing: Iterable[str] = ()):
+    Parameters
+    ----------
+    message : str
+        What is missing and what to do.
+    missing : iterable of str, optional
+        The missing topics (kept as the tuple ``missing``).
+    """
+
+    def __init__(self, message: str, missing: Iterable[str] = ()) -> None:
         super().__init__(message)
         self.missing = tuple(missing)
 

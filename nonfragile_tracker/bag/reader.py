@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition, Qos
 from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.typesys.store import Typestore
 
 from .. import topics
 from ..control.follow import reference_at
@@ -141,7 +142,17 @@ class BagData:
         return sum(self.counts.values())
 
     def count(self, name: str) -> int:
-        """Messages on a logical topic name (0 if absent)."""
+        """Messages on a logical topic name (0 if absent).
+
+        Parameters
+        ----------
+        name : str
+            A logical name (``topics.ODOM``, ...) or a stored topic.
+
+        Returns
+        -------
+        int
+        """
         topic = self.topic_map.get(name, name)
         return self.counts.get(topic, 0)
 
@@ -149,8 +160,18 @@ class BagData:
 # ---------------------------------------------------------------------------------------------
 # Opening
 
-def mcap_is_complete(path: str | os.PathLike) -> bool:
-    """True if the MCAP file starts and ends with the MCAP magic (i.e. it was closed)."""
+def mcap_is_complete(path: str | os.PathLike[str]) -> bool:
+    """True if the MCAP file starts and ends with the MCAP magic (i.e. it was closed).
+
+    Parameters
+    ----------
+    path : path-like
+        The MCAP file (unreadable or too short: False).
+
+    Returns
+    -------
+    bool
+    """
     p = Path(path)
     try:
         size = p.stat().st_size
@@ -165,11 +186,30 @@ def mcap_is_complete(path: str | os.PathLike) -> bool:
     return head == MCAP_MAGIC and tail == MCAP_MAGIC
 
 
-def check_bag(path: str | os.PathLike) -> Path:
+def check_bag(path: str | os.PathLike[str]) -> Path:
     """Check that ``path`` is a readable bag directory and return the path to open.
 
     That is the directory (with metadata.yaml) or, when metadata.yaml is
     missing but there is one complete MCAP file, that file.
+
+    Parameters
+    ----------
+    path : path-like
+        A bag directory or an MCAP file.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    BagNotFoundError
+        If ``path`` does not exist.
+    NotABagError
+        If it is neither a bag directory nor an MCAP file (or holds several MCAP files
+        without metadata.yaml).
+    BagTruncatedError
+        If an MCAP file was not closed (``bag repair`` recovers it).
     """
     p = Path(path)
     if not p.exists():
@@ -203,8 +243,23 @@ def check_bag(path: str | os.PathLike) -> Path:
                        f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
 
 
-def open_reader(path: str | os.PathLike) -> Reader:
-    """An opened rosbags :class:`Reader` after :func:`check_bag`; close it when done."""
+def open_reader(path: str | os.PathLike[str]) -> Reader:
+    """An opened rosbags :class:`Reader` after :func:`check_bag`; close it when done.
+
+    Parameters
+    ----------
+    path : path-like
+        A bag directory or an MCAP file.
+
+    Returns
+    -------
+    rosbags.rosbag2.Reader
+
+    Raises
+    ------
+    BagError
+        As :func:`check_bag`, or :class:`NotABagError` when rosbags cannot open it.
+    """
     target = check_bag(path)
     try:
         reader = Reader(target)
@@ -221,11 +276,26 @@ def open_reader(path: str | os.PathLike) -> Reader:
     return reader
 
 
-def typestore_for(reader: Reader):
+def typestore_for(reader: Reader) -> Typestore:
     """The Jazzy typestore, plus the bag's own definitions of types it does not know.
 
     A bag from another system may carry custom messages; their ros2msg definitions are
     stored in the bag, so they are registered in a private copy of the typestore.
+
+    Parameters
+    ----------
+    reader : rosbags.rosbag2.Reader
+        An opened bag.
+
+    Returns
+    -------
+    rosbags.typesys.store.Typestore
+        The shared one when the bag has no unknown type, else a private copy.
+
+    Raises
+    ------
+    NotABagError
+        If a stored definition cannot be parsed.
     """
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     ts = jazzy_typestore()
@@ -262,6 +332,21 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
     ``/robot1/n``; without it, as stored (``n``), as ``/n``, or under the
     namespace that matches the most logical names of :data:`topics.TYPES`.
     Absolute names (``/clock``) are looked up as they are.
+
+    Parameters
+    ----------
+    available : iterable of str
+        The stored topics.
+    names : iterable of str
+        Logical names (relative, ``odom``, or absolute, ``/clock``).
+    namespace : str, optional
+        The namespace of the relative names (``''`` or ``'/'``: the root); guessed
+        when ``None``.
+
+    Returns
+    -------
+    dict
+        ``{logical name: stored topic}`` of the names found.
     """
     avail = set(available)
     names = list(names)
@@ -307,23 +392,39 @@ def _align8(pos: int) -> int:
     return 4 + ((pos - 4 + 7) & ~7)          # CDR alignment counts from after the 4-byte header
 
 
-def _string_end(raw, pos: int) -> int:
+def _string_end(raw: bytes | memoryview, pos: int) -> int:
     pos = 4 + ((pos - 4 + 3) & ~3)
-    return pos + 4 + _U32.unpack_from(raw, pos)[0]
+    return pos + 4 + int(_U32.unpack_from(raw, pos)[0])
 
 
-def _fast_header(raw) -> tuple[int, int]:
+def _fast_header(raw: bytes | memoryview) -> tuple[int, int]:
     """(stamp ns, position after the header) of a message that starts with a Header."""
     sec, nsec = _STAMP.unpack_from(raw, 4)
     return sec * 1_000_000_000 + nsec, _string_end(raw, 12)
 
 
-def fast_fields(raw, msgtype: str, command: bool = False) -> tuple | None:
+def fast_fields(raw: bytes | memoryview, msgtype: str, command: bool = False
+                ) -> tuple[Any, ...] | None:
     """The report's fields of a CDR message, or None when the fast path does not apply.
 
     Odometry -> (stamp, x, y, qx, qy, qz, qw, twist.linear.x); PoseStamped -> (stamp, x, y,
     qx, qy, qz, qw); TwistStamped / AccelStamped -> (stamp, linear.x, linear.y), or with
     ``command`` a TwistStamped -> (stamp, linear.x, angular.z); Twist -> (linear.x, angular.z).
+
+    Parameters
+    ----------
+    raw : bytes
+        The serialized message (CDR with its 4-byte header).
+    msgtype : str
+        Its ROS type (``nav_msgs/msg/Odometry``, ...).
+    command : bool, optional
+        Read a TwistStamped as a command (its angular.z).
+
+    Returns
+    -------
+    tuple or None
+        Stamps in ns, lengths in m, speeds in m/s and rad/s; None for another type or
+        a big-endian message.
     """
     if msgtype not in _FAST_TYPES or len(raw) < 16 or raw[1] != 1:    # CDR_LE only
         return None
@@ -358,12 +459,31 @@ def _connections_by_topic(reader: Reader) -> dict[str, Connection]:
     return out
 
 
-def read_messages(path: str | os.PathLike, topic: str, *, namespace: str | None = None
+def read_messages(path: str | os.PathLike[str], topic: str, *, namespace: str | None = None
                   ) -> Iterator[tuple[int, Any]]:
     """Yield ``(timestamp_ns, message)`` of ``topic`` in bag order (receive time).
 
     ``topic`` is a stored name (``/odom``) or a logical one (``odom``).
     Messages are deserialized with the Jazzy typestore.
+
+    Parameters
+    ----------
+    path : path-like
+        A bag directory or an MCAP file.
+    topic : str
+        The topic.
+    namespace : str, optional
+        The namespace of a logical name (:func:`resolve_topics`).
+
+    Yields
+    ------
+    (int, object)
+        Receive time [ns] and the deserialized message.
+
+    Raises
+    ------
+    MissingTopicsError
+        If the bag has no such topic.
     """
     reader = open_reader(path)
     try:
@@ -440,8 +560,8 @@ def _missing_run_topics(topic_map: dict[str, str]) -> list[str]:
     return missing
 
 
-def _slow_fields(msg: Any, name: str, timestamp: int) -> tuple:
-    """Like :func:`fast_fields` from a deserialized message: (fields, frames).
+def _slow_fields(msg: Any, name: str, timestamp: int) -> Any:
+    """Like :func:`fast_fields` from a deserialized message: (fields, frames); a Path as it is.
 
     A TwistStamped command gives (stamp, v, w) - its angular.z, not linear.y.
     """
@@ -527,7 +647,7 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)
 
 
-def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None,
+def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: str | None = None,
              topic_overrides: dict[str, str] | None = None) -> BagData:
     """Read a run: counts and receive times of every topic, and the run arrays.
 
@@ -544,6 +664,29 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
     ``trajectory`` Path) at each odometry stamp, with the tracker's own conversion and
     sampling; failing that, when a nav_msgs/Path topic exists, the reference is its last
     message (positions at the poses' stamps, velocities by differences).
+
+    Parameters
+    ----------
+    path : path-like
+        A bag directory or an MCAP file.
+    strict : bool, optional
+        Refuse a bag without the topics of a run.
+    namespace : str, optional
+        The namespace of the run's topics (:func:`resolve_topics`); guessed when
+        ``None``.
+    topic_overrides : dict, optional
+        ``{logical name: stored topic}`` for topics under other names.
+
+    Returns
+    -------
+    BagData
+
+    Raises
+    ------
+    MissingTopicsError
+        With ``strict``, naming the missing topics.
+    BagError
+        If the bag cannot be opened or a message cannot be read.
     """
     reader = open_reader(path)
     try:
@@ -585,11 +728,11 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
         traj_msgs: list[tuple[int, Any]] = []
         ts = jazzy_typestore()
         receive: dict[str, list[int]] = {t: [] for t in by_topic}
-        pose_rows: dict[int, tuple] = {}
+        pose_rows: dict[int, tuple[Any, ...]] = {}
         pose_recv: dict[int, int] = {}
         frames = ['', '']
-        ref_parts: dict[str, dict[int, tuple]] = {topics.REF_POSE: {}, topics.REF_TWIST: {},
-                                                   topics.REF_ACCEL: {}}
+        ref_parts: dict[str, dict[int, tuple[Any, ...]]] = {
+            topics.REF_POSE: {}, topics.REF_TWIST: {}, topics.REF_ACCEL: {}}
         cmds: list[tuple[int, float, float, int]] = []
         cmd_stamped = False
         last_path = None

@@ -64,7 +64,7 @@ class McapScan:
         return self.size - self.valid_bytes
 
 
-def _take(scan: McapScan, record) -> None:
+def _take(scan: McapScan, record: object) -> None:
     if isinstance(record, Schema):
         scan.schemas.setdefault(record.id, record)
     elif isinstance(record, Channel):
@@ -73,10 +73,24 @@ def _take(scan: McapScan, record) -> None:
         scan.messages.append(record)
 
 
-def scan_mcap(path: str | os.PathLike) -> McapScan:
+def scan_mcap(path: str | os.PathLike[str]) -> McapScan:
     """Read every complete record of an MCAP file, tolerating a cut anywhere.
 
-    Raises :class:`NotABagError` if the file does not start with the MCAP magic.
+    Parameters
+    ----------
+    path : path-like
+        The MCAP file.
+
+    Returns
+    -------
+    McapScan
+        Schemas, channels and messages of the complete records, and where the valid
+        part ends.
+
+    Raises
+    ------
+    NotABagError
+        If the file does not start with the MCAP magic.
     """
     p = Path(path)
     data = p.read_bytes()
@@ -182,13 +196,36 @@ def _opens(path: Path) -> bool:
     return True
 
 
-def repair_bag(path: str | os.PathLike, out: str | os.PathLike | None = None) -> RepairResult:
+def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None = None
+               ) -> RepairResult:
     """Write a closed copy of a bag that was not closed; return what was recovered.
 
     ``out`` defaults to ``<path>_repaired``; an existing ``out`` is never
     overwritten (:class:`BagExistsError`).  Every message of every complete
     chunk is kept with its topic, type, receive timestamp and bytes; the
     chunk that was being filled when the recorder died is lost.
+
+    Parameters
+    ----------
+    path : path-like
+        The bag directory, or one MCAP file.
+    out : path-like, optional
+        The new bag's directory (must not exist).
+
+    Returns
+    -------
+    RepairResult
+
+    Raises
+    ------
+    BagNotFoundError, NotABagError
+        If there is no MCAP file to repair.
+    NothingToRepairError
+        If the bag is complete.
+    BagExistsError
+        If ``out`` exists.
+    RepairError
+        If no ROS 2 data can be recovered (or a topic has two types).
     """
     src = Path(path)
     if not src.exists():

@@ -116,6 +116,34 @@ def make_qos(*, history: Any = 'keep_last', depth: int = topics.DEPTH,
           liveliness: system_default
           liveliness_lease_duration: {sec: 0, nsec: 0}
           avoid_ros_namespace_conventions: false
+
+    Parameters
+    ----------
+    history : str, int or enum, optional
+        ``keep_last``, ``keep_all``, ...
+    depth : int, optional
+        History depth (>= 0).
+    reliability : str, int or enum, optional
+        ``reliable``, ``best_effort``, ...
+    durability : str, int or enum, optional
+        ``volatile``, ``transient_local``, ...
+    deadline_ns, lifespan_ns : int or mapping, optional
+        Durations [ns] (or ``{'sec': s, 'nsec': ns}``).
+    liveliness : str, int or enum, optional
+        ``automatic``, ``manual_by_topic``, ``system_default``, ...
+    liveliness_lease_duration_ns : int or mapping, optional
+        Duration [ns] (or ``{'sec': s, 'nsec': ns}``).
+    avoid_ros_namespace_conventions : bool, optional
+        The rmw flag of that name.
+
+    Returns
+    -------
+    rosbags.interfaces.Qos
+
+    Raises
+    ------
+    ValueError
+        For an unknown policy name, a negative depth or a negative duration.
     """
     if isinstance(depth, bool) or not isinstance(depth, int) or depth < 0:
         raise ValueError(f'QoS depth must be an integer >= 0, got {depth!r}')
@@ -133,6 +161,15 @@ def default_qos(topic: str) -> Qos:
 
     ``run_done`` is reliable + transient_local, depth 1; every other topic is
     reliable + volatile, keep_last :data:`topics.DEPTH`.
+
+    Parameters
+    ----------
+    topic : str
+        The stored topic name (any namespace).
+
+    Returns
+    -------
+    rosbags.interfaces.Qos
     """
     if topic.rstrip('/').endswith(topics.RUN_DONE):
         return make_qos(depth=1, durability='transient_local')
@@ -156,8 +193,18 @@ def _as_qos(item: QosSpec) -> Qos:
     raise TypeError(f'offered QoS profile must be a rosbags Qos or a dict, got {item!r}')
 
 
-def qos_to_dicts(profiles: Sequence[Qos]) -> list[dict]:
-    """Profiles as the plain dicts stored in metadata.yaml v9 (see :func:`make_qos`)."""
+def qos_to_dicts(profiles: Sequence[Qos]) -> list[dict[str, Any]]:
+    """Profiles as the plain dicts stored in metadata.yaml v9 (see :func:`make_qos`).
+
+    Parameters
+    ----------
+    profiles : sequence of rosbags.interfaces.Qos
+        The offered profiles of a connection.
+
+    Returns
+    -------
+    list of dict
+    """
     return [dict(d) for d in dump_qos_v9(list(profiles))]
 
 
@@ -176,7 +223,7 @@ def _check_run_name(name: str) -> str:
     return name
 
 
-def new_run_dir(root: str | os.PathLike, name: str | None = None) -> Path:
+def new_run_dir(root: str | os.PathLike[str], name: str | None = None) -> Path:
     """Create and return a fresh, empty run directory under ``root``.
 
     The name is ``name`` or ``run_YYYYmmdd_HHMMSS`` (local time); if that exists
@@ -185,8 +232,24 @@ def new_run_dir(root: str | os.PathLike, name: str | None = None) -> Path:
     processes never get the same directory.  ``root`` is created if missing.
     Put the bag *inside* the run directory (e.g. ``<run>/bag``).
 
-    Raises :class:`InvalidRunNameError` for a name with a path separator or
-    ``..``.
+    Parameters
+    ----------
+    root : path-like
+        The parent folder (created if missing).
+    name : str, optional
+        The directory's name; a local time stamp when ``None``.
+
+    Returns
+    -------
+    pathlib.Path
+        The new, empty directory.
+
+    Raises
+    ------
+    InvalidRunNameError
+        For a name with a path separator or ``..``.
+    BagError
+        If no free name is found.
     """
     base = _check_run_name(name) if name is not None \
         else datetime.now().strftime('run_%Y%m%d_%H%M%S')
@@ -234,14 +297,38 @@ class BagWriter:
       (there is no fsync).
     * :meth:`close` writes the last chunk, the MCAP summary (schemas,
       channels, chunk indexes, statistics, footer) and then metadata.yaml.
+
+    Parameters
+    ----------
+    path : path-like
+        The bag directory to create (must not exist).
+    connections : mapping, optional
+        ``{topic: message type}`` or ``{topic: (message type, offered QoS profiles)}``.
+    chunk_size : int, optional
+        Bytes [B] of a chunk before it is written (capped at 1 MiB).
+    flush_period : float or None, optional
+        Age [s] of the oldest unflushed message that makes a write flush the chunk.
+    typestore : rosbags.typesys.store.Typestore, optional
+        Message definitions (default: the shared Jazzy one).
+    custom_data : mapping, optional
+        ``custom_data`` of metadata.yaml (values as strings).
+
+    Raises
+    ------
+    BagExistsError
+        If ``path`` exists.
+    ValueError
+        For a bad ``chunk_size`` or ``flush_period``.
+    BagError
+        If the bag cannot be created, or a connection is invalid.
     """
 
-    def __init__(self, path: str | os.PathLike,
+    def __init__(self, path: str | os.PathLike[str],
                  *, connections: Mapping[str, ConnectionSpec] | None = None,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period: float | None = DEFAULT_FLUSH_PERIOD,
                  typestore: Typestore | None = None,
-                 custom_data: Mapping[str, str] | None = None):
+                 custom_data: Mapping[str, str] | None = None) -> None:
         self.path = Path(path)
         if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
             raise ValueError(f'chunk_size must be an integer number of bytes >= 1, '
@@ -309,7 +396,17 @@ class BagWriter:
         return self._closed
 
     def has_connection(self, topic: str) -> bool:
-        """Whether ``topic`` has a connection in this bag."""
+        """Whether ``topic`` has a connection in this bag.
+
+        Parameters
+        ----------
+        topic : str
+            The stored topic name.
+
+        Returns
+        -------
+        bool
+        """
         return topic in self._connections
 
     def add_connection(self, topic: str, msgtype: str,
@@ -319,6 +416,23 @@ class BagWriter:
 
         A type unknown to the Jazzy typestore needs ``msgdef`` (the ros2msg text,
         dependencies after ``===`` / ``MSG:`` lines, as stored in MCAP schemas).
+
+        Parameters
+        ----------
+        topic : str
+            The stored topic name (added once).
+        msgtype : str
+            Its ROS type (``nav_msgs/msg/Odometry``).
+        offered_qos_profiles : sequence of Qos or dict, optional
+            The publishers' QoS (:func:`make_qos` dicts accepted).
+        msgdef : str, optional
+            The ros2msg definition of a type the typestore does not know.
+
+        Raises
+        ------
+        BagError
+            If the bag is closed, the topic was added, or the type is unknown without
+            a usable ``msgdef``.
         """
         self._check_open()
         if not isinstance(topic, str) or not topic:
@@ -343,7 +457,22 @@ class BagWriter:
     # ------------------------------------------------------------------ writing
     def write(self, topic: str, timestamp_ns: int, rawdata: bytes | bytearray | memoryview
               ) -> None:
-        """Append one serialized (CDR) message received at ``timestamp_ns``; bytes unchanged."""
+        """Append one serialized (CDR) message received at ``timestamp_ns``; bytes unchanged.
+
+        Parameters
+        ----------
+        topic : str
+            A topic added with :meth:`add_connection`.
+        timestamp_ns : int
+            Receive time [ns], in ``[0, 2^64)``.
+        rawdata : bytes-like
+            The serialized message (CDR).
+
+        Raises
+        ------
+        BagError
+            If the bag is closed, the topic unknown, or a value of the wrong type.
+        """
         self._check_open()
         conn = self._connections.get(topic)
         if conn is None:

@@ -93,7 +93,24 @@ def first_order_step(s: float, c: float, T: float, a_max: float, h: float
 
 def actuate(model: ActuatorModel, v: float, w: float, cv: float, cw: float, h: float
             ) -> tuple[float, float, float, float]:
-    """Both channels over one interval: ``(v_end, w_end, v_mean, w_mean)``."""
+    """Both channels over one interval: ``(v_end, w_end, v_mean, w_mean)``.
+
+    Parameters
+    ----------
+    model : ActuatorModel
+        Time constants and acceleration limits.
+    v, w : float
+        Actual speed [m/s] and angular rate [rad/s] at the start of the interval.
+    cv, cw : float
+        Commands held over the interval [m/s, rad/s].
+    h : float
+        Interval length [s], ``> 0``.
+
+    Returns
+    -------
+    tuple of 4 float
+        End values and means over the interval (:func:`first_order_step`).
+    """
     v_end, v_mean = first_order_step(v, cv, model.lag_v, model.max_linear_accel, h)
     w_end, w_mean = first_order_step(w, cw, model.lag_w, model.max_angular_accel, h)
     return v_end, w_end, v_mean, w_mean
@@ -104,6 +121,24 @@ def unicycle_arc(x: float, y: float, th: float, v: float, w: float, h: float
     """Pose after ``h`` seconds at constant ``(v, w)``.
 
     Exact arc; ``th`` wrapped to ``[-pi, pi]``.
+
+    Parameters
+    ----------
+    x, y : float
+        Position [m].
+    th : float
+        Heading [rad].
+    v : float
+        Speed [m/s].
+    w : float
+        Angular rate [rad/s].
+    h : float
+        Duration [s].
+
+    Returns
+    -------
+    tuple of 3 float
+        ``(x, y, th)`` at the end.
     """
     half = 0.5 * w * h
     sinc = math.sin(half) / half if abs(half) > 1e-8 else 1.0 - half * half / 6.0

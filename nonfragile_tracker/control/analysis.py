@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import delay
-from .lmi import certified_perturbation_scale, certify_gain
+from .lmi import CertifyResult, certified_perturbation_scale, certify_gain
 from .problem import Problem
 
 __all__ = ['GainAnalysis', 'analyse_gain', 'format_analysis', 'certified_decay_rate']
@@ -22,13 +24,13 @@ class GainAnalysis:
     """Certificates, delay-loop abscissae and fragility margins of a gain."""
 
     name: str
-    K: list
+    K: list[list[float]]
     norm: float                          # ||K||_2
     certified_nominal: bool              # Theorem 1 with D = 0
     certified_nonfragile: bool           # Theorem 1 with E D F, ||D|| <= 1
     certify_margin: float                # best normalized strictness t of the non-fragile check
     abscissa_nominal: float              # spectral abscissa of the delay loop, D = 0
-    abscissa: dict = field(default_factory=dict)   # per named perturbation D
+    abscissa: dict[str, float] = field(default_factory=dict)   # per named perturbation D
     worst_abscissa: float = math.nan     # worst case over ||D|| <= 1 (measured)
     measured_margin: float = math.nan    # largest scale keeping every ||D|| <= 1 stable
     certified_margin: float = math.nan   # largest scale Theorem 1 certifies
@@ -37,14 +39,33 @@ class GainAnalysis:
     certified_delay: float = math.nan    # inf when Theorem 1 (delay-independent) certifies K
     tau: float = 0.0
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready dict."""
         return asdict(self)
 
 
-def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
+def analyse_gain(problem: Problem, K: ArrayLike, *, name: str = 'K', margins: bool = True,
                  seed: int = 0) -> GainAnalysis:
-    """Analyse ``K`` on ``problem`` (certificates, abscissae at ``problem.tau``, margins)."""
+    """Analyse ``K`` on ``problem`` (certificates, abscissae at ``problem.tau``, margins).
+
+    Parameters
+    ----------
+    problem : Problem
+        The plant, delay and perturbation structure (``E``, ``F``, named ``D``).
+    K : array_like, shape (m, n)
+        The state-feedback gain.
+    name : str, optional
+        The label of the gain in the record (a column of :func:`format_analysis`).
+    margins : bool, optional
+        Also compute the costly ones: certified decay rate, worst-case abscissa and the
+        measured and certified fragility margins (``nan`` when ``False``).
+    seed : int, optional
+        Seed of the random starts of the worst-case perturbation search.
+
+    Returns
+    -------
+    GainAnalysis
+    """
     K = np.asarray(K, dtype=float)
     A, B, Ad, tau, E, F = problem.A, problem.B, problem.A_tau, problem.tau, problem.E, problem.F
     nom = certify_gain(problem, K, nominal=True)
@@ -71,18 +92,33 @@ def analyse_gain(problem: Problem, K, *, name: str = 'K', margins: bool = True,
                         certified_delay=math.inf if nf.certified else math.nan, tau=tau)
 
 
-def certified_decay_rate(problem: Problem, K, *, hi: float = 50.0, rel_tol: float = 1e-3
-                         ) -> float:
+def certified_decay_rate(problem: Problem, K: ArrayLike, *, hi: float = 50.0,
+                         rel_tol: float = 1e-3) -> float:
     """Largest ``alpha`` with Theorem 1 (non-fragile) certifying ``K`` on the shifted problem.
 
     The shifted problem is (``A + alpha I``, ``e^{alpha tau} A_tau``): every
-    ``||D(t)|| <= 1`` decays at least as ``e^{-alpha t}``.  0.0 if ``K`` is not
-    certified at all.
+    ``||D(t)|| <= 1`` decays at least as ``e^{-alpha t}``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The problem to shift.
+    K : array_like, shape (m, n)
+        The gain to certify.
+    hi : float, optional
+        Upper limit of the search for ``alpha`` [1/s].
+    rel_tol : float, optional
+        Relative tolerance of the bisection on ``alpha``.
+
+    Returns
+    -------
+    float
+        The certified decay rate [1/s]; 0.0 if ``K`` is not certified at all.
     """
     from .design import shifted_problem
     from .search import largest_feasible
 
-    def trial(a: float):
+    def trial(a: float) -> CertifyResult | None:
         try:
             res = certify_gain(shifted_problem(problem, a), K)
         except Exception:  # noqa: BLE001 - numerical trouble at an extreme trial: not certified
@@ -101,7 +137,18 @@ def _fmt(x: float) -> str:
 
 
 def format_analysis(rows: list[GainAnalysis]) -> str:
-    """A plain-text table, one column per gain."""
+    """A plain-text table, one column per gain.
+
+    Parameters
+    ----------
+    rows : list of GainAnalysis
+        The gains' records, in column order (the perturbation rows are those of the first).
+
+    Returns
+    -------
+    str
+        The table ('' for no rows).
+    """
     if not rows:
         return ''
     keys = list(rows[0].abscissa)

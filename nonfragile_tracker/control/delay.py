@@ -29,7 +29,7 @@ import math
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import scipy.linalg as sla
@@ -64,7 +64,9 @@ def _pair(A0: Any, A1: Any, tau: Any) -> tuple[np.ndarray, np.ndarray, float]:
     return a0, as_square(A1, 'A1', a0.shape[0]), _delay(tau)
 
 
-def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any):
+def _loop(A: Any, B: Any, K: Any, A_tau: Any, tau: Any, E: Any, F: Any
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray,
+                     np.ndarray]:
     a = as_square(A, 'A')
     n = a.shape[0]
     b = as_matrix(B, 'B', (n, None))
@@ -112,9 +114,9 @@ def closed_loop_matrix(A: Any, B: Any, K: Any, E: Any = None, F: Any = None,
     e = np.eye(m) if E is None else as_matrix(E, 'E', (m, None))
     f = np.eye(n) if F is None else as_matrix(F, 'F', (None, n))
     if Delta is None:
-        return a + b @ k
+        return cast(np.ndarray, a + b @ k)
     d = as_matrix(Delta, 'Delta', (e.shape[1], f.shape[0]))
-    return a + b @ (k + e @ d @ f)
+    return cast(np.ndarray, a + b @ (k + e @ d @ f))
 
 
 # ----------------------------------------------------------------------------- roots
@@ -253,10 +255,10 @@ class _Char:
         return self._bounds
 
     def T(self, s: complex) -> np.ndarray:
-        return s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau)
+        return cast(np.ndarray, s * self.I - self.A0 - self.A1 * np.exp(-s * self.tau))
 
     def dT(self, s: complex) -> np.ndarray:
-        return self.I + (self.tau * np.exp(-s * self.tau)) * self.A1
+        return cast(np.ndarray, self.I + (self.tau * np.exp(-s * self.tau)) * self.A1)
 
     def residual(self, s: complex) -> float:
         sv = np.linalg.svd(self.T(s), compute_uv=False)
@@ -671,7 +673,7 @@ def rightmost_roots(A0: Any, A1: Any, tau: float, *, count: int = 6,
 
 def _is_int(value: Any, minimum: int) -> bool:
     try:
-        return int(value) == value and value >= minimum
+        return bool(int(value) == value and value >= minimum)
     except (TypeError, ValueError):
         return False
 
@@ -853,7 +855,8 @@ def delay_margin(A0: Any, A1: Any, *, tau_max: float = math.inf) -> float:
 class _Perturbed:
     """Spectral abscissa of A + B (K + scale E Delta F) with A_tau, and its gradient in Delta."""
 
-    def __init__(self, A, B, K, A_tau, tau, E, F) -> None:
+    def __init__(self, A: np.ndarray, B: np.ndarray, K: np.ndarray, A_tau: np.ndarray,
+                 tau: float, E: np.ndarray, F: np.ndarray) -> None:
         self.A0 = A + B @ K
         self.BE = B @ E
         self.F = F
@@ -878,7 +881,7 @@ class _Perturbed:
 def _project(M: np.ndarray) -> np.ndarray:
     """Nearest point of the unit spectral-norm ball (clip singular values at 1)."""
     U, S, Vt = np.linalg.svd(M, full_matrices=False)
-    return (U * np.minimum(S, 1.0)) @ Vt
+    return cast(np.ndarray, (U * np.minimum(S, 1.0)) @ Vt)
 
 
 def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int
@@ -902,8 +905,9 @@ def _candidates(shape: tuple[int, int], rng: np.random.Generator, n_random: int
     return out
 
 
-def _ascent(f: Callable, D: np.ndarray, val: float, grad: np.ndarray, scale: float,
-            maxit: int) -> tuple[float, np.ndarray]:
+def _ascent(f: Callable[[np.ndarray, float], tuple[float, np.ndarray]], D: np.ndarray,
+            val: float, grad: np.ndarray, scale: float, maxit: int
+            ) -> tuple[float, np.ndarray]:
     """Projected gradient ascent of the abscissa on the unit ball (adaptive step)."""
     step = 0.25
     for _ in range(maxit):
@@ -1100,7 +1104,7 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
     quick = dict(n_random=0, n_starts=1, maxit=maxit)
     warm: list[np.ndarray] = []
 
-    def w(alpha: float, opts: dict) -> tuple[float, np.ndarray]:
+    def w(alpha: float, opts: dict[str, Any]) -> tuple[float, np.ndarray]:
         v, D = _search(fn, alpha, rng, warm=warm[-2:], **opts)
         warm.append(D)
         return v, D
@@ -1123,7 +1127,8 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
         lo, w_lo = hi, w_hi
         hi, (w_hi, D_hi) = x, w(x, quick)
 
-    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray, opts: dict):
+    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray,
+               opts: dict[str, Any]) -> tuple[float, float, float, float, np.ndarray]:
         """Illinois regula falsi with a bisection safeguard."""
         side = 0
         while hi - lo > rtol * hi:

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ['TrackingMetrics', 'tracking_metrics']
 
@@ -25,14 +27,40 @@ class TrackingMetrics:
     peak_abs_v: float
     peak_abs_w: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready dict."""
         return asdict(self)
 
 
-def tracking_metrics(t, x, y, xd, yd, v=None, w=None, *, tolerance: float = 0.01
-                     ) -> TrackingMetrics:
-    """Metrics of the position error ``|(x, y) - (x_d, y_d)|`` sampled at times ``t``."""
+def tracking_metrics(t: ArrayLike, x: ArrayLike, y: ArrayLike, xd: ArrayLike, yd: ArrayLike,
+                     v: Sequence[float] | np.ndarray | None = None,
+                     w: Sequence[float] | np.ndarray | None = None, *,
+                     tolerance: float = 0.01) -> TrackingMetrics:
+    """Metrics of the position error ``|(x, y) - (x_d, y_d)|`` sampled at times ``t``.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Sample times [s], increasing.
+    x, y : array_like, shape (N,)
+        Robot position [m].
+    xd, yd : array_like, shape (N,)
+        Desired position [m].
+    v, w : array_like, shape (N,), optional
+        Commanded speed [m/s] and angular rate [rad/s], for the peaks (``nan`` if
+        absent or empty).
+    tolerance : float, optional
+        Error [m] within which the robot counts as tracking (settling).
+
+    Returns
+    -------
+    TrackingMetrics
+
+    Raises
+    ------
+    ValueError
+        If there are no samples.
+    """
     t = np.asarray(t, float)
     err = np.hypot(np.asarray(x, float) - np.asarray(xd, float),
                    np.asarray(y, float) - np.asarray(yd, float))

@@ -41,12 +41,12 @@ class LinearizedModel:
     @property
     def n(self) -> int:
         """Number of states."""
-        return self.A.shape[0]
+        return int(self.A.shape[0])
 
     @property
     def m(self) -> int:
         """Number of inputs."""
-        return self.B.shape[1]
+        return int(self.B.shape[1])
 
 
 def double_integrator_model(axes: int = 2) -> LinearizedModel:
@@ -54,6 +54,21 @@ def double_integrator_model(axes: int = 2) -> LinearizedModel:
 
     State order per axis is (position, velocity), so for two axes
     ``xi = [x, x', y, y']`` exactly as in the paper.
+
+    Parameters
+    ----------
+    axes : int, optional
+        Number of double integrators (>= 1).
+
+    Returns
+    -------
+    LinearizedModel
+        ``A`` of shape ``(2 axes, 2 axes)``, ``B`` ``(2 axes, axes)``, ``C`` ``(axes, 2 axes)``.
+
+    Raises
+    ------
+    ValueError
+        If ``axes < 1``.
     """
     if axes < 1:
         raise ValueError(f'axes must be >= 1, got {axes}')
@@ -65,12 +80,44 @@ def double_integrator_model(axes: int = 2) -> LinearizedModel:
 
 
 def xi_from_state(x: float, y: float, th: float, v: float) -> tuple[float, float, float, float]:
-    """Linearizing coordinates ``xi = [x, v cos th, y, v sin th]``."""
+    """Linearizing coordinates ``xi = [x, v cos th, y, v sin th]``.
+
+    Parameters
+    ----------
+    x, y : float
+        Position [m].
+    th : float
+        Heading [rad].
+    v : float
+        Forward speed [m/s].
+
+    Returns
+    -------
+    tuple of 4 float
+        ``xi`` [m, m/s, m, m/s].
+    """
     return (x, v * math.cos(th), y, v * math.sin(th))
 
 
 def u_from_inputs(th: float, v: float, a: float, w: float) -> tuple[float, float]:
-    """Map unicycle inputs ``(a, w)`` to the linear model's ``u`` (paper, below eq. 3)."""
+    """Map unicycle inputs ``(a, w)`` to the linear model's ``u`` (paper, below eq. 3).
+
+    Parameters
+    ----------
+    th : float
+        Heading [rad].
+    v : float
+        Forward speed [m/s].
+    a : float
+        Forward acceleration [m/s^2].
+    w : float
+        Angular rate [rad/s].
+
+    Returns
+    -------
+    tuple of 2 float
+        ``u`` [m/s^2].
+    """
     c, s = math.cos(th), math.sin(th)
     return (a * c - w * v * s, a * s + w * v * c)
 
@@ -81,8 +128,29 @@ def inputs_from_u(th: float, v: float, u1: float, u2: float,
 
     ``a = u1 cos th + u2 sin th``, ``w = (u2 cos th - u1 sin th) / v``.
 
-    Raises :class:`SingularSpeedError` when ``|v| <= min_speed`` (and always at
-    ``v = 0``); the tracker applies its documented speed floor before calling.
+    Parameters
+    ----------
+    th : float
+        Heading [rad].
+    v : float
+        Forward speed [m/s].
+    u1, u2 : float
+        The linear model's input [m/s^2].
+    min_speed : float, optional
+        Smallest ``|v|`` accepted [m/s].
+
+    Returns
+    -------
+    a : float
+        Forward acceleration [m/s^2].
+    w : float
+        Angular rate [rad/s].
+
+    Raises
+    ------
+    SingularSpeedError
+        When ``|v| <= min_speed`` (and always at ``v = 0``); the tracker applies its
+        documented speed floor before calling.
     """
     if not abs(v) > min_speed:
         raise SingularSpeedError(

@@ -37,12 +37,44 @@ class ProblemError(InputError):
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None = None
               ) -> np.ndarray:
-    """:func:`control.validate.as_matrix` raising :class:`ProblemError` (problem files)."""
+    """:func:`control.validate.as_matrix` raising :class:`ProblemError` (problem files).
+
+    Parameters
+    ----------
+    value : array_like
+        Nested lists of numbers, an array or a scalar.
+    name : str
+        What the value is, for the message (a file field).
+    shape : (rows, cols), optional
+        Required shape; ``None`` entries are free.
+
+    Returns
+    -------
+    numpy.ndarray
+        A finite 2-D float array.
+    """
     return validate.as_matrix(value, name, shape, error=ProblemError)
 
 
 def is_stabilizable(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> tuple[bool, list[complex]]:
-    """PBH test: return (stabilizable, unstabilizable eigenvalues) for continuous time."""
+    """PBH test: return (stabilizable, unstabilizable eigenvalues) for continuous time.
+
+    Parameters
+    ----------
+    A : numpy.ndarray, shape (n, n)
+        State matrix.
+    B : numpy.ndarray, shape (n, m)
+        Input matrix.
+    tol : float, optional
+        Eigenvalues with a real part below ``-tol`` count as stable; singular values
+        below ``tol`` times the largest (at least 1) count as zero.
+
+    Returns
+    -------
+    stabilizable : bool
+    unstabilizable : list of complex
+        The eigenvalues of ``A`` (real part ``>= -tol``) that ``B`` does not reach.
+    """
     n = A.shape[0]
     bad = []
     for lam in np.linalg.eigvals(A):
@@ -72,12 +104,12 @@ class Problem:
     @property
     def n(self) -> int:
         """Number of states."""
-        return self.A.shape[0]
+        return int(self.A.shape[0])
 
     @property
     def m(self) -> int:
         """Number of inputs."""
-        return self.B.shape[1]
+        return int(self.B.shape[1])
 
     def gain(self, K: Any) -> np.ndarray:
         """``K`` as a float array of this problem's gain shape ``(m, n)``: the one K-shape check.
@@ -98,13 +130,25 @@ class Problem:
         InputError
             (a :class:`ValueError`) when the shape is not ``(m, n)``.
         """
-        K = np.asarray(K, float)
-        if K.shape != (self.m, self.n):
-            raise InputError(f'K must have shape {(self.m, self.n)}, got {K.shape}')
-        return K
+        gain = np.asarray(K, float)
+        if gain.shape != (self.m, self.n):
+            raise InputError(f'K must have shape {(self.m, self.n)}, got {gain.shape}')
+        return gain
 
     def replace(self, **changes: Any) -> 'Problem':
-        """Return a validated copy with some fields changed."""
+        """Return a validated copy with some fields changed.
+
+        Parameters
+        ----------
+        **changes
+            New values of fields (``A``, ``B``, ``A_tau``, ``tau``, ``E``, ``F``, ``name``,
+            ``perturbations``, ``options``), validated as in a problem file (the
+            stabilizability check left out).
+
+        Returns
+        -------
+        Problem
+        """
         data = dict(A=self.A, B=self.B, A_tau=self.A_tau, tau=self.tau, E=self.E, F=self.F,
                     name=self.name, perturbations=dict(self.perturbations),
                     options=dict(self.options))
@@ -118,7 +162,28 @@ _KNOWN_KEYS = {'name', 'A', 'B', 'A_tau', 'tau', 'E', 'F', 'perturbations', 'opt
 
 def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
                          check_stabilizable: bool = True) -> Problem:
-    """Validate a mapping and build a :class:`Problem`; errors name ``source`` and the field."""
+    """Validate a mapping and build a :class:`Problem`; errors name ``source`` and the field.
+
+    Parameters
+    ----------
+    data : mapping
+        The keys of a problem file (see the module docstring).
+    source : str, optional
+        Where the mapping comes from (a file path), for the messages; its stem is the
+        problem's name when ``data`` has none.
+    check_stabilizable : bool, optional
+        Refuse an ``(A, B)`` that is not stabilizable (:func:`is_stabilizable`).
+
+    Returns
+    -------
+    Problem
+
+    Raises
+    ------
+    ProblemError
+        Naming ``source`` and the field, for a missing or unknown key, a malformed
+        matrix, a bad ``tau`` or option, or an unstabilizable ``(A, B)``.
+    """
     if not isinstance(data, Mapping):
         got = 'an empty file' if data is None else f'a {type(data).__name__}'
         raise ProblemError(f'{source}: expected a mapping with keys A, B, A_tau, tau, E, F; '
@@ -173,6 +238,21 @@ def problem_from_mapping(data: Mapping[str, Any], *, source: str = 'problem',
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem YAML file."""
+    """Read and validate a problem YAML file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The YAML file (see the module docstring).
+
+    Returns
+    -------
+    Problem
+
+    Raises
+    ------
+    ProblemError
+        If the file cannot be read or parsed, or its content is malformed.
+    """
     data = read_yaml(path, 'problem file', error=ProblemError)
     return problem_from_mapping(data, source=str(path))

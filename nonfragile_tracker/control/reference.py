@@ -50,7 +50,17 @@ class Path:
     harmonic: int = 1
 
     def sample(self, t: float) -> RefSample:
-        """Position, velocity, acceleration and heading of the path at time ``t``."""
+        """Position, velocity, acceleration and heading of the path at time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Time [s] (the path's own clock: 0 at its start).
+
+        Returns
+        -------
+        RefSample
+        """
         x, y, vx, vy, ax, ay = self._fn(t)
         if vx * vx + vy * vy > 1e-24:
             heading = math.atan2(vy, vx)
@@ -65,7 +75,8 @@ def _finite(name: str, value: Any) -> float:
     return float(value)
 
 
-def _path_params(radius, rate, center_x, center_y, phase) -> tuple[float, ...]:
+def _path_params(radius: Any, rate: Any, center_x: Any, center_y: Any, phase: Any
+                 ) -> tuple[float, float, float, float, float]:
     r = _finite('radius', radius)
     if r <= 0:
         raise PathError(f'path parameter radius must be > 0 m, got {r}')
@@ -75,10 +86,31 @@ def _path_params(radius, rate, center_x, center_y, phase) -> tuple[float, ...]:
 
 def circle(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
            center_y: float = 0.0, phase: float = 0.0) -> Path:
-    """Circle ``c + r [cos(W t + phase), sin(W t + phase)]`` (paper: r = 0.5, W = 0.01)."""
+    """Circle ``c + r [cos(W t + phase), sin(W t + phase)]`` (paper: r = 0.5, W = 0.01).
+
+    Parameters
+    ----------
+    radius : float, optional
+        ``r`` [m], > 0.
+    rate : float, optional
+        ``W`` [rad/s]; negative runs clockwise.
+    center_x, center_y : float, optional
+        ``c`` [m].
+    phase : float, optional
+        Angle at ``t = 0`` [rad].
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    PathError
+        For a non-finite parameter or ``radius <= 0``.
+    """
     r, w, cx, cy, ph = _path_params(radius, rate, center_x, center_y, phase)
 
-    def fn(t: float):
+    def fn(t: float) -> tuple[float, float, float, float, float, float]:
         a = w * t + ph
         c, s = math.cos(a), math.sin(a)
         return (cx + r * c, cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
@@ -92,10 +124,30 @@ def figure_eight(radius: float = 0.5, rate: float = 0.01, center_x: float = 0.0,
     """Lemniscate of Gerono: ``x = c_x + r sin(a)``, ``y = c_y + (r/2) sin(2a)``.
 
     The parameter is ``a = W t + phase`` (``W`` = ``rate``).
+
+    Parameters
+    ----------
+    radius : float, optional
+        ``r`` [m], > 0.
+    rate : float, optional
+        ``W`` [rad/s].
+    center_x, center_y : float, optional
+        ``c`` [m].
+    phase : float, optional
+        Parameter at ``t = 0`` [rad].
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    PathError
+        For a non-finite parameter or ``radius <= 0``.
     """
     r, w, cx, cy, ph = _path_params(radius, rate, center_x, center_y, phase)
 
-    def fn(t: float):
+    def fn(t: float) -> tuple[float, float, float, float, float, float]:
         a = w * t + ph
         s1, c1 = math.sin(a), math.cos(a)
         s2, c2 = math.sin(2 * a), math.cos(2 * a)
@@ -112,7 +164,24 @@ PATHS: dict[str, Callable[..., Path]] = {'circle': circle, 'figure_eight': figur
 
 
 def make_path(name: str, **params: float) -> Path:
-    """Build a path by name (``circle`` or ``figure_eight``)."""
+    """Build a path by name (``circle`` or ``figure_eight``).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`PATHS`.
+    **params
+        The path function's parameters (:func:`circle`, :func:`figure_eight`).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    PathError
+        For an unknown name or an invalid parameter value.
+    """
     try:
         factory = PATHS[name]
     except KeyError:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Callable, Hashable, TypeVar
+from typing import Any, Callable, Hashable, TypeVar, cast
 
 import numpy as np
 
@@ -51,9 +51,18 @@ T = TypeVar('T')
 
 
 def sym(M: np.ndarray) -> np.ndarray:
-    """Symmetric part ``(M + M^T) / 2`` of a square array."""
+    """Symmetric part ``(M + M^T) / 2`` of a square array.
+
+    Parameters
+    ----------
+    M : array_like, shape (n, n)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, n)
+    """
     M = np.asarray(M, float)
-    return 0.5 * (M + M.T)
+    return cast(np.ndarray, 0.5 * (M + M.T))
 
 
 @dataclass(frozen=True)
@@ -74,15 +83,19 @@ def solve(problem: Any, solver: str, *, what: str = 'the LMI',
         The (possibly cached, re-parametrized) problem.
     solver : str
         cvxpy solver name.
-    what : str
+    what : str, optional
         Description used in the error message.
-    quiet_inaccurate : bool
+    quiet_inaccurate : bool, optional
         Suppress cvxpy's "Solution may be inaccurate" warning (the status says it and
         the point is verified independently anyway).
-    ignore_dpp : bool
+    ignore_dpp : bool, optional
         Compile with the parameters' current values as constants: several times faster
         than cvxpy's parametrized (DPP) compilation, but nothing is kept for a re-solve.
         Worth it for the first solve of a cached program (most are solved only once).
+
+    Returns
+    -------
+    SolveOutcome
 
     Raises
     ------
@@ -109,6 +122,19 @@ def classify(status: str, t: float | None, margin: float) -> str:
     A solved problem whose best strictness is below ``margin`` counts as infeasible
     (no point with the required margin exists), as do the infeasible statuses; any
     other status (unbounded, solver error, no value) is a failure.
+
+    Parameters
+    ----------
+    status : str
+        The cvxpy status of the solve.
+    t : float or None
+        The strictness reached (``None``: the solver gave no value).
+    margin : float
+        The strictness required.
+
+    Returns
+    -------
+    str
     """
     if status in INFEASIBLE_STATUSES:
         return 'infeasible'
@@ -120,14 +146,14 @@ def classify(status: str, t: float | None, margin: float) -> str:
 
 
 class _LruCache:
-    def __init__(self, size: int):
+    def __init__(self, size: int) -> None:
         self.size = size
         self.items: OrderedDict[Hashable, Any] = OrderedDict()
 
     def get(self, key: Hashable, factory: Callable[[], T]) -> T:
         if key in self.items:
             self.items.move_to_end(key)
-            return self.items[key]
+            return cast(T, self.items[key])
         value = factory()
         self.items[key] = value
         while len(self.items) > self.size:
@@ -143,6 +169,18 @@ def cached_program(key: Hashable, factory: Callable[[], T]) -> T:
 
     ``key`` must name the module and everything that changes the program's structure
     (shapes, options), e.g. ``('theorem1', n, m, q, p, nominal, gain_bound)``.
+
+    Parameters
+    ----------
+    key : hashable
+        The cache key.
+    factory : callable
+        Builds the program (no arguments).
+
+    Returns
+    -------
+    object
+        The cached or new program (the most recently used of the cache).
     """
     return _CACHE.get(key, factory)
 

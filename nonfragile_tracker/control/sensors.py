@@ -27,7 +27,8 @@ class OdometryModel:
 
     latency_steps: int = 0             # a measurement of step k is published at step k + this
     period_steps: int = 1              # measure at every period-th step
-    noise: tuple = (0.0, 0.0, 0.0)     # standard deviation of x (m), y (m), yaw (rad)
+    #: standard deviation of x (m), y (m), yaw (rad)
+    noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
 
     @property
@@ -48,20 +49,38 @@ class OdometrySample(NamedTuple):
 
 
 class Odometer:
-    """Delay line, decimation and noise between the true state and the odometry messages."""
+    """Delay line, decimation and noise between the true state and the odometry messages.
 
-    def __init__(self, model: OdometryModel):
+    Parameters
+    ----------
+    model : OdometryModel
+        Latency and period (in plant steps), noise and its seed.
+    """
+
+    def __init__(self, model: OdometryModel) -> None:
         self.model = model
         self._noisy = any(model.noise)
         self.reset()
 
     def reset(self) -> None:
         """Forget pending measurements and restart the noise from the seed."""
-        self._pending: deque = deque()
+        self._pending: deque[OdometrySample] = deque()
         self._rng = np.random.default_rng(self.model.seed) if self._noisy else None
 
     def measure(self, k: int, x: float, y: float, th: float, v: float, w: float) -> None:
-        """Record the true state of step ``k`` (call once per step, in order)."""
+        """Record the true state of step ``k`` (call once per step, in order).
+
+        Parameters
+        ----------
+        k : int
+            Plant step.
+        x, y : float
+            True position [m].
+        th : float
+            True heading [rad].
+        v, w : float
+            Actual speed [m/s] and angular rate [rad/s] (never noisy).
+        """
         m = self.model
         pending = self._pending
         while pending and pending[0].step + m.latency_steps < k:
@@ -76,7 +95,17 @@ class Odometer:
         pending.append(OdometrySample(k, x, y, th, v, w))
 
     def due(self, k: int) -> OdometrySample | None:
-        """The sample to publish at step ``k`` (measured at ``k - latency``), if any."""
+        """The sample to publish at step ``k`` (measured at ``k - latency``), if any.
+
+        Parameters
+        ----------
+        k : int
+            Plant step (after :meth:`measure` of the same step).
+
+        Returns
+        -------
+        OdometrySample or None
+        """
         pending = self._pending
         if pending and pending[0].step + self.model.latency_steps == k:
             return pending[0]

@@ -10,9 +10,10 @@ the command in force (held at steps without odometry).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
                    odometry_period_steps, quaternion_to_yaw, step_time, yaw_to_quaternion)
@@ -26,7 +27,25 @@ __all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'DelayRun', 'simulate
 
 
 def steps_for_duration(duration: float, dt: float) -> int:
-    """Number of plant steps in ``duration`` seconds (at least 1)."""
+    """Number of plant steps in ``duration`` seconds (at least 1).
+
+    Parameters
+    ----------
+    duration : float
+        Length of the run [s], > 0.
+    dt : float
+        Plant step [s].
+
+    Returns
+    -------
+    int
+        ``round(duration / dt)``, at least 1.
+
+    Raises
+    ------
+    ValueError
+        If ``duration`` is not > 0.
+    """
     if not duration > 0:
         raise ValueError(f'duration must be > 0 s, got {duration!r}')
     return max(1, int(round(duration / dt)))
@@ -56,14 +75,24 @@ class TrackingRun:
     commanded: np.ndarray    # 1.0 at steps where the tracker computed a command
 
     def metrics(self, tolerance: float = 0.01) -> TrackingMetrics:
-        """Tracking metrics of the run (:func:`~.metrics.tracking_metrics`)."""
+        """Tracking metrics of the run (:func:`~.metrics.tracking_metrics`).
+
+        Parameters
+        ----------
+        tolerance : float, optional
+            Error [m] within which the robot counts as tracking.
+
+        Returns
+        -------
+        TrackingMetrics
+        """
         return tracking_metrics(self.t, self.x, self.y, self.xd, self.yd, self.cmd_v,
                                 self.cmd_w, tolerance=tolerance)
 
     @property
     def error(self) -> np.ndarray:
         """Position error ``|p - p_d|`` in m at every sample."""
-        return np.hypot(self.x - self.xd, self.y - self.yd)
+        return cast(np.ndarray, np.hypot(self.x - self.xd, self.y - self.yd))
 
 
 def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, path: Path,
@@ -72,6 +101,26 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
 
     The tracker's ``dt`` (its command period) must equal the odometry period
     (``plant dt`` times the odometry decimation; the plant step by default).
+
+    Parameters
+    ----------
+    plant_config : PlantConfig
+        The simulated robot (step, actuator, odometry, latencies).
+    tracker_config : TrackerConfig
+        The tracker (gain, ``dt``, limits, predictor).
+    path : Path
+        The reference path, sampled at each odometry stamp.
+    steps : int
+        Number of plant steps.
+
+    Returns
+    -------
+    TrackingRun
+
+    Raises
+    ------
+    ValueError
+        If the tracker's ``dt`` is not the odometry period.
     """
     period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
     if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
@@ -99,6 +148,22 @@ def run_loop(plant_config: PlantConfig, steps: int,
     command the plant takes (after its command latency); otherwise the command in force
     is held.  ``reference(k)`` is logged with step ``k``.  Used by
     :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
+
+    Parameters
+    ----------
+    plant_config : PlantConfig
+        The simulated robot.
+    steps : int
+        Number of plant steps (``steps + 1`` samples).
+    command : callable
+        ``command(measurement, yaw, k, reference)`` returns the :class:`Command` for an
+        odometry sample (``yaw`` [rad] read back through a quaternion).
+    reference : callable
+        ``reference(k)`` is the reference sample logged at step ``k``.
+
+    Returns
+    -------
+    TrackingRun
     """
     plant = UnicyclePlant(plant_config)
     rows: list[tuple[float | bool, ...]] = []
@@ -129,14 +194,40 @@ class DelayRun:
     xi: np.ndarray
 
 
-def simulate_delay_loop(A0, A1, tau: float, xi0, duration: float, dt: float = 1e-3,
-                        history=None) -> DelayRun:
+def simulate_delay_loop(A0: ArrayLike, A1: ArrayLike, tau: float, xi0: ArrayLike,
+                        duration: float, dt: float = 1e-3,
+                        history: Callable[[float], ArrayLike] | None = None) -> DelayRun:
     """Integrate ``xi' = A0 xi + A1 xi(t - tau)`` with RK4 and a history buffer.
 
     ``tau`` must be a multiple of ``dt`` (to 1e-9 relative); the delayed state at
     the RK4 half step is the mean of the two neighbouring buffer samples.  The
     initial function is ``history`` (callable ``s -> xi(s)`` for ``s`` in
     ``[-tau, 0]``) or the constant ``xi0``.
+
+    Parameters
+    ----------
+    A0, A1 : array_like, shape (n, n)
+        Matrices of the current and the delayed state.
+    tau : float
+        Delay [s], a multiple of ``dt``.
+    xi0 : array_like, shape (n,)
+        State at ``t = 0`` (and the constant initial function without ``history``).
+    duration : float
+        Length of the run [s].
+    dt : float, optional
+        Integration step [s].
+    history : callable, optional
+        ``history(s)`` is the state at ``s`` in ``[-tau, 0)`` (shape (n,)).
+
+    Returns
+    -------
+    DelayRun
+        ``t`` of shape (steps + 1,) and ``xi`` of shape (steps + 1, n).
+
+    Raises
+    ------
+    ValueError
+        For mismatched shapes, or a ``tau`` that is not a multiple of ``dt``.
     """
     A0 = np.asarray(A0, float)
     A1 = np.asarray(A1, float)
@@ -166,6 +257,19 @@ def rk4_delay_steps(out: np.ndarray, N: int, steps: int, dt: float,
     written from ``out[N + k]``.  The delayed state at the half step is the mean of the
     two neighbouring samples.  Shared by :func:`simulate_delay_loop` and the batched loop
     (:func:`control.batch.simulate_delay_loop_batch`), so both integrate the same way.
+
+    Parameters
+    ----------
+    out : numpy.ndarray, shape (N + steps + 1, ...)
+        The buffer, written in place from row ``N + 1`` on.
+    N : int
+        The delay in steps.
+    steps : int
+        Number of steps to take.
+    dt : float
+        Step [s].
+    f : callable
+        ``f(xi, xi_delayed)`` returns ``xi'`` (same shape as a row of ``out``).
     """
     for k in range(steps):
         i = N + k

@@ -32,8 +32,10 @@ def as_matrix(value: Any, name: str, shape: Shape | None = None, *,
         What the value is, for the message (``'A_tau'``, ``'K'``, a file field).
     shape : (rows, cols), optional
         Required shape; ``None`` entries are free.  Required with ``flat=True``.
-    error : subclass of InputError
+    error : subclass of InputError, optional
         The exception class to raise (a module's own, e.g. ``ProblemError``).
+    flat : bool, optional
+        Read ``value`` as a flat row-major list of ``shape``.
 
     Returns
     -------
@@ -87,7 +89,28 @@ def as_matrix(value: Any, name: str, shape: Shape | None = None, *,
 
 def as_square(value: Any, name: str, n: int | None = None, *,
               error: type[InputError] = InputError) -> np.ndarray:
-    """:func:`as_matrix` for a square matrix (of order ``n`` if given)."""
+    """:func:`as_matrix` for a square matrix (of order ``n`` if given).
+
+    Parameters
+    ----------
+    value : array_like
+        Nested lists of numbers, an array or a scalar.
+    name : str
+        What the value is, for the message.
+    n : int, optional
+        Required order; any when ``None``.
+    error : subclass of InputError, optional
+        The exception class to raise.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, n)
+
+    Raises
+    ------
+    InputError (or ``error``)
+        As :func:`as_matrix`, or when the matrix is not square.
+    """
     arr = as_matrix(value, name, (n, n), error=error)
     if arr.shape[0] != arr.shape[1]:
         raise error(f'{name}: expected a square matrix, got shape {arr.shape}')
@@ -96,7 +119,30 @@ def as_square(value: Any, name: str, n: int | None = None, *,
 
 def as_finite_float(value: Any, name: str, *, low: float | None = None,
                     low_inclusive: bool = True, error: type[InputError] = InputError) -> float:
-    """A finite real number (``bool`` refused), optionally ``>= low`` (or ``> low``)."""
+    """A finite real number (``bool`` refused), optionally ``>= low`` (or ``> low``).
+
+    Parameters
+    ----------
+    value : object
+        A number, or anything ``float()`` accepts (a numeric string).
+    name : str
+        What the value is, for the message.
+    low : float, optional
+        Lower bound; none when ``None``.
+    low_inclusive : bool, optional
+        Whether ``low`` itself is allowed.
+    error : subclass of InputError, optional
+        The exception class to raise.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError (or ``error``)
+        For a bool, a non-number, NaN or inf, or a value below the bound.
+    """
     if isinstance(value, bool):
         raise error(f'{name}: expected a number, got {value!r}')
     try:

@@ -92,6 +92,18 @@ def arm_exit_deadline(code: int, seconds: float | None = None) -> bool:
     to stderr under ``Timeout (0:00:03.800000)!``.  Only in a process started by :func:`main`
     (never in a test or an embedding process); returns whether the deadline is armed
     (False where glibc timers are unavailable).
+
+    Parameters
+    ----------
+    code : int
+        The exit code (its low byte).
+    seconds : float, optional
+        The deadline [s]; :data:`TEARDOWN_DEADLINE_S` when ``None``.
+
+    Returns
+    -------
+    bool
+        Whether the deadline is armed.
     """
     if not _node_process:
         return False
@@ -149,8 +161,22 @@ def stop_requested() -> bool:
 def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) -> int:
     """Run node ``name`` (one of :data:`NODES`) with ROS arguments ``args``; its exit code.
 
-    ``noted``: stop signals a caller noted before (``python -m``'s ``__main__`` copy of
-    this module, while it imported this one).
+    Parameters
+    ----------
+    name : str
+        The node, one of :data:`NODES`.
+    args : list of str, optional
+        Command-line arguments as ``sys.argv`` holds them (program name first, then
+        ``--ros-args ...``); ``sys.argv`` when ``None``.
+    noted : sequence of int, optional
+        Stop signals a caller noted before (``python -m``'s ``__main__`` copy of this
+        module, while it imported this one).
+
+    Returns
+    -------
+    int
+        2 for an unknown node, 0 when stopped before the node started; otherwise the
+        process ends with the node's exit code (``os._exit``) and does not return.
     """
     global _node_process
     catch_stop_signals()

@@ -17,20 +17,47 @@ stamp (the origin).  Points without velocities are interpolated by the cubic spl
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
 from nav_msgs.msg import Path as PathMsg
+from numpy.typing import ArrayLike
 
 from ..control.loop import yaw_to_quaternion
-from ..control.trajectory import Trajectory
+from ..control.trajectory import Trajectory, TrajectorySamples
 # the message -> trajectory conversions are ROS-free (bag/ reconstructs references with them)
 from ..msgconv import multidof_to_trajectory, path_to_trajectory, stamp_ns
 
 __all__ = ['path_to_trajectory', 'trajectory_to_path', 'multidof_to_trajectory',
            'states_to_multidof', 'stamp_ns']
 
+if TYPE_CHECKING:
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str, times=None,
-                       msg: PathMsg | None = None) -> PathMsg:
-    """nav_msgs/Path of ``traj`` at ``times`` (default its knots), stamped ``origin + t``."""
+
+def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str,
+                       times: ArrayLike | None = None, msg: PathMsg | None = None) -> PathMsg:
+    """nav_msgs/Path of ``traj`` at ``times`` (default its knots), stamped ``origin + t``.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The trajectory.
+    origin_ns : int
+        Stamp [ns] of ``t = 0`` (the header's stamp).
+    frame : str
+        ``frame_id`` of the header and of every pose.
+    times : array_like, optional
+        Sample times [s] after the origin; the trajectory's knots when ``None`` (an
+        analytic path has none: then they are required).
+    msg : nav_msgs.msg.Path, optional
+        A message to fill (reused); a new one when ``None``.
+
+    Returns
+    -------
+    nav_msgs.msg.Path
+    """
     msg = PathMsg() if msg is None else msg
     from geometry_msgs.msg import PoseStamped
     t, x, y, h = traj.poses(times)
@@ -50,13 +77,32 @@ def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str, times=None,
     return msg
 
 
-def states_to_multidof(t_ns, samples, origin_ns: int, frame: str, joint: str = 'base_link'):
+def states_to_multidof(t_ns: Sequence[int] | np.ndarray, samples: TrajectorySamples,
+                       origin_ns: int, frame: str, joint: str = 'base_link'
+                       ) -> MultiDOFJointTrajectory:
     """trajectory_msgs/MultiDOFJointTrajectory of timed states (one joint, the planar base).
 
     ``t_ns``: integer nanoseconds after ``origin_ns`` (the header stamp); ``samples``: a
     :class:`~control.trajectory.TrajectorySamples` (position, velocity, acceleration in
     ``frame`` and heading) - e.g. :func:`control.trajectory.analytic_knots`.
     :func:`multidof_to_trajectory` turns it back into the quintic Hermite trajectory.
+
+    Parameters
+    ----------
+    t_ns : sequence of int
+        Times [ns] after ``origin_ns``, one per sample.
+    samples : TrajectorySamples
+        Positions [m], velocities [m/s], accelerations [m/s^2] and heading [rad].
+    origin_ns : int
+        The header's stamp [ns].
+    frame : str
+        The header's ``frame_id``.
+    joint : str, optional
+        The one joint name.
+
+    Returns
+    -------
+    trajectory_msgs.msg.MultiDOFJointTrajectory
     """
     from geometry_msgs.msg import Transform, Twist
     from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
