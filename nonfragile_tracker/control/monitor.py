@@ -25,14 +25,15 @@ Validity gating (per channel, per odometry sample), as mature estimators gate:
   ``max_latency + 3 max_lag``): a base at its limit does not follow a first-order model;
 * *acceleration limits*: where the measured ``|dy/dt|`` between two odometry samples
   reaches ``accel_fraction`` of a known limit (``max_linear_accel`` /
-  ``max_angular_accel``, 0 = unknown) the sample and the following ``3 max_lag`` are
+  ``max_angular_accel``, 0 = unknown) the sample and the following ``limit_guard`` are
   excluded (the response is rate limited, not first order);
 * *odometry gaps*: an interval longer than ``gap_factor`` times the median period
   excludes the samples around it;
 * *excitation*: a channel whose valid commands vary less than ``min_excitation``
   (standard deviation) is not used; no usable channel, fewer than ``min_valid_fraction``
-  valid samples or a fit that explains less than ``min_r2`` of the motion gives no
-  estimate (the status is STALE, with the reason).
+  valid samples, a fit that explains less than ``min_r2`` of the motion, or valid
+  samples that hold less than ``min_information`` of the model's slope (the gates removed
+  the responses that place the latency) give no estimate (STALE, with the reason).
 
 Status (:func:`evaluate`): with the certificate's residual range ``[r_lo, r_hi]`` and
 the predictor's latency ``P`` the certified latency interval is ``[P + r_lo, P + r_hi]``;
@@ -106,6 +107,8 @@ class MonitorSettings:
         The base's acceleration limits (0 = unknown: not gated).
     accel_fraction : float
         A measured acceleration at this fraction of a limit counts as binding.
+    limit_guard : float
+        Samples this long after a binding limit are excluded too (the response catches up, s).
     gap_factor : float
         An odometry interval longer than this times the median is a gap.
     min_excitation : (float, float)
@@ -114,6 +117,9 @@ class MonitorSettings:
         Least fraction of valid samples and least explained variance for an estimate.
     chi2_level : float
         Rise of the normalised cost that bounds the latency interval.
+    min_information : float
+        Least share of the model's slope (its sensitivity to the latency) on valid samples:
+        a gate that removed the responses leaves data that cannot place the latency.
     warn_margin : float
         WARN when the latency is within this of the certified upper end (s).
     tolerance : float
@@ -131,11 +137,13 @@ class MonitorSettings:
     max_linear_accel: float = 0.0
     max_angular_accel: float = 0.0
     accel_fraction: float = 0.9
+    limit_guard: float = 0.2
     gap_factor: float = 3.0
     min_excitation: tuple = (0.01, 0.02)
     min_valid_fraction: float = 0.3
     min_r2: float = 0.5
     chi2_level: float = 4.0
+    min_information: float = 0.25
     warn_margin: float = 0.02
     tolerance: float = 0.01
     lag_tolerance: float = 0.5
@@ -148,6 +156,7 @@ class MonitorSettings:
                     and not math.isnan(v)):
                 raise MonitorError(f'monitor {name} must be a number > 0, got {v!r}')
         for name in ('max_linear_accel', 'max_angular_accel', 'min_valid_fraction', 'min_r2',
+                     'limit_guard', 'min_information',
                      'warn_margin', 'tolerance', 'lag_tolerance'):
             object.__setattr__(self, name, _pos(f'monitor {name}', getattr(self, name),
                                                 zero=True))
@@ -187,6 +196,7 @@ class LatencyEstimate:
     valid_fraction: float = 0.0
     excluded: dict = field(default_factory=dict)   # reason -> samples excluded
     channels: tuple = ()
+    information: dict = field(default_factory=dict)   # channel -> share of slope on valid
 
     @property
     def lag(self) -> float:
@@ -275,7 +285,7 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
             bind[1:] = acc >= s.accel_fraction * amax
             bind[:-1] |= bind[1:]
             if bind.any():
-                bind = _dilate(bind, t, 0.0, 3 * s.max_lag)
+                bind = _dilate(bind, t, 0.0, s.limit_guard)
                 excluded[f'{name} acceleration limit'] = int((bind & ~m).sum())
                 m |= bind
         masks.append(~m)
@@ -312,12 +322,13 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
             continue
         J = np.full((len(taus), nL), np.inf)
         ii = idx[:, ok]
+        up = np.concatenate([u[:1], u[:-1]])     # the command held over (gt[i-1], gt[i]]
         for k, tau in enumerate(taus):
             if tau == 0:
-                ym = u
+                ym = up
             else:
                 a = math.exp(-res / tau)
-                ym = lfilter([1 - a], [1, -a], u, zi=[a * u[0]])[0]
+                ym = lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
             Y = ym[ii]                                            # (nL, n_ok)
             yy = np.einsum('ij,ij->i', Y, Y)
             yd = Y @ yo
@@ -346,6 +357,20 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
             L += 0.5 * res * (a - cc) / den
     inside = np.nonzero(total <= total[i0] + s.chi2_level)[0]
     lo, hi = inside.min() * res - res, inside.max() * res + res
+    # identifiability: the share of the model's sensitivity to the latency (its slope)
+    # that falls on valid samples; a gate that removed the responses leaves flat data
+    info = {}
+    for name, bt in zip(used, best_tau):
+        c = ('v', 'w').index(name)
+        u = cu[c][ci]
+        up = np.concatenate([u[:1], u[:-1]])
+        tau = bt[i0]
+        if tau > 0:
+            a = math.exp(-res / tau)
+            up = lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
+        slope = np.gradient(up)[np.clip(base_idx - i0, 0, grid_n - 1)]
+        e_all = float(slope @ slope)
+        info[name] = float(slope[masks[c]] @ slope[masks[c]]) / e_all if e_all > 0 else 0.0
     r2 = min(r2s)
     lags = {name: float(bt[i0]) for name, bt in zip(used, best_tau)}
     frac = min(fracs)
@@ -353,10 +378,16 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
     est = LatencyEstimate(True, '', t_end=end, latency=float(L), interval=(max(0.0, lo), hi),
                           lag_v=lags.get('v', math.nan), lag_w=lags.get('w', math.nan), r2=r2,
                           confidence=conf, valid_fraction=frac, excluded=excluded,
-                          channels=tuple(used))
+                          channels=tuple(used), information=info)
     if r2 < s.min_r2:
         return replace(est, valid=False, reason=f'the model explains only {100 * r2:.0f} % of '
                        f'the motion (at least {100 * s.min_r2:.0f} % needed)')
+    weak = [f'{k} {100 * v:.0f} %' for k, v in info.items() if v < s.min_information]
+    if len(weak) == len(info):
+        return replace(est, valid=False, reason='latency not observable in the valid samples '
+                       '(share of the response slope outside the excluded segments: '
+                       + ', '.join(weak) + f'; at least {100 * s.min_information:.0f} % '
+                       'needed)')
     if i0 == nL - 1:
         return replace(est, valid=False, reason=f'latency at the search limit '
                        f'{s.max_latency:g} s')
@@ -598,12 +629,16 @@ def adapted_prediction(est: LatencyEstimate, cert: Certificate, current: float,
     (half its interval, at least ``tolerance``): the latency sits ``u`` above the
     certified lower end (under-prediction is the certified side) or, if the certified
     residual range is narrower than that, in its middle; clamped to ``cert.adapt_range``.
-    Returns ``current`` if the estimate is not valid, the certificate has no range, or
-    the change is below half the tolerance (no chatter).
+    Returns ``current`` if the estimate is not valid, the certificate has no range, the
+    latency is inside the OK band for ``current`` (above ``current + r_lo - tolerance``,
+    below the WARN margin: no change while nothing needs one) or the change is below half
+    the tolerance (no chatter).
     """
     if not est.valid or cert.adapt_range is None:
         return current
     r0, r1 = cert.residual[0], cert.residual[1] - cert.hold
+    if current + r0 - settings.tolerance <= est.latency <= current + r1 - settings.warn_margin:
+        return current                   # OK as it is: the prediction stays (hysteresis)
     u = max(settings.tolerance, 0.5 * (est.interval[1] - est.interval[0]))
     target = est.latency - min(r0 + u, 0.5 * (r0 + r1))
     target = min(max(target, cert.adapt_range[0]), cert.adapt_range[1])
