@@ -383,7 +383,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
             self._monitor_last_level = verdict.level
-            self.log({1: 'warn', 2: 'error'}.get(verdict.level, 'info'), f'certificate {verdict.name}: {verdict.message}')
+            self.log({1: 'warn', 2: 'error'}.get(verdict.level, 'info'),
+                     f'certificate {verdict.name}: {verdict.message}')
         st = DiagnosticStatus(level=bytes([verdict.level]), name=f'{self.get_name()}: certificate',
                               message=verdict.message,
                               hardware_id=self.get_fully_qualified_name())

@@ -12,7 +12,10 @@ from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
 from nonfragile_tracker.control.follow import simulate_following
 
 from conftest import CONFIG
-from test_trajectory_nodes import param_list, ros_context, spin_nodes  # noqa: F401
+import test_trajectory_nodes
+from test_trajectory_nodes import param_list, spin_nodes
+
+ros_context = test_trajectory_nodes.ros_context       # the fixture, shared
 
 pytestmark = pytest.mark.ros
 
@@ -23,7 +26,7 @@ CERT = {'certified_residual': [0.0, 0.1], 'certified_lag': 0.05,
         'monitor_window': 3.0, 'diagnostics_period': 0.5}
 
 
-def test_latency_step_turns_the_certificate_status_to_error(ros_context):
+def test_latency_step_turns_the_certificate_status_to_error(ros_context):  # noqa: F811
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import Twist
     from rclpy.node import Node
