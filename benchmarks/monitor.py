@@ -160,14 +160,72 @@ def step_run(K, predict, cert, seed, duration, period, adapt: bool,
             / max(worker.estimates, 1)}
 
 
+def node_step_run(gain_file: Path, seed: int, duration: float, adapt: bool, run_dir: Path,
+                  domain: int) -> dict:
+    """The latency-step run through the nodes in real time; ERROR delay and RMS."""
+    import os
+    import re
+
+    from nonfragile_tracker import runner
+    sys.path.insert(0, str(ROOT / 'benchmarks'))
+    from latency import bag_rms_after
+    ov = {'plant': {'ros__parameters': {
+        'cmd_latency': L0, 'noise_seed': seed, 'duration': duration,
+        'max_linear_accel': ACCEL_V, 'max_angular_accel': ACCEL_W,
+        'cmd_latency_schedule': [T_STEP, L1]}},
+        'tracker': {'ros__parameters': {'monitor_adapt': adapt}}}
+    runner.merge(ov, runner.realtime_overrides())
+    params = runner.scenario_parameters(CONFIG / 'latency_scenario.yaml', gain_file, ov)
+    run_dir.mkdir(parents=True)
+    env = runner.isolated_env({**os.environ, 'ROS_DOMAIN_ID': str(domain)})
+    res = runner.run_processes(params, run_dir, record=True, env=env, timeout=300.0,
+                               progress=lambda _line: None, record_all=True)
+    from nonfragile_tracker.bag.reader import read_messages
+    stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+              for _, m in read_messages(res.bag, 'pose')]
+    start = stamps[-1] - duration
+    log = (run_dir / 'tracker.log').read_text()
+    errors = [float(m.group(1)) for m in re.finditer(
+        r'\[ERROR\] \[(\d+\.\d+)\] \[tracker\]: certificate ERROR', log)]
+    after = [t - (start + T_STEP) for t in errors if t >= start + T_STEP - 1.0]
+    last = [ln for ln in log.splitlines() if 'certificate' in ln][-1:]
+    return {'to ERROR (s)': after[0] if after else math.inf,
+            'rms after': bag_rms_after(res.bag, duration, T_STEP + 10.0),
+            'last': last[0][:300] if last else '', 'exit': res.exit_codes}
+
+
+def main_nodes(args) -> int:
+    """Bring-up in process, then the step through the nodes in real time."""
+    import tempfile
+
+    from nonfragile_tracker.control.gains import write_gain_file
+    K, predict, cert, text = bring_up(seed=11)
+    print('bring-up:', text)
+    tmp = Path(tempfile.mkdtemp(prefix='monitor_bench_'))
+    extra = {**predict, **cert.parameters(), 'max_angular_speed': 2.0}
+    gain_file = write_gain_file(tmp / 'bringup.yaml', K, extra=extra)
+    print('| mode | adaptation | step -> ERROR (s) | RMS from 40 s (mm) |')
+    print('|---|---|---|---|')
+    for adapt in (False, True):
+        for seed in range(1, args.seeds + 1):
+            r = node_step_run(gain_file, seed, args.duration, adapt,
+                              tmp / f'run_{int(adapt)}_{seed}', 60 + seed + 10 * adapt)
+            print(f"| real time | {'on' if adapt else 'off'} | {r['to ERROR (s)']:.1f} | "
+                  f"{1e3 * r['rms after']:.1f} |   exit {r['exit']}; {r['last']}")
+    return 0
+
+
 def main() -> int:
     """Bring-up, then the table."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--nodes', action='store_true', help='through the ROS nodes, real time')
     ap.add_argument('--seeds', type=int, default=3)
     ap.add_argument('--duration', type=float, default=60.0)
     ap.add_argument('--period', type=float, default=1.0, help='seconds between estimates')
     ap.add_argument('--json', help='write the rows here')
     args = ap.parse_args()
+    if args.nodes:
+        return main_nodes(args)
     K, predict, cert, text = bring_up(seed=11)
     print('bring-up (record 30 s with K_nf, no predictor, at 100 ms):', text)
     default_K = read_gain_file(CONFIG / 'tracker_gains.yaml')

@@ -142,7 +142,7 @@ MONITOR_PARAMS = [
     Param('monitor_period', 1.0, 'certificate monitor: wall seconds between estimates',
           low=0.05, high=3600.0, read_only=True),
     Param('monitor_max_latency', 0.5, 'certificate monitor: largest latency searched (s)',
-          low=0.01, high=5.0),
+          low=0.05, high=2.0),
     Param('monitor_warn_margin', 0.02, 'certificate monitor: WARN when the latency is within '
           'this of the certified upper end (s)', low=0.0, high=10.0),
     Param('monitor_tolerance', 0.01, 'certificate monitor: an estimate this far below the '
