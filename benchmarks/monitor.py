@@ -17,7 +17,7 @@ and no predictor -> :func:`control.identify.identify_latency` -> the plan rule
 (:func:`control.monitor.certificate_from_design`, the tracker's ``certified_*``).
 
 Then per seed the step run with the monitor as the tracker node runs it (an estimate every
-``--period`` s of simulated time over a 6 s window, :class:`control.monitor.MonitorWorker`,
+``--period`` s of simulated time over a 4 s window, :class:`control.monitor.MonitorWorker`,
 :func:`control.monitor.evaluate`), with adaptation off, on (clamped to the identified
 interval: the default) and on with the adaptation range widened to [0, 0.3] s (beyond what
 was identified: shown for comparison).  Columns: status before the step, time from the

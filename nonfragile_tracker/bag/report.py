@@ -569,7 +569,7 @@ def certificate_check(bag: str | os.PathLike, certificate: Any, params: dict, *,
     from .motion import read_motion
     if settings is None:
         settings = MonitorSettings(
-            window=float(params.get('monitor_window', 6.0)),
+            window=float(params.get('monitor_window', 4.0)),
             max_latency=float(params.get('monitor_max_latency', 0.5)),
             max_linear_speed=float(params.get('max_linear_speed', 1.0)),
             max_angular_speed=float(params.get('max_angular_speed', 2.0)),

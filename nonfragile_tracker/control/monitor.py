@@ -128,7 +128,7 @@ class MonitorSettings:
         A lag estimate above the certified lag by more than this fraction WARNs.
     """
 
-    window: float = 6.0
+    window: float = 4.0
     max_latency: float = 0.5
     max_lag: float = 0.3
     resolution: float = 0.002

@@ -62,8 +62,8 @@ from visualization_msgs.msg import Marker
 from .. import topics
 from ..control.follow import REST_SPEED, Follower, path_errors, trajectory_time
 from ..control.loop import Tracker, TrackerConfig
-from ..control.monitor import (Certificate, MonitorSettings, MonitorWorker, adapted_prediction,
-                               certificate_from_parameters, evaluate)
+from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
+                               adapted_prediction, certificate_from_parameters, evaluate)
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -137,7 +137,7 @@ MONITOR_PARAMS = [
     Param('monitor', True, 'estimate the command-to-motion latency and lags online (a worker '
           'thread) and report them against the gain\'s certificate on /diagnostics and '
           f'{topics.CERTIFICATE}', read_only=True),
-    Param('monitor_window', 6.0, 'certificate monitor: sliding window of odometry (s)',
+    Param('monitor_window', 4.0, 'certificate monitor: sliding window of odometry (s)',
           low=0.5, high=600.0),
     Param('monitor_period', 1.0, 'certificate monitor: wall seconds between estimates',
           low=0.05, high=3600.0, read_only=True),
@@ -380,6 +380,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 self.log('info', f'certificate monitor: predict_latency {P:.4f} -> {new_p:.4f} s '
                                  f'(latency estimate {est.latency:.4f} s)')
                 pred.cmd_latency = P = new_p
+        if self._stopped:
+            est = LatencyEstimate(False, 'inputs stale: the tracker is publishing stop')
         verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
             self._monitor_last_level = verdict.level

@@ -64,24 +64,24 @@ def run_dir(tmp_path_factory):
 
 def test_fraction_inside_the_certificate_of_a_gain_file(run_dir, tmp_path):
     """Certified delay [0, 0.1] s with the 50 ms lag, predict_latency 0.1 s, dt 0.02 s: latency certified in
-    [0.1, 0.18] s.  Windows (6 s, every 1 s) ending at 6..19 s (the last odometry at
-    19.98 s): those ending by 10 s see 100 ms only, those from 16 s 250 ms only."""
+    [0.1, 0.18] s.  Windows (4 s, every 1 s) ending at 4..19 s (the last odometry at
+    19.98 s): those ending by 10 s see 100 ms only, those from 14 s 250 ms only."""
     gains = write_gain_file(tmp_path / 'g.yaml', K, extra={'predict_latency': 0.1, 'dt': 0.02},
                             design={'latency_interval': [0.0, 0.1], 'certified_h_max': 0.2,
                                     'actuator_lag': 0.05, 'lag_certified_h_max': 0.1})
     cert, params, source = certificate_source(run_dir / 'bag', gains)
     assert cert.interval(0.1) == pytest.approx((0.1, 0.18))
     chk = certificate_check(run_dir / 'bag', cert, params, source=source)
-    assert chk.t.size == 14
-    assert chk.t[0] == pytest.approx(6.0) and chk.t[-1] == pytest.approx(19.0)
-    early, late = chk.t <= STEP, chk.t >= STEP + 6.0
+    assert chk.t.size == 16
+    assert chk.t[0] == pytest.approx(4.0) and chk.t[-1] == pytest.approx(19.0)
+    early, late = chk.t <= STEP, chk.t >= STEP + 4.0
     assert np.all(np.abs(chk.latency[early] - 0.1) <= DT)            # one plant step
     assert np.all(np.abs(chk.latency[late] - 0.25) <= DT)
     assert np.all(chk.levels[early] == 0) and np.all(chk.levels[late] == 2)
     assert chk.inside + chk.outside + chk.unknown == pytest.approx(1.0)
-    assert 5 / 14 <= chk.inside <= 10 / 14 and 4 / 14 <= chk.outside <= 9 / 14
+    assert 7 / 16 <= chk.inside <= 10 / 16 and 6 / 16 <= chk.outside <= 9 / 16
     # a window straddling the step: the estimate follows the larger part of it
-    assert STEP < chk.first_outside <= STEP + 4.0
+    assert STEP < chk.first_outside <= STEP + 3.0
     text = format_certificate(chk)
     assert 'certified latency [0.1000, 0.1800] s' in text
     assert f'time inside the certified interval: {100 * chk.inside:.1f} %' in text

@@ -90,7 +90,7 @@ def test_odometry_gap_is_excluded():
     """0.4 s without odometry (a stalled driver): the samples around it are excluded and
     the estimate stays within a step; a window of nothing but gaps is refused."""
     c, o = steps_run(0.1, seed=2)
-    keep = ~((o[0] >= 5.0) & (o[0] < 5.4))
+    keep = ~((o[0] >= 7.0) & (o[0] < 7.4))
     est = estimate_latency(*c, *o[:, keep])
     assert est.excluded['odometry gap'] >= 10
     assert est.valid and abs(est.latency - 0.1) <= DT
