@@ -33,7 +33,8 @@ Validity gating (per channel, per odometry sample), as mature estimators gate:
   (standard deviation) is not used; no usable channel, fewer than ``min_valid_fraction``
   valid samples, a fit that explains less than ``min_r2`` of the motion, or valid
   samples that hold less than ``min_information`` of the model's slope (the gates removed
-  the responses that place the latency) give no estimate (STALE, with the reason).
+  the responses that place the latency), or an interval wider than ``max_interval`` (a
+  window straddling a latency change) give no estimate (STALE, with the reason).
 
 Status (:func:`evaluate`): with the certificate's residual range ``[r_lo, r_hi]`` and
 the predictor's latency ``P`` the certified latency interval is ``[P + r_lo, P + r_hi]``;
@@ -117,6 +118,9 @@ class MonitorSettings:
         Least fraction of valid samples and least explained variance for an estimate.
     chi2_level : float
         Rise of the normalised cost that bounds the latency interval.
+    max_interval : float
+        Widest latency interval that counts as an estimate (s): a window that straddles a
+        latency change fits neither latency well and its interval widens.
     min_information : float
         Least share of the model's slope (its sensitivity to the latency) on valid samples:
         a gate that removed the responses leaves data that cannot place the latency.
@@ -144,12 +148,14 @@ class MonitorSettings:
     min_r2: float = 0.5
     chi2_level: float = 4.0
     min_information: float = 0.25
+    max_interval: float = 0.03
     warn_margin: float = 0.02
     tolerance: float = 0.01
     lag_tolerance: float = 0.5
 
     def __post_init__(self):
         for name in ('window', 'max_latency', 'max_lag', 'resolution', 'max_linear_speed',
+                     'max_interval',
                      'max_angular_speed', 'accel_fraction', 'gap_factor', 'chi2_level'):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
@@ -388,6 +394,11 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                        '(share of the response slope outside the excluded segments: '
                        + ', '.join(weak) + f'; at least {100 * s.min_information:.0f} % '
                        'needed)')
+    if hi - max(0.0, lo) > s.max_interval:
+        return replace(est, valid=False, reason=f'latency not determined: interval '
+                       f'{1e3 * max(0.0, lo):.0f}-{1e3 * hi:.0f} ms is wider than '
+                       f'{1e3 * s.max_interval:.0f} ms (the latency is changing, or the motion '
+                       'hardly constrains it)')
     if i0 == nL - 1:
         return replace(est, valid=False, reason=f'latency at the search limit '
                        f'{s.max_latency:g} s')
