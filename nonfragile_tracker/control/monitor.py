@@ -129,7 +129,8 @@ class MonitorSettings:
     tolerance : float
         An estimate below the lower end by at most this is inside (estimator precision, s).
     lag_tolerance : float
-        A lag estimate above the certified lag by more than this fraction WARNs.
+        A lag estimate above ``(1 + lag_tolerance)`` times the certified lag (plus
+        ``tolerance``) WARNs; the lag is less precise than the latency in closed loop.
     """
 
     window: float = 4.0
@@ -151,7 +152,7 @@ class MonitorSettings:
     max_interval: float = 0.03
     warn_margin: float = 0.02
     tolerance: float = 0.01
-    lag_tolerance: float = 0.5
+    lag_tolerance: float = 1.0
 
     def __post_init__(self):
         for name in ('window', 'max_latency', 'max_lag', 'resolution', 'max_linear_speed',
