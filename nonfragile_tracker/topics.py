@@ -24,6 +24,9 @@ TRAVELLED_PATH = 'tracker/path'
 TRACKING_ERROR = 'tracker/error'
 REF_MARKER = 'tracker/reference_marker'
 DIAGNOSTICS = '/diagnostics'
+#: The tracker's certificate monitor (diagnostic_msgs/DiagnosticArray, one status: latency
+#: estimate, certified interval, level), published with each /diagnostics report.
+CERTIFICATE = 'tracker/certificate'
 #: The recorder's lockstep readiness (std_msgs/UInt64, transient-local): published once
 #: every recorded lockstep topic's subscription has matched its publisher; the plant
 #: (``lockstep_recorder``) starts the run only after it.  Not recorded.

@@ -22,6 +22,7 @@ import math
 import os
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -33,7 +34,8 @@ from .reader import MissingTopicsError, read_bag
 from .errors import BagError
 
 __all__ = ['Gap', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'find_gaps',
-           'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH']
+           'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH', 'CertificateCheck',
+           'certificate_source', 'certificate_check', 'format_certificate']
 
 #: File names of the figures written by :func:`bag_report`.
 PLOTS = ('xy.png', 'errors.png', 'xi.png', 'commands.png')
@@ -469,4 +471,166 @@ def format_report(report: Report) -> str:
         lines.append(f'note: {report.command_time_note}')
     if report.plots:
         lines += ['', f'plots in {report.out_dir}: ' + ', '.join(sorted(report.plots))]
+    return '\n'.join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# Certificate over the run (the tracker's monitor, offline)
+
+@dataclass(frozen=True)
+class CertificateCheck:
+    """The certificate monitor run over a recorded run (:func:`certificate_check`).
+
+    ``levels`` has one monitor level per window end ``t`` (s from the first odometry);
+    ``inside`` is the fraction of windows whose estimate lies in the certified interval
+    (OK or WARN), ``outside`` the fraction out of it (ERROR), ``unknown`` without an
+    estimate (STALE); they sum to 1.
+    """
+
+    source: str
+    certificate: Any                # control.monitor.Certificate or None
+    predict_latency: float
+    t: np.ndarray
+    latency: np.ndarray             # estimate per window (NaN: none)
+    levels: np.ndarray
+    inside: float
+    outside: float
+    unknown: float
+    first_outside: float            # s, NaN if never
+    last_message: str
+    notes: tuple[str, ...] = ()
+
+
+def _tracker_section(path: Path) -> dict:
+    from ..files import read_yaml
+    data = read_yaml(path, 'parameter file', error=BagError)
+    if isinstance(data, dict):
+        for key in ('/**/tracker', 'tracker', '/tracker'):
+            sec = data.get(key)
+            if isinstance(sec, dict) and isinstance(sec.get('ros__parameters'), dict):
+                return dict(sec['ros__parameters'])
+    return {}
+
+
+def certificate_source(bag: str | os.PathLike, gains: str | os.PathLike | None = None
+                       ) -> tuple[Any, dict, str] | None:
+    """The certificate and tracker parameters to check a run against, and where they are from.
+
+    ``gains`` (a gain file: its ``gain_design`` record and tracker section), else the run
+    directory's ``params.yaml`` (the tracker parameters recorded with the run:
+    ``certified_residual`` etc.).  None when neither gives one.
+    """
+    from ..control.gains import read_gain_design
+    from ..control.monitor import certificate_from_design, certificate_from_parameters
+    if gains is not None:
+        params = _tracker_section(Path(gains))
+        hold = float(params.get('dt', 0.01))
+        cert = certificate_from_design(read_gain_design(gains), hold=hold, source=str(gains))
+        if cert is None and params.get('certified_residual'):
+            cert = certificate_from_parameters(params['certified_residual'],
+                                               params.get('certified_lag', 0.0),
+                                               params.get('certified_adapt_range'), hold=hold,
+                                               source=str(gains))
+        return cert, params, str(gains)
+    recorded = Path(bag).parent / 'params.yaml'
+    if not recorded.is_file():
+        return None
+    params = _tracker_section(recorded)
+    if not params.get('certified_residual'):
+        return None
+    cert = certificate_from_parameters(params['certified_residual'],
+                                       params.get('certified_lag', 0.0),
+                                       params.get('certified_adapt_range'),
+                                       hold=float(params.get('dt', 0.01)), source=str(recorded))
+    return cert, params, str(recorded)
+
+
+def certificate_check(bag: str | os.PathLike, certificate: Any, params: dict, *,
+                      source: str = '', step: float = 1.0, settings: Any = None
+                      ) -> CertificateCheck:
+    """Run the tracker's certificate monitor over a recorded run, one window every ``step`` s.
+
+    Parameters
+    ----------
+    bag : path-like
+        The run's bag (commands and odometry with twist).
+    certificate : control.monitor.Certificate or None
+        What the gain is certified for (None: estimates only, every window STALE).
+    params : dict
+        The tracker's parameters (``predict_latency``, limits, ``monitor_*``).
+    source : str
+        Where the certificate came from (printed).
+    step : float
+        Seconds between windows.
+    settings : control.monitor.MonitorSettings, optional
+        Default: from ``params`` as the tracker node builds them.
+    """
+    from ..control.monitor import ERROR, STALE, MonitorSettings, estimate_latency, evaluate
+    from .motion import read_motion
+    if settings is None:
+        settings = MonitorSettings(
+            window=float(params.get('monitor_window', 4.0)),
+            max_latency=float(params.get('monitor_max_latency', 0.5)),
+            max_linear_speed=float(params.get('max_linear_speed', 1.0)),
+            max_angular_speed=float(params.get('max_angular_speed', 2.0)),
+            max_linear_accel=float(params.get('max_linear_accel', 0.0) or 0.0),
+            max_angular_accel=float(params.get('max_angular_accel', 0.0) or 0.0),
+            warn_margin=float(params.get('monitor_warn_margin', 0.02)),
+            tolerance=float(params.get('monitor_tolerance', 0.01)))
+    data = read_motion(bag)
+    c, o = data.commands, data.odometry
+    if o.v is None or o.w is None:
+        raise BagError(f'{bag}: the odometry carries no twist; the certificate check needs '
+                       'twist.linear.x and twist.angular.z')
+    P = float(params.get('predict_latency', 0.0))
+    notes = []
+    if params.get('monitor_adapt'):
+        notes.append('the run adapted predict_latency (monitor_adapt): checked against the '
+                     f'configured {P:g} s, not the adapted values')
+    ends = np.arange(o.t[0] + settings.window, o.t[-1] + 1e-9, step)
+    lat, lev, msg = [], [], ''
+    for end in ends:
+        sel_o = o.t <= end
+        sel_c = c.t <= end
+        est = estimate_latency(c.t[sel_c], c.v[sel_c], c.w[sel_c], o.t[sel_o], o.v[sel_o],
+                               o.w[sel_o], settings)
+        st = evaluate(est, certificate, P, settings)
+        lat.append(est.latency if est.valid else math.nan)
+        lev.append(st.level)
+        msg = st.message
+    levels = np.array(lev, int)
+    n = max(len(levels), 1)
+    out = levels == ERROR
+    unknown = levels == STALE
+    t = ends - o.t[0]
+    return CertificateCheck(source=source, certificate=certificate, predict_latency=P, t=t,
+                            latency=np.array(lat, float), levels=levels,
+                            inside=float(np.sum(~out & ~unknown)) / n,
+                            outside=float(np.sum(out)) / n, unknown=float(np.sum(unknown)) / n,
+                            first_outside=float(t[out][0]) if out.any() else math.nan,
+                            last_message=msg, notes=tuple(notes))
+
+
+def format_certificate(chk: CertificateCheck) -> str:
+    """The certificate section of ``bag report``."""
+    lines = ['', f'certificate ({chk.source}):']
+    if chk.certificate is None:
+        lines.append('  none recorded: latency estimates only')
+    else:
+        lo, hi = chk.certificate.interval(chk.predict_latency)
+        lines.append(f'  certified latency [{lo:.4f}, {hi:.4f}] s with predict_latency '
+                     f'{chk.predict_latency:.4f} s (lag {chk.certificate.lag:g} s)')
+    valid = chk.latency[np.isfinite(chk.latency)]
+    if valid.size:
+        lines.append(f'  latency estimate: median {np.median(valid):.4f} s, range '
+                     f'[{valid.min():.4f}, {valid.max():.4f}] s over {valid.size} of '
+                     f'{chk.latency.size} windows')
+    else:
+        lines.append(f'  latency estimate: none in {chk.latency.size} windows')
+    lines.append(f'  time inside the certified interval: {100 * chk.inside:.1f} %, outside: '
+                 f'{100 * chk.outside:.1f} %, unknown: {100 * chk.unknown:.1f} %')
+    if math.isfinite(chk.first_outside):
+        lines.append(f'  first outside at t = {chk.first_outside:.1f} s')
+    lines.append(f'  last window: {chk.last_message}')
+    lines += [f'  note: {n}' for n in chk.notes]
     return '\n'.join(lines)

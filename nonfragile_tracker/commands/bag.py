@@ -29,6 +29,12 @@ def cmd_report(args) -> int:
                      overwrite=args.force, plots=not args.no_plots, tolerance=args.tolerance,
                      topic_overrides=_overrides(args), late_threshold=args.late)
     print(format_report(rep))
+    from ..bag.report import certificate_check, certificate_source, format_certificate
+    found = certificate_source(Path(args.bag), args.gains)
+    if found is not None:
+        cert, params, source = found
+        print(format_certificate(certificate_check(Path(args.bag), cert, params,
+                                                   source=source)))
     return EXIT_OK
 
 
@@ -92,6 +98,11 @@ def register(subparsers) -> None:
                      help='position tolerance for settling (m, default 0.01)')
     rep.add_argument('--odom', help='odometry topic (nav_msgs/Odometry) if not found by name')
     rep.add_argument('--cmd', help='command topic (Twist or TwistStamped) if not found by name')
+    rep.add_argument('--gains', metavar='FILE',
+                     help='check the run against this gain file\'s certificate (its '
+                     'gain_design record and tracker section): the latency estimate over the '
+                     'run and the fraction of time inside the certified interval; default: '
+                     'the certified_* parameters recorded in the run directory\'s params.yaml')
     rep.add_argument('--late', type=float,
                      help='latency (s) above which a command is late (default: median odom step)')
     rep.set_defaults(func=cmd_report)

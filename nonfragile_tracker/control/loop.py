@@ -97,6 +97,26 @@ def odometry_period_steps(rate: float, dt: float) -> tuple[int, float]:
     return n, 1.0 / (n * dt)
 
 
+def _latency_schedule(value, dt: float) -> tuple:
+    """Validated flat ``(t_1, L_1, t_2, L_2, ...)``: times increasing >= 0, latencies >= 0."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+        raise LoopConfigError('cmd_latency_schedule must be a flat list [t_1, L_1, t_2, L_2, '
+                              f'...] (s), got {value!r}')
+    vals = [as_finite_float(v, f'cmd_latency_schedule[{i}]', low=0.0, error=LoopConfigError)
+            for i, v in enumerate(value)]
+    if len(vals) % 2:
+        raise LoopConfigError('cmd_latency_schedule needs pairs [t_1, L_1, t_2, L_2, ...] (time, '
+                              f'latency in s); got {len(vals)} numbers')
+    times = vals[0::2]
+    if any(b <= a for a, b in zip(times, times[1:])):
+        raise LoopConfigError(f'cmd_latency_schedule times must increase, got {times}')
+    for t in times:
+        if abs(round(t / dt) * dt - t) > 1e-9 * max(1.0, t):
+            raise LoopConfigError(f'cmd_latency_schedule time {t} s is not a multiple of the '
+                                  f'step dt = {dt} s')
+    return tuple(vals)
+
+
 # ---------------------------------------------------------------------------------------------
 # Plant
 
@@ -114,6 +134,10 @@ class PlantConfig:
     ``odom_latency`` (s: the measurement of step ``k`` is published at ``k + d`` with
     the stamp of step ``k``), ``odom_rate`` (Hz, 0 = every step), ``odom_noise``
     (standard deviations of x, y (m) and yaw (rad)) and ``noise_seed``.
+    ``cmd_latency_schedule`` (flat ``[t_1, L_1, t_2, L_2, ...]``, times increasing, s):
+    from ``t_i`` on a command received acts ``L_i`` later (``cmd_latency`` before
+    ``t_1``); a command that would act no later than one received before it replaces
+    the queued ones (a latency drop skips them, as a transport that delivers the newest).
     """
 
     dt: float = 0.01
@@ -132,6 +156,7 @@ class PlantConfig:
     odom_rate: float = 0.0
     odom_noise: tuple = (0.0, 0.0, 0.0)
     noise_seed: int = 0
+    cmd_latency_schedule: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
@@ -155,6 +180,8 @@ class PlantConfig:
                                   f'yaw (rad)], got {self.odom_noise!r}')
         object.__setattr__(self, 'odom_noise',
                            tuple(_nonneg(f'odom_noise[{i}]', v) for i, v in enumerate(noise)))
+        object.__setattr__(self, 'cmd_latency_schedule',
+                           _latency_schedule(self.cmd_latency_schedule, self.dt))
         seed = self.noise_seed
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise LoopConfigError(f'noise_seed must be an integer >= 0, got {seed!r}')
@@ -168,6 +195,12 @@ class PlantConfig:
     def cmd_latency_steps(self) -> int:
         """Command latency in whole plant steps."""
         return delay_steps(self.cmd_latency, self.dt)[0]
+
+    def latency_schedule_steps(self) -> tuple[tuple[int, int], ...]:
+        """``cmd_latency_schedule`` as (first step, latency in steps) pairs."""
+        sch = self.cmd_latency_schedule
+        return tuple((int(round(sch[i] / self.dt)), delay_steps(sch[i + 1], self.dt)[0])
+                     for i in range(0, len(sch), 2))
 
     @property
     def actuator(self) -> ActuatorModel:
@@ -213,6 +246,7 @@ class UnicyclePlant:
         self._terms = tuple((i, j, a) for i, row in enumerate(config.A_tau)
                             for j, a in enumerate(row) if a != 0.0)
         self.cmd_delay = config.cmd_latency_steps
+        self._schedule = config.latency_schedule_steps()
         actuator = config.actuator
         self.actuator = None if actuator.ideal else actuator
         odometry = config.odometry
@@ -231,6 +265,8 @@ class UnicyclePlant:
         self._hist: deque = deque([xi0] * (self.N + 1), maxlen=self.N + 1)
         self._queue: deque = deque()    # (first step it acts, v, w)
         self.cmd = (self.v, 0.0)        # command in force
+        self.cmd_delay = c.cmd_latency_steps
+        self._next_change = 0           # index of the next schedule entry
         if self.odometer is not None:
             self.odometer.reset()
             self.odometer.measure(0, self.x, self.y, self.th, self.v, self.w)
@@ -247,7 +283,19 @@ class UnicyclePlant:
         return (self.x, v * c + self.ox, self.y, v * s + self.oy)
 
     def command(self, v: float, w: float) -> None:
-        """Receive ``(v, w)`` at the current step: it acts from step ``k + cmd_latency_steps``."""
+        """Receive ``(v, w)`` at the current step: it acts from step ``k + cmd_latency_steps``.
+
+        With a latency schedule the latency in force at step ``k`` applies; queued commands
+        that would act no earlier than this one are replaced by it.
+        """
+        if self._schedule:
+            sch = self._schedule
+            while self._next_change < len(sch) and sch[self._next_change][0] <= self.k:
+                self.cmd_delay = sch[self._next_change][1]
+                self._next_change += 1
+            act = self.k + self.cmd_delay
+            while self._queue and self._queue[-1][0] >= act:
+                self._queue.pop()
         if self.cmd_delay == 0 and not self._queue:
             self.cmd = (v, w)
         else:

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterType
 from rclpy.duration import Duration
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -101,6 +102,10 @@ PARAMS = [
           '[x (m), y (m), yaw (rad)], Gaussian; 0 = exact', read_only=True),
     Param('noise_seed', 0, 'seed of the odometry noise (numpy Generator); same seed, same '
           'noise', read_only=True),
+    Param('cmd_latency_schedule', None, 'command latency that changes during the run: flat '
+          '[t_1, L_1, t_2, L_2, ...] (s, times increasing, multiples of dt): from t_1 on a '
+          'command acts L_1 after it is received, ...; cmd_latency before t_1; unset = '
+          'cmd_latency throughout', type=ParameterType.PARAMETER_DOUBLE_ARRAY, read_only=True),
 ]
 #: Lockstep: at most this many steps without waiting (QoS keep-last depth headroom).
 MAX_FREE_STEPS = 50
@@ -142,6 +147,7 @@ def plant_settings(values: dict) -> PlantSettings:
                       A_tau=tuple(map(tuple, as_matrix(values['A_tau'], 'A_tau', (4, 4),
                                                        flat=True, error=LoopConfigError))),
                       x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'],
+                      cmd_latency_schedule=tuple(values['cmd_latency_schedule'] or ()),
                       **{n: values[n] for n in LATENCY_PARAMS})
     odo = cfg.odometry
     if mode == 'lockstep' and max(odo.latency_steps, odo.period_steps) > MAX_FREE_STEPS:

@@ -62,6 +62,8 @@ from visualization_msgs.msg import Marker
 from .. import topics
 from ..control.follow import REST_SPEED, Follower, path_errors, trajectory_time
 from ..control.loop import Tracker, TrackerConfig
+from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
+                               adapted_prediction, certificate_from_parameters, evaluate)
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -130,6 +132,35 @@ PARAMS = [
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
 ]
+#: The certificate monitor's parameters (:mod:`control.monitor`; README "Certificate monitor").
+MONITOR_PARAMS = [
+    Param('monitor', True, 'estimate the command-to-motion latency and lags online (a worker '
+          'thread) and report them against the gain\'s certificate on /diagnostics and '
+          f'{topics.CERTIFICATE}', read_only=True),
+    Param('monitor_window', 4.0, 'certificate monitor: sliding window of odometry (s)',
+          low=0.5, high=600.0),
+    Param('monitor_period', 1.0, 'certificate monitor: wall seconds between estimates',
+          low=0.05, high=3600.0, read_only=True),
+    Param('monitor_max_latency', 0.5, 'certificate monitor: largest latency searched (s)',
+          low=0.05, high=2.0),
+    Param('monitor_warn_margin', 0.02, 'certificate monitor: WARN when the latency is within '
+          'this of the certified upper end (s)', low=0.0, high=10.0),
+    Param('monitor_tolerance', 0.01, 'certificate monitor: an estimate this far below the '
+          'certified lower end still counts as inside (estimator precision, s)', low=0.0,
+          high=1.0),
+    Param('monitor_adapt', False, 'certificate monitor: set the predictor\'s latency to the '
+          'estimate (minus its uncertainty), clamped to certified_adapt_range; needs the '
+          'predictor (predict_latency > 0); off: the commands never depend on the monitor'),
+    Param('certified_residual', None, 'certificate: the delay range [h_min, H] (s) the gain '
+          'is certified for (latency - predict_latency + the hold of dt; written by '
+          'latency-design); unset: the monitor reports the certificate as unknown',
+          type=ParameterType.PARAMETER_DOUBLE_ARRAY),
+    Param('certified_lag', 0.0, 'certificate: actuator time constant the certificate '
+          'includes (s; 0 = none)', low=0.0, high=10.0),
+    Param('certified_adapt_range', None, 'certificate: the identified latency interval '
+          '[lo, hi] (s) the predictor latency may be adapted within',
+          type=ParameterType.PARAMETER_DOUBLE_ARRAY),
+]
 #: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
 REF_BUFFER = 1000
 
@@ -153,6 +184,7 @@ class TrackerSettings:
     max_path_poses: int
     diagnostics_period: float
     rest_speed: float
+    monitor: MonitorConfig
 
 
 def tracker_settings(values: dict) -> TrackerSettings:
@@ -180,7 +212,38 @@ def tracker_settings(values: dict) -> TrackerSettings:
                            base_frame=values['base_frame'], viz_period=values['viz_period'],
                            max_path_poses=values['max_path_poses'],
                            diagnostics_period=values['diagnostics_period'],
-                           rest_speed=values['rest_speed'])
+                           rest_speed=values['rest_speed'],
+                           monitor=monitor_config(values))
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """The certificate monitor's validated settings (see :data:`MONITOR_PARAMS`)."""
+
+    enabled: bool
+    period: float
+    adapt: bool
+    settings: MonitorSettings
+    certificate: Certificate | None
+
+
+def monitor_config(values: dict) -> MonitorConfig:
+    """Validate the monitor's parameters; InputError (MonitorError) if bad.
+
+    The saturation limits are the tracker's; the acceleration limits are its
+    ``max_linear_accel`` / ``max_angular_accel`` parameters when it has them (0 = unknown).
+    """
+    settings = MonitorSettings(
+        window=values['monitor_window'], max_latency=values['monitor_max_latency'],
+        max_linear_speed=values['max_linear_speed'],
+        max_angular_speed=values['max_angular_speed'],
+        max_linear_accel=values.get('max_linear_accel') or 0.0,
+        max_angular_accel=values.get('max_angular_accel') or 0.0,
+        warn_margin=values['monitor_warn_margin'], tolerance=values['monitor_tolerance'])
+    cert = certificate_from_parameters(values['certified_residual'], values['certified_lag'],
+                                       values['certified_adapt_range'], hold=values['dt'])
+    return MonitorConfig(enabled=values['monitor'], period=values['monitor_period'],
+                         adapt=values['monitor_adapt'], settings=settings, certificate=cert)
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
@@ -188,7 +251,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
 
     def __init__(self, node_name: str = 'tracker', **node_kwargs):
         super().__init__(node_name, **node_kwargs)
-        self.config = cfg = self.bind_parameters(PARAMS, tracker_settings)
+        self.config = cfg = self.bind_parameters(PARAMS + MONITOR_PARAMS, tracker_settings)
         self.mode = cfg.mode
         self.tracker = Tracker(cfg.tracker)
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
@@ -255,11 +318,94 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._last_odom_wall: int | None = None     # wall ns of the last input
             self._last_ref_wall: int | None = None
             self.create_timer(0.05, self._watchdog)
+        self._monitor_start()
 
     def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
         """An accepted runtime set (post-set callback): the law uses the new gains/limits."""
         self.tracker.config = new.tracker
         self.max_path_poses = new.max_path_poses
+        if self.monitor is not None:
+            self.monitor.settings = new.monitor.settings
+
+    # ------------------------------------------------------------------ certificate monitor
+    def _monitor_start(self) -> None:
+        """Start the certificate monitor's worker (:class:`control.monitor.MonitorWorker`)."""
+        m = self.config.monitor
+        self.monitor: MonitorWorker | None = None
+        self._monitor_last_level = -1
+        if not m.enabled:
+            return
+        self.monitor = MonitorWorker(m.settings, m.period)
+        self.pub_cert = self.create_publisher(DiagnosticArray, topics.CERTIFICATE, DATA_QOS)
+        if m.certificate is None:
+            self.log('info', 'certificate monitor: no certified_residual given (the gain '
+                             'file records no certificate): latency is estimated and '
+                             'reported, the certificate as unknown')
+        if m.adapt and self.tracker.predictor is None:
+            self.log('warn', 'monitor_adapt needs the predictor (predict_latency > 0 or a '
+                             'predict_* parameter): not adapting')
+        self.monitor.start()
+
+    def _monitor_command(self, stamp: int | None, v: float, w: float) -> None:
+        """Record a command sent: at the tracker's *now* (lockstep) or the clock (real time)."""
+        if self.monitor is None:
+            return
+        if stamp is None or self.mode == 'realtime':
+            t = self.get_clock().now().nanoseconds * 1e-9
+        else:
+            t = stamp * 1e-9 + self.tracker.config.predict_odom_latency
+        self.monitor.window.add_command(t, v, w)
+
+    def _monitor_odom(self, stamp: int, msg: Odometry) -> None:
+        """Record the odometry twist measured at ``stamp`` (ns)."""
+        if self.monitor is None:
+            return
+        v, w = msg.twist.twist.linear.x, msg.twist.twist.angular.z
+        if math.isfinite(v) and math.isfinite(w):
+            self.monitor.window.add_odometry(stamp * 1e-9, v, w)
+
+    def _monitor_diagnostics(self) -> list[DiagnosticStatus]:
+        """The certificate status (and, with monitor_adapt, the predictor's new latency)."""
+        mon = self.monitor
+        if mon is None:
+            return []
+        m = self.config.monitor
+        pred = self.tracker.predictor
+        adapting = m.adapt and pred is not None
+        P = pred.cmd_latency if pred is not None else 0.0
+        est = mon.latest
+        if adapting and pred is not None and est is not None and m.certificate is not None:
+            new_p = adapted_prediction(est, m.certificate, P, m.settings)
+            if new_p != P:
+                self.log('info', f'certificate monitor: predict_latency {P:.4f} -> {new_p:.4f} s '
+                                 f'(latency estimate {est.latency:.4f} s)')
+                pred.cmd_latency = P = new_p
+        if self._stopped:
+            est = LatencyEstimate(False, 'inputs stale: the tracker is publishing stop')
+        verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
+        if verdict.level != self._monitor_last_level:
+            self._monitor_last_level = verdict.level
+            self.log({1: 'warn', 2: 'error'}.get(verdict.level, 'info'),
+                     f'certificate {verdict.name}: {verdict.message}')
+        st = DiagnosticStatus(level=bytes([verdict.level]), name=f'{self.get_name()}: certificate',
+                              message=verdict.message,
+                              hardware_id=self.get_fully_qualified_name())
+        vals = dict(verdict.values)
+        vals['adaptation'] = 'on' if adapting else 'off'
+        vals['estimates'] = str(mon.estimates)
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self.pub_cert.publish(arr)
+        return [st]
+
+    def close(self) -> None:
+        """Stop the certificate monitor's worker (idempotent)."""
+        mon = getattr(self, 'monitor', None)
+        if mon is not None:
+            mon.stop()
+        super().close()
 
     # ------------------------------------------------------------------ inputs
     def _reject(self, what: str) -> None:
@@ -333,6 +479,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.last_odom_stamp = s
         self._try_compute()                # cmd_vel first: the clock read is bookkeeping
         self._odom_received()
+        self._monitor_odom(s, msg)
 
     def _odom_received(self) -> None:
         """Receipt time of the odometry just handled (diagnostics' odom age, the watchdog).
@@ -456,6 +603,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             ns_to_stamp(stamp, self._cmd_msg.header.stamp)
         self.pub_cmd.publish(self._cmd_msg)
         self.commands += 1
+        self._monitor_command(stamp, self._cmd.linear.x, self._cmd.angular.z)
 
     # ------------------------------------------------------------------ outputs
     def _outputs(self, stamp: int, pose, ref, cmd) -> None:
@@ -533,7 +681,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
+        arr.status = [st, *self._monitor_diagnostics()]
         self.pub_diag.publish(arr)
 
     def _watchdog(self) -> None:
