@@ -7,16 +7,16 @@ spread of the odometry age.  Latency drifts at run time (network, CPU, battery);
 module estimates it from the tracker's own command history and the odometry twist over a
 sliding window and compares it with the certificate.
 
-Estimator (:func:`estimate_latency`; first order plus dead time per channel, the model
-of :mod:`.identify`, fitted by a small self-contained grid search so that it costs a
-few milliseconds): on a fine grid (``resolution``) the response of a first-order lag to
-the zero-order-held commands is computed for a set of time constants; a latency is a
-shift of that response; per channel the static gain is fitted by least squares and the
-residual is evaluated for every latency on the grid.  The latency minimises the sum of
-the channels' residuals, each normalised by its own best residual (the channels have
-different units), then refined by a parabola through the three grid points around the
-minimum.  Interval: the latencies whose normalised cost rises by at most
-``chi2_level`` over the minimum, widened by the grid step.
+Estimator (:func:`estimate_latency`; first order plus dead time per channel, the model of
+:mod:`nonfragile_tracker.control.identify`, fitted by a small self-contained grid search
+so that it costs a few milliseconds): on a fine grid (``resolution``) the response of a
+first-order lag to the zero-order-held commands is computed for a set of time constants; a
+latency is a shift of that response; per channel the static gain is fitted by least
+squares and the residual is evaluated for every latency on the grid. The latency minimises
+the sum of the channels' residuals, each normalised by its own best residual (the channels
+have different units), then refined by a parabola through the three grid points around the
+minimum. Interval: the latencies whose normalised cost rises by at most ``chi2_level``
+over the minimum, widened by the grid step.
 
 Validity gating (per channel, per odometry sample), as mature estimators gate:
 
