@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         print(plan.describe())
         h_min, h_max = plan.h_min, plan.h_max
         lag = plan.lag if args.lag is None else args.lag
-        extra = plan.tracker_parameters()
+        extra = {**plan.tracker_parameters(), **plan.actuator_parameters()}
         record = plan.metadata()
     else:
         h_min, h_max = args.delay_interval

@@ -38,11 +38,34 @@ point estimate.  It covers noise and serially correlated model error; it does no
 cover a systematic convention offset (e.g. a base that stamps odometry at publish
 time: that transport delay is then part of ``L``).
 
+What real recordings contain, and what is done about it:
+
+* acceleration limits: where a rate-limited FOPDT (``s' = sat((u - s) / tau, a)``,
+  the plant's actuator) explains a channel at least 5 % better than the linear one,
+  its limit ``a`` is fitted with the lag (candidates around the 99th percentile of the
+  measured ``|ds/dt|``, then polished with ``tau``) and reported (``max_linear_accel``,
+  ``max_angular_accel``; 0 when no limit binds) with the fraction of time it binds;
+* stalls, hiccups and glitches: samples whose residual is gross (above 6 robust
+  standard deviations and a quarter of the channel's spread) are excluded with
+  0.2 s + 3 time constants either side, and the fit repeated (at most twice; not when
+  that would exclude more than 30 % - then the model is wrong and the fit figures say so);
+* latency jitter: after the fit, each distinct command step's latency is fitted on its
+  own (:func:`_event_latencies`); their 2.5-97.5 % range, widened by two grid steps and
+  joined with the interval of the mean, is ``latency_range_s``;
+* commands not driven by the odometry (a joystick): detected by
+  :func:`commands_follow_odometry`; their odometry age is then not recorded (it is not
+  the tracker's);
+* odometry stamped at publish time: its transport delay becomes part of ``L``; the sum
+  from the measurement stamp to the motion, which the predictor uses, stays right.
+
 Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
 too few samples or too short an overlap of commands and odometry
 (:class:`NotEnoughDataError`), a channel whose command hardly varies
 (:class:`InsufficientExcitationError`), a model that explains less than half of the
-measured variation or an estimate at a search limit (:class:`PoorFitError`).
+measured variation or an estimate at a search limit (:class:`PoorFitError`, whose
+message names the likely cause: a base that does not reach the commanded speeds, an
+odometry unrelated to the commands, or a response that is not a lag; it never advises
+widening a search limit that would only fit a wrong model).
 
 The file the latency-aware design reads (:func:`write_identification`,
 :func:`read_identification`)::
@@ -60,7 +83,21 @@ The file the latency-aware design reads (:func:`write_identification`,
       residual_rms: {v: 0.0012, w: 0.0031}
       command_period_s: 0.02          # optional: median period of the commands
       command_age_s: [0.0, 0.0]       # optional: age of the newest odometry at a command
-                                      # (1st and 99th percentile)
+                                      # (1st and 99th percentile; absent when the commands
+                                      # were not driven by the odometry)
+      latency_range_s: [0.119, 0.152] # optional: the range the latency VARIES over (per
+                                      # command step, contains latency_interval_s)
+      latency_range_from: 32 command steps (2.5-97.5 %)   # optional
+      max_linear_accel: 1.0           # optional: m/s^2, 0 = not seen to bind (unknown)
+      max_angular_accel: 3.0          # optional: rad/s^2, 0 = unknown
+      accel_limits_from: rate-limited FOPDT fit (v binding 31 %, w binding 33 % ...)
+      commands_follow_odometry: false # optional: a tracker (true) or a joystick (false)
+      excluded_s: 0.33                # optional: seconds left out (stalls, glitches)
+
+Two different latency figures: ``latency_interval_s`` is the uncertainty of the MEAN
+latency (bootstrap: it shrinks with a longer recording); ``latency_range_s`` is the range
+the latency actually takes from command to command (jitter: it does not shrink).  The
+plan (:func:`.latency_design.plan_from_identification`) certifies the range.
 
 ``latency-design --identification FILE`` turns this into the delay interval it
 certifies (:func:`.latency_design.plan_from_identification`).
@@ -467,35 +504,50 @@ def _parabola_min(values: np.ndarray, i: int) -> float:
 def _rate_limited_response(u: np.ndarray, h: float, tau: float, accel: float) -> np.ndarray:
     """Grid values of ``s' = sat((u - s) / tau, accel)`` from rest, ``u`` held per cell.
 
-    Exact per cell (the closed form of :func:`.actuator.first_order_step`: a ramp at
-    ``accel`` while ``|u - s| > accel tau``, then the exponential approach).
+    Exact (the closed form of :func:`.actuator.first_order_step`: a ramp at ``accel``
+    while ``|u - s| > accel tau``, then the exponential approach).  The state is carried
+    in Python from one run of equal inputs to the next; the values inside the runs are
+    filled in by numpy.
     """
     n = u.size
-    res = [0.0] * (n + 1)
-    e = math.exp(-h / tau) if tau > 0 else 0.0
+    out = np.empty(n + 1)
+    out[0] = 0.0
+    if n == 0:
+        return out
+    starts = np.concatenate([[0], np.flatnonzero(u[1:] != u[:-1]) + 1])
+    lens = np.diff(np.append(starts, n))
+    cs = u[starts]
+    runs = starts.size
+    s0, sg, t1, s1 = np.empty(runs), np.empty(runs), np.empty(runs), np.empty(runs)
     band = accel * tau
-    ramp = accel * h
     s = 0.0
-    k = 1
-    for c in u.tolist():
+    for r, (c, m) in enumerate(zip(cs.tolist(), lens.tolist())):
+        span = m * h
+        s0[r] = s
         d = c - s
-        if d > band:
-            if d - band >= ramp:
-                s += ramp
+        if d > band or d < -band:
+            g = 1.0 if d > 0 else -1.0
+            ramp = (abs(d) - band) / accel           # time to reach the linear band
+            sg[r] = g
+            if ramp >= span:
+                t1[r], s1[r] = span, c
+                s += g * accel * span
             else:
-                rest = h - (d - band) / accel
-                s = c - band * (math.exp(-rest / tau) if tau > 0 else 0.0)
-        elif d < -band:
-            if -d - band >= ramp:
-                s -= ramp
-            else:
-                rest = h - (-d - band) / accel
-                s = c + band * (math.exp(-rest / tau) if tau > 0 else 0.0)
+                t1[r], s1[r] = ramp, c - g * band
+                s = c - g * band * (math.exp(-(span - ramp) / tau) if tau > 0 else 0.0)
         else:
-            s = c - d * e
-        res[k] = s
-        k += 1
-    return np.array(res)
+            sg[r], t1[r], s1[r] = 0.0, 0.0, s
+            s = c - d * (math.exp(-span / tau) if tau > 0 else 0.0)
+    idx = np.repeat(np.arange(runs), lens)
+    t = (np.arange(n) - starts[idx] + 1) * h
+    end_ramp = t1[idx]
+    level = cs[idx]
+    if tau > 0:
+        tail = level - (level - s1[idx]) * np.exp(-np.maximum(t - end_ramp, 0.0) / tau)
+    else:
+        tail = level
+    out[1:] = np.where(t <= end_ramp, s0[idx] + sg[idx] * accel * t, tail)
+    return out
 
 
 def _fit_gain(ch: _Channel, pos: float, tau: float) -> float:
@@ -503,8 +555,8 @@ def _fit_gain(ch: _Channel, pos: float, tau: float) -> float:
     return float(_sse(_stats(ch, tau, np.array([pos]), None, 0), float(ch.z @ ch.z))[1][0])
 
 
-def _choose_limits(chans: dict[str, '_Channel'], pos: float, tau_hat: dict[str, float],
-                   max_tau_s: float, d_max: int) -> dict[str, float]:
+def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[str, float],
+                   max_tau_s: float, max_latency_s: float) -> dict[str, float]:
     """Per channel, the acceleration limit of a rate-limited FOPDT, or 0 if none explains more.
 
     Candidates around a high percentile (99 %) of the measured ``|ds/dt|`` (over 40 ms),
@@ -529,11 +581,11 @@ def _choose_limits(chans: dict[str, '_Channel'], pos: float, tau_hat: dict[str, 
             continue
         sub = ch.subset(max(1, z.size // 800))
         zz = float(sub.z @ sub.z)
-        lo = max(0, int(round(pos - 0.1 / h)))
-        shifts = np.arange(lo, min(d_max, int(round(pos + 0.03 / h))) + 1,
-                           max(1, int(round(0.002 / h))), dtype=float)
-        grid = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002),
-                                                   min(max_tau_s, 1.5 * tau_hat[c] + 0.02), 11)])
+        lo = max(0, int(round((latency - 0.1) / h)))
+        shifts = np.arange(lo, int(round(min(max_latency_s, latency + 0.03) / h)) + 1,
+                           dtype=float)
+        grid = np.concatenate([[0.0], np.geomspace(0.002,
+                                                   min(max_tau_s, 1.5 * tau_hat[c] + 0.02), 8)])
         factors = 2.0 ** (np.arange(-4, 3) / 3.0)
         cands = np.concatenate([[0.0], a0 * factors])
         best_sse = np.empty(cands.size)
@@ -913,9 +965,18 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
               for c in _CHANNELS}
     odom_pos = (to - tc[0]) / h
 
-    def make_channels(keep: dict[str, np.ndarray] | None, accel: dict[str, float]
-                      ) -> dict[str, _Channel]:
+    # the rate-limited model costs a Python pass over the grid per simulation: its coarse
+    # stages run on a grid of at most 5 ms (the coarse latency step is 10 ms)
+    hc = h * max(1, int(round(0.005 / h))) if h < 0.005 else h
+    coarse_inputs: dict[str, np.ndarray] = {}
+
+    def make_channels(keep: dict[str, np.ndarray] | None, accel: dict[str, float],
+                      hh: float = h) -> dict[str, _Channel]:
         out = {}
+        if hh != h and not coarse_inputs:
+            sc = tc[0] + hh * np.arange(int(math.ceil((t_end - tc[0]) / hh)) + 3)
+            coarse_inputs.update({c: np.diff(_held_integral(tc, cmd[c], sc, command_timeout_s))
+                                  / hh for c in _CHANNELS})
         for c in _CHANNELS:
             ia, ib, wd, z, tm = meas[c]
             if keep is not None:
@@ -923,12 +984,17 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                 ia, z, tm = ia[k], z[k], tm[k]
                 if ib is not None:
                     ib, wd = ib[k], cast(np.ndarray, wd)[k]
-            ch = _Channel.build(c, use[c], u_grid[c], h, z, odom_pos, ia, ib, wd, tm)
+            if hh == h:
+                ch = _Channel.build(c, use[c], u_grid[c], h, z, odom_pos, ia, ib, wd, tm)
+            else:
+                ch = _Channel.build(c, use[c], coarse_inputs[c], hh, z, (to - tc[0]) / hh, ia,
+                                    ib, wd, tm)
             ch.accel = float(accel[c])
             out[c] = ch
         return out
 
     no_limit = {c: 0.0 for c in _CHANNELS}
+    keep: dict[str, np.ndarray] | None = None
     chans = make_channels(None, no_limit)
     d_max = int(round(max_latency_s / h))
     taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
@@ -944,7 +1010,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     def local_taus(c: str, centre: float, spread: float) -> np.ndarray:
         lo = max(0.0, centre / spread - 2 * h * spread)
         hi = min(max_tau_s, centre * spread + 2 * h * spread)
-        return np.linspace(lo, hi, 25)
+        return np.linspace(lo, hi, 13 if chans[c].accel > 0 else 25)
 
     def grid_fit(shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool):
         """Block statistics (nd, ntau, 5, nb) per channel and zz per block."""
@@ -990,11 +1056,14 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         """
         # coarse: 10 ms steps, at most ~1500 samples per channel
         sse_c = {}
+        rough = (make_channels(keep, {c: chans[c].accel for c in _CHANNELS}, hc)
+                 if hc != h and any(ch.accel > 0 for ch in chans.values()) else chans)
         for c, ch in chans.items():
             stride = max(1, ch.z.size // 1500)
-            sub = ch.subset(stride)
+            sub = (ch if ch.accel <= 0 else rough[c]).subset(stride)
             zz = float(sub.z @ sub.z)
-            sse_c[c] = np.stack([_sse(_stats(sub, tau, coarse, None, 0), zz)[0]
+            shifts = coarse * (h / sub.h)
+            sse_c[c] = np.stack([_sse(_stats(sub, tau, shifts, None, 0), zz)[0]
                                  for tau in taus], axis=1) * stride          # (nd, ntau)
         # each channel's noise variance: its own best fit at the grid resolution (a coarse
         # grid would inflate a noise-free channel's and let a noisy one dominate)
@@ -1004,30 +1073,69 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             i = int(np.argmin(prof_c[c]))
             zz = float(ch.z @ ch.z)
             best = min(float(_sse(_stats(ch, tau, around(coarse[i]), None, 0), zz)[0].min())
-                       for tau in tau_range(int(kbest[c][i]), 17))
+                       for tau in tau_range(int(kbest[c][i]), 9 if ch.accel > 0 else 17))
             ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
         j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
         i_c = int(np.argmin(j_coarse))
         # fine: grid resolution around the coarse minimum, local time-constant grids
-        tau_grid = {c: tau_range(int(kbest[c][i_c]), 25) for c in _CHANNELS}
+        tau_grid = {c: tau_range(int(kbest[c][i_c]), 13 if chans[c].accel > 0 else 25)
+                    for c in _CHANNELS}
         fine = around(coarse[i_c])
         pos, tau0, lat_c, _ = estimate(grid_fit(fine, tau_grid, False), None, fine, tau_grid)
+        if any(ch.accel > 0 for ch in chans.values()):
+            p_l, t_l = polish_limited(pos, tau0, fine)
+            return p_l, t_l, lat_c
         # polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps)
+        from scipy.optimize import minimize
         x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
         j0 = objective(x0)
         simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
-        from scipy.optimize import minimize
-        limited = any(ch.accel > 0 for ch in chans.values())
         polish = minimize(objective, x0, method='Nelder-Mead',
                           bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h),
                                   (0.0, max_tau_s / h)],
                           options={'initial_simplex': simplex, 'xatol': 0.01,
-                                   'fatol': 1e-7 * j0 + 1e-12,
-                                   'maxfev': 80 if limited else 200})
+                                   'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
         if polish.fun <= j0:
             return float(polish.x[0]), {'v': float(polish.x[1]) * h,
                                         'w': float(polish.x[2]) * h}, lat_c
         return pos, {c: max(tau0[c], 0.0) for c in _CHANNELS}, lat_c
+
+    def polish_limited(pos: float, tau0: dict[str, float], fine: np.ndarray
+                       ) -> tuple[float, dict[str, float]]:
+        """Rate-limited channels: (tau, limit) polished per channel at the latency, then
+        the latency again on the fine grid (each simulation of the nonlinear model costs
+        a pass over the grid, so the channels are polished one by one)."""
+        from scipy.optimize import minimize
+        tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
+        for c, ch in chans.items():
+            if ch.accel <= 0:
+                continue
+            a_start = ch.accel
+            zz = float(ch.z @ ch.z)
+
+            def f(x: np.ndarray, ch: _Channel = ch, zz: float = zz) -> float:
+                tau, a = float(x[0]) * h, float(x[1])
+                if tau < 0 or a <= 0:
+                    return math.inf
+                ch.accel = a
+                return float(_sse(_stats(ch, tau, np.array([pos]), None, 0), zz)[0][0])
+
+            x0 = np.array([tau_hat[c] / h, a_start])
+            f0 = f(x0)
+            simplex = np.vstack([x0, x0 * [1.1, 1.0] + [0.5, 0.0], x0 * [1.0, 1.03]])
+            res = minimize(f, x0, method='Nelder-Mead',
+                           options={'initial_simplex': simplex, 'xatol': 0.05,
+                                    'fatol': 1e-7 * f0 + 1e-12, 'maxfev': 40})
+            if res.fun <= f0 and float(res.x[0]) * h <= max_tau_s:
+                tau_hat[c], ch.accel = float(res.x[0]) * h, float(res.x[1])
+            else:
+                ch.accel = a_start
+        j: Any = 0.0
+        for c, ch in chans.items():
+            j = j + _sse(_stats(ch, tau_hat[c], fine, None, 0),
+                         float(ch.z @ ch.z))[0] / ch.sigma2
+        i = int(np.argmin(j))
+        return float(fine[i]) + _parabola_min(j, i), tau_hat
 
     def channel_sse(c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
         ch = chans[c]
@@ -1041,14 +1149,15 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     # 1. the linear FOPDT
     pos, tau_hat, lat_c = search()
     # 2. acceleration limits: a rate-limited FOPDT where it explains the motion better
-    accel = _choose_limits(chans, pos, tau_hat, max_tau_s, d_max)
+    accel = _choose_limits(make_channels(None, no_limit, hc), pos * h, tau_hat, max_tau_s,
+                           max_latency_s)
     if any(accel.values()):
         chans = make_channels(None, accel)
         pos, tau_hat, lat_c = search()
+        accel = {c: chans[c].accel for c in _CHANNELS}      # polished
     # 3. segments where the base did not follow the commands at all (a stall, a hiccup,
     #    a glitch of the odometry): excluded, and the fit repeated without them
     excluded: list[tuple[float, float]] = []
-    keep: dict[str, np.ndarray] | None = None
     for _ in range(2):
         found = _gross_errors(chans, pos, tau_hat, meas, keep, t_begin, t_end,
                               max(tau_hat.values()))
@@ -1057,6 +1166,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         keep, excluded = found
         chans = make_channels(keep, accel)
         pos, tau_hat, lat_c = search()
+        accel = {c: chans[c].accel for c in _CHANNELS}
     excluded_s = float(sum(b - a for a, b in excluded))
     if excluded:
         spans = ', '.join(f'{a:.2f}-{b:.2f} s' for a, b in excluded[:4])
@@ -1145,7 +1255,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     events = _event_latencies(chans, pos, tau_hat, tc, cmd, t_begin, t_end, excluded)
     if events.size >= MIN_EVENTS:
         e_lo, e_hi = (float(x) for x in np.percentile(events * h, [2.5, 97.5]))
-        rng_lo, rng_hi = min(e_lo, lat_lo), max(e_hi, lat_hi)
+        # two grid steps either side for the sub-step error of one step's fit
+        rng_lo, rng_hi = max(0.0, min(e_lo - 2 * h, lat_lo)), max(e_hi + 2 * h, lat_hi)
         range_from = f'{events.size} command steps (2.5-97.5 %)'
     else:
         rng_lo, rng_hi = lat_lo, lat_hi
@@ -1302,6 +1413,22 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
     if math.isfinite(result.command_age_low_s) and math.isfinite(result.command_age_high_s):
         lines.append(f'  command_age_s: [{_num(max(result.command_age_low_s, 0.0))}, '
                      f'{_num(max(result.command_age_high_s, 0.0))}]')
+    if math.isfinite(result.latency_range_low_s) and math.isfinite(result.latency_range_high_s):
+        lo, hi = result.latency_range_s
+        lines.append(f'  latency_range_s: [{_num(lo)}, {_num(hi)}]   # the range the latency '
+                     'varies over (latency_interval_s: the uncertainty of its mean)')
+        if result.latency_range_from:
+            lines.append(f'  latency_range_from: {_yaml_str(result.latency_range_from)}')
+    lines.append(f'  max_linear_accel: {_num(result.max_linear_accel)}     # m/s^2, 0 = unknown')
+    lines.append(f'  max_angular_accel: {_num(result.max_angular_accel)}    # rad/s^2, 0 = unknown')
+    how = _accel_from(result)
+    if how:
+        lines.append(f'  accel_limits_from: {_yaml_str(how)}')
+    if result.commands_follow_odometry is not None:
+        lines.append('  commands_follow_odometry: '
+                     f'{"true" if result.commands_follow_odometry else "false"}')
+    if result.excluded_s > 0:
+        lines.append(f'  excluded_s: {_num(result.excluded_s)}')
     text = '\n'.join(lines) + '\n'
     read_identification_text(text, str(p))            # never write what cannot be read back
     p.write_text(text)
@@ -1310,7 +1437,32 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
 
 _FIELDS = ('source', 'latency_s', 'latency_interval_s', 'tau_v_s', 'tau_v_interval_s',
            'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz', 'samples', 'residual_rms')
-_OPTIONAL = ('command_period_s', 'command_age_s')
+_OPTIONAL = ('command_period_s', 'command_age_s', 'latency_range_s', 'latency_range_from',
+             'max_linear_accel', 'max_angular_accel', 'accel_limits_from',
+             'commands_follow_odometry', 'excluded_s')
+
+
+def _yaml_str(text: str) -> str:
+    out = yaml.safe_dump(str(text), default_style=None, width=1000).strip()
+    return out[:-3].strip() if out.endswith('...') else out
+
+
+def _accel_from(result: Identification) -> str:
+    parts = []
+    for name, a, frac in (('v', result.max_linear_accel, result.accel_binding_v),
+                          ('w', result.max_angular_accel, result.accel_binding_w)):
+        if a > 0 and math.isfinite(frac):
+            parts.append(f'{name} binding {100 * frac:.0f} %')
+    if not parts:
+        return ''
+    return 'rate-limited FOPDT fit (' + ', '.join(parts) + ' of the fitted time)'
+
+
+def _text(where: str, key: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a string, got '
+                                      f'{value!r}')
+    return value
 
 
 def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
@@ -1382,9 +1534,26 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
             raise IdentificationFileError(f'{where}: {FILE_KEY}.command_age_s must be a list '
                                           f'[low, high] of two numbers, got {a!r}')
         age = _pair(where, 'command_age_s', a, _number(where, 'command_age_s[0]', a[0]))
+    rng = (math.nan, math.nan)
+    if 'latency_range_s' in d:
+        rng = _pair(where, 'latency_range_s', d['latency_range_s'], lat)
+    _text(where, 'accel_limits_from', d.get('accel_limits_from', ''))
+    driven = d.get('commands_follow_odometry')
+    if driven is not None and not isinstance(driven, bool):
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.commands_follow_odometry must be '
+                                      f'true or false, got {driven!r}')
     return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
                           rv, rw, source=d['source'], command_period_s=period,
-                          command_age_low_s=age[0], command_age_high_s=age[1])
+                          command_age_low_s=age[0], command_age_high_s=age[1],
+                          latency_range_low_s=rng[0], latency_range_high_s=rng[1],
+                          latency_range_from=_text(where, 'latency_range_from',
+                                                   d.get('latency_range_from', '')),
+                          max_linear_accel=_number(where, 'max_linear_accel',
+                                                   d.get('max_linear_accel', 0.0)),
+                          max_angular_accel=_number(where, 'max_angular_accel',
+                                                    d.get('max_angular_accel', 0.0)),
+                          commands_follow_odometry=driven,
+                          excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)))
 
 
 def read_identification(path: str | os.PathLike) -> Identification:
