@@ -132,6 +132,8 @@ MIN_ODOM_SAMPLES = 30
 MIN_BLOCKS = 8
 #: A channel's fit must explain at least this fraction of the measured variance.
 MIN_R2 = 0.5
+#: An acceleration limit is identified only if it binds at least this fraction of the time.
+MIN_BINDING = 0.02
 #: Fewest command steps fitted one by one for a measured latency range.
 MIN_EVENTS = 10
 _CHANNELS = ('v', 'w')
@@ -562,8 +564,9 @@ def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[s
     Candidates around a high percentile (99 %) of the measured ``|ds/dt|`` (over 40 ms),
     each fitted over a local grid of latencies (the linear fit's ``pos`` - 0.1 s to
     + 0.03 s: a binding limit makes the linear fit late) and time constants; a limit is
-    kept only if it lowers the residual by at least 5 %; its value is refined by a
-    parabola in ``log a`` through the best candidate and its neighbours.
+    kept only if it lowers the residual by at least 5 % and binds at least
+    :data:`MIN_BINDING` of the time; its value is refined by a parabola in ``log a``
+    through the best candidate and its neighbours.
     """
     out = {}
     for c, ch in chans.items():
@@ -588,11 +591,13 @@ def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[s
                                                    min(max_tau_s, 1.5 * tau_hat[c] + 0.02), 8)])
         factors = 2.0 ** (np.arange(-4, 3) / 3.0)
         cands = np.concatenate([[0.0], a0 * factors])
-        best_sse = np.empty(cands.size)
+        best_sse, best_tau = np.empty(cands.size), np.empty(cands.size)
         for i, a in enumerate(cands):
             sub.accel = float(a)
-            best_sse[i] = min(float(_sse(_stats(sub, tau, shifts, None, 0), zz)[0].min())
-                              for tau in grid)
+            per_tau = [float(_sse(_stats(sub, tau, shifts, None, 0), zz)[0].min())
+                       for tau in grid]
+            k = int(np.argmin(per_tau))
+            best_sse[i], best_tau[i] = per_tau[k], grid[k]
         sub.accel = 0.0
         i = int(np.argmin(best_sse))
         if i == 0 or not best_sse[i] < 0.95 * best_sse[0]:
@@ -601,7 +606,13 @@ def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[s
         la = np.log(cands[1:])
         j = i - 1
         off = _parabola_min(best_sse[1:], j) if 0 < j < la.size - 1 else 0.0
-        out[c] = float(np.exp(la[j] + off * (la[1] - la[0])))
+        a = float(np.exp(la[j] + off * (la[1] - la[0])))
+        # a limit that binds for a moment only (the steepest steps of a plain lag) is not
+        # one: at least MIN_BINDING of the time
+        ch.accel = a
+        binds = _binding_fraction(ch, float(best_tau[i]), 0.0, 0.0, ch.u_avg.size * ch.h)
+        ch.accel = 0.0
+        out[c] = a if binds >= MIN_BINDING else 0.0
     return out
 
 

@@ -19,10 +19,13 @@ do, or at its publish time (``stamp='publish'``), as some drivers do.  No ROS im
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
-from typing import Callable
+from pathlib import Path as FilePath
+from typing import Any, Callable
 
 import numpy as np
+import yaml
 
 from ..errors import InputError
 from .identify import CommandSamples, OdometrySamples
@@ -30,7 +33,8 @@ from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
                    quaternion_to_yaw, step_time, yaw_to_quaternion)
 from .reference import Path
 
-__all__ = ['Recording', 'record_tracking', 'record_open_loop', 'joystick_steps']
+__all__ = ['Recording', 'record_tracking', 'record_open_loop', 'joystick_steps', 'load_cases',
+           'record_case']
 
 
 @dataclass(frozen=True)
@@ -201,3 +205,61 @@ def joystick_steps(duration: float, *, period: float = 0.05, hold: tuple[float, 
         w[i:i + n] = rng.uniform(*w_range)
         i += n
     return t, v, w
+
+
+def load_cases(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
+    """The recording cases of a YAML file (``config/identify_cases.yaml``), by name.
+
+    Each case has ``plant`` (:class:`~control.loop.PlantConfig` fields), ``drive``
+    (a tracker: ``gains`` - a gain file relative to the YAML file - ``dt``,
+    ``max_angular_speed``, ``path``, ``radius``, ``rate``; or a joystick: ``period``,
+    ``hold``, ``v_range``, ``w_range``) and ``title``.
+    """
+    p = FilePath(path)
+    data = yaml.safe_load(p.read_text())
+    cases = data.get('cases') if isinstance(data, dict) else None
+    if not isinstance(cases, dict) or not cases:
+        raise InputError(f'{p}: expected a mapping "cases" of named recordings')
+    out = {}
+    for name, spec in cases.items():
+        if not isinstance(spec, dict) or not {'plant', 'drive'} <= set(spec):
+            raise InputError(f'{p}: case {name!r} needs "plant" and "drive"')
+        spec = dict(spec)
+        drive = dict(spec['drive'])
+        if 'gains' in drive:
+            drive['gains'] = str(p.parent / drive['gains'])
+        spec['drive'] = drive
+        spec['name'] = str(name)
+        out[str(name)] = spec
+    return out
+
+
+def record_case(spec: dict[str, Any], *, seed: int = 1, duration: float = 30.0) -> Recording:
+    """Record one case of :func:`load_cases` (``seed``: odometry noise, jitter, joystick).
+
+    Parameters
+    ----------
+    spec : dict
+        A case (``plant``, ``drive``).
+    seed : int
+        Seed of the noise, the latency jitter and the joystick levels.
+    duration : float
+        Seconds recorded.
+    """
+    from .gains import read_gain_file
+    from .reference import make_path
+    plant_kw = dict(spec['plant'])
+    plant_kw['stalls'] = tuple(tuple(s) for s in plant_kw.get('stalls', ()))
+    if 'odom_noise' in plant_kw:
+        plant_kw['odom_noise'] = tuple(plant_kw['odom_noise'])
+    plant = PlantConfig(noise_seed=seed, **plant_kw)
+    d = spec['drive']
+    if 'gains' in d:
+        tracker = TrackerConfig(K=read_gain_file(d['gains']), dt=d['dt'],
+                                max_angular_speed=d.get('max_angular_speed', 2.0))
+        path = make_path(d['path'], radius=d['radius'], rate=d['rate'])
+        return record_tracking(plant, tracker, path, duration)
+    t, v, w = joystick_steps(duration, period=d['period'], hold=tuple(d['hold']),
+                             v_range=tuple(d['v_range']), w_range=tuple(d['w_range']),
+                             seed=seed)
+    return record_open_loop(plant, t, v, w)
