@@ -381,7 +381,9 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
         (the residual delay) or for the uncompensated law (the whole delay).
     command_period : float, optional
         The tracker's command period ``T`` (s); default: the identification's
-        ``command_period_s``.  Required when the identification has none.
+        ``command_period_s``, or the odometry period when the recorded commands were not
+        driven by the odometry (a joystick's period is not the tracker's, which commands
+        once per odometry message).  Required when the identification has neither.
 
     Returns
     -------
@@ -395,6 +397,10 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
         No command period known, or a bad one.
     """
     T = ident.command_period_s if command_period is None else command_period
+    if command_period is None and ident.commands_follow_odometry is False \
+            and math.isfinite(ident.odom_rate_hz) and ident.odom_rate_hz > 0:
+        # a joystick's period is not the tracker's; the tracker commands once per odometry
+        T = 1.0 / ident.odom_rate_hz
     if T is None or not math.isfinite(float(T)):
         raise InputError('the identification has no command_period_s (an older file or '
                          'another tool wrote it); pass the tracker\'s command period, e.g. '
