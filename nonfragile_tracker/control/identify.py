@@ -717,8 +717,10 @@ def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, flo
 
 
 def _spans_of(meas: dict, keep: dict[str, np.ndarray]) -> list[tuple[float, float]]:
-    """Time spans (between kept samples) that hold excluded samples, from the first channel
-    with point or window measurements."""
+    """Time spans (between kept samples) that hold excluded samples.
+
+    From the first channel (both channels exclude the same spans).
+    """
     out: list[tuple[float, float]] = []
     for c in _CHANNELS:
         tm = meas[c][4]
@@ -935,8 +937,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     o = odometry
     order = _check_times('odometry t', o.t)
     to = o.t[order]
-    keep = np.concatenate([[True], np.diff(to) > 0])     # repeated stamps: keep the first
-    idx = order[keep]
+    first = np.concatenate([[True], np.diff(to) > 0])    # repeated stamps: keep the first
+    idx = order[first]
     to = o.t[idx]
     x, y, yaw = o.x[idx], o.y[idx], o.yaw[idx]
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(yaw))):
@@ -1147,9 +1149,12 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     def polish_limited(pos: float, tau0: dict[str, float], fine: np.ndarray
                        ) -> tuple[float, dict[str, float]]:
-        """Rate-limited channels: (tau, limit) polished per channel at the latency, then
-        the latency again on the fine grid (each simulation of the nonlinear model costs
-        a pass over the grid, so the channels are polished one by one)."""
+        """Rate-limited channels: (tau, limit) polished per channel, then the latency.
+
+        Each channel at the latency found (each simulation of the nonlinear model costs
+        a pass over the grid, so the channels are polished one by one), then the latency
+        again on the fine grid.
+        """
         from scipy.optimize import minimize
         tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
         for c, ch in chans.items():

@@ -320,8 +320,10 @@ class LatencyPlan:
         return {k: float(getattr(self, k)) for k in keys}
 
     def actuator_parameters(self) -> dict[str, float]:
-        """The tracker's acceleration limits (``max_linear_accel`` in m/s^2,
-        ``max_angular_accel`` in rad/s^2; 0 = unknown), with or without the predictor."""
+        """The tracker's acceleration limits, with or without the predictor.
+
+        ``max_linear_accel`` in m/s^2, ``max_angular_accel`` in rad/s^2; 0 = unknown.
+        """
         return {'max_linear_accel': float(self.max_linear_accel),
                 'max_angular_accel': float(self.max_angular_accel)}
 
