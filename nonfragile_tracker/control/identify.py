@@ -134,6 +134,9 @@ MIN_BLOCKS = 8
 MIN_R2 = 0.5
 #: An acceleration limit is identified only if it binds at least this fraction of the time.
 MIN_BINDING = 0.02
+#: A spread of the step latencies (2.5-97.5 %) above this (s) is jitter: the lags are
+#: then refitted with every step at the time it acted.
+JITTER_REFIT_S = 0.005
 #: Fewest command steps fitted one by one for a measured latency range.
 MIN_EVENTS = 10
 _CHANNELS = ('v', 'w')
@@ -743,8 +746,12 @@ def _spans_of(meas: dict, keep: dict[str, np.ndarray]) -> list[tuple[float, floa
 
 def _event_latencies(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float],
                      tc: np.ndarray, cmd: dict[str, np.ndarray], t_begin: float,
-                     t_end: float, excluded: list[tuple[float, float]]) -> np.ndarray:
+                     t_end: float, excluded: list[tuple[float, float]]
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The latency (grid positions) of each distinct command step, fitted one by one.
+
+    Returns the latencies and, per step, the index of its command and of the next step's
+    (the commands ``first[k]:last[k]`` act with latency ``k``).
 
     A step is a command change of at least 20 % of the channel's 5-95 % range, at least
     max(0.15 s, 4 time constants) after the previous one; its latency minimizes the
@@ -772,7 +779,9 @@ def _event_latencies(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, 
     any_step = np.flatnonzero(sig['v'] | sig['w'])
     settle = max(0.15, 4 * max(tau_hat.values()))
     lat = pos * h
-    out = []
+    out: list[float] = []
+    first: list[int] = []
+    last: list[int] = []
     for n, i in enumerate(any_step):
         t_i = tc[i]
         if n > 0 and t_i - tc[any_step[n - 1]] < settle:
@@ -797,7 +806,9 @@ def _event_latencies(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, 
         if k == 0 or k == shifts.size - 1:
             continue
         out.append(float(shifts[k]) + _parabola_min(total, k))
-    return np.array(out)
+        first.append(int(i))
+        last.append(int(any_step[n + 1]) if n + 1 < any_step.size else tc.size)
+    return np.array(out), np.array(first, dtype=np.int64), np.array(last, dtype=np.int64)
 
 
 def _poor_fit_cause(c: str, r2: float, source: str, ch: _Channel, u: np.ndarray, accel: float,
@@ -1046,7 +1057,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     d_max = int(round(max_latency_s / h))
     taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
     step = max(1, int(round(0.01 / h)))
-    coarse = np.arange(0, d_max + 1, step, dtype=float)
+    coarse_all = np.arange(0, d_max + 1, step, dtype=float)
 
     def around(centre: float, half: int = 3 * step) -> np.ndarray:
         return np.arange(max(0, centre - half), min(d_max, centre + half) + 1, dtype=float)
@@ -1095,12 +1106,16 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             tau_hat[c] = float(g[k] + _parabola_min(row, k) * (g[1] - g[0]))
         return pos, tau_hat, lat_c, j
 
-    def search() -> tuple[float, dict[str, float], dict[str, float]]:
+    def search(near: float | None = None) -> tuple[float, dict[str, float], dict[str, float]]:
         """Coarse, fine and polished fit of (latency, tau_v, tau_w) on ``chans``.
 
         Sets each channel's noise variance (``sigma2``); returns (latency grid position,
-        time constants, each channel's own latency position).
+        time constants, each channel's own latency position).  With ``near`` (a grid
+        position: a refit after a change of the model) the coarse grid spans +-0.1 s
+        around it only.
         """
+        coarse = coarse_all if near is None else \
+            coarse_all[np.abs(coarse_all - near) <= 0.1 / h + step]
         # coarse: 10 ms steps, at most ~1500 samples per channel
         sse_c = {}
         rough = (make_channels(keep, {c: chans[c].accel for c in _CHANNELS}, hc)
@@ -1208,13 +1223,13 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                          f'{100 * frac:.0f} % of the time); modelled by clipping the commands')
         coarse_inputs.clear()
         chans = make_channels(None, no_limit)
-        pos, tau_hat, lat_c = search()
+        pos, tau_hat, lat_c = search(pos)
     # 2. acceleration limits: a rate-limited FOPDT where it explains the motion better
     accel = _choose_limits(make_channels(None, no_limit, hc), pos * h, tau_hat, max_tau_s,
                            max_latency_s)
     if any(accel.values()):
         chans = make_channels(None, accel)
-        pos, tau_hat, lat_c = search()
+        pos, tau_hat, lat_c = search(pos)
         accel = {c: chans[c].accel for c in _CHANNELS}      # polished
     # 3. segments where the base did not follow the commands at all (a stall, a hiccup,
     #    a glitch of the odometry): excluded, and the fit repeated without them
@@ -1226,7 +1241,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             break
         keep, excluded = found
         chans = make_channels(keep, accel)
-        pos, tau_hat, lat_c = search()
+        pos, tau_hat, lat_c = search(pos)
         accel = {c: chans[c].accel for c in _CHANNELS}
     excluded_s = float(sum(b - a for a, b in excluded))
     if excluded:
@@ -1235,6 +1250,27 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         notes.append(f'excluded {excluded_s:.2f} s where the motion did not follow the commands '
                      f'at all ({spans}{more}): a stall or hiccup of the base, slipping wheels or '
                      'an odometry glitch; the fit uses the rest')
+    # 4. latency jitter: each distinct command step timed on its own; when they spread,
+    #    the commands are moved to the times they acted and the lags fitted again (a
+    #    single delay would take the smear of the jitter for lag)
+    events, ev_first, ev_last = _event_latencies(chans, pos, tau_hat, tc, cmd, t_begin, t_end,
+                                                 excluded)
+    if events.size >= MIN_EVENTS:
+        e_lo, e_hi = np.percentile(events, [2.5, 97.5])
+        if (e_hi - e_lo) * h > JITTER_REFIT_S:
+            shift = np.zeros(tc.size)
+            for p_k, a_k, b_k in zip(events, ev_first, ev_last):
+                shift[a_k:b_k] = (p_k - pos) * h
+            tcw = np.maximum.accumulate(tc + shift)
+            for c in _CHANNELS:
+                u_grid[c] = np.diff(_held_integral(tcw, cmd[c], s, command_timeout_s)) / h
+            coarse_inputs.clear()
+            chans = make_channels(keep, accel)
+            pos, tau_hat, lat_c = search(pos)
+            accel = {c: chans[c].accel for c in _CHANNELS}
+            notes.append(f'the latency jitters ({events.size} command steps over '
+                         f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with each '
+                         'step moved to the time it acted')
     latency = pos * h
     gains, resid, r2 = {}, {}, {}
     for c, ch in chans.items():
@@ -1313,7 +1349,6 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                      f'w {lat_c["w"] * h:.4f} s)')
 
     # -- the range the latency varies over: one latency per distinct command step
-    events = _event_latencies(chans, pos, tau_hat, tc, cmd, t_begin, t_end, excluded)
     if events.size >= MIN_EVENTS:
         e_lo, e_hi = (float(x) for x in np.percentile(events * h, [2.5, 97.5]))
         # two grid steps either side for the sub-step error of one step's fit

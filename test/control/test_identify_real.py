@@ -143,6 +143,21 @@ def test_publish_time_stamps_put_the_transport_into_the_latency():
     assert_lags(res, truth('ii'))
 
 
+def test_odometry_gaps_are_bridged(identified):
+    """1 s without odometry twice (a driver that hangs): the latency and lags stay right,
+    from the twist and from the poses alone (windows across a gap integrate the model
+    over the gap)."""
+    rec, _ = identified['ii']
+    o = rec.odometry
+    ok = ~(((o.t > 8.0) & (o.t < 9.0)) | ((o.t > 17.0) & (o.t < 18.0)))
+    for twist in (True, False):
+        odom = OdometrySamples(o.t[ok], o.x[ok], o.y[ok], o.yaw[ok],
+                               o.v[ok] if twist else None, o.w[ok] if twist else None)
+        res = identify_latency(rec.commands, odom, bootstrap=50)
+        assert abs(res.latency_s - 0.12) <= DT
+        assert_lags(res, truth('ii'))
+
+
 def test_commands_follow_odometry():
     to = np.arange(0.0, 10.0, 0.02)
     odom = OdometrySamples(to, to, to, to)
