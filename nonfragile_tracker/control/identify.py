@@ -137,6 +137,9 @@ MIN_BINDING = 0.02
 #: A spread of the step latencies (2.5-97.5 %) above this (s) is jitter: the lags are
 #: then refitted with every step at the time it acted.
 JITTER_REFIT_S = 0.005
+#: ... and kept only if it lowers the normalized residual below this fraction of the
+#: one-delay fit's (a spread from noise does not).
+JITTER_GAIN = 0.8
 #: Fewest command steps fitted one by one for a measured latency range.
 MIN_EVENTS = 10
 _CHANNELS = ('v', 'w')
@@ -1262,15 +1265,27 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             for p_k, a_k, b_k in zip(events, ev_first, ev_last):
                 shift[a_k:b_k] = (p_k - pos) * h
             tcw = np.maximum.accumulate(tc + shift)
+            before = (dict(u_grid), chans, pos, tau_hat, lat_c, accel)
+            j_before = objective(np.array([pos, tau_hat['v'] / h, tau_hat['w'] / h]))
             for c in _CHANNELS:
                 u_grid[c] = np.diff(_held_integral(tcw, cmd[c], s, command_timeout_s)) / h
+                if c in clips:
+                    u_grid[c] = np.clip(u_grid[c], clips[c][0], clips[c][1])
             coarse_inputs.clear()
+            sig_before = {c: ch.sigma2 for c, ch in chans.items()}
             chans = make_channels(keep, accel)
             pos, tau_hat, lat_c = search(pos)
             accel = {c: chans[c].accel for c in _CHANNELS}
-            notes.append(f'the latency jitters ({events.size} command steps over '
-                         f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with each '
-                         'step moved to the time it acted')
+            j_after = sum(float(channel_sse(c, pos, tau_hat[c])[0][0]) / sig_before[c]
+                          for c in _CHANNELS)
+            if j_after < JITTER_GAIN * j_before:
+                notes.append(f'the latency jitters ({events.size} command steps over '
+                             f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with '
+                             'each step moved to the time it acted')
+            else:                   # the steps' spread is noise: keep the one-delay fit
+                u_grid.update(before[0])
+                coarse_inputs.clear()
+                chans, pos, tau_hat, lat_c, accel = before[1:]
     latency = pos * h
     gains, resid, r2 = {}, {}, {}
     for c, ch in chans.items():
