@@ -48,7 +48,8 @@ def truth(name: str) -> dict:
 
 @pytest.fixture(scope='module')
 def identified():
-    """Each case recorded (30 s, seed 1) and identified once (bootstrap 50)."""
+    """Each case recorded (30 s, seed 1) and identified once (bootstrap 50): about 20 s of
+    CPU, so the tests that use it are marked slow (they run in the full suite)."""
     out = {}
     for name in ('i', 'i_cycle', 'ii', 'iii', 'iv'):
         rec = record_case(CASES[name], seed=1, duration=30.0)
@@ -62,6 +63,7 @@ def assert_lags(res, t):
 
 
 @pytest.mark.parametrize('name', ['i', 'i_cycle', 'ii', 'iii'])
+@pytest.mark.slow
 def test_latency_within_one_step_and_lags_within_20_percent(identified, name):
     rec, res = identified[name]
     t = truth(name)
@@ -72,6 +74,7 @@ def test_latency_within_one_step_and_lags_within_20_percent(identified, name):
     assert 0.95 < res.gain_v < 1.05 and 0.95 < res.gain_w < 1.05
 
 
+@pytest.mark.slow
 def test_the_default_tracker_in_its_limit_cycle(identified):
     """|w| pinned at 2 rad/s, 3 rad/s^2 binding most of the time: the rate-limited fit
     finds the limit and the 50 ms lag (d11fc49: tau_w 0.73 s, gain 1.31, no warning)."""
@@ -84,6 +87,7 @@ def test_the_default_tracker_in_its_limit_cycle(identified):
     assert any('angular acceleration limit' in n for n in res.notes)
 
 
+@pytest.mark.slow
 def test_joystick_steps_with_the_limits_binding(identified):
     """Limits binding 35-40 % (d11fc49: L 0.143 s, tau 0.25 / 0.27 s, R^2 0.93 / 0.94)."""
     rec, res = identified['ii']
@@ -96,6 +100,7 @@ def test_joystick_steps_with_the_limits_binding(identified):
     assert math.isnan(res.command_age_low_s) and math.isnan(res.command_age_high_s)
 
 
+@pytest.mark.slow
 def test_a_stall_is_excluded_and_named(identified):
     """A 0.33 s stall at 3 s (d11fc49: L 0.078 s, tau 0.26 / 0.22 s, no warning)."""
     _, res = identified['iii']
@@ -106,6 +111,7 @@ def test_a_stall_is_excluded_and_named(identified):
     assert lo <= 3.0 + res.latency_s and hi >= 3.33 + res.latency_s
 
 
+@pytest.mark.slow
 def test_jitter_range_and_interval_are_different_figures(identified):
     """Latency uniform in [0.12, 0.15] s: the RANGE contains it within one step; the
     interval of the MEAN is narrower and lies inside (d11fc49: [0.156, 0.184], read as
@@ -123,6 +129,7 @@ def test_jitter_range_and_interval_are_different_figures(identified):
     assert_lags(res, truth('iv'))
 
 
+@pytest.mark.slow
 def test_range_without_steps_is_the_interval_and_says_so(identified):
     """The tracker's commands change every period: no distinct steps to time one by one."""
     _, res = identified['i']
@@ -143,6 +150,7 @@ def test_publish_time_stamps_put_the_transport_into_the_latency():
     assert_lags(res, truth('ii'))
 
 
+@pytest.mark.slow
 def test_odometry_gaps_are_bridged(identified):
     """1 s without odometry twice (a driver that hangs): the latency and lags stay right,
     from the twist and from the poses alone (windows across a gap integrate the model
@@ -168,6 +176,7 @@ def test_commands_follow_odometry():
     assert commands_follow_odometry(CommandSamples([1.0], [0.0], [0.0]), odom) is None
 
 
+@pytest.mark.slow
 def test_file_carries_range_limits_and_driver(identified, tmp_path):
     _, res = identified['iv']
     back = read_identification(write_identification(tmp_path / 'lat.yaml', res))
@@ -178,6 +187,7 @@ def test_file_carries_range_limits_and_driver(identified, tmp_path):
     assert 'rate-limited FOPDT' in (tmp_path / 'lat.yaml').read_text()
 
 
+@pytest.mark.slow
 def test_plan_certifies_the_range_and_passes_the_limits(identified):
     _, res = identified['iv']
     plan = plan_from_identification(res, command_period=0.02)
@@ -192,6 +202,7 @@ def test_plan_certifies_the_range_and_passes_the_limits(identified):
     assert (bare.h_min, bare.h_max) == pytest.approx((lo, hi + 0.02))
 
 
+@pytest.mark.slow
 def test_planned_design_under_jitter_stays_inside_its_certificate(identified):
     """The plan from the jittered recording, run on the jittered base: every command's
     residual delay (actual latency - predicted, plus the hold of one period) lies in the
