@@ -515,15 +515,18 @@ def _rate_limited_response(u: np.ndarray, h: float, tau: float, accel: float) ->
 
     Exact (the closed form of :func:`.actuator.first_order_step`: a ramp at ``accel``
     while ``|u - s| > accel tau``, then the exponential approach).  The state is carried
-    in Python from one run of equal inputs to the next; the values inside the runs are
-    filled in by numpy.
+    in Python from one run of equal inputs (to 1e-9 relative) to the next; the values
+    inside the runs are filled in by numpy.
     """
     n = u.size
     out = np.empty(n + 1)
     out[0] = 0.0
     if n == 0:
         return out
-    starts = np.concatenate([[0], np.flatnonzero(u[1:] != u[:-1]) + 1])
+    # runs of equal inputs: cell averages of one held command differ by round-off only
+    # (differences of a cumulative integral), so equal means within 1e-9 relative
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(u))))
+    starts = np.concatenate([[0], np.flatnonzero(np.abs(np.diff(u)) > tol) + 1])
     lens = np.diff(np.append(starts, n))
     cs = u[starts]
     runs = starts.size
