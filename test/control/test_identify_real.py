@@ -257,3 +257,27 @@ def test_refusal_of_unrelated_odometry_names_it_without_harmful_advice():
     msg = str(err.value)
     assert 'max_tau' not in msg and 'raise' not in msg
     assert 'does not respond to these commands' in msg
+
+
+def test_plant_jitter_and_stalls():
+    """The plant's latency jitter (whole steps in [L, L + J], commands in order) and stalls
+    (commands ignored, braking at the limits); the batch simulation refuses both."""
+    from nonfragile_tracker.control.batch import BatchError, simulate_batch
+    from nonfragile_tracker.control.loop import LoopConfigError
+    rec = record_case(CASES['iv'], seed=4, duration=10.0)
+    lat = np.round(rec.latencies / DT).astype(int)
+    assert set(lat) == {12, 13, 14, 15}
+    assert np.all(np.diff(rec.act_steps) >= 0)
+    stall = record_case(CASES['iii'], seed=1, duration=6.0)
+    o = stall.odometry
+    # the ramp (1 m/s^2, 3 rad/s^2) then the 50 ms lag bring it near rest by the stall's end
+    during = (o.t > 3.25) & (o.t < 3.33)
+    assert np.all(np.abs(o.v[during]) < 1e-3) and np.all(np.abs(o.w[during]) < 1e-3)
+    after = (o.t > 3.6) & (o.t < 4.0)
+    assert np.max(np.abs(o.v[after])) > 0.05       # it drives again
+    with pytest.raises(LoopConfigError, match='stalls'):
+        PlantConfig(stalls=[[1.0, -0.1]])
+    with pytest.raises(BatchError, match='jitter or stalls'):
+        simulate_batch(PlantConfig(cmd_latency_jitter=0.02),
+                       TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml')),
+                       figure_eight(), 10)
