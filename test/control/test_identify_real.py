@@ -281,3 +281,21 @@ def test_plant_jitter_and_stalls():
         simulate_batch(PlantConfig(cmd_latency_jitter=0.02),
                        TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml')),
                        figure_eight(), 10)
+
+
+def test_an_older_identification_file_still_reads_and_plans(tmp_path):
+    """The format of issue 11 (no range, limits or driver): range = interval, limits 0."""
+    f = tmp_path / 'old.yaml'
+    f.write_text('identification:\n  source: runs/x/bag\n  latency_s: 0.1\n'
+                 '  latency_interval_s: [0.098, 0.102]\n  tau_v_s: 0.05\n'
+                 '  tau_v_interval_s: [0.048, 0.052]\n  tau_w_s: 0.05\n'
+                 '  tau_w_interval_s: [0.047, 0.052]\n  odom_rate_hz: 50\n  samples: 1451\n'
+                 '  residual_rms: {v: 1.0e-9, w: 3.0e-8}\n  command_period_s: 0.02\n'
+                 '  command_age_s: [0, 0]\n')
+    old = read_identification(f)
+    assert old.latency_range_s == (0.098, 0.102)
+    assert (old.max_linear_accel, old.max_angular_accel) == (0.0, 0.0)
+    assert old.commands_follow_odometry is None
+    plan = plan_from_identification(old)
+    assert (plan.predict_latency, plan.h_max) == pytest.approx((0.098, 0.004 + 0.02))
+    assert plan.actuator_parameters() == {'max_linear_accel': 0.0, 'max_angular_accel': 0.0}
