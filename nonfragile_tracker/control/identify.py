@@ -51,7 +51,10 @@ What real recordings contain, and what is done about it:
   that would exclude more than 30 % - then the model is wrong and the fit figures say so);
 * latency jitter: after the fit, each distinct command step's latency is fitted on its
   own (:func:`_event_latencies`); their 2.5-97.5 % range, widened by two grid steps and
-  joined with the interval of the mean, is ``latency_range_s``;
+  joined with the interval of the mean, is ``latency_range_s``; when the steps spread
+  by more than 5 ms the commands are moved to the times their steps acted and the lags
+  fitted again (kept if that explains the motion clearly better: a single delay would
+  take the smear of the jitter for lag);
 * commands not driven by the odometry (a joystick): detected by
   :func:`commands_follow_odometry`; their odometry age is then not recorded (it is not
   the tracker's);
