@@ -36,6 +36,7 @@ from sections.batch_study import bench_batch, worker_batch  # noqa: E402
 from sections.delay import bench_delay, worker_roots  # noqa: E402
 from sections.delay_tdcpy import bench_tdcpy, worker_tdcpy  # noqa: E402
 from sections.fleet import bench_fleet  # noqa: E402
+from sections.identify import bench_identify  # noqa: E402
 from sections.lockstep import bench_lockstep  # noqa: E402
 from sections.quality import bench_quality  # noqa: E402
 from sections.realtime import bench_realtime  # noqa: E402
@@ -45,7 +46,7 @@ from sections.simulation import bench_simulation  # noqa: E402
 from sections.synthesis import bench_synthesis, worker_cold, worker_growth  # noqa: E402
 
 SECTIONS = ('synthesis', 'scaling', 'delay', 'tdcpy', 'simulation', 'batch', 'lockstep',
-            'realtime', 'recorder', 'quality', 'fleet')
+            'realtime', 'recorder', 'quality', 'identify', 'fleet')
 
 
 def cpu_seconds() -> float:
@@ -113,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                  ('realtime', lambda: bench_realtime(cfg, table, raw, domain, tmp)),
                  ('recorder', lambda: bench_recorder(cfg, table, raw, domain, tmp)),
                  ('quality', lambda: bench_quality(cfg, table, raw)),
+                 ('identify', lambda: bench_identify(cfg, table, raw)),
                  ('fleet', lambda: bench_fleet(cfg, table, raw, domain, tmp))]
         for name, fn in steps:
             if name not in only:

@@ -118,8 +118,9 @@ def test_identification_of_the_simulated_run(recorded):
     assert back.command_period_s == pytest.approx(0.02)
     assert (back.command_age_low_s, back.command_age_high_s) == (0.0, 0.0)
     plan = plan_from_identification(back)
-    assert plan.h_max == pytest.approx(back.latency_high_s - back.latency_low_s + 0.02,
-                                       rel=1e-5)
+    lo, hi = back.latency_range_s            # the range (contains the interval of the mean)
+    assert lo <= back.latency_low_s and hi >= back.latency_high_s
+    assert plan.predict_latency == lo and plan.h_max == pytest.approx(hi - lo + 0.02, rel=1e-5)
     assert 0.02 <= plan.h_max < 0.03 and abs(plan.predict_latency - LATENCY) <= DT
 
 
@@ -158,8 +159,10 @@ def test_cli_design_from_identification_records_it(tmp_path, capsys):
     """latency-design --identification: interval by the rule, predictor in the gain file."""
     prob = tmp_path / 'di.yaml'
     prob.write_text(DI_PROBLEM)
-    lat = write_identification(tmp_path / 'lat.yaml', ident(lo=0.09, hi=0.1, period=0.02,
-                                                            age=(0.0, 0.0)))
+    from dataclasses import replace
+    lat = write_identification(tmp_path / 'lat.yaml', replace(
+        ident(lo=0.09, hi=0.1, period=0.02, age=(0.0, 0.0)), max_linear_accel=1.0,
+        max_angular_accel=3.0))
     out = tmp_path / 'g.yaml'
     assert main(['latency-design', str(prob), '--identification', str(lat),
                  '-o', str(out)]) == 0
@@ -174,6 +177,10 @@ def test_cli_design_from_identification_records_it(tmp_path, capsys):
     assert {k: params[k] for k in PREDICTOR_KEYS} == pytest.approx(
         {'predict_latency': 0.09, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.05,
          'predict_lag_w': 0.06})
+    # the identified acceleration limits go to the tracker section and the design record
+    assert (params['max_linear_accel'], params['max_angular_accel']) == (1.0, 3.0)
+    assert (rec['max_linear_accel'], rec['max_angular_accel']) == (1.0, 3.0)
+    assert rec['identified_latency_range'] == pytest.approx([0.09, 0.1])
     assert DESIGN_SECTION in yaml.safe_load(out.read_text())
     assert read_gain_file(out).shape == (1, 2)
     # without the predictor: the whole delay, and the gain file switches the predictor off
@@ -183,6 +190,7 @@ def test_cli_design_from_identification_records_it(tmp_path, capsys):
     assert read_gain_design(out2)['latency_interval'] == pytest.approx([0.09, 0.12])
     params = yaml.safe_load(out2.read_text())['/**/tracker']['ros__parameters']
     assert [params[k] for k in PREDICTOR_KEYS] == [0.0] * 4
+    assert (params['max_linear_accel'], params['max_angular_accel']) == (1.0, 3.0)
 
 
 @pytest.mark.parametrize('argv, match', [

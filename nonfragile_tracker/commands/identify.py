@@ -35,7 +35,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f'odometry {data.odom_topic} ({res.odom_rate_hz:.4g} Hz by {data.odom_time}, '
         f'{res.samples} samples fitted over {res.duration_s:.1f} s)',
         f'latency  L     = {res.latency_s:.4f} s   {pct} interval '
-        f'{_fmt_interval(res.latency_low_s, res.latency_high_s)} s',
+        f'{_fmt_interval(res.latency_low_s, res.latency_high_s)} s   (uncertainty of the '
+        'mean latency)',
+        f'latency range    {_fmt_interval(*res.latency_range_s)} s   (what the latency varies '
+        f'over, from {res.latency_range_from}; latency-design certifies this range)',
         f'lag of v tau_v = {res.tau_v_s:.4f} s   {pct} interval '
         f'{_fmt_interval(res.tau_v_low_s, res.tau_v_high_s)} s   (from {src[res.source_v]}; '
         f'gain {res.gain_v:.3f}, residual rms {res.residual_rms_v:.3g} m/s, '
@@ -45,7 +48,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f'gain {res.gain_w:.3f}, residual rms {res.residual_rms_w:.3g} rad/s, '
         f'explains {100 * res.r2_w:.1f} %)',
         f'each channel alone: latency {res.latency_v_s:.4f} s (v), {res.latency_w_s:.4f} s (w)',
+        _limits_line(res),
     ]
+    if res.commands_follow_odometry is not None:
+        lines.append('commands: ' + ('computed from the odometry (a tracker)'
+                                     if res.commands_follow_odometry else
+                                     'not driven by the odometry (a joystick or script): '
+                                     'their odometry age is not counted'))
     mc_delay = measurement_to_command_delay(data.commands, data.odometry)
     if math.isfinite(mc_delay[1]):
         lines.append(f'age of the newest odometry when a command is sent: median '
@@ -71,15 +80,28 @@ def cmd_identify(args: argparse.Namespace) -> int:
         bare = plan_from_identification(res, predictor=False)
         out = args.output or 'FILE'
         print('next: gains certified for the residual delay after the tracker\'s predictor '
-              '(docs: tutorial, "From the interval to h_min, h_max"):\n'
+              '(docs: tutorial, "From the range to h_min, h_max"):\n'
               f'  nonfragile_tracker latency-design PROBLEM --identification {out} -o g.yaml\n'
               f'  = --delay-interval {plan.h_min:.4f} {plan.h_max:.4f} --lag {plan.lag:.4f} '
               f'with predict_latency {plan.predict_latency:.4f}, predict_odom_latency '
               f'{plan.predict_odom_latency:.4f}, predict_lag_v {plan.predict_lag_v:.4f}, '
-              f'predict_lag_w {plan.predict_lag_w:.4f} (written into g.yaml)\n'
+              f'predict_lag_w {plan.predict_lag_w:.4f}, max_linear_accel '
+              f'{plan.max_linear_accel:.4g}, max_angular_accel {plan.max_angular_accel:.4g} '
+              '(written into g.yaml)\n'
               f'  without the predictor (--no-predictor): --delay-interval {bare.h_min:.4f} '
               f'{bare.h_max:.4f} --lag {bare.lag:.4f}')
     return 0
+
+
+def _limits_line(res) -> str:
+    parts = []
+    for name, a, frac, unit in (('max_linear_accel', res.max_linear_accel, res.accel_binding_v,
+                                 'm/s^2'),
+                                ('max_angular_accel', res.max_angular_accel,
+                                 res.accel_binding_w, 'rad/s^2')):
+        parts.append(f'{name} {a:.3g} {unit} (binding {100 * frac:.0f} % of the time)'
+                     if a > 0 else f'{name} 0 (no limit seen to bind: unknown)')
+    return 'acceleration limits: ' + ', '.join(parts)
 
 
 def _cross_check(args: argparse.Namespace, data, res) -> list[str]:

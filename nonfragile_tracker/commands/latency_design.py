@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
         print(plan.describe())
         h_min, h_max = plan.h_min, plan.h_max
         lag = plan.lag if args.lag is None else args.lag
-        extra = plan.tracker_parameters()
+        extra = {**plan.tracker_parameters(), **plan.actuator_parameters()}
         record = plan.metadata()
     else:
         h_min, h_max = args.delay_interval
@@ -76,7 +76,7 @@ def register(subparsers) -> None:
                    metavar=('H_MIN', 'H_MAX'), help='latency interval in seconds')
     p.add_argument('--identification', metavar='FILE',
                    help='identification file from `identify BAG -o FILE`: the interval, lag '
-                   'and predictor settings follow the docs\' "From the interval to h_min, h_max" '
+                   'and predictor settings follow the docs\' "From the range to h_min, h_max" '
                    '(instead of --delay-interval); the gain file then sets the predictor')
     p.add_argument('--no-predictor', action='store_true',
                    help='with --identification: design for the uncompensated law (the whole '

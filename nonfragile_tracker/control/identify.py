@@ -38,11 +38,37 @@ point estimate.  It covers noise and serially correlated model error; it does no
 cover a systematic convention offset (e.g. a base that stamps odometry at publish
 time: that transport delay is then part of ``L``).
 
+What real recordings contain, and what is done about it:
+
+* acceleration limits: where a rate-limited FOPDT (``s' = sat((u - s) / tau, a)``,
+  the plant's actuator) explains a channel at least 5 % better than the linear one,
+  its limit ``a`` is fitted with the lag (candidates around the 99th percentile of the
+  measured ``|ds/dt|``, then polished with ``tau``) and reported (``max_linear_accel``,
+  ``max_angular_accel``; 0 when no limit binds) with the fraction of time it binds;
+* stalls, hiccups and glitches: samples whose residual is gross (above 6 robust
+  standard deviations and a quarter of the channel's spread) are excluded with
+  0.2 s + 3 time constants either side, and the fit repeated (at most twice; not when
+  that would exclude more than 30 % - then the model is wrong and the fit figures say so);
+* latency jitter: after the fit, each distinct command step's latency is fitted on its
+  own (:func:`_event_latencies`); their 2.5-97.5 % range, widened by two grid steps and
+  joined with the interval of the mean, is ``latency_range_s``; when the steps spread
+  by more than 5 ms the commands are moved to the times their steps acted and the lags
+  fitted again (kept if that explains the motion clearly better: a single delay would
+  take the smear of the jitter for lag);
+* commands not driven by the odometry (a joystick): detected by
+  :func:`commands_follow_odometry`; their odometry age is then not recorded (it is not
+  the tracker's);
+* odometry stamped at publish time: its transport delay becomes part of ``L``; the sum
+  from the measurement stamp to the motion, which the predictor uses, stays right.
+
 Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
 too few samples or too short an overlap of commands and odometry
 (:class:`NotEnoughDataError`), a channel whose command hardly varies
 (:class:`InsufficientExcitationError`), a model that explains less than half of the
-measured variation or an estimate at a search limit (:class:`PoorFitError`).
+measured variation or an estimate at a search limit (:class:`PoorFitError`, whose
+message names the likely cause: a base that does not reach the commanded speeds, an
+odometry unrelated to the commands, or a response that is not a lag; it never advises
+widening a search limit that would only fit a wrong model).
 
 The file the latency-aware design reads (:func:`write_identification`,
 :func:`read_identification`)::
@@ -60,7 +86,21 @@ The file the latency-aware design reads (:func:`write_identification`,
       residual_rms: {v: 0.0012, w: 0.0031}
       command_period_s: 0.02          # optional: median period of the commands
       command_age_s: [0.0, 0.0]       # optional: age of the newest odometry at a command
-                                      # (1st and 99th percentile)
+                                      # (1st and 99th percentile; absent when the commands
+                                      # were not driven by the odometry)
+      latency_range_s: [0.119, 0.152] # optional: the range the latency VARIES over (per
+                                      # command step, contains latency_interval_s)
+      latency_range_from: 32 command steps (2.5-97.5 %)   # optional
+      max_linear_accel: 1.0           # optional: m/s^2, 0 = not seen to bind (unknown)
+      max_angular_accel: 3.0          # optional: rad/s^2, 0 = unknown
+      accel_limits_from: rate-limited FOPDT fit (v binding 31 %, w binding 33 % ...)
+      commands_follow_odometry: false # optional: a tracker (true) or a joystick (false)
+      excluded_s: 0.33                # optional: seconds left out (stalls, glitches)
+
+Two different latency figures: ``latency_interval_s`` is the uncertainty of the MEAN
+latency (bootstrap: it shrinks with a longer recording); ``latency_range_s`` is the range
+the latency actually takes from command to command (jitter: it does not shrink).  The
+plan (:func:`.latency_design.plan_from_identification`) certifies the range.
 
 ``latency-design --identification FILE`` turns this into the delay interval it
 certifies (:func:`.latency_design.plan_from_identification`).
@@ -84,6 +124,7 @@ __all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationE
            'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',
            'Identification', 'identify_latency', 'write_identification', 'read_identification',
            'read_identification_text', 'with_source', 'measurement_to_command_delay',
+           'commands_follow_odometry', 'MIN_EVENTS',
            'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
 
 #: Top-level key of the identification file.
@@ -94,9 +135,20 @@ MIN_ODOM_SAMPLES = 30
 MIN_BLOCKS = 8
 #: A channel's fit must explain at least this fraction of the measured variance.
 MIN_R2 = 0.5
+#: An acceleration limit is identified only if it binds at least this fraction of the time.
+MIN_BINDING = 0.02
+#: A spread of the step latencies (2.5-97.5 %) above this (s) is jitter: the lags are
+#: then refitted with every step at the time it acted.
+JITTER_REFIT_S = 0.005
+#: ... and kept only if it lowers the normalized residual below this fraction of the
+#: one-delay fit's (a spread from noise does not).
+JITTER_GAIN = 0.8
+#: Fewest command steps fitted one by one for a measured latency range.
+MIN_EVENTS = 10
 _CHANNELS = ('v', 'w')
 _UNITS = {'v': 'm/s', 'w': 'rad/s'}
 _NAMES = {'v': 'linear speed v', 'w': 'yaw rate w'}
+_ACCEL_UNITS = {'v': 'm/s^2', 'w': 'rad/s^2'}
 
 
 class IdentificationError(InputError):
@@ -230,11 +282,41 @@ class Identification:
     #: unknown), see :func:`measurement_to_command_delay`
     command_age_low_s: float = math.nan
     command_age_high_s: float = math.nan
+    #: the range the latency varies over from command to command (s; NaN: not measured,
+    #: see :attr:`latency_range_s`) and what it was measured from
+    latency_range_low_s: float = math.nan
+    latency_range_high_s: float = math.nan
+    latency_range_from: str = ''
+    #: number of command steps whose latency was fitted one by one
+    latency_events: int = 0
+    #: acceleration limits of the base (m/s^2, rad/s^2; 0 = not seen to bind: unknown)
+    max_linear_accel: float = 0.0
+    max_angular_accel: float = 0.0
+    #: fraction of the fitted time in which each limit binds (NaN: unknown)
+    accel_binding_v: float = math.nan
+    accel_binding_w: float = math.nan
+    #: whether the commands were computed from the odometry (a tracker: True) or not (a
+    #: joystick: False; their odometry age is then not recorded); None: unknown
+    commands_follow_odometry: bool | None = None
+    #: seconds excluded from the fit because the motion did not follow the commands
+    excluded_s: float = 0.0
 
     @property
     def latency_interval_s(self) -> tuple[float, float]:
-        """(low, high) of the latency interval (s)."""
+        """(low, high) of the latency interval (s): the uncertainty of the mean latency."""
         return (self.latency_low_s, self.latency_high_s)
+
+    @property
+    def latency_range_s(self) -> tuple[float, float]:
+        """(low, high) the latency varies over (s), containing the interval of the mean.
+
+        The interval of the mean (:attr:`latency_interval_s`) when the range was not
+        measured (an older file, or too few distinct command steps).
+        """
+        lo, hi = self.latency_range_low_s, self.latency_range_high_s
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return self.latency_interval_s
+        return (min(lo, self.latency_low_s), max(hi, self.latency_high_s))
 
     @property
     def tau_v_interval_s(self) -> tuple[float, float]:
@@ -288,6 +370,7 @@ class _Channel:
         self.z, self.pos, self.ia, self.ib = z, pos, ia, ib
         self.width, self.t_mid = width, t_mid
         self.sigma2 = 1.0
+        self.accel = 0.0            # acceleration limit of the model (0: none, linear)
 
     @classmethod
     def build(cls, name, source, u_avg, h, z, pos_all, ia, ib, width, t_mid) -> '_Channel':
@@ -301,18 +384,27 @@ class _Channel:
     def subset(self, stride: int) -> '_Channel':
         """Every ``stride``-th measurement (for the coarse search)."""
         sl = slice(None, None, stride)
-        return _Channel.build(self.name, self.source, self.u_avg, self.h, self.z[sl], self.pos,
-                              self.ia[sl], None if self.ib is None else self.ib[sl],
-                              None if self.width is None else self.width[sl], self.t_mid[sl])
+        sub = _Channel.build(self.name, self.source, self.u_avg, self.h, self.z[sl], self.pos,
+                             self.ia[sl], None if self.ib is None else self.ib[sl],
+                             None if self.width is None else self.width[sl], self.t_mid[sl])
+        sub.accel = self.accel
+        return sub
 
     def signals(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        """Forced (zero initial state) and free (unit initial state) responses on the grid."""
+        """Forced (zero initial state) and free (unit initial state) responses on the grid.
+
+        With an acceleration limit (``accel > 0``) the forced response is the
+        rate-limited lag's (nonlinear; the free response stays the linear one).
+        """
         from scipy.signal import lfilter      # here: scipy.signal costs ~0.8 s to import
         n = self.u_avg.size + 1
         a = math.exp(-self.h / tau) if tau > 0 else 0.0
-        forced = np.empty(n)
-        forced[0] = 0.0
-        forced[1:] = lfilter([1.0 - a], [1.0, -a], self.u_avg)
+        if self.accel > 0:
+            forced = _rate_limited_response(self.u_avg, self.h, tau, self.accel)
+        else:
+            forced = np.empty(n)
+            forced[0] = 0.0
+            forced[1:] = lfilter([1.0 - a], [1.0, -a], self.u_avg)
         if a > 0:
             k = np.arange(n, dtype=float)
             with np.errstate(under='ignore'):
@@ -419,6 +511,337 @@ def _parabola_min(values: np.ndarray, i: int) -> float:
     if not den > 0:
         return 0.0
     return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+
+def _rate_limited_response(u: np.ndarray, h: float, tau: float, accel: float) -> np.ndarray:
+    """Grid values of ``s' = sat((u - s) / tau, accel)`` from rest, ``u`` held per cell.
+
+    Exact (the closed form of :func:`.actuator.first_order_step`: a ramp at ``accel``
+    while ``|u - s| > accel tau``, then the exponential approach).  The state is carried
+    in Python from one run of equal inputs (to 1e-9 relative) to the next; the values
+    inside the runs are filled in by numpy.
+    """
+    n = u.size
+    out = np.empty(n + 1)
+    out[0] = 0.0
+    if n == 0:
+        return out
+    # runs of equal inputs: cell averages of one held command differ by round-off only
+    # (differences of a cumulative integral), so equal means within 1e-9 relative
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(u))))
+    starts = np.concatenate([[0], np.flatnonzero(np.abs(np.diff(u)) > tol) + 1])
+    lens = np.diff(np.append(starts, n))
+    cs = u[starts]
+    runs = starts.size
+    s0, sg, t1, s1 = np.empty(runs), np.empty(runs), np.empty(runs), np.empty(runs)
+    band = accel * tau
+    s = 0.0
+    for r, (c, m) in enumerate(zip(cs.tolist(), lens.tolist())):
+        span = m * h
+        s0[r] = s
+        d = c - s
+        if d > band or d < -band:
+            g = 1.0 if d > 0 else -1.0
+            ramp = (abs(d) - band) / accel           # time to reach the linear band
+            sg[r] = g
+            if ramp >= span:
+                t1[r], s1[r] = span, c
+                s += g * accel * span
+            else:
+                t1[r], s1[r] = ramp, c - g * band
+                s = c - g * band * (math.exp(-(span - ramp) / tau) if tau > 0 else 0.0)
+        else:
+            sg[r], t1[r], s1[r] = 0.0, 0.0, s
+            s = c - d * (math.exp(-span / tau) if tau > 0 else 0.0)
+    idx = np.repeat(np.arange(runs), lens)
+    t = (np.arange(n) - starts[idx] + 1) * h
+    end_ramp = t1[idx]
+    level = cs[idx]
+    if tau > 0:
+        tail = level - (level - s1[idx]) * np.exp(-np.maximum(t - end_ramp, 0.0) / tau)
+    else:
+        tail = level
+    out[1:] = np.where(t <= end_ramp, s0[idx] + sg[idx] * accel * t, tail)
+    return out
+
+
+def _fit_gain(ch: _Channel, pos: float, tau: float) -> float:
+    """The static gain of the channel's fit at grid position ``pos``."""
+    return float(_sse(_stats(ch, tau, np.array([pos]), None, 0), float(ch.z @ ch.z))[1][0])
+
+
+def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[str, float],
+                   max_tau_s: float, max_latency_s: float) -> dict[str, float]:
+    """Per channel, the acceleration limit of a rate-limited FOPDT, or 0 if none explains more.
+
+    Candidates around a high percentile (99 %) of the measured ``|ds/dt|`` (over 40 ms),
+    each fitted over a local grid of latencies (the linear fit's ``pos`` - 0.1 s to
+    + 0.03 s: a binding limit makes the linear fit late) and time constants; a limit is
+    kept only if it lowers the residual by at least 5 % and binds at least
+    :data:`MIN_BINDING` of the time; its value is refined by a parabola in ``log a``
+    through the best candidate and its neighbours.
+    """
+    out = {}
+    for c, ch in chans.items():
+        h = ch.h
+        z, tm = ch.z, ch.t_mid
+        dtm = float(np.median(np.diff(tm))) if tm.size > 1 else h
+        lag = max(1, int(round(0.04 / max(dtm, 1e-9))))
+        if z.size <= lag + 10:
+            out[c] = 0.0
+            continue
+        slope = np.abs(z[lag:] - z[:-lag]) / np.maximum(tm[lag:] - tm[:-lag], 1e-9)
+        a0 = float(np.percentile(slope, 99))
+        if not a0 > 0:
+            out[c] = 0.0
+            continue
+        sub = ch.subset(max(1, z.size // 800))
+        zz = float(sub.z @ sub.z)
+        lo = max(0, int(round((latency - 0.1) / h)))
+        shifts = np.arange(lo, int(round(min(max_latency_s, latency + 0.03) / h)) + 1,
+                           dtype=float)
+        grid = np.concatenate([[0.0], np.geomspace(0.002,
+                                                   min(max_tau_s, 1.5 * tau_hat[c] + 0.02), 8)])
+        factors = 2.0 ** (np.arange(-4, 3) / 3.0)
+        cands = np.concatenate([[0.0], a0 * factors])
+        best_sse, best_tau = np.empty(cands.size), np.empty(cands.size)
+        for i, a in enumerate(cands):
+            sub.accel = float(a)
+            per_tau = [float(_sse(_stats(sub, tau, shifts, None, 0), zz)[0].min())
+                       for tau in grid]
+            k = int(np.argmin(per_tau))
+            best_sse[i], best_tau[i] = per_tau[k], grid[k]
+        sub.accel = 0.0
+        i = int(np.argmin(best_sse))
+        if i == 0 or not best_sse[i] < 0.95 * best_sse[0]:
+            out[c] = 0.0
+            continue
+        la = np.log(cands[1:])
+        j = i - 1
+        off = _parabola_min(best_sse[1:], j) if 0 < j < la.size - 1 else 0.0
+        a = float(np.exp(la[j] + off * (la[1] - la[0])))
+        # a limit that binds for a moment only (the steepest steps of a plain lag) is not
+        # one: at least MIN_BINDING of the time
+        ch.accel = a
+        binds = _binding_fraction(ch, float(best_tau[i]), 0.0, 0.0, ch.u_avg.size * ch.h)
+        ch.accel = 0.0
+        out[c] = a if binds >= MIN_BINDING else 0.0
+    return out
+
+
+def _speed_saturation(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float]
+                      ) -> dict[str, tuple[float, float, float]]:
+    """Channels whose base saturates below the commands: ``{c: (low, high, fraction)}``.
+
+    The measured range is the 0.5-99.5 % percentiles of the measured speed; a channel
+    saturates when at least 2 % of the commands lie beyond it by more than a tenth of
+    its width and clipping the commands to it lowers the residual by at least 5 %
+    (fitted over latencies within 20 grid steps of ``pos`` and a grid of lags).
+    """
+    out = {}
+    for c, ch in chans.items():
+        lo, hi = (float(x) for x in np.percentile(ch.z, [0.5, 99.5]))
+        margin = 0.1 * (hi - lo)
+        u = ch.u_avg
+        frac = float(np.mean((u > hi + margin) | (u < lo - margin)))
+        if frac < 0.02:
+            continue
+        shifts = np.arange(max(0.0, round(pos) - 20), round(pos) + 21)
+        grid = np.concatenate([[0.0], np.geomspace(0.002, max(2 * tau_hat[c], 0.02), 8)])
+        sub = ch.subset(max(1, ch.z.size // 800))
+        zz = float(sub.z @ sub.z)
+
+        def best(chn: _Channel) -> float:
+            return min(float(_sse(_stats(chn, tau, shifts, None, 0), zz)[0].min())
+                       for tau in grid)
+
+        clipped = _Channel.build(c, sub.source, np.clip(u, lo, hi), sub.h, sub.z, sub.pos,
+                                 sub.ia, sub.ib, sub.width, sub.t_mid)
+        if best(clipped) < 0.95 * best(sub):
+            out[c] = (lo, hi, frac)
+    return out
+
+
+def _binding_fraction(ch: _Channel, tau: float, pos: float, t0: float, t1: float) -> float:
+    """Fraction of ``[t0, t1]`` (s after the first command) in which the limit binds."""
+    if ch.accel <= 0:
+        return 0.0
+    sig = _rate_limited_response(ch.u_avg, ch.h, tau, ch.accel)
+    rate = np.abs(np.diff(sig)) / ch.h
+    a = max(0, int(t0 / ch.h - pos))
+    b = max(a + 1, min(rate.size, int(t1 / ch.h - pos)))
+    return float(np.mean(rate[a:b] >= 0.999 * ch.accel))
+
+
+def _fitted(ch: _Channel, pos: float, tau: float) -> np.ndarray:
+    """The fitted values of the channel's measurements (gain and free response fitted)."""
+    forced, free = ch.signals(tau)
+    m1 = ch.regressors(forced, np.array([pos]))[0]
+    m2 = ch.regressors(free, np.array([pos]))[0]
+    a = np.stack([m1, m2], axis=1)
+    coef = np.linalg.lstsq(a, ch.z, rcond=None)[0]
+    return a @ coef
+
+
+def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float],
+                  meas: dict, keep: dict[str, np.ndarray] | None, t_begin: float,
+                  t_end: float, tau_max: float
+                  ) -> tuple[dict[str, np.ndarray], list[tuple[float, float]]] | None:
+    """Spans where the motion does not follow the fitted model at all, and the samples kept.
+
+    A residual counts as gross when it exceeds both 6 robust standard deviations
+    (1.4826 x MAD) and a quarter of the channel's measured standard deviation; each is
+    widened by 0.2 s + 3 time constants either side (the base recovers through its
+    lag).  None when there is none, or when the spans would cover more than 30 % of the
+    fitted time (then the model, not a segment, is wrong: the fit figures say so).
+    """
+    times = []
+    for c, ch in chans.items():
+        r = ch.z - _fitted(ch, pos, tau_hat[c])
+        mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        thr = max(6.0 * mad, 0.25 * float(np.std(ch.z)))
+        times.append(ch.t_mid[np.abs(r) > thr])
+    flagged = np.sort(np.concatenate(times))
+    if flagged.size == 0:
+        return None
+    pad = 0.2 + 3.0 * tau_max
+    spans: list[list[float]] = []
+    for t in flagged:
+        if spans and t - pad <= spans[-1][1]:
+            spans[-1][1] = t + pad
+        else:
+            spans.append([t - pad, t + pad])
+    new_keep = {}
+    for c in chans:
+        ia, ib, wd, z, tm = meas[c]
+        ok = np.ones(z.size, dtype=bool) if keep is None else keep[c].copy()
+        half = 0.0 if wd is None else 0.5 * cast(np.ndarray, wd)
+        for a, b in spans:
+            ok &= ~((tm + half >= a) & (tm - half <= b))
+        new_keep[c] = ok
+    excluded = _spans_of(meas, new_keep)
+    total = sum(b - a for a, b in excluded)
+    if total > 0.3 * (t_end - t_begin):
+        return None
+    if keep is not None and all(np.array_equal(new_keep[c], keep[c]) for c in chans):
+        return None
+    return new_keep, excluded
+
+
+def _spans_of(meas: dict, keep: dict[str, np.ndarray]) -> list[tuple[float, float]]:
+    """Time spans (between kept samples) that hold excluded samples.
+
+    From the first channel (both channels exclude the same spans).
+    """
+    out: list[tuple[float, float]] = []
+    for c in _CHANNELS:
+        tm = meas[c][4]
+        k = keep[c]
+        i = 0
+        while i < k.size:
+            if k[i]:
+                i += 1
+                continue
+            j = i
+            while j < k.size and not k[j]:
+                j += 1
+            a = tm[i - 1] if i > 0 else tm[i]
+            b = tm[j] if j < k.size else tm[j - 1]
+            out.append((float(a), float(b)))
+            i = j
+        break
+    return out
+
+
+def _event_latencies(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float],
+                     tc: np.ndarray, cmd: dict[str, np.ndarray], t_begin: float,
+                     t_end: float, excluded: list[tuple[float, float]]
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The latency (grid positions) of each distinct command step, fitted one by one.
+
+    Returns the latencies and, per step, the index of its command and of the next step's
+    (the commands ``first[k]:last[k]`` act with latency ``k``).
+
+    A step is a command change of at least 20 % of the channel's 5-95 % range, at least
+    max(0.15 s, 4 time constants) after the previous one; its latency minimizes the
+    residual of the fitted model, shifted, over the samples from 40 ms before its
+    expected response to the next step (at most 0.5 s), both channels where both step
+    (each normalized by its noise variance).  Shifts within +-60 ms of ``pos``; a
+    minimum at the edge of that window is not used.
+    """
+    h = chans['v'].h
+    half = int(round(0.06 / h))
+    centre = int(round(pos))
+    shifts = np.arange(max(0, centre - half), centre + half + 1, dtype=float)
+    res = {}
+    for c, ch in chans.items():
+        forced, _ = ch.signals(tau_hat[c])
+        g = _fit_gain(ch, pos, tau_hat[c])
+        r = ch.z[None, :] - g * ch.regressors(forced, shifts)
+        res[c] = r * r / ch.sigma2
+    sig = {}
+    for c in _CHANNELS:
+        u = cmd[c]
+        lo, hi = np.percentile(u, [5, 95])
+        du = np.abs(np.diff(u, prepend=u[0]))
+        sig[c] = du >= 0.2 * max(hi - lo, 1e-12)
+    any_step = np.flatnonzero(sig['v'] | sig['w'])
+    settle = max(0.15, 4 * max(tau_hat.values()))
+    lat = pos * h
+    out: list[float] = []
+    first: list[int] = []
+    last: list[int] = []
+    for n, i in enumerate(any_step):
+        t_i = tc[i]
+        if n > 0 and t_i - tc[any_step[n - 1]] < settle:
+            continue
+        nxt = tc[any_step[n + 1]] if n + 1 < any_step.size else t_i + 0.5
+        a, b = t_i + lat - 0.04, t_i + lat + min(nxt - t_i, 0.5)
+        if a < t_begin or b > t_end or any(x < b and a < y for x, y in excluded):
+            continue
+        total = np.zeros(shifts.size)
+        used = 0
+        for c, ch in chans.items():
+            if not sig[c][i]:
+                continue
+            sel = (ch.t_mid >= a) & (ch.t_mid <= b)
+            if np.count_nonzero(sel) < 3:
+                continue
+            total += res[c][:, sel].sum(axis=1)
+            used += 1
+        if not used:
+            continue
+        k = int(np.argmin(total))
+        if k == 0 or k == shifts.size - 1:
+            continue
+        out.append(float(shifts[k]) + _parabola_min(total, k))
+        first.append(int(i))
+        last.append(int(any_step[n + 1]) if n + 1 < any_step.size else tc.size)
+    return np.array(out), np.array(first, dtype=np.int64), np.array(last, dtype=np.int64)
+
+
+def _poor_fit_cause(c: str, r2: float, source: str, ch: _Channel, u: np.ndarray, accel: float,
+                    excluded_s: float) -> str:
+    """The message of a fit that explains too little, naming the likely cause."""
+    head = (f'the model explains only {100 * max(r2, 0):.0f} % of the measured {_NAMES[c]} '
+            f'(from the odometry {source}; need >= {100 * MIN_R2:.0f} %)')
+    tried = ('with a first-order lag' + (f', an acceleration limit {accel:.3g} {_ACCEL_UNITS[c]}'
+                                         if accel > 0 else ' (no acceleration limit binds)')
+             + (f' and {excluded_s:.2f} s of stalls excluded' if excluded_s else ''))
+    umax = float(np.percentile(np.abs(u), 99))
+    zmax = float(np.percentile(np.abs(ch.z), 99.5))
+    if umax > 0 and zmax < 0.7 * umax:
+        return (f'{head}, {tried}: the base does not reach the commanded {_NAMES[c]} '
+                f'(commands up to {umax:.3g} {_UNITS[c]}, measured at most {zmax:.3g}): a '
+                'speed limit of the base below the commands, or a wrong odometry scale. '
+                'Record commands within the speed range of the base')
+    if r2 < 0.1:
+        return (f'{head}, {tried}: the odometry does not respond to these commands - check '
+                'that both topics belong to the same robot and that the command times and '
+                'odometry stamps are on one clock')
+    return (f'{head}, {tried}: the base responds to the commands but not as a lag with '
+            'dead time (a controller that overshoots or oscillates, wheel slip, long stalls); '
+            'the latency of such a base is not identified here')
 
 
 # ---------------------------------------------------------------------------------------------
@@ -534,8 +957,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     o = odometry
     order = _check_times('odometry t', o.t)
     to = o.t[order]
-    keep = np.concatenate([[True], np.diff(to) > 0])     # repeated stamps: keep the first
-    idx = order[keep]
+    first = np.concatenate([[True], np.diff(to) > 0])    # repeated stamps: keep the first
+    idx = order[first]
     to = o.t[idx]
     x, y, yaw = o.x[idx], o.y[idx], o.yaw[idx]
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(yaw))):
@@ -605,53 +1028,56 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     # -- the grid: cell averages of the held commands
     n_cells = int(math.ceil((t_end - tc[0]) / h)) + 2
     s = tc[0] + h * np.arange(n_cells + 1)
-    chans: dict[str, _Channel] = {}
-    for c in _CHANNELS:
-        ia, ib, wd, z, tm = meas[c]
-        u_avg = np.diff(_held_integral(tc, cmd[c], s, command_timeout_s)) / h
-        chans[c] = _Channel.build(c, use[c], u_avg, h, z, (to - tc[0]) / h, ia, ib, wd, tm)
+    u_grid = {c: np.diff(_held_integral(tc, cmd[c], s, command_timeout_s)) / h
+              for c in _CHANNELS}
+    odom_pos = (to - tc[0]) / h
 
+    # the rate-limited model costs a Python pass over the grid per simulation: its coarse
+    # stages run on a grid of at most 5 ms (the coarse latency step is 10 ms)
+    hc = h * max(1, int(round(0.005 / h))) if h < 0.005 else h
+    coarse_inputs: dict[str, np.ndarray] = {}
+
+    def make_channels(keep: dict[str, np.ndarray] | None, accel: dict[str, float],
+                      hh: float = h) -> dict[str, _Channel]:
+        out = {}
+        if hh != h and not coarse_inputs:
+            sc = tc[0] + hh * np.arange(int(math.ceil((t_end - tc[0]) / hh)) + 3)
+            coarse_inputs.update({c: np.diff(_held_integral(tc, cmd[c], sc, command_timeout_s))
+                                  / hh for c in _CHANNELS})
+        for c in _CHANNELS:
+            ia, ib, wd, z, tm = meas[c]
+            if keep is not None:
+                k = keep[c]
+                ia, z, tm = ia[k], z[k], tm[k]
+                if ib is not None:
+                    ib, wd = ib[k], cast(np.ndarray, wd)[k]
+            if hh == h:
+                ch = _Channel.build(c, use[c], u_grid[c], h, z, odom_pos, ia, ib, wd, tm)
+            else:
+                ch = _Channel.build(c, use[c], coarse_inputs[c], hh, z, (to - tc[0]) / hh, ia,
+                                    ib, wd, tm)
+            ch.accel = float(accel[c])
+            out[c] = ch
+        return out
+
+    no_limit = {c: 0.0 for c in _CHANNELS}
+    keep: dict[str, np.ndarray] | None = None
+    chans = make_channels(None, no_limit)
     d_max = int(round(max_latency_s / h))
     taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
-    # coarse: 10 ms steps, at most ~1500 samples per channel
     step = max(1, int(round(0.01 / h)))
-    coarse = np.arange(0, d_max + 1, step, dtype=float)
-    sse_c = {}
-    for c, ch in chans.items():
-        stride = max(1, ch.z.size // 1500)
-        sub = ch.subset(stride)
-        zz = float(sub.z @ sub.z)
-        sse_c[c] = np.stack([_sse(_stats(sub, tau, coarse, None, 0), zz)[0] for tau in taus],
-                            axis=1) * stride                        # (nd, ntau)
-    # each channel's noise variance: its own best fit at the grid resolution (a coarse
-    # grid would inflate a noise-free channel's and let a noisy one dominate)
-    prof_c = {c: sse_c[c].min(axis=1) for c in _CHANNELS}
-    kbest = {c: np.argmin(sse_c[c], axis=1) for c in _CHANNELS}
+    coarse_all = np.arange(0, d_max + 1, step, dtype=float)
 
-    def around(i: int) -> np.ndarray:
-        return np.arange(max(0, coarse[i] - 3 * step), min(d_max, coarse[i] + 3 * step) + 1,
-                         dtype=float)
+    def around(centre: float, half: int = 3 * step) -> np.ndarray:
+        return np.arange(max(0, centre - half), min(d_max, centre + half) + 1, dtype=float)
 
     def tau_range(k: int, n: int) -> np.ndarray:
         return np.linspace(taus[max(0, k - 2)], taus[min(taus.size - 1, k + 2)], n)
 
-    for c, ch in chans.items():
-        i = int(np.argmin(prof_c[c]))
-        zz = float(ch.z @ ch.z)
-        best = min(float(_sse(_stats(ch, tau, around(i), None, 0), zz)[0].min())
-                   for tau in tau_range(int(kbest[c][i]), 17))
-        ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
-    j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
-    i_c = int(np.argmin(j_coarse))
-
-    # -- fine: grid resolution around the coarse minimum, local time-constant grids
     def local_taus(c: str, centre: float, spread: float) -> np.ndarray:
         lo = max(0.0, centre / spread - 2 * h * spread)
         hi = min(max_tau_s, centre * spread + 2 * h * spread)
-        return np.linspace(lo, hi, 25)
-
-    tau_grid = {c: tau_range(int(kbest[c][i_c]), 25) for c in _CHANNELS}
-    fine = around(i_c)
+        return np.linspace(lo, hi, 13 if chans[c].accel > 0 else 25)
 
     def grid_fit(shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool):
         """Block statistics (nd, ntau, 5, nb) per channel and zz per block."""
@@ -689,34 +1115,183 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             tau_hat[c] = float(g[k] + _parabola_min(row, k) * (g[1] - g[0]))
         return pos, tau_hat, lat_c, j
 
-    fit = grid_fit(fine, tau_grid, False)
-    pos, tau0, lat_c, _ = estimate(fit, None, fine, tau_grid)
+    def search(near: float | None = None) -> tuple[float, dict[str, float], dict[str, float]]:
+        """Coarse, fine and polished fit of (latency, tau_v, tau_w) on ``chans``.
 
-    # -- polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps), then the
-    #    fit figures at the result
-    zzs = {c: float(ch.z @ ch.z) for c, ch in chans.items()}
+        Sets each channel's noise variance (``sigma2``); returns (latency grid position,
+        time constants, each channel's own latency position).  With ``near`` (a grid
+        position: a refit after a change of the model) the coarse grid spans +-0.1 s
+        around it only.
+        """
+        coarse = coarse_all if near is None else \
+            coarse_all[np.abs(coarse_all - near) <= 0.1 / h + step]
+        # coarse: 10 ms steps, at most ~1500 samples per channel
+        sse_c = {}
+        rough = (make_channels(keep, {c: chans[c].accel for c in _CHANNELS}, hc)
+                 if hc != h and any(ch.accel > 0 for ch in chans.values()) else chans)
+        for c, ch in chans.items():
+            stride = max(1, ch.z.size // 1500)
+            sub = (ch if ch.accel <= 0 else rough[c]).subset(stride)
+            zz = float(sub.z @ sub.z)
+            shifts = coarse * (h / sub.h)
+            sse_c[c] = np.stack([_sse(_stats(sub, tau, shifts, None, 0), zz)[0]
+                                 for tau in taus], axis=1) * stride          # (nd, ntau)
+        # each channel's noise variance: its own best fit at the grid resolution (a coarse
+        # grid would inflate a noise-free channel's and let a noisy one dominate)
+        prof_c = {c: sse_c[c].min(axis=1) for c in _CHANNELS}
+        kbest = {c: np.argmin(sse_c[c], axis=1) for c in _CHANNELS}
+        for c, ch in chans.items():
+            i = int(np.argmin(prof_c[c]))
+            zz = float(ch.z @ ch.z)
+            best = min(float(_sse(_stats(ch, tau, around(coarse[i]), None, 0), zz)[0].min())
+                       for tau in tau_range(int(kbest[c][i]), 9 if ch.accel > 0 else 17))
+            ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
+        j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
+        i_c = int(np.argmin(j_coarse))
+        # fine: grid resolution around the coarse minimum, local time-constant grids
+        tau_grid = {c: tau_range(int(kbest[c][i_c]), 13 if chans[c].accel > 0 else 25)
+                    for c in _CHANNELS}
+        fine = around(coarse[i_c])
+        pos, tau0, lat_c, _ = estimate(grid_fit(fine, tau_grid, False), None, fine, tau_grid)
+        if any(ch.accel > 0 for ch in chans.values()):
+            p_l, t_l = polish_limited(pos, tau0, fine)
+            return p_l, t_l, lat_c
+        # polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps)
+        from scipy.optimize import minimize
+        x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
+        j0 = objective(x0)
+        simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
+        polish = minimize(objective, x0, method='Nelder-Mead',
+                          bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h),
+                                  (0.0, max_tau_s / h)],
+                          options={'initial_simplex': simplex, 'xatol': 0.01,
+                                   'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
+        if polish.fun <= j0:
+            return float(polish.x[0]), {'v': float(polish.x[1]) * h,
+                                        'w': float(polish.x[2]) * h}, lat_c
+        return pos, {c: max(tau0[c], 0.0) for c in _CHANNELS}, lat_c
+
+    def polish_limited(pos: float, tau0: dict[str, float], fine: np.ndarray
+                       ) -> tuple[float, dict[str, float]]:
+        """Rate-limited channels: (tau, limit) polished per channel, then the latency.
+
+        Each channel at the latency found (each simulation of the nonlinear model costs
+        a pass over the grid, so the channels are polished one by one), then the latency
+        again on the fine grid.
+        """
+        from scipy.optimize import minimize
+        tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
+        for c, ch in chans.items():
+            if ch.accel <= 0:
+                continue
+            a_start = ch.accel
+            zz = float(ch.z @ ch.z)
+
+            def f(x: np.ndarray, ch: _Channel = ch, zz: float = zz) -> float:
+                tau, a = float(x[0]) * h, float(x[1])
+                if tau < 0 or a <= 0:
+                    return math.inf
+                ch.accel = a
+                return float(_sse(_stats(ch, tau, np.array([pos]), None, 0), zz)[0][0])
+
+            x0 = np.array([tau_hat[c] / h, a_start])
+            f0 = f(x0)
+            simplex = np.vstack([x0, x0 * [1.1, 1.0] + [0.5, 0.0], x0 * [1.0, 1.03]])
+            res = minimize(f, x0, method='Nelder-Mead',
+                           options={'initial_simplex': simplex, 'xatol': 0.05,
+                                    'fatol': 1e-7 * f0 + 1e-12, 'maxfev': 40})
+            if res.fun <= f0 and float(res.x[0]) * h <= max_tau_s:
+                tau_hat[c], ch.accel = float(res.x[0]) * h, float(res.x[1])
+            else:
+                ch.accel = a_start
+        j: Any = 0.0
+        for c, ch in chans.items():
+            j = j + _sse(_stats(ch, tau_hat[c], fine, None, 0),
+                         float(ch.z @ ch.z))[0] / ch.sigma2
+        i = int(np.argmin(j))
+        return float(fine[i]) + _parabola_min(j, i), tau_hat
 
     def channel_sse(c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        return _sse(_stats(chans[c], tau, np.array([p]), None, 0), zzs[c])
+        ch = chans[c]
+        return _sse(_stats(ch, tau, np.array([p]), None, 0), float(ch.z @ ch.z))
 
     def objective(x: np.ndarray) -> float:
         p, tv, tw = (float(v) for v in x)
         return sum(float(channel_sse(c, p, t * h)[0][0]) / chans[c].sigma2
                    for c, t in (('v', tv), ('w', tw)))
 
-    x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
-    j0 = objective(x0)
-    simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
-    from scipy.optimize import minimize
-    polish = minimize(objective, x0, method='Nelder-Mead',
-                      bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h), (0.0, max_tau_s / h)],
-                      options={'initial_simplex': simplex, 'xatol': 0.01,
-                               'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
-    if polish.fun <= j0:
-        pos, tau_hat = float(polish.x[0]), {'v': float(polish.x[1]) * h,
-                                            'w': float(polish.x[2]) * h}
-    else:
-        tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
+    # 1. the linear FOPDT
+    pos, tau_hat, lat_c = search()
+    # 1b. a base that cannot reach the commanded speeds: the commands clipped to its range
+    clips = _speed_saturation(chans, pos, tau_hat)
+    if clips:
+        for c, (lo_c, hi_c, frac) in clips.items():
+            u_grid[c] = np.clip(u_grid[c], lo_c, hi_c)
+            notes.append(f'the base does not reach the commanded {_NAMES[c]}: it saturates at '
+                         f'[{lo_c:.3g}, {hi_c:.3g}] {_UNITS[c]} (commands beyond that '
+                         f'{100 * frac:.0f} % of the time); modelled by clipping the commands')
+        coarse_inputs.clear()
+        chans = make_channels(None, no_limit)
+        pos, tau_hat, lat_c = search(pos)
+    # 2. acceleration limits: a rate-limited FOPDT where it explains the motion better
+    accel = _choose_limits(make_channels(None, no_limit, hc), pos * h, tau_hat, max_tau_s,
+                           max_latency_s)
+    if any(accel.values()):
+        chans = make_channels(None, accel)
+        pos, tau_hat, lat_c = search(pos)
+        accel = {c: chans[c].accel for c in _CHANNELS}      # polished
+    # 3. segments where the base did not follow the commands at all (a stall, a hiccup,
+    #    a glitch of the odometry): excluded, and the fit repeated without them
+    excluded: list[tuple[float, float]] = []
+    for _ in range(2):
+        found = _gross_errors(chans, pos, tau_hat, meas, keep, t_begin, t_end,
+                              max(tau_hat.values()))
+        if found is None:
+            break
+        keep, excluded = found
+        chans = make_channels(keep, accel)
+        pos, tau_hat, lat_c = search(pos)
+        accel = {c: chans[c].accel for c in _CHANNELS}
+    excluded_s = float(sum(b - a for a, b in excluded))
+    if excluded:
+        spans = ', '.join(f'{a:.2f}-{b:.2f} s' for a, b in excluded[:4])
+        more = f' and {len(excluded) - 4} more' if len(excluded) > 4 else ''
+        notes.append(f'excluded {excluded_s:.2f} s where the motion did not follow the commands '
+                     f'at all ({spans}{more}): a stall or hiccup of the base, slipping wheels or '
+                     'an odometry glitch; the fit uses the rest')
+    # 4. latency jitter: each distinct command step timed on its own; when they spread,
+    #    the commands are moved to the times they acted and the lags fitted again (a
+    #    single delay would take the smear of the jitter for lag)
+    events, ev_first, ev_last = _event_latencies(chans, pos, tau_hat, tc, cmd, t_begin, t_end,
+                                                 excluded)
+    if events.size >= MIN_EVENTS:
+        e_lo, e_hi = np.percentile(events, [2.5, 97.5])
+        if (e_hi - e_lo) * h > JITTER_REFIT_S:
+            shift = np.zeros(tc.size)
+            for p_k, a_k, b_k in zip(events, ev_first, ev_last):
+                shift[a_k:b_k] = (p_k - pos) * h
+            tcw = np.maximum.accumulate(tc + shift)
+            before = (dict(u_grid), chans, pos, tau_hat, lat_c, accel)
+            j_before = objective(np.array([pos, tau_hat['v'] / h, tau_hat['w'] / h]))
+            for c in _CHANNELS:
+                u_grid[c] = np.diff(_held_integral(tcw, cmd[c], s, command_timeout_s)) / h
+                if c in clips:
+                    u_grid[c] = np.clip(u_grid[c], clips[c][0], clips[c][1])
+            coarse_inputs.clear()
+            sig_before = {c: ch.sigma2 for c, ch in chans.items()}
+            chans = make_channels(keep, accel)
+            pos, tau_hat, lat_c = search(pos)
+            accel = {c: chans[c].accel for c in _CHANNELS}
+            j_after = sum(float(channel_sse(c, pos, tau_hat[c])[0][0]) / sig_before[c]
+                          for c in _CHANNELS)
+            if j_after < JITTER_GAIN * j_before:
+                notes.append(f'the latency jitters ({events.size} command steps over '
+                             f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with '
+                             'each step moved to the time it acted')
+            else:                   # the steps' spread is noise: keep the one-delay fit
+                u_grid.update(before[0])
+                coarse_inputs.clear()
+                chans, pos, tau_hat, lat_c, accel = before[1:]
     latency = pos * h
     gains, resid, r2 = {}, {}, {}
     for c, ch in chans.items():
@@ -725,21 +1300,28 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         resid[c] = math.sqrt(float(sse[0]) / ch.z.size)
         var = float(np.var(ch.z))
         r2[c] = 1.0 - float(sse[0]) / (ch.z.size * var) if var > 0 else 0.0
+    binding = {c: _binding_fraction(chans[c], tau_hat[c], pos, t_begin - tc[0], t_end - tc[0])
+               for c in _CHANNELS}
 
     for c in _CHANNELS:
         if r2[c] < MIN_R2:
-            raise PoorFitError(
-                f'the FOPDT model explains only {100 * max(r2[c], 0):.0f} % of the measured '
-                f'{_NAMES[c]} (from the odometry {use[c]}; need >= {100 * MIN_R2:.0f} %): '
-                'check that the topics belong to the same robot and clock, that odom is '
-                'stamped at measurement time, and try source pose/twist')
+            raise PoorFitError(_poor_fit_cause(c, r2[c], use[c], chans[c], cmd[c], accel[c],
+                                               excluded_s))
     if pos >= d_max - 0.5:
-        raise PoorFitError(f'the latency estimate is at the search limit {max_latency_s:g} s; '
-                           'raise max_latency_s (--max-latency)')
+        raise PoorFitError(f'the latency estimate is at the search limit {max_latency_s:g} s: '
+                           'either the latency is longer (raise max_latency_s, --max-latency) '
+                           'or the odometry does not respond to these commands (another '
+                           'robot, another clock)')
     for c in _CHANNELS:
         if tau_hat[c] >= 0.999 * max_tau_s:
-            raise PoorFitError(f'the {_NAMES[c]} time constant is at the search limit '
-                               f'{max_tau_s:g} s; raise max_tau_s (--max-tau)')
+            raise PoorFitError(
+                f'the {_NAMES[c]} time constant reaches the search limit {max_tau_s:g} s: the '
+                f'measured {_NAMES[c]} does not follow the commands through a lag. Real '
+                'actuator lags are tens of milliseconds; a fit this slow means something the '
+                'model lacks (a speed limit below the commands, a base controller that '
+                'overshoots, a base that stalls for long) - a larger max_tau_s would only fit '
+                'that as a lag, with a wrong latency. Record commands within the base\'s speed '
+                'range (e.g. the figure eight at a lower rate)')
 
     # -- block bootstrap on a local grid (widened while estimates pile at an edge)
     rng = np.random.default_rng(seed)
@@ -786,14 +1368,38 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     if abs(lat_c['v'] - lat_c['w']) * h > max(lat_hi - lat_lo, 2 * h) * 2:
         notes.append(f'the channels alone give different latencies (v {lat_c["v"] * h:.4f} s, '
                      f'w {lat_c["w"] * h:.4f} s)')
+
+    # -- the range the latency varies over: one latency per distinct command step
+    if events.size >= MIN_EVENTS:
+        e_lo, e_hi = (float(x) for x in np.percentile(events * h, [2.5, 97.5]))
+        # two grid steps either side for the sub-step error of one step's fit
+        rng_lo, rng_hi = max(0.0, min(e_lo - 2 * h, lat_lo)), max(e_hi + 2 * h, lat_hi)
+        range_from = f'{events.size} command steps (2.5-97.5 %)'
+    else:
+        rng_lo, rng_hi = lat_lo, lat_hi
+        range_from = 'interval of the mean'
+        notes.append(f'only {events.size} distinct command steps: how much the latency varies '
+                     'from command to command is not measured (the range is the interval of '
+                     'the mean); a joystick drive with steps in v and w measures it')
+
     used = np.sort(tc[(tc >= t_begin - max_latency_s) & (tc <= t_end)])
     period = float(np.median(np.diff(used))) if used.size > 1 else math.nan
     age_lo, _, age_hi = measurement_to_command_delay(commands, odometry)
+    driven = commands_follow_odometry(commands, odometry)
+    if driven is False:
+        notes.append('the commands are not driven by the odometry (a joystick or script: their '
+                     'age since the newest odometry is spread over the odometry period); that '
+                     'age is not the tracker\'s and is not recorded')
+        age_lo = age_hi = math.nan
+    for c, name in (('v', 'linear'), ('w', 'angular')):
+        if accel[c] > 0:
+            notes.append(f'{name} acceleration limit {accel[c]:.3g} {_ACCEL_UNITS[c]} (binding '
+                         f'{100 * binding[c]:.0f} % of the fitted time; rate-limited FOPDT)')
     return Identification(
         latency_s=latency, latency_low_s=lat_lo, latency_high_s=lat_hi,
         tau_v_s=tau_hat['v'], tau_v_low_s=tv_lo, tau_v_high_s=tv_hi,
         tau_w_s=tau_hat['w'], tau_w_low_s=tw_lo, tau_w_high_s=tw_hi,
-        odom_rate_hz=odom_rate, samples=int(max(n_used.values())),
+        odom_rate_hz=odom_rate, samples=int(max(ch.z.size for ch in chans.values())),
         residual_rms_v=resid['v'], residual_rms_w=resid['w'],
         gain_v=gains['v'], gain_w=gains['w'], r2_v=r2['v'], r2_w=r2['w'],
         source_v=use['v'], source_w=use['w'],
@@ -803,7 +1409,44 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         bootstrap=int(bootstrap), notes=tuple(notes),
         command_period_s=period if period > 0 else math.nan,
         command_age_low_s=max(age_lo, 0.0) if math.isfinite(age_lo) else math.nan,
-        command_age_high_s=max(age_hi, 0.0) if math.isfinite(age_hi) else math.nan)
+        command_age_high_s=max(age_hi, 0.0) if math.isfinite(age_hi) else math.nan,
+        latency_range_low_s=rng_lo, latency_range_high_s=rng_hi,
+        latency_range_from=range_from, latency_events=int(events.size),
+        max_linear_accel=accel['v'], max_angular_accel=accel['w'],
+        accel_binding_v=binding['v'], accel_binding_w=binding['w'],
+        commands_follow_odometry=driven, excluded_s=excluded_s)
+
+
+def commands_follow_odometry(commands: CommandSamples, odometry: OdometrySamples
+                             ) -> bool | None:
+    """Whether the commands were computed from the odometry (a tracker) or not (a joystick).
+
+    A tracker sends each command a nearly constant time after the odometry it used:
+    the age of the newest odometry at a command (see :func:`measurement_to_command_delay`)
+    varies little.  Commands from a joystick or a script come at times of their own, so
+    that age spreads over the odometry period.  The commands follow the odometry when
+    the 10-90 % spread of the age is below a quarter of the odometry period.
+
+    Parameters
+    ----------
+    commands, odometry : CommandSamples, OdometrySamples
+        The recording.
+
+    Returns
+    -------
+    bool or None
+        None when fewer than 10 commands follow an odometry sample.
+    """
+    to = np.unique(np.asarray(odometry.t, dtype=float))
+    tc = np.asarray(commands.t, dtype=float)
+    if to.size < 2:
+        return None
+    j = np.searchsorted(to, tc, side='right') - 1
+    age = tc[j >= 0] - to[j[j >= 0]]
+    if age.size < 10:
+        return None
+    p10, p90 = np.percentile(age, [10, 90])
+    return bool(p90 - p10 < 0.25 * float(np.median(np.diff(to))))
 
 
 def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySamples
@@ -887,6 +1530,22 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
     if math.isfinite(result.command_age_low_s) and math.isfinite(result.command_age_high_s):
         lines.append(f'  command_age_s: [{_num(max(result.command_age_low_s, 0.0))}, '
                      f'{_num(max(result.command_age_high_s, 0.0))}]')
+    if math.isfinite(result.latency_range_low_s) and math.isfinite(result.latency_range_high_s):
+        lo, hi = result.latency_range_s
+        lines.append(f'  latency_range_s: [{_num(lo)}, {_num(hi)}]   # the range the latency '
+                     'varies over (latency_interval_s: the uncertainty of its mean)')
+        if result.latency_range_from:
+            lines.append(f'  latency_range_from: {_yaml_str(result.latency_range_from)}')
+    lines.append(f'  max_linear_accel: {_num(result.max_linear_accel)}     # m/s^2, 0 = unknown')
+    lines.append(f'  max_angular_accel: {_num(result.max_angular_accel)}    # rad/s^2, 0 = unknown')
+    how = _accel_from(result)
+    if how:
+        lines.append(f'  accel_limits_from: {_yaml_str(how)}')
+    if result.commands_follow_odometry is not None:
+        lines.append('  commands_follow_odometry: '
+                     f'{"true" if result.commands_follow_odometry else "false"}')
+    if result.excluded_s > 0:
+        lines.append(f'  excluded_s: {_num(result.excluded_s)}')
     text = '\n'.join(lines) + '\n'
     read_identification_text(text, str(p))            # never write what cannot be read back
     p.write_text(text)
@@ -895,7 +1554,32 @@ def write_identification(path: str | os.PathLike, result: Identification, *,
 
 _FIELDS = ('source', 'latency_s', 'latency_interval_s', 'tau_v_s', 'tau_v_interval_s',
            'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz', 'samples', 'residual_rms')
-_OPTIONAL = ('command_period_s', 'command_age_s')
+_OPTIONAL = ('command_period_s', 'command_age_s', 'latency_range_s', 'latency_range_from',
+             'max_linear_accel', 'max_angular_accel', 'accel_limits_from',
+             'commands_follow_odometry', 'excluded_s')
+
+
+def _yaml_str(text: str) -> str:
+    out = yaml.safe_dump(str(text), default_style=None, width=1000).strip()
+    return out[:-3].strip() if out.endswith('...') else out
+
+
+def _accel_from(result: Identification) -> str:
+    parts = []
+    for name, a, frac in (('v', result.max_linear_accel, result.accel_binding_v),
+                          ('w', result.max_angular_accel, result.accel_binding_w)):
+        if a > 0 and math.isfinite(frac):
+            parts.append(f'{name} binding {100 * frac:.0f} %')
+    if not parts:
+        return ''
+    return 'rate-limited FOPDT fit (' + ', '.join(parts) + ' of the fitted time)'
+
+
+def _text(where: str, key: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a string, got '
+                                      f'{value!r}')
+    return value
 
 
 def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
@@ -967,9 +1651,26 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
             raise IdentificationFileError(f'{where}: {FILE_KEY}.command_age_s must be a list '
                                           f'[low, high] of two numbers, got {a!r}')
         age = _pair(where, 'command_age_s', a, _number(where, 'command_age_s[0]', a[0]))
+    rng = (math.nan, math.nan)
+    if 'latency_range_s' in d:
+        rng = _pair(where, 'latency_range_s', d['latency_range_s'], lat)
+    _text(where, 'accel_limits_from', d.get('accel_limits_from', ''))
+    driven = d.get('commands_follow_odometry')
+    if driven is not None and not isinstance(driven, bool):
+        raise IdentificationFileError(f'{where}: {FILE_KEY}.commands_follow_odometry must be '
+                                      f'true or false, got {driven!r}')
     return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
                           rv, rw, source=d['source'], command_period_s=period,
-                          command_age_low_s=age[0], command_age_high_s=age[1])
+                          command_age_low_s=age[0], command_age_high_s=age[1],
+                          latency_range_low_s=rng[0], latency_range_high_s=rng[1],
+                          latency_range_from=_text(where, 'latency_range_from',
+                                                   d.get('latency_range_from', '')),
+                          max_linear_accel=_number(where, 'max_linear_accel',
+                                                   d.get('max_linear_accel', 0.0)),
+                          max_angular_accel=_number(where, 'max_angular_accel',
+                                                    d.get('max_angular_accel', 0.0)),
+                          commands_follow_odometry=driven,
+                          excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)))
 
 
 def read_identification(path: str | os.PathLike) -> Identification:

@@ -259,18 +259,39 @@ def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
 class LatencyPlan:
     """What to certify and what the tracker predicts, derived from an identification.
 
-    The one rule (doc/tutorial.md, "From the interval to h_min, h_max"), with ``[L_lo, L_hi]`` the
-    identified command-to-motion latency interval, ``[a_lo, a_hi]`` the age of the newest
-    odometry when a command is sent, ``T`` the command period and ``tau_v``, ``tau_w`` the
+    The one rule (doc/tutorial.md, "From the range to h_min, h_max"), with ``[R_lo, R_hi]`` the
+    range the command-to-motion latency varies over (the identification's
+    ``latency_range_s``: per-command latencies, widened to contain the interval of the
+    mean; the interval of the mean alone when the range was not measured), ``[a_lo, a_hi]``
+    the age of the newest odometry when a command is sent (0 when the recorded commands
+    were not driven by odometry), ``T`` the command period and ``tau_v``, ``tau_w`` the
     identified lags:
 
-    * with the predictor (default): the tracker predicts ``predict_latency = L_lo``,
+    * with the predictor (default): the tracker predicts ``predict_latency = R_lo``,
       ``predict_odom_latency = a_lo`` and the lags, so that the residual delay
-      ``(L + a) - (L_lo + a_lo)`` is never negative; certify ``h`` in
-      ``[0, (L_hi - L_lo) + (a_hi - a_lo) + T]`` (``T``: the sample-and-hold);
-    * without it: certify ``h`` in ``[L_lo + a_lo, L_hi + a_hi + T]``;
+      ``h = (L + a) - (R_lo + a_lo)`` is never negative; certify ``h`` in
+      ``[0, (R_hi - R_lo) + (a_hi - a_lo) + T]`` (``T``: the sample-and-hold);
+    * without it: certify ``h`` in ``[R_lo + a_lo, R_hi + a_hi + T]``;
 
     and in both cases design with the actuator lag ``max(tau_v, tau_w)``.
+
+    Why the prediction sits at the LOW end of the range, not at its middle: the
+    certificate (:func:`.input_delay.certify_input_delay`) is for the loop
+    ``x' = A x + B K x(t - h(t))`` with ``0 <= h_min <= h(t) <= h_max``; its
+    Lyapunov-Krasovskii functional integrates the state over ``[t - h_max, t]``.  A
+    command computed from the state predicted ``P`` ahead and acting after the actual
+    latency ``L`` has the residual ``h = L - P``.  When ``L < P`` (over-prediction) the
+    command acts on a predicted *future* state, ``u(t) = K x(t + (P - L))``: an
+    anticipation, not a delay, which no interval of the certificate contains (its
+    functional has no term for the future; the LMI is not even defined for ``h < 0``).
+    So the over-prediction side is not certified by the design, and the prediction must
+    be the lowest latency the base shows: ``P = R_lo``.  The price is that the residual
+    spans the whole width of the range (``R_hi - R_lo``) rather than half of it.  A
+    latency below ``R_lo`` at run time breaks this; the identified range is widened to
+    contain the interval of the mean for that reason.
+
+    The acceleration limits identified (0 = not seen to bind: unknown) go to the
+    tracker's ``max_linear_accel`` and ``max_angular_accel``.
     """
 
     predictor: bool
@@ -285,6 +306,11 @@ class LatencyPlan:
     command_age: tuple[float, float]
     command_period: float
     source: str
+    latency_range: tuple[float, float] = (math.nan, math.nan)
+    latency_range_from: str = ''
+    max_linear_accel: float = 0.0
+    max_angular_accel: float = 0.0
+    commands_follow_odometry: bool | None = None
 
     def tracker_parameters(self) -> dict[str, float]:
         """The tracker's predictor parameters this plan assumes (all 0 without predictor)."""
@@ -293,25 +319,52 @@ class LatencyPlan:
             return {k: 0.0 for k in keys}
         return {k: float(getattr(self, k)) for k in keys}
 
+    def actuator_parameters(self) -> dict[str, float]:
+        """The tracker's acceleration limits, with or without the predictor.
+
+        ``max_linear_accel`` in m/s^2, ``max_angular_accel`` in rad/s^2; 0 = unknown.
+        """
+        return {'max_linear_accel': float(self.max_linear_accel),
+                'max_angular_accel': float(self.max_angular_accel)}
+
     def metadata(self) -> dict[str, Any]:
         """Flat record for the gain file's design section."""
-        return {'designed_from': self.source or '(identification)',
-                'compensation': 'predictor' if self.predictor else 'none',
-                'identified_latency_interval': list(self.latency_interval),
-                'identified_command_age': list(self.command_age),
-                'command_period': self.command_period,
-                **{k: v for k, v in self.tracker_parameters().items()}}
+        out: dict[str, Any] = {
+            'designed_from': self.source or '(identification)',
+            'compensation': 'predictor' if self.predictor else 'none',
+            'identified_latency_interval': list(self.latency_interval),
+            'identified_latency_range': list(self.latency_range),
+            'identified_command_age': list(self.command_age),
+            'command_period': self.command_period,
+            **{k: v for k, v in self.tracker_parameters().items()},
+            **self.actuator_parameters()}
+        if self.latency_range_from:
+            out['latency_range_from'] = self.latency_range_from
+        return out
 
     def describe(self) -> str:
         """One line per derived quantity."""
         lo, hi = self.latency_interval
+        r0, r1 = self.latency_range
         a0, a1 = self.command_age
-        head = (f'identified latency [{lo:.4f}, {hi:.4f}] s, command age [{a0:.4f}, {a1:.4f}] s,'
-                f' command period {self.command_period:.4g} s, lag {self.lag:.4f} s')
+        origin = self.latency_range_from or 'the interval of the mean'
+        head = (f'identified latency: mean in [{lo:.4f}, {hi:.4f}] s (uncertainty of the mean); '
+                f'varies over [{r0:.4f}, {r1:.4f}] s (from {origin}: the range certified)\n')
+        if self.commands_follow_odometry is False:
+            head += ('command age: not counted (the recorded commands were not driven by the '
+                     'odometry; the tracker\'s own odometry-to-command time is not in this '
+                     'recording)')
+        else:
+            head += f'command age [{a0:.4f}, {a1:.4f}] s'
+        head += f', command period {self.command_period:.4g} s, lag {self.lag:.4f} s'
+        if self.max_linear_accel or self.max_angular_accel:
+            head += (f'\nacceleration limits: max_linear_accel {self.max_linear_accel:.4g} m/s^2, '
+                     f'max_angular_accel {self.max_angular_accel:.4g} rad/s^2 (0 = unknown)')
         if self.predictor:
-            return (head + f'\npredictor: predict_latency = {self.predict_latency:.4f} s, '
-                    f'predict_odom_latency = {self.predict_odom_latency:.4f} s, predict_lag_v '
-                    f'= {self.predict_lag_v:.4f} s, predict_lag_w = {self.predict_lag_w:.4f} s'
+            return (head + f'\npredictor: predict_latency = {self.predict_latency:.4f} s (low end '
+                    f'of the range: the residual delay stays >= 0), predict_odom_latency = '
+                    f'{self.predict_odom_latency:.4f} s, predict_lag_v = {self.predict_lag_v:.4f} '
+                    f's, predict_lag_w = {self.predict_lag_w:.4f} s'
                     f'\nresidual delay to certify: [{self.h_min:.4f}, {self.h_max:.4f}] s')
         return head + (f'\nno predictor: delay to certify [{self.h_min:.4f}, '
                        f'{self.h_max:.4f}] s')
@@ -319,23 +372,26 @@ class LatencyPlan:
 
 def plan_from_identification(ident: Identification, *, predictor: bool = True,
                              command_period: float | None = None) -> LatencyPlan:
-    """The delay interval, lag and predictor settings for an identification (one rule).
+    """The delay interval, lag, predictor settings and limits for an identification.
 
     Parameters
     ----------
     ident : Identification
         From :func:`.identify.identify_latency` or :func:`.identify.read_identification`.
     predictor : bool
-        Design for the tracker with its predictor at the low end of the interval (the
-        residual delay) or for the uncompensated law (the whole delay).
+        Design for the tracker with its predictor at the low end of the latency range
+        (the residual delay) or for the uncompensated law (the whole delay).
     command_period : float, optional
         The tracker's command period ``T`` (s); default: the identification's
-        ``command_period_s``.  Required when the identification has none.
+        ``command_period_s``, or the odometry period when the recorded commands were not
+        driven by the odometry (a joystick's period is not the tracker's, which commands
+        once per odometry message).  Required when the identification has neither.
 
     Returns
     -------
     LatencyPlan
-        See the class docstring for the rule.
+        See the class docstring for the rule and why the prediction is the low end of
+        the range (the certificate does not cover over-prediction).
 
     Raises
     ------
@@ -343,6 +399,10 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
         No command period known, or a bad one.
     """
     T = ident.command_period_s if command_period is None else command_period
+    if command_period is None and ident.commands_follow_odometry is False \
+            and math.isfinite(ident.odom_rate_hz) and ident.odom_rate_hz > 0:
+        # a joystick's period is not the tracker's; the tracker commands once per odometry
+        T = 1.0 / ident.odom_rate_hz
     if T is None or not math.isfinite(float(T)):
         raise InputError('the identification has no command_period_s (an older file or '
                          'another tool wrote it); pass the tracker\'s command period, e.g. '
@@ -351,7 +411,7 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
     a_lo = ident.command_age_low_s if math.isfinite(ident.command_age_low_s) else 0.0
     a_hi = ident.command_age_high_s if math.isfinite(ident.command_age_high_s) else a_lo
     a_lo, a_hi = max(a_lo, 0.0), max(a_hi, a_lo, 0.0)
-    lo, hi = ident.latency_low_s, ident.latency_high_s
+    lo, hi = ident.latency_range_s
     lag = max(ident.tau_v_s, ident.tau_w_s)
     if predictor:
         h0, h1 = 0.0, (hi - lo) + (a_hi - a_lo) + T
@@ -360,6 +420,11 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
     return LatencyPlan(predictor=predictor, h_min=float(h0), h_max=float(h1), lag=float(lag),
                        predict_latency=float(lo), predict_odom_latency=float(a_lo),
                        predict_lag_v=float(ident.tau_v_s), predict_lag_w=float(ident.tau_w_s),
-                       latency_interval=(float(lo), float(hi)),
+                       latency_interval=(float(ident.latency_low_s),
+                                         float(ident.latency_high_s)),
                        command_age=(float(a_lo), float(a_hi)), command_period=float(T),
-                       source=str(ident.source))
+                       source=str(ident.source), latency_range=(float(lo), float(hi)),
+                       latency_range_from=str(ident.latency_range_from),
+                       max_linear_accel=float(ident.max_linear_accel),
+                       max_angular_accel=float(ident.max_angular_accel),
+                       commands_follow_odometry=ident.commands_follow_odometry)

@@ -138,6 +138,14 @@ class PlantConfig:
     from ``t_i`` on a command received acts ``L_i`` later (``cmd_latency`` before
     ``t_1``); a command that would act no later than one received before it replaces
     the queued ones (a latency drop skips them, as a transport that delivers the newest).
+
+    Real-base irregularities (off by default): ``cmd_latency_jitter`` (s: each command's
+    latency is drawn uniformly from the whole steps in ``[cmd_latency, cmd_latency +
+    cmd_latency_jitter]``, from a generator seeded by ``noise_seed`` of its own; commands
+    stay in order - one never acts before an earlier one, so a latency is at most its
+    draw's upper end) and ``stalls`` (``((start_s, duration_s), ...)``: while a stall lasts
+    the base ignores its commands and brakes to rest through its actuator, as a motor
+    driver that resets does; afterwards it applies the newest command received).
     """
 
     dt: float = 0.01
@@ -157,6 +165,8 @@ class PlantConfig:
     odom_noise: tuple = (0.0, 0.0, 0.0)
     noise_seed: int = 0
     cmd_latency_schedule: tuple = ()
+    cmd_latency_jitter: float = 0.0
+    stalls: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
@@ -166,9 +176,9 @@ class PlantConfig:
             if not math.isfinite(getattr(self, name)):
                 raise LoopConfigError(f'{name} must be finite, got {getattr(self, name)!r}')
         for name in ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
-                     'odom_latency', 'odom_rate'):
+                     'odom_latency', 'odom_rate', 'cmd_latency_jitter'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
-        for name in ('cmd_latency', 'odom_latency'):
+        for name in ('cmd_latency', 'odom_latency', 'cmd_latency_jitter'):
             try:
                 delay_steps(getattr(self, name), self.dt)
             except LoopConfigError as exc:
@@ -185,6 +195,18 @@ class PlantConfig:
         seed = self.noise_seed
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise LoopConfigError(f'noise_seed must be an integer >= 0, got {seed!r}')
+        object.__setattr__(self, 'stalls', _stalls(self.stalls))
+
+    @property
+    def regular(self) -> bool:
+        """True without jitter, stalls or a latency schedule: what the batch simulation models."""
+        return not (self.cmd_latency_jitter or self.stalls or self.cmd_latency_schedule)
+
+    @property
+    def stall_steps(self) -> tuple[tuple[int, int], ...]:
+        """Stalls as plant steps ``[first, end)`` (rounded to whole steps)."""
+        return tuple((int(round(a / self.dt)), int(round((a + d) / self.dt)))
+                     for a, d in self.stalls)
 
     @property
     def delay_steps(self) -> int:
@@ -214,6 +236,18 @@ class PlantConfig:
         return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
                              odometry_period_steps(self.odom_rate, self.dt)[0],
                              self.odom_noise, int(self.noise_seed))
+
+
+def _stalls(value) -> tuple[tuple[float, float], ...]:
+    try:
+        rows = [tuple(float(x) for x in row) for row in value]
+    except (TypeError, ValueError):
+        rows = [()]
+    if any(len(r) != 2 or not all(math.isfinite(x) for x in r) or r[0] < 0 or r[1] <= 0
+           for r in rows):
+        raise LoopConfigError('stalls must be a list of (start_s >= 0, duration_s > 0) pairs, '
+                              f'got {value!r}')
+    return tuple(cast(tuple[float, float], r) for r in rows)
 
 
 class UnicyclePlant:
@@ -247,6 +281,8 @@ class UnicyclePlant:
                             for j, a in enumerate(row) if a != 0.0)
         self.cmd_delay = config.cmd_latency_steps
         self._schedule = config.latency_schedule_steps()
+        self._jitter = delay_steps(config.cmd_latency_jitter, config.dt)[0]
+        self._stalls = config.stall_steps
         actuator = config.actuator
         self.actuator = None if actuator.ideal else actuator
         odometry = config.odometry
@@ -267,6 +303,11 @@ class UnicyclePlant:
         self.cmd = (self.v, 0.0)        # command in force
         self.cmd_delay = c.cmd_latency_steps
         self._next_change = 0           # index of the next schedule entry
+        # a generator of its own (not the odometry noise's): jitter leaves the noise alone
+        self._jitter_rng = (np.random.default_rng([int(c.noise_seed), 1])
+                            if self._jitter else None)
+        self._last_act = -1
+        self.last_act_step = -1         # step the newest command acts from (-1: none yet)
         if self.odometer is not None:
             self.odometer.reset()
             self.odometer.measure(0, self.x, self.y, self.th, self.v, self.w)
@@ -287,6 +328,8 @@ class UnicyclePlant:
 
         With a latency schedule the latency in force at step ``k`` applies; queued commands
         that would act no earlier than this one are replaced by it.
+        (With ``cmd_latency_jitter``, from a drawn step; :attr:`last_act_step` is the step
+        the newest command acts from.)
         """
         if self._schedule:
             sch = self._schedule
@@ -296,10 +339,18 @@ class UnicyclePlant:
             act = self.k + self.cmd_delay
             while self._queue and self._queue[-1][0] >= act:
                 self._queue.pop()
-        if self.cmd_delay == 0 and not self._queue:
+        if self._jitter_rng is not None:
+            d = self.cmd_delay + int(self._jitter_rng.integers(0, self._jitter + 1))
+            act = max(self.k + d, self._last_act)        # in order: never before an earlier one
+            self._last_act = act
+            self._queue.append((act, v, w))
+        elif self.cmd_delay == 0 and not self._queue:
             self.cmd = (v, w)
+            act = self.k
         else:
-            self._queue.append((self.k + self.cmd_delay, v, w))
+            act = self.k + self.cmd_delay
+            self._queue.append((act, v, w))
+        self.last_act_step = act
 
     def odometry(self) -> OdometrySample | None:
         """The odometry sample to publish at the current step (measured earlier), if any."""
@@ -319,6 +370,8 @@ class UnicyclePlant:
             _, cv, cw = queue.popleft()
             self.cmd = (cv, cw)
         v, w = self.cmd
+        if self._stalls and any(a <= self.k < b for a, b in self._stalls):
+            v = w = 0.0                           # stalled: commands ignored, braking to rest
         h = self.config.dt
         if self.actuator is not None:
             v_end, w_end, v, w = actuate(self.actuator, self.v, self.w, v, w, h)

@@ -220,16 +220,25 @@ def test_file_round_trip(result, tmp_path):
     f = write_identification(tmp_path / 'latency.yaml', result)
     import yaml
     data = yaml.safe_load(f.read_text())['identification']
+    # the first ten are the format of issue 11 (an older reader's fields); the rest optional
     assert list(data) == ['source', 'latency_s', 'latency_interval_s', 'tau_v_s',
                           'tau_v_interval_s', 'tau_w_s', 'tau_w_interval_s', 'odom_rate_hz',
-                          'samples', 'residual_rms', 'command_period_s', 'command_age_s']
+                          'samples', 'residual_rms', 'command_period_s', 'latency_range_s', 'latency_range_from', 'max_linear_accel',
+                          'max_angular_accel', 'commands_follow_odometry']
     assert data['command_period_s'] == pytest.approx(result.command_period_s, rel=1e-5)
+    assert data['max_linear_accel'] == data['max_angular_accel'] == 0      # no limit binds
+    # the generator's commands come from a 100 Hz timer, not from the 50 Hz odometry: their
+    # odometry age is not the tracker's and is not written (command_age_s absent)
+    assert data['commands_follow_odometry'] is False
     back = read_identification(f)
     for name in ('latency_s', 'latency_low_s', 'latency_high_s', 'tau_v_s', 'tau_v_low_s',
                  'tau_v_high_s', 'tau_w_s', 'tau_w_low_s', 'tau_w_high_s', 'odom_rate_hz',
                  'residual_rms_v', 'residual_rms_w'):
         assert getattr(back, name) == pytest.approx(getattr(result, name), rel=1e-5, abs=1e-9)
     assert back.samples == result.samples and back.source == 'runs/x/bag'
+    assert back.latency_range_s == pytest.approx(result.latency_range_s, rel=1e-5)
+    assert back.latency_range_from == result.latency_range_from != ''
+    assert back.commands_follow_odometry is False
     assert math.isnan(back.gain_v)
     with pytest.raises(FileExistsError):
         write_identification(f, result, overwrite=False)
@@ -247,6 +256,12 @@ def test_file_round_trip(result, tmp_path):
     (lambda d: d.update(residual_rms={'v': 0.1, 'w': float('nan')}), 'residual_rms.w'),
     (lambda d: d.update(source=3), 'source must be a string'),
     (lambda d: d.update(latncy_s=0.1), 'unknown field.*latncy_s'),
+    (lambda d: d.update(latency_range_s=[0.2, 0.3]), 'latency_range_s.*contain the estimate'),
+    (lambda d: d.update(max_linear_accel=-1.0), 'max_linear_accel must be a finite number'),
+    (lambda d: d.update(max_angular_accel='fast'), 'max_angular_accel must be a finite'),
+    (lambda d: d.update(commands_follow_odometry='yes'), 'commands_follow_odometry must be'),
+    (lambda d: d.update(latency_range_from=3), 'latency_range_from must be a string'),
+    (lambda d: d.update(excluded_s=float('inf')), 'excluded_s must be a finite'),
 ])
 def test_file_validation_names_the_field(result, tmp_path, edit, match):
     import yaml
