@@ -31,7 +31,7 @@ from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefiniti
 from rosbags.rosbag2 import Reader, ReaderError
 
 from .. import topics
-from ..control.follow import reference_at
+from ..control.follow import REST_SPEED, START_TOLERANCE, start_offset, trajectory_time
 from ..control.loop import quaternion_to_yaw
 from ..control.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
@@ -513,13 +513,17 @@ def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
 
 
 def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
-                          stamps: np.ndarray, receive: np.ndarray) -> ReferenceSeries:
+                          stamps: np.ndarray, receive: np.ndarray, *,
+                          start_tolerance: float = START_TOLERANCE,
+                          rest_speed: float = REST_SPEED) -> ReferenceSeries:
     """The reference a lockstep tracker sampled from recorded trajectory messages.
 
     Each message is converted as the tracker converts it (:mod:`msgconv`) and sampled at
     each odometry stamp as :class:`control.follow.Follower` samples it
     (:func:`control.follow.reference_at`); a stamp uses the latest message received no
-    later than its odometry (the first message before that).  :class:`TrajectoryError` if a
+    later than its odometry (the first message before that); a trajectory first followed
+    late is re-based as the Follower re-bases it (:func:`control.follow.start_offset`, the
+    tracker's default ``start_tolerance``).  :class:`TrajectoryError` if a
     message cannot be converted (e.g. an untimed Path, whose times depend on the
     tracker's parameters).
     """
@@ -537,9 +541,14 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     recv = np.array([r for r, _ in msgs], dtype=np.int64)
     which = np.maximum(np.searchsorted(recv, receive, side='right') - 1, 0)
     rows = np.empty((stamps.size, 6))
+    offsets: dict[int, float] = {}       # message -> its re-basing (Follower's start rule)
     for i, (s, k) in enumerate(zip(stamps, which)):
         traj, origin = built[int(k)]
-        r = reference_at(traj, origin, int(s))
+        t = trajectory_time(int(s), origin)
+        if int(k) not in offsets and t >= traj.t_start:
+            offsets[int(k)] = start_offset(traj, t, start_tolerance=start_tolerance,
+                                           rest_speed=rest_speed)
+        r = traj.sample(t - offsets.get(int(k), 0.0))
         rows[i] = (r.x, r.y, r.vx, r.vy, r.ax, r.ay)
     x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
     return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)

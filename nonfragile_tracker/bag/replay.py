@@ -37,7 +37,8 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.follow import REST_SPEED, Follower, trajectory_time
+from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                              trajectory_time)
 from ..control.gains import read_gain_file
 from ..control.loop import Command, Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
@@ -260,6 +261,7 @@ class FollowerInputs(_OdomInputs):
                  max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
         super().__init__(config, max_stamp_jump)
         self.rest_speed = rest_speed
+        self.start_tolerance, self.max_start_distance = START_TOLERANCE, MAX_START_DISTANCE
         self.cruise_speed, self.max_accel = cruise_speed, max_accel
         self.follower: Follower | None = None
         self.origin_ns = 0
@@ -279,7 +281,9 @@ class FollowerInputs(_OdomInputs):
             self._ignore(f'trajectory refused: {exc}')
             return None
         if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.rest_speed)
+            self.follower = Follower(self.tracker, traj, self.rest_speed,
+                                     start_tolerance=self.start_tolerance,
+                                     max_start_distance=self.max_start_distance)
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
@@ -308,6 +312,8 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
                             values.get('cruise_speed'), values.get('max_accel'),
                             float(values.get('max_stamp_jump',
                                              TRACKER_DEFAULTS['max_stamp_jump'])))
+    inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
+    inputs.max_start_distance = float(values.get('max_start_distance', MAX_START_DISTANCE))
     data = [e for e in events if e.kind in ('odom', 'trajectory')]
     commands = []
     for e in data:

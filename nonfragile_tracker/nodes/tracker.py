@@ -60,7 +60,8 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import REST_SPEED, Follower, path_errors, trajectory_time
+from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                              path_errors, trajectory_time)
 from ..control.loop import Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
@@ -129,6 +130,13 @@ PARAMS = [
           low=1e-3, high=1e6, read_only=True),
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
+    Param('start_tolerance', START_TOLERANCE, 'a trajectory that starts at rest and is first '
+          'followed more than this (s) after its start stamp is re-based to start at that '
+          'step (no chase after a reference or planner that started earlier); a start stamp '
+          'in the future is waited for at rest', low=0.0, high=1e9, read_only=True),
+    Param('max_start_distance', MAX_START_DISTANCE, 'refuse a trajectory whose reference is '
+          'further than this (m) from the robot when it starts; 0 = no check', low=0.0,
+          high=1e9, read_only=True),
 ]
 #: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
 REF_BUFFER = 1000
@@ -153,6 +161,8 @@ class TrackerSettings:
     max_path_poses: int
     diagnostics_period: float
     rest_speed: float
+    start_tolerance: float = START_TOLERANCE
+    max_start_distance: float = MAX_START_DISTANCE
 
 
 def tracker_settings(values: dict) -> TrackerSettings:
@@ -180,7 +190,9 @@ def tracker_settings(values: dict) -> TrackerSettings:
                            base_frame=values['base_frame'], viz_period=values['viz_period'],
                            max_path_poses=values['max_path_poses'],
                            diagnostics_period=values['diagnostics_period'],
-                           rest_speed=values['rest_speed'])
+                           rest_speed=values['rest_speed'],
+                           start_tolerance=values['start_tolerance'],
+                           max_start_distance=values['max_start_distance'])
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
@@ -277,7 +289,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self.log('error', f'refused trajectory: {exc}; keeping {keep}')
             return
         if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.config.rest_speed)
+            self.follower = Follower(self.tracker, traj, self.config.rest_speed,
+                                     start_tolerance=self.config.start_tolerance,
+                                     max_start_distance=self.config.max_start_distance)
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
@@ -425,9 +439,11 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             return self._reject(f'odom: {pose}')
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
-        was_finished = f.finished
+        was_finished, was_started = f.finished, f.started
         cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
                      measured_speed=speed if math.isfinite(speed) else 0.0)
+        if f.started and not was_started:
+            self._started(f)
         if f.finished and not was_finished:
             e = math.hypot(cmd.error[0], cmd.error[2])
             self.log('info',
@@ -437,6 +453,18 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._diagnostics()
         self._publish(cmd.v, cmd.w, s)
         self._outputs(s, pose, f.last_ref, cmd)
+
+    def _started(self, f: Follower) -> None:
+        """Say how the trajectory started: re-based, on its stamps, or refused."""
+        if f.refused:
+            self.rejected += 1
+            self.last_refusal = f.refused
+            self.log('error', f'refused trajectory: {f.refused}; waiting at rest for a new '
+                              'trajectory')
+            self._diagnostics()
+        elif f.offset:
+            self.log('info', f'trajectory started {f.offset:.3f} s after its start stamp: '
+                             're-based to start now (its own speed profile, no chase)')
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
         """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
@@ -499,6 +527,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if f is None:
             state = 'waiting for a trajectory' if self.wait_for_trajectory else \
                 'following the reference topics'
+        elif f.refused:
+            state = 'trajectory refused at its start (too far): at rest'
+        elif not f.started:
+            state = 'waiting at rest for the trajectory\'s start stamp'
         elif f.finished:
             state = f'trajectory finished, at rest since t = {f.finished_at:.3f} s'
         elif f.ended:
@@ -529,6 +561,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'saturated commands': self.saturated, 'stamp jumps': self.jumps,
                 'trajectory': state,
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
+                'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
                 'last refused trajectory': self.last_refusal or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
