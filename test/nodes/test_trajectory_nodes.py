@@ -489,3 +489,50 @@ def test_reference_relays_an_untimed_plan(ros_context):
     finally:
         for n in nodes:
             n.destroy_node()
+
+
+def test_reference_started_5_s_before_the_tracker_does_not_make_it_chase(ros_context):
+    """Real time: the reference node publishes the lap 5 s before the tracker starts; the
+    tracker re-bases it, so its first second's commanded speed stays within 10 % of the
+    lap's own speed profile (before: a lurch after a reference already 5 s ahead)."""
+    import time
+    from geometry_msgs.msg import Twist
+    from rclpy.node import Node
+    from nonfragile_tracker.nodes.common import DATA_QOS
+    from nonfragile_tracker.nodes.plant import PlantNode
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    params = scenario(trajectory_file=str(LAP))
+    rt = {'mode': 'realtime'}
+    reference = ReferenceNode(context=ctx, parameter_overrides=param_list(
+        params, 'reference', publish_samples=False, **rt))
+    spin_nodes([reference], lambda: False, ctx, timeout=5.0)      # 5 s alone: the lap runs
+    test = Node('test_late', context=ctx)
+    cmds = []
+    test.create_subscription(Twist, 'cmd_vel', lambda m: cmds.append(
+        (time.monotonic(), m.linear.x)), DATA_QOS)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker', **rt))
+    plant = PlantNode(context=ctx, parameter_overrides=param_list(
+        params, 'plant', duration=0.0, tau=0.0, initial_pose=[0.0, 0.0, 0.0], **rt))
+    nodes = [reference, test, tracker, plant]
+    try:
+        moving = []
+        spin_nodes(nodes, lambda: bool(moving.extend(c for c in cmds[len(moving):]
+                                                     if c[1] != 0.0 or moving)
+                                       or (moving and moving[-1][0] - moving[0][0] > 1.5)),
+                   ctx, timeout=30)
+        f = tracker.follower
+        assert f is not None and f.started and f.refused is None
+        assert f.offset > 4.0                   # re-based: the lap was 5 s old
+        t0 = moving[0][0]
+        first = np.array([v for t, v in moving if t - t0 <= 1.0])
+        prof = load_waypoints(LAP).evaluate(np.linspace(0.0, 1.1, 221))
+        peak = float(np.hypot(prof.vx, prof.vy).max())
+        print(f'first second: max |cmd v| {np.abs(first).max():.3f} m/s, profile peak '
+              f'{peak:.3f} m/s (re-based by {f.offset:.3f} s)')
+        assert first.size > 50 and float(np.abs(first).max()) <= 1.1 * peak
+    finally:
+        for n in nodes:
+            n.destroy_node()
