@@ -41,6 +41,7 @@ from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, F
                               trajectory_time)
 from ..control.gains import read_gain_file
 from ..control.loop import Command, Tracker, TrackerConfig
+from ..control.limits import Limits, within_limits
 from ..control.trajectory import TrajectoryError
 from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
                        reference_from_msgs, stamp_ns, tracker_config)
@@ -62,7 +63,8 @@ TRACKER_DEFAULTS: dict[str, Any] = {
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0, 'max_stamp_jump': 1.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
-    'predict_lag_w': 0.0,
+    'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
+    'min_turning_radius': 0.0,
 }
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
@@ -262,6 +264,7 @@ class FollowerInputs(_OdomInputs):
         super().__init__(config, max_stamp_jump)
         self.rest_speed = rest_speed
         self.start_tolerance, self.max_start_distance = START_TOLERANCE, MAX_START_DISTANCE
+        self.limits: Limits | None = None
         self.cruise_speed, self.max_accel = cruise_speed, max_accel
         self.follower: Follower | None = None
         self.origin_ns = 0
@@ -277,6 +280,8 @@ class FollowerInputs(_OdomInputs):
             else:
                 traj, origin = multidof_to_trajectory(e.msg, frame=topics.ODOM_FRAME,
                                                       source=e.topic)
+            if self.limits is not None:          # the tracker's retime (default true)
+                traj = within_limits(traj, self.limits)[0]
         except TrajectoryError as exc:
             self._ignore(f'trajectory refused: {exc}')
             return None
@@ -314,6 +319,8 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
                                              TRACKER_DEFAULTS['max_stamp_jump'])))
     inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
     inputs.max_start_distance = float(values.get('max_start_distance', MAX_START_DISTANCE))
+    if values.get('retime', True):
+        inputs.limits = Limits.from_values({**TRACKER_DEFAULTS, **values})
     data = [e for e in events if e.kind in ('odom', 'trajectory')]
     commands = []
     for e in data:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 
+from .limits import Limits, within_limits
 from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
                    step_time_ns)
 from .reference import RefSample
@@ -199,12 +200,17 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
                        trajectory: Trajectory, steps: int, *,
                        rest_speed: float = REST_SPEED, origin_ns: int = 0,
                        start_tolerance: float = START_TOLERANCE,
-                       max_start_distance: float = MAX_START_DISTANCE) -> TrackingRun:
+                       max_start_distance: float = MAX_START_DISTANCE,
+                       limits: Limits | None = None) -> TrackingRun:
     """In-process run of a :class:`Follower`, the ROS lockstep sequence step by step.
 
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
-    ``(t_k - origin_ns) * 1e-9`` as the tracker node does.
+    ``(t_k - origin_ns) * 1e-9`` as the tracker node does.  With ``limits`` the
+    trajectory is first re-timed within them as the tracker node (``retime: true``) does
+    (:func:`control.limits.within_limits`).
     """
+    if limits is not None:
+        trajectory = within_limits(trajectory, limits)[0]
     period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
     if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
         raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '

@@ -62,6 +62,7 @@ from visualization_msgs.msg import Marker
 from .. import topics
 from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
                               path_errors, trajectory_time)
+from ..control.limits import Limits, within_limits
 from ..control.loop import Tracker, TrackerConfig
 from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
@@ -79,6 +80,17 @@ PARAMS = [
           high=10.0, read_only=True),
     Param('max_linear_speed', 1.0, 'limit on |cmd_vel.linear.x| (m/s)', low=1e-9, high=1e3),
     Param('max_angular_speed', 2.0, 'limit on |cmd_vel.angular.z| (rad/s)', low=1e-9, high=1e3),
+    Param('max_linear_accel', 0.0, 'the base\'s limit on |dv/dt| (m/s^2); 0 = unknown. '
+          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
+    Param('max_angular_accel', 0.0, 'the base\'s limit on |dw/dt| (rad/s^2); 0 = unknown. '
+          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
+    Param('min_turning_radius', 0.0, 'smallest radius the base can turn on (m; car-like '
+          'bases: wheelbase / tan(max steering angle)); a trajectory tighter than it is '
+          'refused; 0 = none', low=0.0, high=1e3),
+    Param('retime', True, 'check each trajectory against max_linear_speed, '
+          'max_linear_accel, max_angular_speed, max_angular_accel and min_turning_radius and '
+          're-time one that exceeds them along its path (logged); false: follow as sent',
+          read_only=True),
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),
@@ -163,6 +175,8 @@ class TrackerSettings:
     rest_speed: float
     start_tolerance: float = START_TOLERANCE
     max_start_distance: float = MAX_START_DISTANCE
+    limits: Limits = Limits()
+    retime: bool = True
 
 
 def tracker_settings(values: dict) -> TrackerSettings:
@@ -192,7 +206,8 @@ def tracker_settings(values: dict) -> TrackerSettings:
                            diagnostics_period=values['diagnostics_period'],
                            rest_speed=values['rest_speed'],
                            start_tolerance=values['start_tolerance'],
-                           max_start_distance=values['max_start_distance'])
+                           max_start_distance=values['max_start_distance'],
+                           limits=Limits.from_values(values), retime=values['retime'])
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
@@ -214,6 +229,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                                      DATA_QOS)
         self.follower: Follower | None = None
         self.last_refusal = ''
+        self.last_retime = ''              # what re-timing the last trajectory changed
         self.origin_ns = 0
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
@@ -282,6 +298,11 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _new_trajectory(self, build, source: str) -> None:
         try:
             traj, origin = build()
+            if self.config.retime:
+                traj, note = within_limits(traj, self.config.limits)
+                if note:
+                    self.last_retime = note
+                    self.log('warn', f'trajectory from {source}: {note}')
         except TrajectoryError as exc:
             self.rejected += 1
             self.last_refusal = str(exc)
@@ -562,7 +583,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'trajectory': state,
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
                 'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
-                'last refused trajectory': self.last_refusal or 'none'}
+                'last refused trajectory': self.last_refusal or 'none',
+                'last re-timed trajectory': self.last_retime or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -326,7 +326,10 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
     test = Node('test_bad_paths', context=ctx)
     pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
     pub_m = test.create_publisher(MultiDOFJointTrajectory, 'trajectory_multidof', LATCHED_QOS)
-    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
+    # retime off: the MultiDOF trajectory below ends at 2 m/s, above the default
+    # max_linear_speed, and is checked here for its exact conversion (not its re-timing)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker',
+                                                                     retime=False))
     try:
         pub.publish(good)
         spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx, timeout=20)
@@ -536,3 +539,44 @@ def test_reference_started_5_s_before_the_tracker_does_not_make_it_chase(ros_con
     finally:
         for n in nodes:
             n.destroy_node()
+
+
+def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
+    """The line-arc lap to trackers with one limit below its peak each: the log/diagnostics
+    note names the limit, the time and the value, and the tracker follows the re-timed lap;
+    a minimum turning radius above the lap's is a refusal naming place and curvature."""
+    from nav_msgs.msg import Path as PathMsg
+    from rclpy.node import Node
+    from nonfragile_tracker.control.limits import Limits, check
+    from nonfragile_tracker.nodes.common import LATCHED_QOS
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    lap = load_waypoints(CONFIG / 'trajectories' / 'line_arc_lap.csv')
+    _, msg = as_sent(lap)
+    params = scenario()
+    test = Node('test_limits', context=ctx)
+    pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
+    pub.publish(msg)
+    for name, value in (('max_linear_speed', 0.3), ('max_linear_accel', 0.3),
+                        ('max_angular_speed', 0.9), ('max_angular_accel', 3.0),
+                        ('min_turning_radius', 0.5)):
+        tracker = TrackerNode(context=ctx, parameter_overrides=param_list(
+            params, 'tracker', **{name: value}))
+        try:
+            spin_nodes([test, tracker], lambda: tracker.follower is not None
+                       or tracker.last_refusal, ctx, timeout=30)
+            v = check(lap, Limits(**{name: value}))[name]
+            if name == 'min_turning_radius':
+                assert tracker.follower is None
+                note = tracker.last_refusal
+                assert 'min_turning_radius = 0.5 m' in note and 'curvature' in note
+            else:
+                note = tracker.last_retime
+                assert tracker.follower.trajectory.t_end > lap.t_end + 0.1   # re-timed
+                assert f'{v.violated_value:.4g}' in note
+            assert f'VIOLATES {name} = {value:g}' in note or name == 'min_turning_radius'
+            assert f'{v.violated_at:.3f} s' in note
+        finally:
+            tracker.destroy_node()
+    test.destroy_node()
