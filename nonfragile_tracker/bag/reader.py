@@ -106,6 +106,9 @@ class ReferenceSeries:
     ax: np.ndarray
     ay: np.ndarray
     source: str = ''           # where it came from: the reference topics or a Path topic
+    #: per sample: 0 before the trajectory's start (waiting), 1 while it is active, 2 after
+    #: its end (holding the end point at rest); None when unknown (reference samples)
+    phase: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -541,6 +544,7 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     recv = np.array([r for r, _ in msgs], dtype=np.int64)
     which = np.maximum(np.searchsorted(recv, receive, side='right') - 1, 0)
     rows = np.empty((stamps.size, 6))
+    phase = np.empty(stamps.size, dtype=np.int8)
     offsets: dict[int, float] = {}       # message -> its re-basing (Follower's start rule)
     for i, (s, k) in enumerate(zip(stamps, which)):
         traj, origin = built[int(k)]
@@ -548,10 +552,13 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
         if int(k) not in offsets and t >= traj.t_start:
             offsets[int(k)] = start_offset(traj, t, start_tolerance=start_tolerance,
                                            rest_speed=rest_speed)
-        r = traj.sample(t - offsets.get(int(k), 0.0))
+        tt = t - offsets.get(int(k), 0.0)
+        r = traj.sample(tt)
         rows[i] = (r.x, r.y, r.vx, r.vy, r.ax, r.ay)
+        phase[i] = 0 if tt < traj.t_start else (2 if tt > traj.t_end else 1)
     x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
-    return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)
+    return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic,
+                           phase=phase)
 
 
 def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | None = None,

@@ -78,6 +78,22 @@ def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path, stamped):
     assert err[run.pose.t > 5.0].max() < 0.03
     assert run.commands.v[-1] == 0.0 and run.commands.w[-1] == 0.0
     assert 0.45 < np.max(np.abs(run.commands.v)) < 0.6
+    if not stamped:
+        # the report says which errors are the tracking (trajectory active) and which the
+        # rest after its end
+        from nonfragile_tracker.bag.report import bag_report, format_report
+        rep = bag_report(res.bag, plots=False)
+        ph = rep.phases
+        active = (sim.t >= traj.t_start) & (sim.t <= traj.t_end)
+        assert ph.active_samples == int(active.sum())
+        assert ph.active_span == pytest.approx((0.0, traj.t_end), abs=0.011)
+        assert ph.active_rms == pytest.approx(math.sqrt(np.mean(err[active] ** 2)), rel=1e-9)
+        assert ph.active_max == pytest.approx(err[active].max(), rel=1e-9)
+        assert ph.after_samples == int((sim.t > traj.t_end).sum())
+        assert ph.after_final == pytest.approx(err[-1], rel=1e-9)
+        text = format_report(rep)
+        assert 'while the trajectory is active (0.00..13.00 s): RMS / max' in text
+        assert 'after its end (at rest)' in text and 'final position error (whole run)' in text
 
 
 def spin_nodes(nodes, done, ctx, timeout=60.0):
