@@ -418,7 +418,8 @@ PATH_TYPE = 'nav_msgs/msg/Path'
 PATH_TOPICS = ('trajectory', 'reference/path')
 #: Trajectory messages a tracker follows (a lean recording keeps these instead of the
 #: per-step samples), in the order the reader prefers them, with their types.
-TRAJECTORY_TOPICS = ((topics.TRAJECTORY_MULTIDOF, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
+TRAJECTORY_TOPICS = ((topics.FOLLOWED_TRAJECTORY, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                     (topics.TRAJECTORY_MULTIDOF, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
                      (topics.TRAJECTORY, PATH_TYPE))
 _TRAJ_ROLE = 'trajectory message'
 

@@ -68,7 +68,7 @@ from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)
-from .trajectory_io import multidof_to_trajectory, path_to_trajectory
+from .trajectory_io import followed_to_multidof, multidof_to_trajectory, path_to_trajectory
 
 PARAMS = [
     Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
@@ -231,6 +231,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.last_refusal = ''
         self.last_retime = ''              # what re-timing the last trajectory changed
         self.origin_ns = 0
+        self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
+                                                  topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
                                  self._on_multidof, LATCHED_QOS)
@@ -483,9 +485,13 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self.log('error', f'refused trajectory: {f.refused}; waiting at rest for a new '
                               'trajectory')
             self._diagnostics()
+            return
         elif f.offset:
             self.log('info', f'trajectory started {f.offset:.3f} s after its start stamp: '
                              're-based to start now (its own speed profile, no chase)')
+        if not f.trajectory.is_analytic:      # what it follows, as it follows it
+            self.pub_followed.publish(followed_to_multidof(
+                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame))
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
         """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
