@@ -586,8 +586,11 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
         topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
         topic_map = _complete_topic_map(by_topic, topic_map, topic_overrides)
         path_topic = traj_topic = None
-        if any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
-                                            topics.REF_ACCEL)):
+        followed = topic_map.get(topics.FOLLOWED_TRAJECTORY)
+        if followed is not None and by_topic[followed].msgtype == TRAJECTORY_TOPICS[0][1]:
+            traj_topic = followed        # what the tracker followed: before the samples
+        elif any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
+                                              topics.REF_ACCEL)):
             for logical, msgtype in TRAJECTORY_TOPICS:
                 if logical in topic_map and by_topic[topic_map[logical]].msgtype == msgtype:
                     traj_topic = topic_map[logical]
@@ -700,7 +703,7 @@ def read_bag(path: str | os.PathLike, *, strict: bool = True, namespace: str | N
     common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
         & set(ref_parts[topics.REF_ACCEL])
     reference = None
-    if not common and traj_msgs and traj_topic is not None:
+    if (not common or traj_topic == followed) and traj_msgs and traj_topic is not None:
         try:
             reference = _trajectory_reference(traj_msgs, by_topic[traj_topic].msgtype,
                                               traj_topic, stamps, precv)

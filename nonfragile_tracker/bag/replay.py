@@ -125,8 +125,10 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
                 'and reference (or trajectory message) to the tracker (the bag has '
                 f'{sorted(by_topic) or "no topics"})', missing)
         kinds = {tmap[n]: k for n, k in _KINDS.items() if n in tmap}
-        if not any(k in REF_INDEX for k in kinds.values()) and lean:
-            kinds[tmap[lean[0]]] = 'trajectory'   # the one the tracker followed
+        if lean:
+            # the tracker follows a trajectory message whenever it has one (lockstep or real
+            # time, lean or full recording): feed that, not the per-step samples
+            kinds[tmap[lean[0]]] = 'trajectory'
         ts = typestore_for(reader)
         conns = [c for c in reader.connections if c.topic in kinds]
         out = []
@@ -245,8 +247,10 @@ class TrackerInputs(_OdomInputs):
             return None
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
+        # the odometry stamp, as the node passes it (the latency predictor's time)
         return self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                 measured_speed=speed if math.isfinite(speed) else 0.0)
+                                 measured_speed=speed if math.isfinite(speed) else 0.0,
+                                 stamp=s * 1e-9)
 
 
 class FollowerInputs(_OdomInputs):
@@ -351,12 +355,18 @@ def load_tracker_parameters(gains: str | os.PathLike | None = None,
     """Tracker config and parameter values from a gain file and a parameter file.
 
     Defaults: ``config/tracker_gains.yaml`` and ``config/paper_scenario.yaml``; values
-    absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).
+    absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).  The gain file's
+    other tracker parameters (the predictor of a ``latency-design`` file) override the
+    parameter file's, as ``run --gains`` does.
     """
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
     values = dict(TRACKER_DEFAULTS)
     values.update(_param_section(params))
+    # the gain file's tracker section overrides the parameter file, as in a run
+    # (`run --gains`, scenario_parameters): a latency-design gain file carries the
+    # predictor parameters its gain was designed with
+    values.update({k: v for k, v in _param_section(gains).items() if k not in ('K', 'K_shape')})
     K = read_gain_file(gains)
     values['K'] = [float(v) for v in np.asarray(K).ravel()]
     values['K_shape'] = list(np.asarray(K).shape)
@@ -491,9 +501,11 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     command cannot be reproduced this way, the rest is fed in bag order (and the
     comparison shows the difference).
 
-    A lean lockstep bag (a trajectory message instead of the reference samples) is fed
-    to :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values)
-    give its ``rest_speed``, ``cruise_speed`` and ``max_accel``.
+    A bag with a trajectory message (``trajectory_multidof`` or ``trajectory``: the tracker
+    follows it whenever it has one; lockstep or real time, lean or full) is fed to
+    :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values) give
+    its ``rest_speed``, ``cruise_speed``, ``max_accel``, the start rule and the limits it
+    re-times with.
     """
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}

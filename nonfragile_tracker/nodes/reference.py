@@ -178,8 +178,9 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
                 traj = load_waypoints(file, smoothing=cfg.smoothing)
             except (TrajectoryError, OSError) as exc:
                 raise StartupError(f'reference: trajectory_file: {exc}') from None
-            if self.mode == 'realtime':      # a start the tracker can meet
-                start_ns += int(round(cfg.start_delay * 1e9))
+            if self.mode == 'realtime':      # a start the tracker can meet: now (after the
+                # node's start-up and the file's loading) + start_delay
+                start_ns = self.get_clock().now().nanoseconds + int(round(cfg.start_delay * 1e9))
             self._follow(trajectory_to_path(traj, start_ns, self.frame), file)
         elif self.mode == 'lockstep' and not cfg.trajectory_topic:
             self._follow_analytic(start_ns)
