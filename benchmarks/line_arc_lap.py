@@ -100,8 +100,9 @@ def lap_errors(bag: Path) -> dict:
     from nonfragile_tracker.bag.report import bag_report
     rep = bag_report(bag, plots=False)
     ph = rep.phases
-    if ph is None:
-        raise RuntimeError(f'{bag}: no trajectory end within the run')
+    if ph is None:                       # the trajectory did not end within the run
+        return {'rms': float('nan'), 'max': float('nan'), 'span': None, 'peak_v': None,
+                'peak_w': None}
     m = rep.metrics
     return {'rms': ph.active_rms, 'max': ph.active_max, 'span': list(ph.active_span),
             'peak_v': m.peak_abs_v if m else None, 'peak_w': m.peak_abs_w if m else None}
@@ -135,7 +136,7 @@ ov = runner.realtime_overrides()
 ov['reference']['ros__parameters'].update(trajectory_file={str(LAPS[lap])!r})
 ov['tracker']['ros__parameters'].update(wait_for_trajectory=True)
 ov['plant']['ros__parameters'].update(initial_pose=[s.x, s.y, s.heading], initial_speed=0.0,
-                                      duration=round(traj.t_end + 5.0, 2))
+                                      duration=round(traj.t_end + 10.0, 2))
 params = runner.scenario_parameters(Path({str(sc)!r}), Path({str(gains)!r}), ov)
 d = Path({str(out / name)!r}); d.mkdir(parents=True, exist_ok=True)
 res = runner.run_processes(params, d, progress=lambda s: None)

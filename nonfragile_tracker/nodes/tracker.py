@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
@@ -230,6 +231,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.follower: Follower | None = None
         self.last_refusal = ''
         self.last_retime = ''              # what re-timing the last trajectory changed
+        self._pool: Any = None             # real time: the re-timing worker thread
+        self._retimed: list = []           # (future, origin, source) ready to adopt
         self.origin_ns = 0
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
@@ -300,17 +303,48 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _new_trajectory(self, build, source: str) -> None:
         try:
             traj, origin = build()
+            if self.config.retime and self.mode == 'realtime' and not traj.is_analytic:
+                # real time: check and re-time in a worker thread (a second or two for a
+                # lap); odometry keeps being answered meanwhile, and the new trajectory
+                # starts at the first odometry after it is ready (re-based if late)
+                if self._pool is None:
+                    from concurrent.futures import ThreadPoolExecutor
+                    self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+                fut = self._pool.submit(within_limits, traj, self.config.limits)
+                fut.add_done_callback(lambda f: self._retimed.append((f, origin, source)))
+                return
             if self.config.retime:
                 traj, note = within_limits(traj, self.config.limits)
-                if note:
-                    self.last_retime = note
-                    self.log('warn', f'trajectory from {source}: {note}')
+                self._note_retime(note, source)
         except TrajectoryError as exc:
-            self.rejected += 1
-            self.last_refusal = str(exc)
-            keep = 'the previous trajectory' if self.follower else 'the reference topics'
-            self.log('error', f'refused trajectory: {exc}; keeping {keep}')
-            return
+            return self._refuse(exc)
+        self._adopt(traj, origin, source)
+        self._try_compute()                # a pose not yet answered gets its command now
+
+    def _note_retime(self, note: str, source: str) -> None:
+        if note:
+            self.last_retime = note
+            self.log('warn', f'trajectory from {source}: {note}')
+
+    def _refuse(self, exc: Exception) -> None:
+        self.rejected += 1
+        self.last_refusal = str(exc)
+        keep = 'the previous trajectory' if self.follower else 'the reference topics'
+        self.log('error', f'refused trajectory: {exc}; keeping {keep}')
+
+    def _take_retimed(self) -> None:
+        """Adopt a trajectory re-timed in the background (real time), or refuse it."""
+        while self._retimed:
+            fut, origin, source = self._retimed.pop(0)
+            try:
+                traj, note = fut.result()
+            except TrajectoryError as exc:
+                self._refuse(exc)
+                continue
+            self._note_retime(note, source)
+            self._adopt(traj, origin, source)
+
+    def _adopt(self, traj, origin: int, source: str) -> None:
         if self.follower is None:
             self.follower = Follower(self.tracker, traj, self.config.rest_speed,
                                      start_tolerance=self.config.start_tolerance,
@@ -321,7 +355,6 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
                          f'({traj.kind}), {traj.duration:.3f} s from stamp '
                          f'{origin * 1e-9:.3f} s: starting a new run')
-        self._try_compute()                # a pose not yet answered gets its command now
 
     def _on_path(self, msg: PathMsg) -> None:
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
@@ -368,6 +401,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 self.deadline_misses += 1
         self._odom = msg
         self.last_odom_stamp = s
+        if self._retimed:                  # real time: a trajectory re-timed meanwhile
+            self._take_retimed()
         self._try_compute()                # cmd_vel first: the clock read is bookkeeping
         self._odom_received()
 
@@ -596,6 +631,12 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st]
         self.pub_diag.publish(arr)
+
+    def close(self) -> None:
+        """Stop the re-timing worker (a re-timing in progress is not waited for)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
 
     def _watchdog(self) -> None:
         own = self.follower is not None      # own trajectory: reference samples not needed
