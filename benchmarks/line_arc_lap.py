@@ -195,6 +195,58 @@ def in_process(gains: Path, seeds: int) -> dict:
     return out
 
 
+def write_laps() -> None:
+    """(Re)write the two lap files: a 3 x 1.5 m rectangle with 0.4 m corner arcs, points every
+    5 cm, times from a trapezoidal profile (0.4 m/s, 0.4 m/s^2); the reverse drives it
+    backwards (yaw + pi)."""
+    import math
+
+    import numpy as np
+    W, H, R, V, A, DS = 3.0, 1.5, 0.4, 0.4, 0.4, 0.05
+
+    def straight(p0, p1):
+        n = max(int(round(math.dist(p0, p1) / DS)), 1)
+        return [(p0[0] + (p1[0] - p0[0]) * k / n, p0[1] + (p1[1] - p0[1]) * k / n)
+                for k in range(n)]
+
+    def arc(c, a0):
+        n = int(round(R * math.pi / 2 / DS))
+        return [(c[0] + R * math.cos(a0 + math.pi / 2 * k / n),
+                 c[1] + R * math.sin(a0 + math.pi / 2 * k / n)) for k in range(n)]
+
+    x0 = W / 2
+    pts = (straight((x0, 0.0), (W - R, 0.0)) + arc((W - R, R), -math.pi / 2)
+           + straight((W, R), (W, H - R)) + arc((W - R, H - R), 0.0)
+           + straight((W - R, H), (R, H)) + arc((R, H - R), math.pi / 2)
+           + straight((0.0, H - R), (0.0, R)) + arc((R, R), math.pi)
+           + straight((R, 0.0), (x0, 0.0)) + [(x0, 0.0)])
+    P = np.array(pts) - [x0, 0.0]
+    s = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(P, axis=0).T))])
+    L = s[-1]
+    sa, ta = V * V / (2 * A), V / A
+    tc = (L - 2 * sa) / V
+    t = np.where(s <= sa, np.sqrt(2 * s / A), np.where(
+        s <= L - sa, ta + (s - sa) / V, 2 * ta + tc - np.sqrt(np.maximum(2 * (L - s) / A, 0))))
+    yaw = np.unwrap(np.arctan2(np.gradient(P[:, 1]), np.gradient(P[:, 0])))
+    heads = {'forward': ('# A line-arc lap, as a planner gives it: a 3 x 1.5 m rectangle whose '
+                         'straights are\n# joined by 0.4 m-radius quarter arcs (curvature jumps '
+                         '0 -> 2.5 1/m at each junction),\n# counter-clockwise from (0, 0) '
+                         'heading +x, back to (0, 0).  Points every 5 cm along\n# the path; '
+                         'times from a trapezoidal speed profile (cruise 0.4 m/s, 0.4 m/s^2), '
+                         'at rest\n# at both ends.  Columns: t (s), x (m), y (m), yaw (rad).  '
+                         'Driven backwards:\n# line_arc_lap_reverse.csv.  Made by '
+                         'benchmarks/line_arc_lap.py --write-laps.\n', 0.0),
+             'backwards': ('# line_arc_lap.csv driven backwards: the same points and times, '
+                           'the robot facing\n# against the direction of travel (yaw + pi): it '
+                           'reverses around the lap.\n# Columns: t (s), x (m), y (m), yaw '
+                           '(rad).  Made by benchmarks/line_arc_lap.py --write-laps.\n',
+                           math.pi)}
+    for lap, (head, turn) in heads.items():
+        rows = ''.join(f'{ti:.4f},{xi:.4f},{yi:.4f},{h + turn:.4f}\n'
+                       for ti, (xi, yi), h in zip(t, P, yaw))
+        LAPS[lap].write_text(head + 't,x,y,yaw\n' + rows)
+
+
 def main(argv=None) -> int:
     """Run the benchmark; print the table."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -203,7 +255,12 @@ def main(argv=None) -> int:
     ap.add_argument('--gains', help='skip the bring-up: use this gain file')
     ap.add_argument('--no-realtime', action='store_true')
     ap.add_argument('--no-lockstep', action='store_true')
+    ap.add_argument('--write-laps', action='store_true',
+                    help='(re)write config/trajectories/line_arc_lap*.csv and exit')
     args = ap.parse_args(argv)
+    if args.write_laps:
+        write_laps()
+        return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     gains = Path(args.gains) if args.gains else bring_up(out)
