@@ -38,6 +38,7 @@ this module solves exactly with numpy in well under a second for a lap.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -323,13 +324,19 @@ class Retimed:
                 f'{self.duration_after:.3f} s, slower than planned during {spans}{more}')
 
 
+@functools.lru_cache(maxsize=16)
+def _pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs of ``m`` constraint rows (the candidate vertices of a 2-D LP)."""
+    i, j = np.triu_indices(m, 1)
+    return i, j
+
+
 def _vertices_max_min(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """Max and min of ``x`` over ``{(x, u): A [x, u] <= b}`` (2-D LP by vertex enumeration).
 
     Returns ``(nan, nan)`` if the set is empty.
     """
-    m = A.shape[0]
-    i, j = np.triu_indices(m, 1)
+    i, j = _pairs(A.shape[0])
     a1, a2 = A[i], A[j]
     det = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
     ok = np.abs(det) > 1e-12
