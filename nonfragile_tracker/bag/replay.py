@@ -269,12 +269,36 @@ class FollowerInputs(_OdomInputs):
         self.rest_speed = rest_speed
         self.start_tolerance, self.max_start_distance = START_TOLERANCE, MAX_START_DISTANCE
         self.limits: Limits | None = None
+        self.defer = False                 # adopt a trajectory without a command
+        self.built: dict[int, Any] = {}    # message id -> (trajectory, origin) or the error
         self.cruise_speed, self.max_accel = cruise_speed, max_accel
         self.follower: Follower | None = None
         self.origin_ns = 0
 
     def trajectory(self, e: ReplayEvent) -> Command | None:
-        """Take a trajectory message; the command for a waiting odometry, if any."""
+        """Take a trajectory message; the command for a waiting odometry, if any.
+
+        With ``defer`` (a real-time tracker that re-times in a worker thread) the
+        trajectory is adopted without a command: the next odometry gets the first one.
+        """
+        key = id(e.msg)
+        if key not in self.built:
+            self.built[key] = self._build(e)
+        built = self.built[key]
+        if isinstance(built, TrajectoryError):
+            self._ignore(f'trajectory refused: {built}')
+            return None
+        traj, origin = built
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, self.rest_speed,
+                                     start_tolerance=self.start_tolerance,
+                                     max_start_distance=self.max_start_distance)
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        return None if self.defer else self._compute()
+
+    def _build(self, e: ReplayEvent):
         try:
             if e.msgtype == 'nav_msgs/msg/Path':
                 traj, origin = path_to_trajectory(
@@ -287,16 +311,8 @@ class FollowerInputs(_OdomInputs):
             if self.limits is not None:          # the tracker's retime (default true)
                 traj = within_limits(traj, self.limits)[0]
         except TrajectoryError as exc:
-            self._ignore(f'trajectory refused: {exc}')
-            return None
-        if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.rest_speed,
-                                     start_tolerance=self.start_tolerance,
-                                     max_start_distance=self.max_start_distance)
-        else:
-            self.follower.set_trajectory(traj)
-        self.origin_ns = origin
-        return self._compute()
+            return exc
+        return traj, origin
 
     def _compute(self) -> Command | None:
         odom, f = self._odom, self.follower
@@ -316,22 +332,72 @@ class FollowerInputs(_OdomInputs):
 
 def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed,
                  values: dict) -> ReplayPlan:
-    """A lean lockstep bag: the trajectory message(s) and odometry, in bag order."""
-    inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
-                            values.get('cruise_speed'), values.get('max_accel'),
-                            float(values.get('max_stamp_jump',
-                                             TRACKER_DEFAULTS['max_stamp_jump'])))
-    inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
-    inputs.max_start_distance = float(values.get('max_start_distance', MAX_START_DISTANCE))
-    if values.get('retime', True):
-        inputs.limits = Limits.from_values({**TRACKER_DEFAULTS, **values})
+    """A bag with a trajectory message: the trajectory message(s) and odometry, in bag order.
+
+    Real time (one trajectory message, recorded commands): the tracker adopted the
+    trajectory at some odometry near the one the recorder saw before it (later when it
+    re-timed it in its worker thread); the placement from which the first
+    :data:`START_CHECK` recorded commands are reproduced is searched (up to
+    :data:`FOLLOW_SEARCH` odometry messages after the bag's), else bag order is used.
+    """
+    built: dict[int, Any] = {}
+
+    def make(defer: bool) -> FollowerInputs:
+        inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
+                                values.get('cruise_speed'), values.get('max_accel'),
+                                float(values.get('max_stamp_jump',
+                                                 TRACKER_DEFAULTS['max_stamp_jump'])))
+        inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
+        inputs.max_start_distance = float(values.get('max_start_distance',
+                                                     MAX_START_DISTANCE))
+        if values.get('retime', True):
+            inputs.limits = Limits.from_values({**TRACKER_DEFAULTS, **values})
+        inputs.built, inputs.defer = built, defer
+        return inputs
+
+    def run(order: list[ReplayEvent], defer: bool, limit: int | None = None):
+        inputs = make(defer)
+        commands = []
+        for e in order:
+            cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
+            if cmd is not None:
+                commands.append((e.receive_ns, _twist_msg(cmd)))
+                if limit is not None and len(commands) >= limit:
+                    break
+        return inputs, commands
+
     data = [e for e in events if e.kind in ('odom', 'trajectory')]
-    commands = []
-    for e in data:
-        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
-        if cmd is not None:
-            commands.append((e.receive_ns, _twist_msg(cmd)))
-    return ReplayPlan('lockstep', data, commands, recorded, fed, dict(inputs.ignored))
+    trajs = [i for i, e in enumerate(data) if e.kind == 'trajectory']
+    # lockstep: the reference samples' stamps (full bags) or odometry on an exact grid
+    # (lean bags: sim time, one stamp per step); real time: jittery wall-clock stamps
+    steps = np.diff([stamp_ns(e.msg.header.stamp) for e in data if e.kind == 'odom'])
+    mode = 'lockstep' if bag_mode(events) == 'lockstep' or (
+        steps.size and int(steps.max() - steps.min()) <= 1000) else 'realtime'
+    if mode == 'realtime' and len(trajs) == 1 and len(recorded) >= START_CHECK:
+        ti = trajs[0]
+        rest = data[:ti] + data[ti + 1:]
+        check = recorded[:START_CHECK]
+        for defer in (False, True):
+            for p in range(max(ti - 5, 0), min(ti + FOLLOW_SEARCH, len(rest)) + 1):
+                order = rest[:p] + [data[ti]] + rest[p:]
+                _, cmds = run(order, defer, START_CHECK)
+                if len(cmds) == START_CHECK and all(
+                        _agrees_twist(c, r, 1e-9) for (_, c), (_, r) in zip(cmds, check)):
+                    inputs, commands = run(order, defer)
+                    return ReplayPlan('realtime', order, commands, recorded, fed,
+                                      dict(inputs.ignored))
+    inputs, commands = run(data, False)
+    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
+
+
+#: Real-time follower bags: odometry messages after the bag's position of the trajectory
+#: message at which the tracker may have adopted it (a re-timing of about 1-3 s).
+FOLLOW_SEARCH = 250
+
+
+def _agrees_twist(a: Any, b: Any, atol: float) -> bool:
+    ta, tb = _twist(a), _twist(b)
+    return abs(ta.linear.x - tb.linear.x) <= atol and abs(ta.angular.z - tb.angular.z) <= atol
 
 
 def _param_section(path: Path) -> dict:
