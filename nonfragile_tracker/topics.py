@@ -17,6 +17,10 @@ RUN_DONE = 'run_done'
 TRAJECTORY = 'trajectory'
 #: The same as trajectory_msgs/MultiDOFJointTrajectory (pose, velocity, acceleration).
 TRAJECTORY_MULTIDOF = 'trajectory_multidof'
+#: The trajectory the tracker follows, as it follows it (MultiDOFJointTrajectory,
+#: transient-local): re-timed within the limits and re-based to its start, stamped with
+#: its start; published when the tracker starts following it (bag report, replay).
+FOLLOWED_TRAJECTORY = 'tracker/trajectory'
 #: The reference for display (nav_msgs/Path, transient-local), any source.
 REF_PATH = 'reference/path'
 #: What the robot drove (nav_msgs/Path), the tracking error, the reference point marker.
@@ -53,6 +57,7 @@ TYPES: dict[str, str] = {
     TRAJECTORY: 'nav_msgs/msg/Path',
     TRAJECTORY_MULTIDOF: 'trajectory_msgs/msg/MultiDOFJointTrajectory',
     REF_PATH: 'nav_msgs/msg/Path',
+    FOLLOWED_TRAJECTORY: 'trajectory_msgs/msg/MultiDOFJointTrajectory',
 }
 
 #: A lean lockstep recording (the default of ``nonfragile_tracker run`` and the launch
@@ -61,7 +66,7 @@ TYPES: dict[str, str] = {
 #: odometry stamp as the tracker does.  ``/clock``, ``pose`` and the per-step reference
 #: samples are left out (``--record-all`` / ``record_all:=true`` records :data:`TYPES`).
 LEAN_TOPICS: tuple[str, ...] = (ODOM, CMD_VEL, RUN_DONE, TRAJECTORY, TRAJECTORY_MULTIDOF,
-                                REF_PATH)
+                                REF_PATH, FOLLOWED_TRAJECTORY)
 
 #: The topics a tracking run's analysis reads (bag reader, golden bags): pose, reference,
 #: command.  ``/clock`` and ``pose`` repeat ``odom``'s stamps and pose.

@@ -32,7 +32,7 @@ from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.typesys.store import Typestore
 
 from .. import topics
-from ..control.follow import reference_at
+from ..control.follow import REST_SPEED, START_TOLERANCE, start_offset, trajectory_time
 from ..control.loop import quaternion_to_yaw
 from ..control.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
@@ -89,6 +89,9 @@ class ReferenceSeries:
     ax: np.ndarray
     ay: np.ndarray
     source: str = ''           # where it came from: the reference topics or a Path topic
+    #: per sample: 0 before the trajectory's start (waiting), 1 while it is active, 2 after
+    #: its end (holding the end point at rest); None when unknown (reference samples)
+    phase: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -517,7 +520,8 @@ PATH_TYPE = 'nav_msgs/msg/Path'
 PATH_TOPICS = ('trajectory', 'reference/path')
 #: Trajectory messages a tracker follows (a lean recording keeps these instead of the
 #: per-step samples), in the order the reader prefers them, with their types.
-TRAJECTORY_TOPICS = ((topics.TRAJECTORY_MULTIDOF, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
+TRAJECTORY_TOPICS = ((topics.FOLLOWED_TRAJECTORY, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                     (topics.TRAJECTORY_MULTIDOF, 'trajectory_msgs/msg/MultiDOFJointTrajectory'),
                      (topics.TRAJECTORY, PATH_TYPE))
 _TRAJ_ROLE = 'trajectory message'
 
@@ -615,13 +619,17 @@ def _path_reference(msg: Any, topic: str) -> ReferenceSeries:
 
 
 def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
-                          stamps: np.ndarray, receive: np.ndarray) -> ReferenceSeries:
+                          stamps: np.ndarray, receive: np.ndarray, *,
+                          start_tolerance: float = START_TOLERANCE,
+                          rest_speed: float = REST_SPEED) -> ReferenceSeries:
     """The reference a lockstep tracker sampled from recorded trajectory messages.
 
     Each message is converted as the tracker converts it (:mod:`msgconv`) and sampled at
     each odometry stamp as :class:`control.follow.Follower` samples it
     (:func:`control.follow.reference_at`); a stamp uses the latest message received no
-    later than its odometry (the first message before that).  :class:`TrajectoryError` if a
+    later than its odometry (the first message before that); a trajectory first followed
+    late is re-based as the Follower re-bases it (:func:`control.follow.start_offset`, the
+    tracker's default ``start_tolerance``).  :class:`TrajectoryError` if a
     message cannot be converted (e.g. an untimed Path, whose times depend on the
     tracker's parameters).
     """
@@ -639,12 +647,21 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     recv = np.array([r for r, _ in msgs], dtype=np.int64)
     which = np.maximum(np.searchsorted(recv, receive, side='right') - 1, 0)
     rows = np.empty((stamps.size, 6))
+    phase = np.empty(stamps.size, dtype=np.int8)
+    offsets: dict[int, float] = {}       # message -> its re-basing (Follower's start rule)
     for i, (s, k) in enumerate(zip(stamps, which)):
         traj, origin = built[int(k)]
-        r = reference_at(traj, origin, int(s))
+        t = trajectory_time(int(s), origin)
+        if int(k) not in offsets and t >= traj.t_start:
+            offsets[int(k)] = start_offset(traj, t, start_tolerance=start_tolerance,
+                                           rest_speed=rest_speed)
+        tt = t - offsets.get(int(k), 0.0)
+        r = traj.sample(tt)
         rows[i] = (r.x, r.y, r.vx, r.vy, r.ax, r.ay)
+        phase[i] = 0 if tt < traj.t_start else (2 if tt > traj.t_end else 1)
     x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
-    return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic)
+    return ReferenceSeries(stamps.copy(), stamps * 1e-9, x, y, vx, vy, ax, ay, source=topic,
+                           phase=phase)
 
 
 def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: str | None = None,
@@ -694,8 +711,11 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
         topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
         topic_map = _complete_topic_map(by_topic, topic_map, topic_overrides)
         path_topic = traj_topic = None
-        if any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
-                                            topics.REF_ACCEL)):
+        followed = topic_map.get(topics.FOLLOWED_TRAJECTORY)
+        if followed is not None and by_topic[followed].msgtype == TRAJECTORY_TOPICS[0][1]:
+            traj_topic = followed        # what the tracker followed: before the samples
+        elif any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
+                                              topics.REF_ACCEL)):
             for logical, msgtype in TRAJECTORY_TOPICS:
                 if logical in topic_map and by_topic[topic_map[logical]].msgtype == msgtype:
                     traj_topic = topic_map[logical]
@@ -808,7 +828,7 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
     common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
         & set(ref_parts[topics.REF_ACCEL])
     reference = None
-    if not common and traj_msgs and traj_topic is not None:
+    if (not common or traj_topic == followed) and traj_msgs and traj_topic is not None:
         try:
             reference = _trajectory_reference(traj_msgs, by_topic[traj_topic].msgtype,
                                               traj_topic, stamps, precv)

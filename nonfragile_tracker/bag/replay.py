@@ -37,9 +37,11 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.follow import REST_SPEED, Follower, trajectory_time
+from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                              trajectory_time)
 from ..control.gains import read_gain_file
 from ..control.loop import Command, Tracker, TrackerConfig
+from ..control.limits import Limits, within_limits
 from ..control.trajectory import TrajectoryError
 from ..files import node_key
 from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
@@ -62,7 +64,8 @@ TRACKER_DEFAULTS: dict[str, Any] = {
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0, 'max_stamp_jump': 1.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
-    'predict_lag_w': 0.0,
+    'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
+    'min_turning_radius': 0.0,
 }
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
@@ -123,8 +126,10 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
                 'and reference (or trajectory message) to the tracker (the bag has '
                 f'{sorted(by_topic) or "no topics"})', missing)
         kinds = {tmap[n]: k for n, k in _KINDS.items() if n in tmap}
-        if not any(k in REF_INDEX for k in kinds.values()) and lean:
-            kinds[tmap[lean[0]]] = 'trajectory'   # the one the tracker followed
+        if lean:
+            # the tracker follows a trajectory message whenever it has one (lockstep or real
+            # time, lean or full recording): feed that, not the per-step samples
+            kinds[tmap[lean[0]]] = 'trajectory'
         ts = typestore_for(reader)
         conns = [c for c in reader.connections if c.topic in kinds]
         out = []
@@ -243,8 +248,10 @@ class TrackerInputs(_OdomInputs):
             return None
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
+        # the odometry stamp, as the node passes it (the latency predictor's time)
         return self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                 measured_speed=speed if math.isfinite(speed) else 0.0)
+                                 measured_speed=speed if math.isfinite(speed) else 0.0,
+                                 stamp=s * 1e-9)
 
 
 class FollowerInputs(_OdomInputs):
@@ -261,12 +268,38 @@ class FollowerInputs(_OdomInputs):
                  max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
         super().__init__(config, max_stamp_jump)
         self.rest_speed = rest_speed
+        self.start_tolerance, self.max_start_distance = START_TOLERANCE, MAX_START_DISTANCE
+        self.limits: Limits | None = None
+        self.defer = False                 # adopt a trajectory without a command
+        self.built: dict[int, Any] = {}    # message id -> (trajectory, origin) or the error
         self.cruise_speed, self.max_accel = cruise_speed, max_accel
         self.follower: Follower | None = None
         self.origin_ns = 0
 
     def trajectory(self, e: ReplayEvent) -> Command | None:
-        """Take a trajectory message; the command for a waiting odometry, if any."""
+        """Take a trajectory message; the command for a waiting odometry, if any.
+
+        With ``defer`` (a real-time tracker that re-times in a worker thread) the
+        trajectory is adopted without a command: the next odometry gets the first one.
+        """
+        key = id(e.msg)
+        if key not in self.built:
+            self.built[key] = self._build(e)
+        built = self.built[key]
+        if isinstance(built, TrajectoryError):
+            self._ignore(f'trajectory refused: {built}')
+            return None
+        traj, origin = built
+        if self.follower is None:
+            self.follower = Follower(self.tracker, traj, self.rest_speed,
+                                     start_tolerance=self.start_tolerance,
+                                     max_start_distance=self.max_start_distance)
+        else:
+            self.follower.set_trajectory(traj)
+        self.origin_ns = origin
+        return None if self.defer else self._compute()
+
+    def _build(self, e: ReplayEvent):
         try:
             if e.msgtype == 'nav_msgs/msg/Path':
                 traj, origin = path_to_trajectory(
@@ -276,15 +309,11 @@ class FollowerInputs(_OdomInputs):
             else:
                 traj, origin = multidof_to_trajectory(e.msg, frame=topics.ODOM_FRAME,
                                                       source=e.topic)
+            if self.limits is not None:          # the tracker's retime (default true)
+                traj = within_limits(traj, self.limits)[0]
         except TrajectoryError as exc:
-            self._ignore(f'trajectory refused: {exc}')
-            return None
-        if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.rest_speed)
-        else:
-            self.follower.set_trajectory(traj)
-        self.origin_ns = origin
-        return self._compute()
+            return exc
+        return traj, origin
 
     def _compute(self) -> Command | None:
         odom, f = self._odom, self.follower
@@ -304,18 +333,72 @@ class FollowerInputs(_OdomInputs):
 
 def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed,
                  values: dict) -> ReplayPlan:
-    """A lean lockstep bag: the trajectory message(s) and odometry, in bag order."""
-    inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
-                            values.get('cruise_speed'), values.get('max_accel'),
-                            float(values.get('max_stamp_jump',
-                                             TRACKER_DEFAULTS['max_stamp_jump'])))
+    """A bag with a trajectory message: the trajectory message(s) and odometry, in bag order.
+
+    Real time (one trajectory message, recorded commands): the tracker adopted the
+    trajectory at some odometry near the one the recorder saw before it (later when it
+    re-timed it in its worker thread); the placement from which the first
+    :data:`START_CHECK` recorded commands are reproduced is searched (up to
+    :data:`FOLLOW_SEARCH` odometry messages after the bag's), else bag order is used.
+    """
+    built: dict[int, Any] = {}
+
+    def make(defer: bool) -> FollowerInputs:
+        inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
+                                values.get('cruise_speed'), values.get('max_accel'),
+                                float(values.get('max_stamp_jump',
+                                                 TRACKER_DEFAULTS['max_stamp_jump'])))
+        inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
+        inputs.max_start_distance = float(values.get('max_start_distance',
+                                                     MAX_START_DISTANCE))
+        if values.get('retime', True):
+            inputs.limits = Limits.from_values({**TRACKER_DEFAULTS, **values})
+        inputs.built, inputs.defer = built, defer
+        return inputs
+
+    def run(order: list[ReplayEvent], defer: bool, limit: int | None = None):
+        inputs = make(defer)
+        commands = []
+        for e in order:
+            cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
+            if cmd is not None:
+                commands.append((e.receive_ns, _twist_msg(cmd)))
+                if limit is not None and len(commands) >= limit:
+                    break
+        return inputs, commands
+
     data = [e for e in events if e.kind in ('odom', 'trajectory')]
-    commands = []
-    for e in data:
-        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
-        if cmd is not None:
-            commands.append((e.receive_ns, _twist_msg(cmd)))
-    return ReplayPlan('lockstep', data, commands, recorded, fed, dict(inputs.ignored))
+    trajs = [i for i, e in enumerate(data) if e.kind == 'trajectory']
+    # lockstep: the reference samples' stamps (full bags) or odometry on an exact grid
+    # (lean bags: sim time, one stamp per step); real time: jittery wall-clock stamps
+    steps = np.diff([stamp_ns(e.msg.header.stamp) for e in data if e.kind == 'odom'])
+    mode = 'lockstep' if bag_mode(events) == 'lockstep' or (
+        steps.size and int(steps.max() - steps.min()) <= 1000) else 'realtime'
+    if mode == 'realtime' and len(trajs) == 1 and len(recorded) >= START_CHECK:
+        ti = trajs[0]
+        rest = data[:ti] + data[ti + 1:]
+        check = recorded[:START_CHECK]
+        for defer in (False, True):
+            for p in range(max(ti - 5, 0), min(ti + FOLLOW_SEARCH, len(rest)) + 1):
+                order = rest[:p] + [data[ti]] + rest[p:]
+                _, cmds = run(order, defer, START_CHECK)
+                if len(cmds) == START_CHECK and all(
+                        _agrees_twist(c, r, 1e-9) for (_, c), (_, r) in zip(cmds, check)):
+                    inputs, commands = run(order, defer)
+                    return ReplayPlan('realtime', order, commands, recorded, fed,
+                                      dict(inputs.ignored))
+    inputs, commands = run(data, False)
+    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
+
+
+#: Real-time follower bags: odometry messages after the bag's position of the trajectory
+#: message at which the tracker may have adopted it (a re-timing of about 1-3 s).
+FOLLOW_SEARCH = 250
+
+
+def _agrees_twist(a: Any, b: Any, atol: float) -> bool:
+    ta, tb = _twist(a), _twist(b)
+    return abs(ta.linear.x - tb.linear.x) <= atol and abs(ta.angular.z - tb.angular.z) <= atol
 
 
 def _param_section(path: Path) -> dict:
@@ -339,12 +422,18 @@ def load_tracker_parameters(gains: str | os.PathLike | None = None,
     """Tracker config and parameter values from a gain file and a parameter file.
 
     Defaults: ``config/tracker_gains.yaml`` and ``config/paper_scenario.yaml``; values
-    absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).
+    absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).  The gain file's
+    other tracker parameters (the predictor of a ``latency-design`` file) override the
+    parameter file's, as ``run --gains`` does.
     """
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
     values = dict(TRACKER_DEFAULTS)
     values.update(_param_section(params))
+    # the gain file's tracker section overrides the parameter file, as in a run
+    # (`run --gains`, scenario_parameters): a latency-design gain file carries the
+    # predictor parameters its gain was designed with
+    values.update({k: v for k, v in _param_section(gains).items() if k not in ('K', 'K_shape')})
     K = read_gain_file(gains)
     values['K'] = [float(v) for v in np.asarray(K).ravel()]
     values['K_shape'] = list(np.asarray(K).shape)
@@ -479,9 +568,11 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     command cannot be reproduced this way, the rest is fed in bag order (and the
     comparison shows the difference).
 
-    A lean lockstep bag (a trajectory message instead of the reference samples) is fed
-    to :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values)
-    give its ``rest_speed``, ``cruise_speed`` and ``max_accel``.
+    A bag with a trajectory message (``trajectory_multidof`` or ``trajectory``: the tracker
+    follows it whenever it has one; lockstep or real time, lean or full) is fed to
+    :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values) give
+    its ``rest_speed``, ``cruise_speed``, ``max_accel``, the start rule and the limits it
+    re-times with.
     """
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}

@@ -33,9 +33,9 @@ from ..control.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
 from .errors import BagError
 
-__all__ = ['Gap', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'find_gaps',
-           'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH', 'CertificateCheck',
-           'certificate_source', 'certificate_check', 'format_certificate']
+__all__ = ['Gap', 'PhaseErrors', 'Report', 'TimingMetrics', 'bag_report', 'format_report',
+           'find_gaps', 'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH',
+           'CertificateCheck', 'certificate_source', 'certificate_check', 'format_certificate']
 
 #: File names of the figures written by :func:`bag_report`.
 PLOTS = ('xy.png', 'errors.png', 'xi.png', 'commands.png')
@@ -129,11 +129,53 @@ class Report:
     timing: TimingMetrics | None = None
     notes: tuple[str, ...] = ()
     path_length: float = math.nan   # m, robot path in the x-y plane
+    #: the errors while the trajectory is active and after its end (None when the
+    #: reference has no end within the run, e.g. the analytic paths or reference samples)
+    phases: PhaseErrors | None = None
 
     @property
     def tolerance(self) -> float:
         """Distance of "within tolerance" in m (NaN without tracking metrics)."""
         return self.metrics.tolerance if self.metrics is not None else math.nan
+
+
+@dataclass(frozen=True)
+class PhaseErrors:
+    """Position errors (m) while the trajectory is active and after its end (s, m).
+
+    *Active*: from the trajectory's start to its end (its own time, re-basing included);
+    *after the end*: the robot holds the end point (at rest; a drift there is the plant's,
+    e.g. the paper's ``A_tau`` term, not the tracking).
+    """
+
+    active_samples: int
+    active_span: tuple[float, float]
+    active_rms: float
+    active_max: float
+    after_samples: int
+    error_at_end: float          # the error at the last active sample
+    after_final: float           # the last error of the run
+    after_max: float
+    after_drift: float           # after_final - error_at_end
+
+    @staticmethod
+    def of(t: np.ndarray, err: np.ndarray, phase: np.ndarray) -> 'PhaseErrors | None':
+        """The split of ``err`` by ``phase`` (0 before, 1 active, 2 after).
+
+        None if no sample is after the end or none is active.
+        """
+        act = phase == 1
+        after = phase == 2
+        if not act.any() or not after.any():
+            return None
+        ea = err[act]
+        end = float(ea[-1])
+        final = float(err[after][-1])
+        ta = t[act]
+        return PhaseErrors(int(act.sum()), (float(ta[0]), float(ta[-1])),
+                           float(np.sqrt(np.mean(ea ** 2))), float(ea.max()),
+                           int(after.sum()), end, final, float(err[after].max()),
+                           final - end)
 
 
 def find_gaps(topic: str, t: np.ndarray, factor: float = GAP_FACTOR
@@ -239,6 +281,8 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
     starts = [a[0] for a in (pose.stamp_ns, ref.stamp_ns) if a.size]
     t0 = int(min(starts)) if starts else int(cmd.receive_ns[0])
     mode, metrics, matched = 'realtime', None, 0
+    phases = None
+    ph = np.zeros(0, dtype=np.int8)
     x = y = xd = yd = vxd = vyd = th = v = t = np.zeros(0)
     if len(pose) and len(ref):
         common, ip, ir = np.intersect1d(pose.stamp_ns, ref.stamp_ns, assume_unique=True,
@@ -247,12 +291,17 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
             mode = 'lockstep'
             sel = ip
             xd, yd, vxd, vyd = ref.x[ir], ref.y[ir], ref.vx[ir], ref.vy[ir]
+            if ref.phase is not None:
+                ph = ref.phase[ir]
         else:
             sel = np.flatnonzero((pose.stamp_ns >= ref.stamp_ns[0])
                                  & (pose.stamp_ns <= ref.stamp_ns[-1]))
             rt = (ref.stamp_ns - t0) * 1e-9
             pt = (pose.stamp_ns[sel] - t0) * 1e-9
             xd, yd, vxd, vyd = (np.interp(pt, rt, a) for a in (ref.x, ref.y, ref.vx, ref.vy))
+            if ref.phase is not None and ref.phase.size:
+                near = np.clip(np.searchsorted(rt, pt), 0, rt.size - 1)
+                ph = ref.phase[near]
             if sel.size == 0:
                 notes.append(f'no pose stamp lies within the reference\'s time span (pose '
                              f'{pose.t[0]:.3f}..{pose.t[-1]:.3f} s, reference {ref.t[0]:.3f}..'
@@ -263,6 +312,8 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
             t = (pose.stamp_ns[sel] - t0) * 1e-9
             x, y, th, v = pose.x[sel], pose.y[sel], pose.th[sel], pose.v[sel]
             metrics = tracking_metrics(t, x, y, xd, yd, cmd.v, cmd.w, tolerance=tolerance)
+            if ph.size == t.size:
+                phases = PhaseErrors.of(t, np.hypot(x - xd, y - yd), ph)
     med, gaps = find_gaps(pose.topic, (pose.stamp_ns - t0) * 1e-9) if len(pose) \
         else (math.nan, [])
     timing = timing_metrics(pose.stamp_ns, pose.receive_ns, cmd.receive_ns,
@@ -281,7 +332,7 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
                     pose_topic=pose.topic, matched=matched, pose_samples=len(pose),
                     reference_samples=len(ref), command_samples=len(cmd), t0_ns=t0,
                     median_step=med, gaps=tuple(gaps), command_time_note=note, mode=mode,
-                    timing=timing, notes=tuple(notes), path_length=length)
+                    timing=timing, notes=tuple(notes), path_length=length, phases=phases)
     if not plots:
         return report
     out = Path(out_dir) if out_dir is not None else Path(f'{Path(path)}_report')
@@ -412,19 +463,31 @@ def format_report(report: Report) -> str:
     rows = []
     if m is not None:
         tol = f'{m.tolerance * 100:g} cm'
+        whole = ' (whole run)' if report.phases is not None else ''
         how = 'matched with' if report.mode == 'lockstep' else 'within the span of'
         rows += [
             (f'samples (pose {how} reference)', f'{report.matched} of {report.pose_samples}'),
             ('steps', str(m.steps)),
             ('duration', _fmt(m.duration, 's')),
-            ('final position error', _fmt(m.final_error, 'm')),
-            ('RMS position error', _fmt(m.rms_error, 'm')),
+            ('final position error' + whole, _fmt(m.final_error, 'm')),
+            ('RMS position error' + whole, _fmt(m.rms_error, 'm')),
             (f'first within {tol}', _fmt(m.first_within, 's')),
-            (f'enters and stays within {tol} at', _fmt(m.settling_time, 's')),
+            (f'enters and stays within {tol} at' + whole, _fmt(m.settling_time, 's')),
             ('RMS error after settling', _fmt(m.rms_error_settled, 'm')),
             ('max error after settling', _fmt(m.max_error_settled, 'm')),
             ('peak |v| (cmd_vel)', _fmt(m.peak_abs_v, 'm/s')),
             ('peak |w| (cmd_vel)', _fmt(m.peak_abs_w, 'rad/s')),
+        ]
+    ph = report.phases
+    if ph is not None:
+        a0, a1 = ph.active_span
+        rows += [
+            (f'while the trajectory is active ({a0:.2f}..{a1:.2f} s): RMS / max',
+             f'{_fmt(ph.active_rms, "m")} / {_fmt(ph.active_max, "m")}'),
+            ('after its end (at rest): error at the end / final',
+             f'{_fmt(ph.error_at_end, "m")} / {_fmt(ph.after_final, "m")}'),
+            ('after its end: max / drift since the end',
+             f'{_fmt(ph.after_max, "m")} / {_fmt(ph.after_drift, "m")}'),
         ]
     if report.pose_samples:
         rows += [('path length', _fmt(report.path_length, 'm')),

@@ -125,8 +125,47 @@ def cmd_design(args: argparse.Namespace) -> int:
                   'gain_norm': float(np.linalg.norm(res.K, 2)), **lat}
         if bound is not None:
             record['gain_bound'] = bound
+    sat = _saturation_text(args, problem, res.K)
+    if sat:
+        summary += '\n' + sat
     _write_gains(args, res.K, summary, record)
     return 0
+
+
+def _add_saturation_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group('saturation certificate (region of attraction with |w|, |dv/dt| '
+                             'limits; generalized sector condition)')
+    g.add_argument('--min-speed', type=positive_float, metavar='V',
+                   help='smallest |v| along the motion (m/s); gives the certificate')
+    g.add_argument('--max-angular-speed', type=positive_float, default=2.0, metavar='W',
+                   help='|w| limit (rad/s, default 2, the tracker\'s default)')
+    g.add_argument('--max-linear-accel', type=float, default=0.0, metavar='A',
+                   help='|dv/dt| limit (m/s^2; 0 = unknown)')
+    g.add_argument('--reference-accel', type=float, default=0.0, metavar='D',
+                   help='largest component of the reference acceleration (m/s^2)')
+    g.add_argument('--check-simulation', action='store_true',
+                   help='simulate the saturated loop from starts inside and just outside '
+                   'the certified radius')
+
+
+def _saturation_text(args: argparse.Namespace, problem, K) -> str:
+    """The saturation certificate of ``K`` when --min-speed is given ('' otherwise)."""
+    if getattr(args, 'min_speed', None) is None:
+        return ''
+    from ..control.saturation import (SaturationLimits, check_by_simulation,
+                                      format_saturation, saturation_certificate)
+    lim = SaturationLimits(args.max_angular_speed, args.min_speed, args.max_linear_accel,
+                           args.reference_accel)
+    K = np.asarray(K, float)
+    cert = saturation_certificate(problem.A, problem.B, K, problem.A_tau, problem.tau, lim)
+    text = format_saturation(cert)
+    if cert.verified and args.check_simulation:
+        c = check_by_simulation(cert, problem.A, problem.B, K, problem.A_tau)
+        text += (f'\n  simulation (saturated loop, 20 s): inside ({c.inside_radius * 1e3:.3g} mm)'
+                 f' {c.inside_converged} of {c.inside_total} converge; just outside '
+                 f'({c.outside_radius * 1e3:.3g} mm) {c.outside_converged} of '
+                 f'{c.outside_total}')
+    return text
 
 
 def cmd_delay_dependent(args: argparse.Namespace) -> int:
@@ -170,6 +209,10 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
                   f'{r.certified_margin:9.4g}')
     else:
         print(format_analysis(rows))
+    for r in rows:
+        sat = _saturation_text(args, problem, r.K)
+        if sat:
+            print(f'{r.name}: {sat}')
     if getattr(args, 'tracking', False):
         from ..reproduce import TRACK_STEPS, paper_circle_tracking, track_pose
         print(f'\ntracking on the paper circle, {TRACK_STEPS} steps of 0.01 s from (x, y, yaw, v) '
@@ -209,6 +252,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument('--nominal', action='store_true', help='nominal condition (no E, F)')
     d.add_argument('-o', '--output', help='tracker gain file to write')
     d.add_argument('--force', action='store_true')
+    _add_saturation_args(d)
     d.set_defaults(func=cmd_design)
 
     dd = sub.add_parser('delay-dependent', help='delay-dependent design (Fridman-Shaked '
@@ -237,4 +281,5 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help='also simulate the paper scenario with each gain (with and without '
                        'delay compensation)')
         a.add_argument('--json', help='also write the results as JSON')
+        _add_saturation_args(a)
         a.set_defaults(func=lambda args, m=margins_only: cmd_analyse(args, m))

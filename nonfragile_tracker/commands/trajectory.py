@@ -1,12 +1,29 @@
-"""``trajectory check FILE``: read a waypoint file, build its trajectory, print a summary.
+"""``trajectory check FILE [--limits NAME=VALUE ...]``: a waypoint file against limits.
 
-Bad files exit 2 with the file, the point index and the value (``cli.main``).
+Builds the file's trajectory and prints its summary and, with limits, each limit's margin
+or violation and what re-timing changes.
+
+Bad files exit 2 with the file, the point index and the value (``cli.main``); a trajectory
+that exceeds a limit exits 1 (after the margins and what re-timing would change).
 """
 from __future__ import annotations
 
 import argparse
 
-from ..control.trajectory import describe, load_waypoints
+from ..control.limits import LIMIT_NAMES, Limits, check, retime
+from ..control.trajectory import TrajectoryError, describe, load_waypoints
+from ..errors import InputError
+
+
+def _limit(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition('=')
+    if not sep or name not in LIMIT_NAMES:
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: expected NAME=VALUE with NAME one of {", ".join(LIMIT_NAMES)}')
+    try:
+        return name, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: {value!r} is not a number') from None
 
 
 def register(subparsers) -> None:
@@ -14,17 +31,24 @@ def register(subparsers) -> None:
     p = subparsers.add_parser('trajectory', help='timed trajectories (waypoint files)')
     sub = p.add_subparsers(dest='trajectory_command', required=True)
     c = sub.add_parser('check', help='build the trajectory of a waypoint file (CSV or YAML: '
-                       't, x, y[, yaw][, speed]) and print its summary')
+                       't, x, y[, yaw][, speed]) and print its summary; with --limits the '
+                       'margin of each limit and what re-timing changes')
     c.add_argument('file')
     c.add_argument('--smoothing', type=float, default=0.0,
                    help='0 interpolates (cubic spline); > 0 smoothing spline penalty')
     c.add_argument('--ends', choices=['rest', 'natural'], default='rest',
                    help='rest: clamped, zero end velocity (default); natural: zero curvature')
+    c.add_argument('--limits', nargs='+', type=_limit, default=[], metavar='NAME=VALUE',
+                   help='the base\'s limits, the tracker\'s parameter names: '
+                   f'{", ".join(LIMIT_NAMES)} (SI units; 0 or absent = not checked)')
+    c.add_argument('-o', '--output', default=None,
+                   help='with --limits: write the re-timed trajectory as a waypoint CSV '
+                   '(t, x, y, yaw, speed at 20 ms knots)')
     c.set_defaults(func=cmd_check)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Load a waypoint file and print its summary (points, duration, peak speed and turn)."""
+    """Load a waypoint file, print its summary and, with limits, the margins."""
     traj = load_waypoints(args.file, ends=args.ends, smoothing=args.smoothing)
     d = describe(traj)
     print(f'{args.file}: {d["points"]} points, {d["kind"]}, t = {d["t_start"]:g} .. '
@@ -36,4 +60,40 @@ def cmd_check(args: argparse.Namespace) -> int:
     ex, ey, eh = d['end']
     print(f'start ({sx:.3f}, {sy:.3f}) m heading {sh:.3f} rad; end ({ex:.3f}, {ey:.3f}) m '
           f'heading {eh:.3f} rad (at rest)')
-    return 0
+    if not args.limits:
+        if args.output:
+            raise InputError('--output needs --limits (it writes the re-timed trajectory)')
+        return 0
+    limits = Limits(**dict(args.limits))
+    result = check(traj, limits)
+    print('limits (accelerations: mean over 20 ms):')
+    for rep in result.reports:
+        print(f'  {rep.describe()}')
+    try:
+        r = retime(traj, limits)
+    except TrajectoryError as exc:
+        print(f'refused: {exc}')
+        return 1
+    print(r.describe())
+    if r.changed:
+        print('after re-timing:')
+        for rep in r.after.reports:
+            print(f'  {rep.describe()}')
+    if args.output:
+        _write_csv(r.trajectory, args.output)
+        print(f'wrote {args.output}')
+    return 0 if result.ok else 1
+
+
+def _write_csv(traj, path: str) -> None:
+    import numpy as np
+    t = np.arange(traj.t_start, traj.t_end, 0.02)
+    t = np.append(t, traj.t_end)
+    s = traj.evaluate(t)
+    seg = np.clip(np.searchsorted(traj.knots, t, side='right') - 1, 0, len(traj.knots) - 2)
+    sign = np.where(traj._dir[seg] < 0, -1.0, 1.0)
+    with open(path, 'w') as f:
+        f.write(f'# {traj.source}: re-timed within the limits by `trajectory check -o`\n')
+        f.write('t,x,y,yaw,speed\n')
+        for row in zip(t, s.x, s.y, s.heading, sign * np.hypot(s.vx, s.vy)):
+            f.write(','.join(f'{v:.6f}' for v in row) + '\n')

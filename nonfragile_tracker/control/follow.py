@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 
+from .limits import Limits, within_limits
 from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
                    step_time_ns)
 from .reference import RefSample
@@ -24,10 +25,48 @@ from .simulate import TrackingRun, run_loop
 from .trajectory import Trajectory
 
 __all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors', 'trajectory_time',
-           'reference_at']
+           'reference_at', 'start_offset', 'START_TOLERANCE', 'MAX_START_DISTANCE']
 
 #: Default speed (m/s) below which, after the trajectory's end, the robot is at rest.
 REST_SPEED = 0.01
+#: Default lateness (s) beyond which a trajectory that starts at rest is re-based.
+START_TOLERANCE = 0.1
+#: Default largest distance (m) between the robot and the reference at the first step.
+MAX_START_DISTANCE = 1.0
+
+
+def start_offset(trajectory: Trajectory, t_first: float, *,
+                 start_tolerance: float = START_TOLERANCE,
+                 rest_speed: float = REST_SPEED) -> float:
+    """Time shift (s) applied to a trajectory first followed at trajectory time ``t_first``.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The trajectory about to be followed.
+    t_first : float
+        Trajectory time (s) of the first step that follows it (at or after ``t_start``).
+    start_tolerance : float
+        Lateness (s) accepted without re-basing (transport delays).
+    rest_speed : float
+        The trajectory starts at rest when its speed at ``t_start`` is below this (m/s).
+
+    Returns
+    -------
+    float
+        ``t_first - t_start`` when the trajectory starts at rest and the first step is
+        more than ``start_tolerance`` late (the trajectory is then sampled at
+        ``t - offset``: it starts at the first step), else ``0.0`` (on its stamps; also
+        for analytic paths, which have no start).
+    """
+    t0 = trajectory.t_start
+    late = t_first - t0
+    if not math.isfinite(t0) or not late > start_tolerance:
+        return 0.0
+    r = trajectory.sample(t0)
+    if math.hypot(r.vx, r.vy) >= rest_speed:
+        return 0.0
+    return late
 
 
 def path_errors(x: float, y: float, th: float, ref) -> tuple[float, float, float]:
@@ -67,13 +106,27 @@ class Follower:
         What to follow; time ``t`` of :meth:`step` is trajectory time (s).
     rest_speed : float
         After ``t_end``, ``|cmd v|`` below this (m/s) ends the run with a zero command.
+    start_tolerance : float
+        A trajectory starting at rest and first followed more than this (s) after its
+        start time is re-based to start then (:func:`start_offset`).
+    max_start_distance : float
+        At the first step, a robot further than this (m) from the reference refuses the
+        trajectory (:attr:`refused`); 0 = no check.
     """
 
-    def __init__(self, tracker: Tracker, trajectory: Trajectory, rest_speed: float = REST_SPEED):
+    def __init__(self, tracker: Tracker, trajectory: Trajectory, rest_speed: float = REST_SPEED,
+                 *, start_tolerance: float = START_TOLERANCE,
+                 max_start_distance: float = MAX_START_DISTANCE):
         if not (math.isfinite(rest_speed) and rest_speed > 0):
             raise ValueError(f'rest_speed must be a finite number > 0 m/s, got {rest_speed!r}')
+        for name, val in (('start_tolerance', start_tolerance),
+                          ('max_start_distance', max_start_distance)):
+            if not (math.isfinite(val) and val >= 0):
+                raise ValueError(f'{name} must be a finite number >= 0, got {val!r}')
         self.tracker = tracker
         self.rest_speed = float(rest_speed)
+        self.start_tolerance = float(start_tolerance)
+        self.max_start_distance = float(max_start_distance)
         self.set_trajectory(trajectory)
 
     def set_trajectory(self, trajectory: Trajectory) -> None:
@@ -83,6 +136,9 @@ class Follower:
         self.ended = False          # past t_end (still settling until finished)
         self.finished_at: float | None = None
         self.last_ref: RefSample | None = None
+        self.started = False        # the first step at or after t_start has been taken
+        self.offset = 0.0           # trajectory time = t - offset (see start_offset)
+        self.refused: str | None = None    # why the trajectory was refused at its start
         self.tracker.reset()
 
     def step(self, x: float, y: float, th: float, t: float,
@@ -94,9 +150,13 @@ class Follower:
         sees are trajectory times (consistent: it uses differences only, and a new
         trajectory resets it).
         """
-        ref = self.trajectory.sample(t)
+        traj = self.trajectory
+        if not self.started and t >= traj.t_start:
+            self._start(x, y, t)
+        t = t - self.offset
+        ref = traj.sample(t)
         self.last_ref = ref
-        if self.finished:
+        if self.finished or self.refused:
             return Command(v=0.0, w=0.0)
         if t < self.trajectory.t_start:
             # not started: wait at rest (holding a point with v = 0 would turn the robot
@@ -120,20 +180,43 @@ class Follower:
                 return Command(v=0.0, w=0.0, error=cmd.error)
         return cmd
 
+    def _start(self, x: float, y: float, t: float) -> None:
+        """The first step on the trajectory: re-base a late start, check the distance."""
+        self.started = True
+        traj = self.trajectory
+        self.offset = start_offset(traj, t, start_tolerance=self.start_tolerance,
+                                   rest_speed=self.rest_speed)
+        ref = traj.sample(t - self.offset)
+        d = math.hypot(x - ref.x, y - ref.y)
+        if self.max_start_distance > 0 and d > self.max_start_distance:
+            self.refused = (f'{traj.source}: the robot at ({x:.3f}, {y:.3f}) m is {d:.3f} m '
+                            f'from the trajectory\'s start ({ref.x:.3f}, {ref.y:.3f}) m, more '
+                            f'than max_start_distance = {self.max_start_distance:g} m; drive '
+                            'it closer or send a trajectory that starts at the robot')
+            self.tracker.reset(0.0)
+
 
 def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
                        trajectory: Trajectory, steps: int, *,
-                       rest_speed: float = REST_SPEED, origin_ns: int = 0) -> TrackingRun:
+                       rest_speed: float = REST_SPEED, origin_ns: int = 0,
+                       start_tolerance: float = START_TOLERANCE,
+                       max_start_distance: float = MAX_START_DISTANCE,
+                       limits: Limits | None = None) -> TrackingRun:
     """In-process run of a :class:`Follower`, the ROS lockstep sequence step by step.
 
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
-    ``(t_k - origin_ns) * 1e-9`` as the tracker node does.
+    ``(t_k - origin_ns) * 1e-9`` as the tracker node does.  With ``limits`` the
+    trajectory is first re-timed within them as the tracker node (``retime: true``) does
+    (:func:`control.limits.within_limits`).
     """
+    if limits is not None:
+        trajectory = within_limits(trajectory, limits)[0]
     period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
     if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
         raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
                          f'({period} x plant dt {plant_config.dt}) in lockstep')
-    follower = Follower(Tracker(tracker_config), trajectory, rest_speed)
+    follower = Follower(Tracker(tracker_config), trajectory, rest_speed,
+                        start_tolerance=start_tolerance, max_start_distance=max_start_distance)
     dt = plant_config.dt
 
     def traj_time(k: int) -> float:
@@ -142,4 +225,5 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     def command(meas, th: float, k: int, ref) -> Command:
         return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v)
 
-    return run_loop(plant_config, steps, command, lambda k: trajectory.sample(traj_time(k)))
+    return run_loop(plant_config, steps, command,
+                    lambda k: trajectory.sample(traj_time(k) - follower.offset))

@@ -256,7 +256,8 @@ class Recorder(AdapterNode[RecorderSettings]):
     # ------------------------------------------------------------------ setup
     def _subscribe(self, name: str) -> None:
         qos = _LATCHED_QOS if name in (topics.RUN_DONE, topics.TRAJECTORY, topics.REF_PATH,
-                                       topics.TRAJECTORY_MULTIDOF) \
+                                       topics.TRAJECTORY_MULTIDOF,
+                                       topics.FOLLOWED_TRAJECTORY) \
             else _DATA_QOS
         sub = self.create_subscription(self._types[name], name, self._make_callback(name),
                                        qos, raw=True)

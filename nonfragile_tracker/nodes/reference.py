@@ -82,6 +82,10 @@ PARAMS = [
           '(m/s^2)', low=1e-6, high=1e3, read_only=True),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of the trajectory (the odometry frame)',
           read_only=True),
+    Param('start_delay', 1.0, 'real time: a trajectory file starts this long (s) after the '
+          'node starts (its Path is stamped node start + start_delay), time for the tracker '
+          'to receive it; a tracker that starts following later re-bases it (its '
+          'start_tolerance)', low=0.0, high=1e6, read_only=True),
     Param('display_points', 400, 'points of the reference/path shown (at least 2)'),
 ]
 
@@ -103,6 +107,7 @@ class ReferenceSettings:
     max_accel: float
     frame: str
     display_points: int
+    start_delay: float = 1.0
 
 
 def reference_settings(values: dict) -> ReferenceSettings:
@@ -127,7 +132,8 @@ def reference_settings(values: dict) -> ReferenceSettings:
                              smoothing=values['smoothing'],
                              cruise_speed=values['cruise_speed'],
                              max_accel=values['max_accel'], frame=values['odom_frame'],
-                             display_points=values['display_points'])
+                             display_points=values['display_points'],
+                             start_delay=values['start_delay'])
 
 
 class ReferenceNode(AdapterNode[ReferenceSettings]):
@@ -172,6 +178,9 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
                 traj = load_waypoints(file, smoothing=cfg.smoothing)
             except (TrajectoryError, OSError) as exc:
                 raise StartupError(f'reference: trajectory_file: {exc}') from None
+            if self.mode == 'realtime':      # a start the tracker can meet: now (after the
+                # node's start-up and the file's loading) + start_delay
+                start_ns = self.get_clock().now().nanoseconds + int(round(cfg.start_delay * 1e9))
             self._follow(trajectory_to_path(traj, start_ns, self.frame), file)
         elif self.mode == 'lockstep' and not cfg.trajectory_topic:
             self._follow_analytic(start_ns)

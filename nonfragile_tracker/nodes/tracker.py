@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
@@ -60,7 +61,9 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import REST_SPEED, Follower, path_errors, trajectory_time
+from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                              path_errors, trajectory_time)
+from ..control.limits import Limits, within_limits
 from ..control.loop import Tracker, TrackerConfig
 from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
                                adapted_prediction, certificate_from_parameters, evaluate)
@@ -68,7 +71,7 @@ from ..control.trajectory import TrajectoryError
 from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)
-from .trajectory_io import multidof_to_trajectory, path_to_trajectory
+from .trajectory_io import followed_to_multidof, multidof_to_trajectory, path_to_trajectory
 
 PARAMS = [
     Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
@@ -80,6 +83,17 @@ PARAMS = [
           high=10.0, read_only=True),
     Param('max_linear_speed', 1.0, 'limit on |cmd_vel.linear.x| (m/s)', low=1e-9, high=1e3),
     Param('max_angular_speed', 2.0, 'limit on |cmd_vel.angular.z| (rad/s)', low=1e-9, high=1e3),
+    Param('max_linear_accel', 0.0, 'the base\'s limit on |dv/dt| (m/s^2); 0 = unknown. '
+          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
+    Param('max_angular_accel', 0.0, 'the base\'s limit on |dw/dt| (rad/s^2); 0 = unknown. '
+          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
+    Param('min_turning_radius', 0.0, 'smallest radius the base can turn on (m; car-like '
+          'bases: wheelbase / tan(max steering angle)); a trajectory tighter than it is '
+          'refused; 0 = none', low=0.0, high=1e3),
+    Param('retime', True, 'check each trajectory against max_linear_speed, '
+          'max_linear_accel, max_angular_speed, max_angular_accel and min_turning_radius and '
+          're-time one that exceeds them along its path (logged); false: follow as sent',
+          read_only=True),
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),
@@ -131,6 +145,13 @@ PARAMS = [
           low=1e-3, high=1e6, read_only=True),
     Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
           'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
+    Param('start_tolerance', START_TOLERANCE, 'a trajectory that starts at rest and is first '
+          'followed more than this (s) after its start stamp is re-based to start at that '
+          'step (no chase after a reference or planner that started earlier); a start stamp '
+          'in the future is waited for at rest', low=0.0, high=1e9, read_only=True),
+    Param('max_start_distance', MAX_START_DISTANCE, 'refuse a trajectory whose reference is '
+          'further than this (m) from the robot when it starts; 0 = no check', low=0.0,
+          high=1e9, read_only=True),
 ]
 #: The certificate monitor's parameters (:mod:`control.monitor`; README "Certificate monitor").
 MONITOR_PARAMS = [
@@ -185,6 +206,10 @@ class TrackerSettings:
     diagnostics_period: float
     rest_speed: float
     monitor: MonitorConfig
+    start_tolerance: float = START_TOLERANCE
+    max_start_distance: float = MAX_START_DISTANCE
+    limits: Limits = Limits()
+    retime: bool = True
 
 
 def tracker_settings(values: dict) -> TrackerSettings:
@@ -213,7 +238,10 @@ def tracker_settings(values: dict) -> TrackerSettings:
                            max_path_poses=values['max_path_poses'],
                            diagnostics_period=values['diagnostics_period'],
                            rest_speed=values['rest_speed'],
-                           monitor=monitor_config(values))
+                           monitor=monitor_config(values),
+                           start_tolerance=values['start_tolerance'],
+                           max_start_distance=values['max_start_distance'],
+                           limits=Limits.from_values(values), retime=values['retime'])
 
 
 @dataclass(frozen=True)
@@ -265,7 +293,12 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                                      DATA_QOS)
         self.follower: Follower | None = None
         self.last_refusal = ''
+        self.last_retime = ''              # what re-timing the last trajectory changed
+        self._pool: Any = None             # real time: the re-timing worker thread
+        self._retimed: list = []           # (future, origin, source) ready to adopt
         self.origin_ns = 0
+        self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
+                                                  topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
                                  self._on_multidof, LATCHED_QOS)
@@ -401,10 +434,17 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         return [st]
 
     def close(self) -> None:
-        """Stop the certificate monitor's worker (idempotent)."""
+        """Stop the certificate monitor's and the re-timing's workers (idempotent).
+
+        A re-timing in progress is not waited for.
+        """
         mon = getattr(self, 'monitor', None)
         if mon is not None:
             mon.stop()
+        pool = getattr(self, '_pool', None)
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
         super().close()
 
     # ------------------------------------------------------------------ inputs
@@ -416,21 +456,58 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _new_trajectory(self, build, source: str) -> None:
         try:
             traj, origin = build()
+            if self.config.retime and self.mode == 'realtime' and not traj.is_analytic:
+                # real time: check and re-time in a worker thread (a second or two for a
+                # lap); odometry keeps being answered meanwhile, and the new trajectory
+                # starts at the first odometry after it is ready (re-based if late)
+                if self._pool is None:
+                    from concurrent.futures import ThreadPoolExecutor
+                    self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+                fut = self._pool.submit(within_limits, traj, self.config.limits)
+                fut.add_done_callback(lambda f: self._retimed.append((f, origin, source)))
+                return
+            if self.config.retime:
+                traj, note = within_limits(traj, self.config.limits)
+                self._note_retime(note, source)
         except TrajectoryError as exc:
-            self.rejected += 1
-            self.last_refusal = str(exc)
-            keep = 'the previous trajectory' if self.follower else 'the reference topics'
-            self.log('error', f'refused trajectory: {exc}; keeping {keep}')
-            return
+            return self._refuse(exc)
+        self._adopt(traj, origin, source)
+        self._try_compute()                # a pose not yet answered gets its command now
+
+    def _note_retime(self, note: str, source: str) -> None:
+        if note:
+            self.last_retime = note
+            self.log('warn', f'trajectory from {source}: {note}')
+
+    def _refuse(self, exc: Exception) -> None:
+        self.rejected += 1
+        self.last_refusal = str(exc)
+        keep = 'the previous trajectory' if self.follower else 'the reference topics'
+        self.log('error', f'refused trajectory: {exc}; keeping {keep}')
+
+    def _take_retimed(self) -> None:
+        """Adopt a trajectory re-timed in the background (real time), or refuse it."""
+        while self._retimed:
+            fut, origin, source = self._retimed.pop(0)
+            try:
+                traj, note = fut.result()
+            except TrajectoryError as exc:
+                self._refuse(exc)
+                continue
+            self._note_retime(note, source)
+            self._adopt(traj, origin, source)
+
+    def _adopt(self, traj, origin: int, source: str) -> None:
         if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.config.rest_speed)
+            self.follower = Follower(self.tracker, traj, self.config.rest_speed,
+                                     start_tolerance=self.config.start_tolerance,
+                                     max_start_distance=self.config.max_start_distance)
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
         self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
                          f'({traj.kind}), {traj.duration:.3f} s from stamp '
                          f'{origin * 1e-9:.3f} s: starting a new run')
-        self._try_compute()                # a pose not yet answered gets its command now
 
     def _on_path(self, msg: PathMsg) -> None:
         source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
@@ -477,6 +554,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 self.deadline_misses += 1
         self._odom = msg
         self.last_odom_stamp = s
+        if self._retimed:                  # real time: a trajectory re-timed meanwhile
+            self._take_retimed()
         self._try_compute()                # cmd_vel first: the clock read is bookkeeping
         self._odom_received()
         self._monitor_odom(s, msg)
@@ -572,9 +651,11 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             return self._reject(f'odom: {pose}')
         self.last_stamp = s
         speed = odom.twist.twist.linear.x
-        was_finished = f.finished
+        was_finished, was_started = f.finished, f.started
         cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
                      measured_speed=speed if math.isfinite(speed) else 0.0)
+        if f.started and not was_started:
+            self._started(f)
         if f.finished and not was_finished:
             e = math.hypot(cmd.error[0], cmd.error[2])
             self.log('info',
@@ -584,6 +665,22 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._diagnostics()
         self._publish(cmd.v, cmd.w, s)
         self._outputs(s, pose, f.last_ref, cmd)
+
+    def _started(self, f: Follower) -> None:
+        """Say how the trajectory started: re-based, on its stamps, or refused."""
+        if f.refused:
+            self.rejected += 1
+            self.last_refusal = f.refused
+            self.log('error', f'refused trajectory: {f.refused}; waiting at rest for a new '
+                              'trajectory')
+            self._diagnostics()
+            return
+        elif f.offset:
+            self.log('info', f'trajectory started {f.offset:.3f} s after its start stamp: '
+                             're-based to start now (its own speed profile, no chase)')
+        if not f.trajectory.is_analytic:      # what it follows, as it follows it
+            self.pub_followed.publish(followed_to_multidof(
+                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame))
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
         """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
@@ -647,6 +744,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if f is None:
             state = 'waiting for a trajectory' if self.wait_for_trajectory else \
                 'following the reference topics'
+        elif f.refused:
+            state = 'trajectory refused at its start (too far): at rest'
+        elif not f.started:
+            state = 'waiting at rest for the trajectory\'s start stamp'
         elif f.finished:
             state = f'trajectory finished, at rest since t = {f.finished_at:.3f} s'
         elif f.ended:
@@ -677,7 +778,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'saturated commands': self.saturated, 'stamp jumps': self.jumps,
                 'trajectory': state,
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
-                'last refused trajectory': self.last_refusal or 'none'}
+                'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
+                'last refused trajectory': self.last_refusal or 'none',
+                'last re-timed trajectory': self.last_retime or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -30,10 +30,39 @@ from ..control.trajectory import Trajectory, TrajectorySamples
 from ..msgconv import multidof_to_trajectory, path_to_trajectory, stamp_ns
 
 __all__ = ['path_to_trajectory', 'trajectory_to_path', 'multidof_to_trajectory',
-           'states_to_multidof', 'stamp_ns']
+           'states_to_multidof', 'followed_to_multidof', 'stamp_ns']
+
 
 if TYPE_CHECKING:
     from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+
+def followed_to_multidof(traj: Trajectory, origin_ns: int,
+                         frame: str) -> 'MultiDOFJointTrajectory':
+    """MultiDOFJointTrajectory of a bounded trajectory at its knots (pose, velocity, accel).
+
+    Stamped ``origin_ns + t_start`` with times from ``t_start``; its quintic Hermite
+    rebuild (:func:`multidof_to_trajectory`) is the trajectory itself (a cubic or quintic
+    piece is matched exactly by its end values), sampled at the same stamps.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A bounded trajectory (with knots).
+    origin_ns : int
+        Stamp [ns] of the trajectory's ``t = 0``.
+    frame : str
+        ``frame_id`` of the header.
+
+    Returns
+    -------
+    trajectory_msgs.msg.MultiDOFJointTrajectory
+    """
+    import numpy as np
+    knots = traj.knots
+    t0_ns = int(round(traj.t_start * 1e9))
+    t_ns = np.round((knots - traj.t_start) * 1e9).astype(np.int64)
+    return states_to_multidof(t_ns, traj.evaluate(knots), int(origin_ns) + t0_ns, frame)
 
 
 def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str,

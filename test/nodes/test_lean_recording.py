@@ -53,7 +53,8 @@ def test_lean_is_the_lockstep_default_and_leaves_out_the_samples():
 def test_lean_bag_holds_odom_cmd_vel_and_the_trajectory(bags):
     counts = read_bag(bags['lean']).counts
     assert counts == {'/odom': STEPS + 1, '/cmd_vel': STEPS + 1, '/run_done': 1,
-                      '/trajectory_multidof': 1, '/reference/path': 1}
+                      '/trajectory_multidof': 1, '/reference/path': 1,
+                      '/tracker/trajectory': 1}    # what the tracker followed
     full = read_bag(bags['full']).counts
     for name in ('/clock', '/pose', '/reference/pose', '/reference/twist',
                  '/reference/accel'):
@@ -62,7 +63,7 @@ def test_lean_bag_holds_odom_cmd_vel_and_the_trajectory(bags):
 
 def test_lean_reference_and_errors_equal_the_full_recording(bags):
     lean, full = read_bag(bags['lean']).run, read_bag(bags['full']).run
-    assert lean.reference.source == '/trajectory_multidof'
+    assert lean.reference.source == '/tracker/trajectory'     # what the tracker followed
     np.testing.assert_array_equal(lean.reference.stamp_ns, full.reference.stamp_ns)
     for f in ('x', 'y', 'vx', 'vy', 'ax', 'ay'):
         np.testing.assert_allclose(getattr(lean.reference, f), getattr(full.reference, f),

@@ -78,6 +78,22 @@ def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path, stamped):
     assert err[run.pose.t > 5.0].max() < 0.03
     assert run.commands.v[-1] == 0.0 and run.commands.w[-1] == 0.0
     assert 0.45 < np.max(np.abs(run.commands.v)) < 0.6
+    if not stamped:
+        # the report says which errors are the tracking (trajectory active) and which the
+        # rest after its end
+        from nonfragile_tracker.bag.report import bag_report, format_report
+        rep = bag_report(res.bag, plots=False)
+        ph = rep.phases
+        active = (sim.t >= traj.t_start) & (sim.t <= traj.t_end)
+        assert ph.active_samples == int(active.sum())
+        assert ph.active_span == pytest.approx((0.0, traj.t_end), abs=0.011)
+        assert ph.active_rms == pytest.approx(math.sqrt(np.mean(err[active] ** 2)), rel=1e-9)
+        assert ph.active_max == pytest.approx(err[active].max(), rel=1e-9)
+        assert ph.after_samples == int((sim.t > traj.t_end).sum())
+        assert ph.after_final == pytest.approx(err[-1], rel=1e-9)
+        text = format_report(rep)
+        assert 'while the trajectory is active (0.00..13.00 s): RMS / max' in text
+        assert 'after its end (at rest)' in text and 'final position error (whole run)' in text
 
 
 def spin_nodes(nodes, done, ctx, timeout=60.0):
@@ -326,7 +342,10 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
     test = Node('test_bad_paths', context=ctx)
     pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
     pub_m = test.create_publisher(MultiDOFJointTrajectory, 'trajectory_multidof', LATCHED_QOS)
-    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
+    # retime off: the MultiDOF trajectory below ends at 2 m/s, above the default
+    # max_linear_speed, and is checked here for its exact conversion (not its re-timing)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker',
+                                                                     retime=False))
     try:
         pub.publish(good)
         spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx, timeout=20)
@@ -489,3 +508,154 @@ def test_reference_relays_an_untimed_plan(ros_context):
     finally:
         for n in nodes:
             n.destroy_node()
+
+
+def test_reference_started_5_s_before_the_tracker_does_not_make_it_chase(ros_context):
+    """Real time: the reference node publishes the lap 5 s before the tracker starts; the
+    tracker re-bases it, so its first second's commanded speed stays within 10 % of the
+    lap's own speed profile (before: a lurch after a reference already 5 s ahead)."""
+    import time
+    from geometry_msgs.msg import Twist
+    from rclpy.node import Node
+    from nonfragile_tracker.nodes.common import DATA_QOS
+    from nonfragile_tracker.nodes.plant import PlantNode
+    from nonfragile_tracker.nodes.reference import ReferenceNode
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    params = scenario(trajectory_file=str(LAP))
+    rt = {'mode': 'realtime'}
+    reference = ReferenceNode(context=ctx, parameter_overrides=param_list(
+        params, 'reference', publish_samples=False, **rt))
+    spin_nodes([reference], lambda: False, ctx, timeout=5.0)      # 5 s alone: the lap runs
+    test = Node('test_late', context=ctx)
+    cmds = []
+    test.create_subscription(Twist, 'cmd_vel', lambda m: cmds.append(
+        (time.monotonic(), m.linear.x)), DATA_QOS)
+    tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker', **rt))
+    plant = PlantNode(context=ctx, parameter_overrides=param_list(
+        params, 'plant', duration=0.0, tau=0.0, initial_pose=[0.0, 0.0, 0.0], **rt))
+    nodes = [reference, test, tracker, plant]
+    try:
+        moving = []
+        spin_nodes(nodes, lambda: bool(moving.extend(c for c in cmds[len(moving):]
+                                                     if c[1] != 0.0 or moving)
+                                       or (moving and moving[-1][0] - moving[0][0] > 1.5)),
+                   ctx, timeout=30)
+        f = tracker.follower
+        assert f is not None and f.started and f.refused is None
+        assert f.offset > 4.0                   # re-based: the lap was 5 s old
+        t0 = moving[0][0]
+        first = np.array([v for t, v in moving if t - t0 <= 1.0])
+        prof = load_waypoints(LAP).evaluate(np.linspace(0.0, 1.1, 221))
+        peak = float(np.hypot(prof.vx, prof.vy).max())
+        print(f'first second: max |cmd v| {np.abs(first).max():.3f} m/s, profile peak '
+              f'{peak:.3f} m/s (re-based by {f.offset:.3f} s)')
+        assert first.size > 50 and float(np.abs(first).max()) <= 1.1 * peak
+    finally:
+        for n in nodes:
+            n.destroy_node()
+
+
+def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
+    """The line-arc lap to trackers with one limit below its peak each: the log/diagnostics
+    note names the limit, the time and the value, and the tracker follows the re-timed lap;
+    a minimum turning radius above the lap's is a refusal naming place and curvature."""
+    from nav_msgs.msg import Path as PathMsg
+    from rclpy.node import Node
+    from nonfragile_tracker.control.limits import Limits, check
+    from nonfragile_tracker.nodes.common import LATCHED_QOS
+    from nonfragile_tracker.nodes.tracker import TrackerNode
+
+    ctx = ros_context
+    lap = load_waypoints(CONFIG / 'trajectories' / 'line_arc_lap.csv')
+    _, msg = as_sent(lap)
+    params = scenario()
+    test = Node('test_limits', context=ctx)
+    pub = test.create_publisher(PathMsg, 'trajectory', LATCHED_QOS)
+    pub.publish(msg)
+    for name, value in (('max_linear_speed', 0.3), ('max_linear_accel', 0.3),
+                        ('max_angular_speed', 0.9), ('max_angular_accel', 3.0),
+                        ('min_turning_radius', 0.5)):
+        tracker = TrackerNode(context=ctx, parameter_overrides=param_list(
+            params, 'tracker', **{name: value}))
+        try:
+            spin_nodes([test, tracker], lambda: tracker.follower is not None
+                       or tracker.last_refusal, ctx, timeout=30)
+            v = check(lap, Limits(**{name: value}))[name]
+            if name == 'min_turning_radius':
+                assert tracker.follower is None
+                note = tracker.last_refusal
+                assert 'min_turning_radius = 0.5 m' in note and 'curvature' in note
+            else:
+                note = tracker.last_retime
+                assert tracker.follower.trajectory.t_end > lap.t_end + 0.1   # re-timed
+                assert f'{v.violated_value:.4g}' in note
+            assert f'VIOLATES {name} = {value:g}' in note or name == 'min_turning_radius'
+            assert f'{v.violated_at:.3f} s' in note
+        finally:
+            tracker.destroy_node()
+    test.destroy_node()
+
+
+@pytest.mark.parametrize('record_all', [False, True])
+def test_replay_reproduces_a_waypoint_run_with_predictor_and_retiming(tmp_path, record_all):
+    """bag replay of a lockstep run that followed a waypoint file (re-timed within the
+    base's limits) with the latency predictor from a latency-design style gain file:
+    the commands are reproduced exactly, from a lean and from a full recording (the
+    trajectory message is fed, not the per-step samples)."""
+    import yaml
+    from nonfragile_tracker.bag.replay import replay
+    from nonfragile_tracker.runner import run_composed, scenario_parameters
+    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    gains = tmp_path / 'g.yaml'
+    gains.write_text(yaml.safe_dump({'/**/tracker': {'ros__parameters': {
+        'K': [float(v) for v in np.asarray(K).ravel()], 'K_shape': [2, 4],
+        'predict_latency': 0.035, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.045,
+        'predict_lag_w': 0.06}}}))
+    scenario_file = CONFIG / 'line_arc_scenario.yaml'
+    ov = {'plant': {'ros__parameters': {'duration': 16.0, 'initial_pose': [0.0, 0.0, 0.0]}},
+          'reference': {'ros__parameters': {'trajectory_file': str(LAP)}},
+          'tracker': {'ros__parameters': {'wait_for_trajectory': True}}}
+    params = scenario_parameters(scenario_file, gains, ov)
+    assert params['tracker']['ros__parameters']['predict_latency'] == 0.035   # the gain file's
+    res = run_composed(params, tmp_path / 'run', record_all=record_all)
+    assert all(c == 0 for c in res.exit_codes.values()), res.exit_codes
+    rep = replay(res.bag, gains=gains, params=scenario_file)
+    assert rep.inputs.get('trajectory') == 1
+    assert {e.kind for e in rep.plan.events} == {'odom', 'trajectory'}  # samples not fed
+    assert len(rep.commands) == len(rep.recorded) == 801               # odometry at 50 Hz
+    assert rep.comparison.equal and rep.max_abs_error <= 1e-9
+    # the scenario's own predictor (0.04 s) instead of the gain file's: not the same run
+    params_only = replay(res.bag, gains=CONFIG / 'tracker_gains.yaml', params=scenario_file)
+    assert params_only.max_abs_error > 1e-3
+
+
+@pytest.mark.slow
+def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(tmp_path):
+    """Real time, one process per node: the tracker re-times the lap in its worker thread and
+    adopts it at a later odometry; bag replay finds that odometry and reproduces every
+    recorded command exactly (predictor from the gain file)."""
+    import yaml
+    from nonfragile_tracker.bag.replay import replay
+    from nonfragile_tracker.runner import realtime_overrides, run_processes, scenario_parameters
+    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    gains = tmp_path / 'g.yaml'
+    gains.write_text(yaml.safe_dump({'/**/tracker': {'ros__parameters': {
+        'K': [float(v) for v in np.asarray(K).ravel()], 'K_shape': [2, 4],
+        'predict_latency': 0.035, 'predict_lag_v': 0.045, 'predict_lag_w': 0.06}}}))
+    scenario_file = CONFIG / 'line_arc_scenario.yaml'
+    ov = realtime_overrides()
+    ov['reference']['ros__parameters'].update(trajectory_file=str(LAP))
+    ov['tracker']['ros__parameters'].update(wait_for_trajectory=True)
+    ov['plant']['ros__parameters'].update(initial_pose=[0.0, 0.0, 0.0], duration=20.0)
+    params = scenario_parameters(scenario_file, gains, ov)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('traj_rt_replay')))
+    res = run_processes(params, tmp_path, env=env, progress=lambda s: None)
+    assert all(c == 0 for c in res.exit_codes.values()), res.exit_codes
+    log = (tmp_path / 'tracker.log').read_text()
+    assert 're-timed for max_angular_accel' in log        # lap.csv's turns exceed 3 rad/s^2
+    rep = replay(res.bag, gains=gains, params=scenario_file)
+    assert rep.mode == 'realtime' and len(rep.recorded) > 500
+    assert len(rep.commands) == len(rep.recorded)
+    assert rep.comparison.equal and rep.max_abs_error <= 1e-9

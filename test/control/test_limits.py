@@ -1,0 +1,136 @@
+"""Trajectories within a base's limits (control.limits): check, margins, re-timing.
+
+The line-arc lap (straights joined by 0.4 m arcs, 0.4 m/s) exceeds each limit when the
+limit is set below its peak; the check names the limit, the time and the value, the
+re-timed trajectory is within the limits and never faster than the plan, and a path
+tighter than the minimum turning radius is refused with the place and the curvature.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from conftest import CONFIG
+from nonfragile_tracker.control.limits import (LIMIT_NAMES, Limits, check, retime,
+                                               within_limits)
+from nonfragile_tracker.control.trajectory import TrajectoryError, load_waypoints
+
+LINE_ARC = CONFIG / 'trajectories' / 'line_arc_lap.csv'
+#: One limit below the lap's peak at a time (peaks: 0.403 m/s, 0.45 m/s^2, 1.14 rad/s,
+#: 5.4 rad/s^2, radius 0.351 m)
+BELOW = {'max_linear_speed': 0.3, 'max_linear_accel': 0.3, 'max_angular_speed': 0.9,
+         'max_angular_accel': 3.0}
+
+
+@pytest.fixture(scope='module')
+def lap():
+    """The line-arc lap as its waypoint file gives it."""
+    return load_waypoints(LINE_ARC)
+
+
+def test_the_lap_is_straights_and_0_4_m_arcs_at_0_4_m_per_s(lap):
+    """The shipped lap is what the benchmark says: 0.4 m/s cruise, turns of ~0.4 m."""
+    r = check(lap, Limits())
+    assert r['max_linear_speed'].peak == pytest.approx(0.4, abs=0.01)
+    assert 0.34 < r['min_turning_radius'].peak < 0.41
+    assert r['max_angular_speed'].peak == pytest.approx(1.0, abs=0.15)
+    assert lap.t_end == pytest.approx(21.78, abs=0.01)
+
+
+def test_within_the_limits_nothing_changes(lap):
+    """Limits above every peak: margins positive, the trajectory passes unchanged."""
+    lim = Limits(1.0, 1.0, 2.0, 10.0, 0.3)
+    r = check(lap, lim)
+    assert r.ok and all(rep.margin > 0 for rep in r.reports)
+    assert within_limits(lap, lim) == (lap, '')
+
+
+@pytest.mark.parametrize('name', list(BELOW))
+def test_each_limit_is_checked_and_re_timed(lap, name):
+    """The violated limit is named with the time and value; the re-timed lap is within it,
+    follows the same path and is nowhere faster than the plan."""
+    lim = Limits(**{name: BELOW[name]})
+    r = check(lap, lim)
+    assert [v.name for v in r.violations] == [name]
+    v = r[name]
+    assert v.violated_value > BELOW[name] and lap.t_start <= v.violated_at < lap.t_end
+    text = v.describe()
+    assert f'VIOLATES {name} = {BELOW[name]:g}' in text
+    assert f'first at t = {v.violated_at:.3f} s' in text
+    rt = retime(lap, lim)
+    assert rt.changed and rt.after.ok and rt.duration_after > rt.duration_before
+    assert rt.after[name].peak <= BELOW[name] * 1.01
+    new = rt.trajectory
+    ts = np.linspace(new.t_start, new.t_end, 4001)
+    s = new.evaluate(ts)
+    # the same path: every re-timed point lies on the original curve (samples 0.2 mm apart)
+    from scipy.spatial import cKDTree
+    dense = lap.evaluate(np.linspace(lap.t_start, lap.t_end, 40001))
+    d, _ = cKDTree(np.column_stack([dense.x, dense.y])).query(np.column_stack([s.x, s.y]))
+    assert float(d.max()) < 2e-4
+    assert float(np.hypot(s.vx, s.vy).max()) <= 0.4035         # never faster than the plan
+
+
+def test_line_arc_junctions_get_a_continuous_turn_rate(lap):
+    """max_angular_accel 3 rad/s^2: the turn rate changes by at most 3 rad/s^2 x 20 ms per
+    command period of a 50 Hz base (it stepped 0 -> 1 rad/s within ~0.2 s before)."""
+    rt = retime(lap, Limits(1.0, 1.0, 2.0, 3.0))
+    new = rt.trajectory
+    ts = np.arange(new.t_start, new.t_end, 0.02)
+    s = new.evaluate(ts)
+    sp = np.hypot(s.vx, s.vy)
+    w = np.where(sp > 1e-3, (s.vx * s.ay - s.vy * s.ax) / np.maximum(sp, 1e-3) ** 2, 0.0)
+    assert float(np.abs(np.diff(w)).max()) <= 3.0 * 0.02 * 1.01
+    assert float(np.abs(np.diff(np.hypot(s.vx, s.vy))).max()) <= 1.0 * 0.02 * 1.01
+
+
+def test_a_path_tighter_than_the_turning_radius_is_refused(lap):
+    """No timing fixes a curvature: refused with the place, the time and the curvature."""
+    with pytest.raises(TrajectoryError) as exc:
+        within_limits(lap, Limits(min_turning_radius=0.5))
+    msg = str(exc.value)
+    assert 'min_turning_radius = 0.5 m' in msg and 'curvature 2.8' in msg
+    assert ' at (' in msg and ', t = ' in msg
+
+
+def test_bad_limits_are_refused():
+    """Negative or non-finite limits name the parameter."""
+    for bad in (-1.0, math.nan):
+        with pytest.raises(TrajectoryError, match='max_angular_accel'):
+            Limits(max_angular_accel=bad)
+    assert set(LIMIT_NAMES) == {f for f in Limits.__dataclass_fields__}
+
+
+@pytest.mark.parametrize('name', list(BELOW) + ['min_turning_radius'])
+def test_cli_trajectory_check_names_the_limit_time_and_value(capsys, lap, name):
+    """`trajectory check FILE --limits NAME=VALUE` prints every margin, the violation
+    (limit, time, value) and what re-timing changes; exit 1 when a limit is exceeded."""
+    from nonfragile_tracker.cli import main
+    value = BELOW.get(name, 0.5)
+    assert main(['trajectory', 'check', str(LINE_ARC), '--limits', f'{name}={value}']) == 1
+    out = capsys.readouterr().out
+    v = check(lap, Limits(**{name: value}))[name]
+    line = next(ln for ln in out.splitlines() if 'VIOLATES' in ln)
+    assert f'VIOLATES {name} = {value:g}' in line
+    assert f'first at t = {v.violated_at:.3f} s' in line
+    if name == 'min_turning_radius':
+        assert 'refused: ' in out and 'curvature' in out
+    else:
+        assert f'{v.violated_value:.4g}' in line
+        assert 're-timed for ' + name in out and 'after re-timing' in out
+
+
+def test_cli_limits_margins_and_bad_limit_names(capsys, tmp_path):
+    """Within the limits: margins and exit 0; -o writes the re-timed waypoints; a wrong
+    name exits 2 naming the accepted ones."""
+    from nonfragile_tracker.cli import main
+    out_csv = tmp_path / 'timed.csv'
+    assert main(['trajectory', 'check', str(LINE_ARC), '--limits', 'max_linear_speed=1',
+                 'max_angular_speed=2', '-o', str(out_csv)]) == 0
+    out = capsys.readouterr().out
+    assert 'margin 0.597' in out and 'within the limits: timing unchanged' in out
+    assert load_waypoints(out_csv).t_end == pytest.approx(21.78, abs=0.03)
+    with pytest.raises(SystemExit) as exc:
+        main(['trajectory', 'check', str(LINE_ARC), '--limits', 'max_speed=1'])
+    assert exc.value.code == 2
+    assert 'max_linear_speed' in capsys.readouterr().err
