@@ -122,7 +122,7 @@ from ..errors import CertificateError, InfeasibleError, InputError, SolverFailur
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
                   cached_program, solve, sym)
-from .search import eps_search, largest_feasible, largest_feasible_bracketed
+from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
            'InputDelayResult', 'InputDelayCertification', 'certify_input_delay',

@@ -40,7 +40,8 @@ from .problem import Problem
 from .search import largest_feasible_bracketed
 
 __all__ = ['OBJECTIVES', 'LatencyDesign', 'LatencyPlan', 'lagged_problem', 'perturbation_set',
-           'exact_abscissa', 'exact_figures', 'design_for_latency', 'latency_figures', 'plan_from_identification']
+           'exact_abscissa', 'exact_figures', 'design_for_latency', 'latency_figures',
+           'plan_from_identification']
 
 OBJECTIVES = ('decay', 'max-delay')
 
