@@ -683,7 +683,7 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                 raise CertificateError(f'{solver} returned a singular X for the {what}; no '
                                        'gain can be recovered')
             ver = v[2]
-            err = CertificateError(
+            cerr = CertificateError(
                 f'{solver} returned no point for the {what} that passes independent '
                 f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
                 f'{cand.eps:.3g}: max eig Psi = {ver.max_eig_Psi:.3g}, relative tolerance '
@@ -692,8 +692,8 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                 f'{ver.min_eig_rc:.3g}). The point is at the edge of feasibility: ask for '
                 'a little less (smaller h_max or decay rate) or a larger margin '
                 '(options.margin of the problem).')
-            err.margin_achieved = float(cand.strictness)
-            raise err
+            cerr.margin_achieved = float(cand.strictness)
+            raise cerr
     return InputDelayResult(
         K=K, h_min=h0, h_max=h1, alpha=alpha, eps=best.eps, certificate=cert,
         verification=ver, margin_required=margin, margin_achieved=float(best.strictness),

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, InputError
-from .delay import _cheb, delay_margin
+from .delay import chebyshev_differentiation, delay_margin
 from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
                           max_certified_input_delay, max_input_delay_decay_rate,
                           synthesize_input_delay)
@@ -41,7 +41,7 @@ from .search import largest_feasible_bracketed
 
 __all__ = ['OBJECTIVES', 'LatencyDesign', 'LatencyPlan', 'lagged_problem', 'perturbation_set',
            'exact_abscissa', 'exact_figures', 'design_for_latency', 'latency_figures',
-           'plan_from_identification']
+           'delay_interval', 'plan_from_identification']
 
 OBJECTIVES = ('decay', 'max-delay')
 
@@ -208,7 +208,7 @@ def exact_abscissa(A: np.ndarray, A_tau: np.ndarray, tau: float, A1: np.ndarray,
         return float(np.max(np.linalg.eigvals(A0).real))
     r = max(d for _, d in terms)
     x = np.cos(np.pi * np.arange(N + 1) / N)
-    G = np.kron(_cheb(N) * (2.0 / r), np.eye(n))
+    G = np.kron(chebyshev_differentiation(N) * (2.0 / r), np.eye(n))
     G[:n, :] = 0.0
     G[:n, :n] = A0
     for M, d in terms:
@@ -478,6 +478,30 @@ class LatencyPlan:
                        f'{self.h_max:.4f}] s')
 
 
+def delay_interval(latency_lo: float, latency_hi: float, *, predictor: bool,
+                   command_period: float, age: tuple[float, float] = (0.0, 0.0)
+                   ) -> tuple[float, float]:
+    """The delay interval to certify for a latency interval (the one rule, :class:`LatencyPlan`).
+
+    Parameters
+    ----------
+    latency_lo, latency_hi : float
+        Command-to-motion latency interval ``[L_lo, L_hi]`` (s).
+    predictor : bool
+        With the tracker's predictor at ``L_lo + a_lo``: the residual
+        ``[0, (L_hi - L_lo) + (a_hi - a_lo) + T]``; without: ``[L_lo + a_lo, L_hi + a_hi + T]``.
+    command_period : float
+        The command period ``T`` (sample and hold), s.
+    age : (float, float)
+        Odometry age ``[a_lo, a_hi]`` when a command is sent (s).
+    """
+    lo, hi, T = float(latency_lo), float(latency_hi), float(command_period)
+    a_lo, a_hi = float(age[0]), float(age[1])
+    if predictor:
+        return 0.0, (hi - lo) + (a_hi - a_lo) + T
+    return lo + a_lo, hi + a_hi + T
+
+
 def plan_from_identification(ident: Identification, *, predictor: bool = True,
                              command_period: float | None = None) -> LatencyPlan:
     """The delay interval, lag and predictor settings for an identification (one rule).
@@ -514,10 +538,7 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
     a_lo, a_hi = max(a_lo, 0.0), max(a_hi, a_lo, 0.0)
     lo, hi = ident.latency_low_s, ident.latency_high_s
     lag = max(ident.tau_v_s, ident.tau_w_s)
-    if predictor:
-        h0, h1 = 0.0, (hi - lo) + (a_hi - a_lo) + T
-    else:
-        h0, h1 = lo + a_lo, hi + a_hi + T
+    h0, h1 = delay_interval(lo, hi, predictor=predictor, command_period=T, age=(a_lo, a_hi))
     return LatencyPlan(predictor=predictor, h_min=float(h0), h_max=float(h1), lag=float(lag),
                        predict_latency=float(lo), predict_odom_latency=float(a_lo),
                        predict_lag_v=float(ident.tau_v_s), predict_lag_w=float(ident.tau_w_s),
