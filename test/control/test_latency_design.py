@@ -68,7 +68,8 @@ def test_max_delay_design_with_lag_is_checked_exactly():
     for D in perturbation_set(p):
         assert delay_margin(p.A, p.B @ (r.K + p.E @ D @ p.F)) > r.certified_h_max
         assert delay_margin(lp.A, lp.B @ (K_aug + lp.E @ D @ lp.F)) > r.lag_certified_h_max
-    assert r.true_delay_margin > r.certified_h_max and r.abscissa_at_h_max < 0
+    # the exact figures are the lagged loop's (the robot's), above its certified latency
+    assert r.true_delay_margin > r.lag_certified_h_max and r.abscissa_at_h_max < 0
     # the lagged certificate is a real one (verified in numpy)
     c = certify_input_delay(lp, K_aug, 0.02, 0.1)
     assert c.certified and c.verification.ok
