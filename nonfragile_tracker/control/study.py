@@ -29,7 +29,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import InputError
-from ..parallel import default_workers, map_tasks
+from ..parallel import EXECUTORS, default_workers, map_tasks
 from .batch import (BatchCases, BatchError, BatchRun, PathBatch, perturbation_schedule,
                     sample_deltas, simulate_batch)
 from .loop import PlantConfig, TrackerConfig
@@ -261,6 +261,10 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path,
     """
     if not isinstance(path, PathBatch):
         raise BatchError('run_study needs the path as a PathBatch (sent to worker processes)')
+    if isinstance(executor, str) and executor not in EXECUTORS:
+        raise InputError(f'executor must be one of {EXECUTORS}, got {executor!r}')
+    if scheduler is not None and executor != 'dask':
+        raise InputError('--scheduler applies to --executor dask only')
     jobs = default_jobs() if jobs is None else jobs
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise InputError(f'jobs must be an integer >= 1, got {jobs!r}')
