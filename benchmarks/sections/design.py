@@ -53,10 +53,12 @@ def _cli(args: list[str], pythonpath: Path | None = None, timeout: float = 600.0
          ) -> tuple[float, str]:
     env = dict(os.environ)
     if pythonpath is not None:
+        # run from there: ``python -m`` puts the working directory first on sys.path
         env['PYTHONPATH'] = str(pythonpath)
     t0 = time.perf_counter()
-    proc = subprocess.run([PY, '-m', 'nonfragile_tracker.cli', *args], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run([PY, '-m', 'nonfragile_tracker.cli', *args],
+                          cwd=pythonpath or ROOT, env=env, capture_output=True, text=True,
+                          timeout=timeout)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f'{args[0]} failed: {proc.stderr[-300:]}')
@@ -132,8 +134,10 @@ def worker_sweep(mode: str, count: int) -> None:
     else:
         recs = run_sweep(p, pts, workers=1 if mode == 'serial' else 2)
     wall = time.perf_counter() - t0
+    cpu = sum(r['seconds'] for r in recs)     # each design's own wall time, summed
     recs = [{k: v for k, v in r.items() if k != 'seconds'} for r in recs]
-    print(json.dumps({'wall_s': wall, 'records': recs}))
+    print(json.dumps({'wall_s': wall, 'design_s': cpu, 'records': recs,
+                      'loadavg': os.getloadavg()}))
 
 
 def bench_sweep(cfg, table: Table, raw: dict) -> None:
@@ -160,8 +164,9 @@ def bench_sweep(cfg, table: Table, raw: dict) -> None:
         ratio = r['wall_s'] / ser['wall_s']
         same = r['records'] == ser['records']
         table.add(rid, f'sweep of {count} designs ({ok} certified), {label} / serial', ratio,
-                  'x', detail=f'{fmt(r["wall_s"])} s vs serial {fmt(ser["wall_s"])} s; '
-                  f'records equal design by design: {fmt(same)}')
+                  'x', detail=f'{fmt(r["wall_s"])} s vs serial {fmt(ser["wall_s"])} s '
+                  f'(load {fmt(r["loadavg"][0])} / {fmt(ser["loadavg"][0])}); records equal '
+                  f'design by design: {fmt(same)}')
         if mode == 'local2':
             op, limit, unit = TARGETS_12['sweep_two_workers']
             row = table.rows[-1]

@@ -390,8 +390,9 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
                 "'max-delay' objective, or a shorter latency interval.")
         margin, absc, worst = exact_figures(lp, K_aug, h0, h1)
         hi = min(margin, max(4 * h1, 1.0))
+        # the robot's figure to half the tolerance (one solve more than ``tol``)
         lag_h = certified_input_delay_of_gain(
-            lp, K_aug, h0, h_hi=max(hi, h1 + tol), tol=tol, h_certified=h1,
+            lp, K_aug, h0, h_hi=max(hi, h1 + tol), tol=0.5 * tol, h_certified=h1,
             certified_margin=lag_cert.margin_achieved, h_hi_refuted=hi == margin > h1)
     return LatencyDesign(problem=problem.name, objective=objective, K=res.K, gain_bound=bound,
                          h_min=h0, h_max=h1, lag=T, certified_h_max=float(certified),
