@@ -814,7 +814,8 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
                                   tol: float = 1e-3, solver: str = DEFAULT_SOLVER,
                                   h_certified: float | None = None,
                                   certified_margin: float | None = None,
-                                  h_hi_refuted: bool = False) -> float:
+                                  h_hi_refuted: bool = False,
+                                  h_guess: float | None = None) -> float:
     """Largest ``h_max`` for which :func:`certify_input_delay` certifies ``K``.
 
     Returns ``h_min`` if not even ``[h_min, max(h_min, tol)]`` is certified and
@@ -854,6 +855,9 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
     h_hi_refuted : bool
         ``h_hi`` is known not certifiable (e.g. the exact delay margin of the loop: a
         root on the imaginary axis there), so it is not tried.
+    h_guess : float, optional
+        Where to try first inside the bracket (with ``h_certified``), e.g. a fraction of
+        the exact margin: a good guess leaves a short bracket for the search.
     """
     def trial(h1: float) -> tuple[float, bool | None]:
         c = certify_input_delay(problem, K, h_min, h1, alpha=alpha, nominal=nominal,
@@ -887,7 +891,15 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
             else:
                 hi = mid
         return lo
-    x, _, _ = largest_feasible_bracketed(trial, lo, h_hi, True, tol=tol, lo_score=lo_s)
+    hi, hi_s = h_hi, math.nan
+    if h_guess is not None and lo + tol < h_guess < hi - tol:
+        sc, ok = trial(float(h_guess))
+        if ok is not None:
+            lo, lo_s = float(h_guess), sc
+        else:
+            hi, hi_s = float(h_guess), sc
+    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
+                                         hi_score=hi_s)
     return float(x)
 
 
