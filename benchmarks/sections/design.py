@@ -145,7 +145,11 @@ def bench_sweep(cfg, table: Table, raw: dict) -> None:
     count = 40 if cfg.quick else 200
     out = {}
     for mode in ('serial', 'local2', 'dask'):
-        res, wall, timed_out = run_worker(['sweep', mode, str(count)], timeout=3600.0)
+        # single-threaded BLAS, as the CLI runs (a multithreaded BLAS may round differently
+        # from run to run, and the workers are the parallelism here)
+        env = dict(os.environ, OPENBLAS_NUM_THREADS='1')
+        res, wall, timed_out = run_worker(['sweep', mode, str(count)], timeout=3600.0,
+                                          env=env)
         out[mode] = res
         log(f'12.2 sweep of {count} designs, {mode}: '
             f'{fmt(res["wall_s"]) if res else "failed"} s')
