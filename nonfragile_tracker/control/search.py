@@ -68,32 +68,36 @@ def largest_feasible_bracketed(trial: Callable[[float], tuple[float, T | None]],
     ``trial(x)`` returns ``(score, result)``: ``result`` is None when ``x`` is infeasible,
     and ``score`` is a continuous measure that crosses 0 at the boundary (the SDP's
     strictness ``t - margin``: >= 0 feasible, < 0 not; ``nan`` when unknown).  The next
-    ``x`` is the root of the secant through the bracket's scores (Illinois variant: the
+    ``x`` is the root of the line through the last two feasible scores (the strictness
+    is smooth on the feasible side and often kinked at the boundary, where another
+    constraint becomes active; for a convex decreasing score the step lands just short of
+    the boundary), else of the secant through the bracket's scores (Illinois variant: the
     score of an end that stays twice is halved), kept at least ``tol / 2`` inside the
     bracket; once the estimate is within ``tol`` of an end the step to ``end +- tol`` is
     taken, so a smooth score closes the bracket in a few trials where halving needs
-    ``log2((hi - lo) / tol)``; a step that does not halve the bracket is followed by a
-    bisection (a flat or saturated score, e.g. a strictness pinned at 0 on the infeasible
-    side, costs at most twice the halving).  A ``nan`` score beyond the boundary (no
-    measure there) makes the step an extrapolation of the last two feasible scores.
-    Without usable scores this is bisection.  Feasibility is decided by ``result`` only,
+    ``log2((hi - lo) / tol)``; two steps in a row that do not halve the bracket are
+    followed by a bisection (a flat or saturated score, e.g. a strictness pinned at 0 on
+    the infeasible side, costs at most three times the halving).  Without usable scores this is bisection.  Feasibility is decided by ``result`` only,
     so the returned ``x`` is always one ``trial`` accepted.
     Returns ``(x, result, trials)`` with ``hi - x <= tol`` for the final bracket.
     """
     best, trials, side = lo_result, 0, 0
     ls, hs = float(lo_score), float(hi_score)
     feasible = [(lo, ls)] if math.isfinite(ls) else []
-    bisect = False
+    bisect, slow = False, 0
     while hi - lo > tol:
         width = hi - lo
         x = math.nan
-        if not bisect and math.isfinite(ls) and math.isfinite(hs) and ls > 0.0 > hs:
-            x = hi - hs * (hi - lo) / (hs - ls)
-        elif not bisect and not math.isfinite(hs) and len(feasible) >= 2:
-            # no score beyond the boundary: extrapolate the last two feasible scores
+        if not bisect and len(feasible) >= 2:
+            # extrapolate the last two feasible scores: the strictness is smooth on the
+            # feasible side, and often kinked at the boundary (another constraint becomes
+            # active), so a secant across the boundary is the worse model
             (x1, s1), (x2, s2) = feasible[-2], feasible[-1]
             if s1 > s2 > 0.0 and x2 > x1:
                 x = x2 + s2 * (x2 - x1) / (s1 - s2)
+        if math.isnan(x) and not bisect and math.isfinite(ls) and math.isfinite(hs) \
+                and ls > 0.0 > hs:
+            x = hi - hs * (hi - lo) / (hs - ls)
         if math.isfinite(x):
             if x - lo < tol:
                 x = lo + min(tol, 0.5 * width)
@@ -118,9 +122,11 @@ def largest_feasible_bracketed(trial: Callable[[float], tuple[float, T | None]],
             if side < 0 and math.isfinite(ls):
                 ls *= 0.5
             side = -1
-        # safeguard (as in Brent's method): a step that did not halve the bracket is
-        # followed by a bisection, so a flat or saturated score costs at most twice halving
-        bisect = not bisect and hi - lo > 0.5 * width
+        # safeguard (as in Brent's method): two steps in a row that did not halve the
+        # bracket are followed by a bisection, so a poor score costs at most three times
+        # the halving
+        slow = 0 if bisect or hi - lo <= 0.5 * width else slow + 1
+        bisect = slow >= 2
     return lo, best, trials
 
 
