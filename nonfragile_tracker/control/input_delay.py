@@ -1067,14 +1067,14 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
         last.append(r.eps)
         return r.margin_achieved - margin, r
 
-    lo, lo_s, best = 0.0, base.margin_achieved - margin, base
+    lo, best = 0.0, base
     a, hi, hi_s = 0.5, math.nan, math.nan
     while True:
         s, r = trial(a)
         if r is None:
             hi, hi_s = a, s
             break
-        lo, lo_s, best = a, s, r
+        lo, best = a, r
         if a >= hi_limit:
             return best
         a = min(2.0 * a, hi_limit)
@@ -1093,11 +1093,11 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
         # by the normalization (t <= 1 with a gain bound), which would skew the secant
         lo, best, _ = largest_feasible_bracketed(single, lo, hi, best, tol=rel_tol * hi,
                                                  lo_score=math.nan, hi_score=hi_s)
-        lo_s, hi = best.margin_achieved - margin, min(refuted)
-        s, r = trial(hi)
+        hi = min(refuted)
+        _, r = trial(hi)
         if r is None:
             break
-        lo, lo_s, best = hi, s, r
+        lo, best = hi, r
         while True:                 # another eps certifies hi: a new bracket above it
             if lo >= hi_limit:
                 return best
@@ -1105,5 +1105,5 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
             hi_s, r = trial(hi)
             if r is None:
                 break
-            lo, lo_s, best = hi, hi_s, r
+            lo, best = hi, r
     return best

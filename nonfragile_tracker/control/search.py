@@ -77,8 +77,9 @@ def largest_feasible_bracketed(trial: Callable[[float], tuple[float, T | None]],
     taken, so a smooth score closes the bracket in a few trials where halving needs
     ``log2((hi - lo) / tol)``; two steps in a row that do not halve the bracket are
     followed by a bisection (a flat or saturated score, e.g. a strictness pinned at 0 on
-    the infeasible side, costs at most three times the halving).  Without usable scores this is bisection.  Feasibility is decided by ``result`` only,
-    so the returned ``x`` is always one ``trial`` accepted.
+    the infeasible side, costs at most three times the halving).  Without usable scores
+    this is bisection.  Feasibility is decided by ``result`` only, so the returned ``x``
+    is always one ``trial`` accepted.
     Returns ``(x, result, trials)`` with ``hi - x <= tol`` for the final bracket.
     """
     best, trials, side = lo_result, 0, 0
