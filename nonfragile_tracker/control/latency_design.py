@@ -386,19 +386,24 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     if T > 0:
         lp = lagged_problem(problem, T)
         K_aug = np.hstack([res.K, np.zeros((problem.m, problem.m))])
-        lag_cert = certify_input_delay(lp, K_aug, h0, h1)
-        if not lag_cert.certified:
+        margin, absc, worst = exact_figures(lp, K_aug, h0, h1)
+        hi = min(margin, max(4 * h1, 1.0))
+        guess = GUESS_OF_MARGIN * hi
+        # [h0, guess] certified (monotone in h_max) implies the [h0, h1] asked for: one
+        # solve decides both when the guess holds, the search then starts from there
+        start = certify_input_delay(lp, K_aug, h0, guess) if guess > h1 + tol else None
+        if start is None or not start.certified:
+            start, guess = certify_input_delay(lp, K_aug, h0, h1), h1
+        if not start.certified:
             raise InfeasibleError(
                 f'the gain designed for problem {problem.name!r} is not certified with the '
                 f'actuator lag {T:g} s on [{h0:g}, {h1:g}] s; try a smaller gain bound, the '
                 "'max-delay' objective, or a shorter latency interval.")
-        margin, absc, worst = exact_figures(lp, K_aug, h0, h1)
-        hi = min(margin, max(4 * h1, 1.0))
         # the robot's figure to half the tolerance (one solve more than ``tol``)
         lag_h = certified_input_delay_of_gain(
-            lp, K_aug, h0, h_hi=max(hi, h1 + tol), tol=0.5 * tol, h_certified=h1,
-            certified_margin=lag_cert.margin_achieved, h_hi_refuted=hi == margin > h1,
-            h_guess=GUESS_OF_MARGIN * hi)
+            lp, K_aug, h0, h_hi=max(hi, guess + tol), tol=0.5 * tol, h_certified=guess,
+            certified_margin=start.margin_achieved, h_hi_refuted=hi == margin > guess,
+            h_guess=None if guess > h1 else GUESS_OF_MARGIN * hi)
     return LatencyDesign(problem=problem.name, objective=objective, K=res.K, gain_bound=bound,
                          h_min=h0, h_max=h1, lag=T, certified_h_max=float(certified),
                          decay_rate=float(decay), lag_certified_h_max=lag_h,
