@@ -35,6 +35,7 @@ from harness import (TARGETS, Config, Procs, Table, cpu_usage, elapsed, fmt, log
 from sections.batch_study import bench_batch, worker_batch  # noqa: E402
 from sections.delay import bench_delay, worker_roots  # noqa: E402
 from sections.delay_tdcpy import bench_tdcpy, worker_tdcpy  # noqa: E402
+from sections.design import bench_design, worker_sweep  # noqa: E402
 from sections.fleet import bench_fleet  # noqa: E402
 from sections.identify import bench_identify  # noqa: E402
 from sections.lockstep import bench_lockstep  # noqa: E402
@@ -46,7 +47,7 @@ from sections.simulation import bench_simulation  # noqa: E402
 from sections.synthesis import bench_synthesis, worker_cold, worker_growth  # noqa: E402
 
 SECTIONS = ('synthesis', 'scaling', 'delay', 'tdcpy', 'simulation', 'batch', 'lockstep',
-            'realtime', 'recorder', 'quality', 'identify', 'fleet')
+            'realtime', 'recorder', 'quality', 'identify', 'fleet', 'design')
 
 
 def cpu_seconds() -> float:
@@ -81,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
             worker_batch(args.worker[1] == '1', int(args.worker[2]))
         elif args.worker[0] == 'tdcpy':
             worker_tdcpy(int(args.worker[1]))
+        elif args.worker[0] == 'sweep':
+            worker_sweep(args.worker[1], int(args.worker[2]))
         return 0
 
     cfg = Config(args.quick, args.budget or (120.0 if args.quick else 560.0))
@@ -115,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
                  ('recorder', lambda: bench_recorder(cfg, table, raw, domain, tmp)),
                  ('quality', lambda: bench_quality(cfg, table, raw)),
                  ('identify', lambda: bench_identify(cfg, table, raw)),
-                 ('fleet', lambda: bench_fleet(cfg, table, raw, domain, tmp))]
+                 ('fleet', lambda: bench_fleet(cfg, table, raw, domain, tmp)),
+                 ('design', lambda: bench_design(cfg, table, raw))]
         for name, fn in steps:
             if name not in only:
                 continue

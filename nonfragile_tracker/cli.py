@@ -7,6 +7,7 @@ Sub-commands::
     delay-dependent PROBLEM [--delay H | --max-delay]             descriptor-method design
     identify BAG [-o latency.yaml]                                command latency and actuator lag
     latency-design PROBLEM --delay-interval H_MIN H_MAX [--lag T]  gain certified for a latency
+    sweep PROBLEM [--latency LO HI]... [--lag T...] [--executor dask]  design grid, Pareto front
     analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
     margins PROBLEM (--gains FILE | --paper)                      fragility margins only
     run [options]                                                 the main job (see --help)
@@ -39,8 +40,8 @@ if TYPE_CHECKING:
 
 #: The command modules (under ``nonfragile_tracker.commands``), in ``--help`` order; each
 #: exposes ``register(subparsers)``.  Imported by :func:`build_parser`.
-COMMANDS = ('synthesis', 'identify', 'latency_design', 'run', 'study', 'trajectory', 'bag',
-            'reproduce', 'golden')
+COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'study', 'trajectory',
+            'bag', 'reproduce', 'golden')
 
 
 def build_parser() -> argparse.ArgumentParser:

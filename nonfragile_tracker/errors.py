@@ -55,6 +55,8 @@ class InfeasibleError(LmiError):
     """The LMI has no strictly feasible point with the requested margin."""
 
     exit_code = EXIT_INFEASIBLE
+    #: the best strictness t found (set by the input-delay synthesis; not always present)
+    margin_achieved: float
 
 
 class SolverFailure(LmiError):

@@ -62,7 +62,7 @@ def _external_imports(path: Path, source: str | None = None):
 #: The layers, lowest first: a module imports modules of its own layer or lower ones only.
 #: A subpackage is named by its folder, a top-level module by its name ('' = the package).
 LAYERS = (
-    ('foundation', {'', 'errors', 'files'}),
+    ('foundation', {'', 'errors', 'files', 'parallel'}),
     ('control', {'control'}),
     ('conversions', {'topics', 'msgconv', 'resources', 'scenario'}),
     ('bag', {'bag'}),

@@ -9,7 +9,7 @@ import argparse
 import math
 
 __all__ = ['finite_float', 'positive_float', 'nonnegative_float', 'positive_int',
-           'nonnegative_int']
+           'nonnegative_int', 'add_executor_arguments']
 
 
 def finite_float(text: str) -> float:
@@ -60,3 +60,19 @@ def nonnegative_int(text: str) -> int:
     if n < 0:
         raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
     return n
+
+
+def add_executor_arguments(p: argparse.ArgumentParser) -> None:
+    """``--executor local|dask`` and ``--scheduler ADDRESS`` (:mod:`..parallel`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The sub-command's parser.
+    """
+    p.add_argument('--executor', choices=['local', 'dask'], default='local',
+                   help='where the work runs: local processes (default) or Dask distributed '
+                   '(optional dependency: pip install dask distributed)')
+    p.add_argument('--scheduler', metavar='ADDRESS',
+                   help='with --executor dask: a running scheduler, e.g. tcp://host:8786 '
+                   '(default: a local cluster of --jobs/--workers processes)')

@@ -7,7 +7,8 @@ import math
 import time
 from pathlib import Path
 
-from .argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
+from .argtypes import (add_executor_arguments, nonnegative_float, nonnegative_int,
+                       positive_float, positive_int)
 
 __all__ = ['register', 'cmd_study']
 
@@ -59,13 +60,15 @@ def cmd_study(args: argparse.Namespace) -> int:
                      delta_norm=tuple(args.delta_norm), hold=args.hold,
                      tolerance=args.tolerance)
     t0 = time.perf_counter()
-    res = run_study(spec, plant, tracker, path, problem.E, problem.F, design, args.jobs)
+    res = run_study(spec, plant, tracker, path, problem.E, problem.F, design, args.jobs,
+                    executor=args.executor, scheduler=args.scheduler)
     wall = time.perf_counter() - t0
     summ = summarize(res)
     summ['wall_time'] = wall
     lim = res.limits
     print(f'study of {args.gains}: {spec.cases} cases x {spec.duration:g} s '
-          f'({res.run.steps} steps of {plant.dt:g} s), {res.jobs} process(es), '
+          f'({res.run.steps} steps of {plant.dt:g} s), {res.jobs} process(es)'
+          + (' on Dask' if args.executor == 'dask' else '') + ', '
           f'{wall:.1f} s wall ({spec.cases * res.run.steps / max(wall, 1e-9):.3g} case-steps/s)')
     print(f'sampled: Delta {spec.delta} with ||Delta||_2 in [{spec.delta_norm[0]:g}, '
           f'{spec.delta_norm[1]:g}], command latency [{spec.latency[0]:g}, {spec.latency[1]:g}] s, '
@@ -151,6 +154,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help='the zero steady-state error law (delay-consistent reference)')
     p.add_argument('--jobs', type=positive_int, default=None,
                    help='worker processes (default: the cores available)')
+    add_executor_arguments(p)
     p.add_argument('--json', metavar='OUT', help='write the summary and every case as JSON')
     p.add_argument('--plot', metavar='OUT.png', help='write a PNG of the distributions')
     p.add_argument('--force', action='store_true', help='overwrite --json/--plot files')

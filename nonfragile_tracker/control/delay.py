@@ -162,6 +162,17 @@ def _cheb(N: int) -> np.ndarray:
     return D
 
 
+def chebyshev_differentiation(N: int) -> np.ndarray:
+    """Chebyshev differentiation matrix on ``cos(j pi / N)``, ``j = 0..N`` (read-only, cached).
+
+    Parameters
+    ----------
+    N : int
+        Degree (``N + 1`` nodes).
+    """
+    return _cheb(N)
+
+
 @lru_cache(maxsize=64)
 def _cheb_resolvent(N: int, tau: float, sigma: float) -> tuple[np.ndarray, np.ndarray, float]:
     """Shift-invert pieces of the Chebyshev differentiation matrix (cached, read-only).

@@ -459,7 +459,8 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
             f'{solver} returned a point for the {what} (eps = {best.eps:.3g}) that fails '
             f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig P1 = '
             f'{ver.min_eig_P1:.3g}, S = {ver.min_eig_S:.3g}, R = {ver.min_eig_R:.3g}. '
-            'Use CLARABEL or raise the margin.')
+            + ('Raise the margin (options.margin).' if solver == 'CLARABEL'
+               else 'Use CLARABEL or raise the margin (options.margin).'))
     return DelayDependentResult(
         K=cert.K, h=h, eps=float(best.eps), certificate=cert, margin_required=margin,
         margin_achieved=t_best, status=str(best.status), solver=solver,

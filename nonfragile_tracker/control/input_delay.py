@@ -29,7 +29,7 @@ from ..errors import CertificateError, InfeasibleError, InputError, SolverFailur
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
                   cached_program, solve, sym)
-from .search import eps_search, largest_feasible
+from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
            'InputDelayResult', 'InputDelayCertification', 'certify_input_delay',
@@ -54,6 +54,9 @@ class InputDelayVerification:
     lam: float | None           # Petersen scalar (> 0; None: nominal)
     tolerance: float
     scale: float                # spectral norm of Psi
+    #: acceptance decided in the congruent coordinates ``T^T Psi T``, ``T = diag(P2^-1, I)``
+    #: (see :func:`verify_input_delay`); ``max_eig_Psi`` and ``scale`` are still of ``Psi``
+    congruent: bool = False
 
     @property
     def worst_eigenvalue(self) -> float:
@@ -185,6 +188,38 @@ def input_delay_verification_matrix(A, B, A_tau, tau, E, F, K, h_min, h_max, alp
     return sym(psi)
 
 
+def _congruent_ok(Psi: np.ndarray, P2: np.ndarray, n: int, k: int, tol: float) -> bool:
+    """``T^T Psi T < -tol ||T^T Psi T|| I`` beyond its rounding error, ``T = diag(P2^-1, .., I)``.
+
+    Sylvester's law of inertia: for an invertible ``T``, ``Psi < 0`` iff ``T^T Psi T < 0``,
+    so both are the same certificate; the relative acceptance test differs.  ``Psi`` is in
+    the original coordinates, where a point that is strict in the solver's coordinates
+    (``X = P2^-1``, module docstring step 6) has ``max eig`` of about ``-t / ||X||^2``
+    next to a norm of about ``||Psi_bar|| cond(X)^2``: with ``cond(X)`` of 50 a point with
+    ``t = 0.05`` fails ``tol = 1e-9`` there by rounding-free arithmetic alone.  The test
+    is repeated where the solver imposed its margin, with the same ``tol``, and accepted
+    only if the margin also exceeds a bound of the floating-point error of forming
+    ``T^T Psi T`` and of its eigenvalues (``8 N u ||T||^2 ||Psi||``, ``N`` the size,
+    ``u`` the unit round-off): the returned matrices, not the solver, are what is checked.
+    """
+    try:
+        Xi = np.linalg.inv(np.asarray(P2, float))
+    except np.linalg.LinAlgError:
+        return False
+    N = Psi.shape[0]
+    T = np.eye(N)
+    for i in range(min(k, N // n)):
+        T[i * n:(i + 1) * n, i * n:(i + 1) * n] = Xi
+    if not np.all(np.isfinite(T)):
+        return False
+    Pb = sym(T.T @ Psi @ T)
+    ev = np.linalg.eigvalsh(Pb)
+    top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
+    rounding = 8.0 * N * np.finfo(float).eps * float(np.linalg.norm(T, 2)) ** 2 \
+        * float(np.linalg.norm(Psi, 2))
+    return bool(top < -max(tol * scale, rounding))
+
+
 def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
                        certificate: InputDelayCertificate, *, alpha: float = 0.0,
                        tol: float = 1e-9) -> InputDelayVerification:
@@ -209,9 +244,13 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
     top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
     min_l = min(float(np.linalg.eigvalsh(sym(M))[0]) for M in lyap)
     min_rc = float(np.linalg.eigvalsh(sym(rc))[0])
-    ok = (top < -tol * scale and min_l > 0 and min_rc > 0
-          and (c.lam is None or c.lam > 0))
-    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, tol, scale)
+    side = min_l > 0 and min_rc > 0 and (c.lam is None or c.lam > 0)
+    ok = top < -tol * scale and side
+    congruent = False
+    if side and not ok and top < 0:
+        congruent = _congruent_ok(Psi, c.P2, problem.n, 5 if c.Q is None else 6, tol)
+        ok = congruent
+    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, tol, scale, congruent)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -504,8 +543,11 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         if eps is not None:
             run(float(eps))
         else:
+            # a warm-started trial of a search whose point is rejected by the independent
+            # check stops at the climb's local maximum (the search counts it as failed,
+            # just beyond the boundary) instead of scanning the whole grid
             eps_search(run, grid, refine, start=eps_start,
-                       accept=margin if stop_at_first else math.inf)
+                       accept=margin if stop_at_first and eps_start is None else math.inf)
     except _Stop:
         pass
     solve_time = sum(p.solve_time for p in points)
@@ -522,21 +564,41 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                                     'gain was produced. Check that the solver is installed.')
             txt = ('no feasible point' if best.strictness == -math.inf
                    else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
-            raise InfeasibleError(
+            err = InfeasibleError(
                 f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
                 'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
                 'smaller decay rate, a smaller F, or nominal=True.')
-        v = verified(best)
-        if v is None:
-            raise CertificateError(f'{solver} returned a singular X for the {what}; no gain '
-                                   'can be recovered')
-        K, cert, ver = v
-        if not ver.ok:
-            raise CertificateError(
-                f'{solver} returned a point for the {what} (eps = {best.eps:.3g}) that fails '
-                f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig of '
-                f'the Lyapunov matrices = {ver.min_eig_lyapunov:.3g}, reciprocally convex '
-                f'block = {ver.min_eig_rc:.3g}. Use CLARABEL or raise the margin.')
+            err.margin_achieved = float(best.strictness)
+            raise err
+        # refinement: a point that fails the independent check (typically only its relative
+        # tolerance, near the feasibility boundary) is replaced by the strictest other point
+        # already solved that passes it - every eps point of the search is a candidate
+        usable = sorted((p for p in points if p.strictness >= margin),
+                        key=lambda p: -p.strictness)
+        first = None
+        for cand in usable:
+            v = verified(cand)
+            if v is not None and v[2].ok:
+                best, (K, cert, ver) = cand, v
+                break
+            first = first or (cand, v)
+        else:
+            cand, v = first if first is not None else (best, None)
+            if v is None:
+                raise CertificateError(f'{solver} returned a singular X for the {what}; no '
+                                       'gain can be recovered')
+            ver = v[2]
+            cerr = CertificateError(
+                f'{solver} returned no point for the {what} that passes independent '
+                f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
+                f'{cand.eps:.3g}: max eig Psi = {ver.max_eig_Psi:.3g}, relative tolerance '
+                f'{ver.tolerance:g} x {ver.scale:.3g}, min eig of the Lyapunov matrices = '
+                f'{ver.min_eig_lyapunov:.3g}, reciprocally convex block = '
+                f'{ver.min_eig_rc:.3g}). The point is at the edge of feasibility: ask for '
+                'a little less (smaller h_max or decay rate) or a larger margin '
+                '(options.margin of the problem).')
+            cerr.margin_achieved = float(cand.strictness)
+            raise cerr
     return InputDelayResult(
         K=K, h_min=h0, h_max=h1, alpha=alpha, eps=best.eps, certificate=cert,
         verification=ver, margin_required=margin, margin_achieved=float(best.strictness),
@@ -652,29 +714,96 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
 def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
                                   alpha: float = 0.0, nominal: bool = False,
                                   state_delay: bool | None = None, h_hi: float = 2.0,
-                                  tol: float = 1e-3, solver: str = DEFAULT_SOLVER) -> float:
-    """Largest ``h_max`` for which :func:`certify_input_delay` certifies ``K`` (bisection).
+                                  tol: float = 1e-3, solver: str = DEFAULT_SOLVER,
+                                  h_certified: float | None = None,
+                                  certified_margin: float | None = None,
+                                  h_hi_refuted: bool = False,
+                                  h_guess: float | None = None) -> float:
+    """Largest ``h_max`` for which :func:`certify_input_delay` certifies ``K``.
 
     Returns ``h_min`` if not even ``[h_min, max(h_min, tol)]`` is certified and
-    ``h_hi`` if ``h_hi`` is.  Monotone in ``h_max`` (docstring step 7).
+    ``h_hi`` if ``h_hi`` is.  Monotone in ``h_max`` (docstring step 7), so the answer is
+    bracketed and searched by false position on the certification LMI's strictness
+    ``t - margin`` (:func:`.search.largest_feasible_bracketed`; ``t`` falls continuously
+    through the margin and is pinned near 0 further out, by the trace normalization),
+    with bisection as the safeguard.  Without ``h_certified`` it is plain bisection from
+    ``h_min`` (the figures of ``design``/``synthesize`` stay bit-identical).
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop (state delay included as :func:`certify_input_delay` decides).
+    K : array_like
+        The gain.
+    h_min : float
+        Low end of the latency interval (s).
+    alpha : float
+        Decay rate the certificate must show.
+    nominal : bool
+        Certify ``D = 0`` only.
+    state_delay : bool, optional
+        As in :func:`certify_input_delay`.
+    h_hi : float
+        Upper end of the search (s).
+    tol : float
+        Absolute tolerance (s) of the returned value (a certified lower bound).
+    solver : str
+        cvxpy solver.
+    h_certified : float, optional
+        An ``h_max`` already known certified for ``K`` (e.g. by its synthesis): the
+        search starts there instead of at ``h_min``.
+    certified_margin : float, optional
+        The strictness ``t`` of :func:`certify_input_delay` at ``h_certified``, if the
+        caller has it (saves that solve).
+    h_hi_refuted : bool
+        ``h_hi`` is known not certifiable (e.g. the exact delay margin of the loop: a
+        root on the imaginary axis there), so it is not tried.
+    h_guess : float, optional
+        Where to try first inside the bracket (with ``h_certified``), e.g. a fraction of
+        the exact margin: a good guess leaves a short bracket for the search.
     """
-    def ok(h1: float) -> bool:
-        return certify_input_delay(problem, K, h_min, h1, alpha=alpha, nominal=nominal,
-                                   state_delay=state_delay, solver=solver).certified
+    def trial(h1: float) -> tuple[float, bool | None]:
+        c = certify_input_delay(problem, K, h_min, h1, alpha=alpha, nominal=nominal,
+                                state_delay=state_delay, solver=solver)
+        score = c.margin_achieved - DEFAULT_MARGIN     # continuous through the margin
+        return (score if math.isfinite(score) else math.nan), (True if c.certified else None)
 
     lo = max(float(h_min), tol)
-    if not ok(lo):
-        return float(h_min)
-    if ok(h_hi):
-        return float(h_hi)
-    hi = h_hi
-    while hi - lo > tol:
-        mid = 0.5 * (lo + hi)
-        if ok(mid):
-            lo = mid
+    lo_s: float = math.nan
+    if h_certified is not None and lo < h_certified < h_hi:
+        if certified_margin is not None:
+            lo, lo_s = float(h_certified), float(certified_margin) - DEFAULT_MARGIN
         else:
-            hi = mid
-    return lo
+            lo_s, ok = trial(float(h_certified))
+            if ok is not None:
+                lo = float(h_certified)
+    if lo != h_certified:
+        lo_s, ok = trial(lo)
+        if ok is None:
+            return float(h_min)
+    if not h_hi_refuted:
+        _, ok = trial(h_hi)
+        if ok is not None:
+            return float(h_hi)
+    if h_certified is None:     # plain bisection, as before the bracketed search
+        hi = h_hi
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            if trial(mid)[1] is not None:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+    hi, hi_s = h_hi, math.nan
+    if h_guess is not None and lo + tol < h_guess < hi - tol:
+        sc, ok = trial(float(h_guess))
+        if ok is not None:
+            lo, lo_s = float(h_guess), sc
+        else:
+            hi, hi_s = float(h_guess), sc
+    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
+                                         hi_score=hi_s)
+    return float(x)
 
 
 def _try(problem: Problem, h0: float, h1: float, **kw) -> InputDelayResult | None:
@@ -756,19 +885,59 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
 
 def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
                                gain_bound: float | None = None, nominal: bool = False,
-                               state_delay: bool | None = None, rel_tol: float = 1e-2,
+                               state_delay: bool | None = None, rel_tol: float = 2e-3,
                                hi_limit: float = 50.0,
                                eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
                                refine: int = DEFAULT_REFINE, margin: float = DEFAULT_MARGIN,
                                solver: str = DEFAULT_SOLVER) -> InputDelayResult:
     """Largest certified decay rate ``alpha`` for input delays in ``[h_min, h_max]``.
 
-    Doubling then bisection on ``alpha`` (:func:`.search.largest_feasible`), each
-    trial searching ``eps`` locally from the last success (:func:`.search.eps_search`);
-    feasibility is not proven monotone in ``alpha``, so the result is a verified lower
-    bound of the best rate.  Returns the strictest point at that rate of an ``eps``
-    climb (with refinement) from the last success; on the paper problem and the test
-    problems it is the point of the whole grid, in 11 solves instead of 29.
+    ``alpha = 0`` first (the first verified ``eps`` of a climb from the middle of the
+    grid decides feasibility, the whole grid if the climb finds none), then doubling from
+    0.5 until a rate fails, each trial a :func:`synthesize_input_delay` that stops at the
+    first verified ``eps`` of a climb on the grid from the last success (no golden
+    refinement); then the bracket is closed by false position on the strictness
+    ``t(alpha) - margin`` (:func:`.search.largest_feasible_bracketed`), one solve per
+    trial at the ``eps`` of the last success; finally one climb at the bracket's upper
+    end checks that no other ``eps`` certifies it (if one does, the search goes on above).
+
+    Why this search (measured on the paper problem, ``||K|| <= 8.67``, ``[0, 0.08]`` and
+    ``[0, 0.2]`` s): each SDP costs 60-130 ms inside the solver on an idle core and a
+    cached DPP program is re-solved without recompiling (:func:`.sdp.cached_program`),
+    so the time is the number of solves.  Halving the ``alpha`` bracket to 1 % took 7-8
+    trials, and every failing trial climbed the ``eps`` grid and refined it by golden
+    section (and a point rejected by the numpy check scanned the whole grid): 99 and 164
+    solves.  ``t(alpha)`` at the best ``eps`` is smooth and nearly linear near the
+    boundary, and the best ``eps`` moves slowly with ``alpha`` (0.32 on both intervals),
+    so false position closes a tighter bracket (``rel_tol`` 0.2 %) in 18 and 17 solves,
+    with decay rates 1.511 and 0.717 1/s where halving gave 1.508 and 0.656.  A
+    generalized-eigenvalue formulation was not used: ``alpha`` enters through the
+    ``exp(-2 alpha h)`` weights as well as ``2 alpha P``, so the problem is not a GEVP in
+    ``alpha`` (and cvxpy has no GEVP solver: it would be bisected over SDPs all the same).
+    Solver tolerances are unchanged.
+
+    Feasibility is not proven monotone in ``alpha``, so the result is a verified lower
+    bound of the best rate (the point the last successful trial verified).
+
+    Parameters
+    ----------
+    problem : Problem
+        Plant, perturbation and state delay.
+    h_min, h_max : float
+        Latency interval (s).
+    gain_bound : float, optional
+        ``||K||_2`` bound.
+    nominal : bool
+        Drop the ``E D F`` terms.
+    state_delay : bool, optional
+        Include ``A_tau`` (default: iff nonzero).
+    rel_tol : float
+        Relative width of the final ``alpha`` bracket.
+    hi_limit : float
+        Largest rate tried (returned as is if certified).
+    eps_grid, refine, margin, solver
+        As in :func:`synthesize_input_delay` (``refine`` is used by the ``alpha = 0``
+        feasibility scan only).
 
     Raises
     ------
@@ -776,22 +945,68 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
         Not even ``alpha = 0`` is certified.
     """
     kw: dict[str, Any] = dict(gain_bound=gain_bound, nominal=nominal,
-                              state_delay=state_delay, eps_grid=eps_grid, refine=refine,
-                              margin=margin, solver=solver)
-    # alpha = 0 decides feasibility (the first verified eps is enough); the strictest
-    # point is searched once, at the rate found, climbing from the last eps that worked
-    base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, **kw)
-    if base is None:
-        synthesize_input_delay(problem, h_min, h_max, alpha=0.0, **kw)   # raises with reason
-    last = [base.eps]   # type: ignore[union-attr]
+                              state_delay=state_delay, eps_grid=eps_grid, margin=margin,
+                              solver=solver)
+    grid = sorted(float(e) for e in eps_grid)
+    middle = grid[len(grid) // 2]
+    base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, refine=refine,
+                eps_start=middle, **kw)
+    if base is None:    # the whole grid (raises with the reason if nothing is certified)
+        base = synthesize_input_delay(problem, h_min, h_max, alpha=0.0, refine=refine, **kw)
+    last = [base.eps]
 
-    def trial(a: float) -> InputDelayResult | None:
-        r = _try(problem, h_min, h_max, alpha=a, stop_at_first=True, eps_start=last[-1], **kw)
-        if r is not None:
-            last.append(r.eps)
-        return r
+    def trial(a: float, climb: bool = True) -> tuple[float, InputDelayResult | None]:
+        try:
+            if climb:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, stop_at_first=True,
+                                           eps_start=last[-1], refine=0, **kw)
+            else:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, eps=last[-1],
+                                           **{k: v for k, v in kw.items() if k != 'eps_grid'})
+        except (InfeasibleError, CertificateError) as exc:
+            return getattr(exc, 'margin_achieved', math.nan) - margin, None
+        except SolverFailure:
+            return math.nan, None
+        last.append(r.eps)
+        return r.margin_achieved - margin, r
 
-    a, best, _ = largest_feasible(trial, 0.0, 0.5, rel_tol=rel_tol, hi_limit=hi_limit,
-                                  lo_result=base)
-    full = _try(problem, h_min, h_max, alpha=a, eps_start=last[-1], **kw)
-    return full if full is not None else best  # type: ignore[return-value]
+    lo, best = 0.0, base
+    a, hi, hi_s = 0.5, math.nan, math.nan
+    while True:
+        s, r = trial(a)
+        if r is None:
+            hi, hi_s = a, s
+            break
+        lo, best = a, r
+        if a >= hi_limit:
+            return best
+        a = min(2.0 * a, hi_limit)
+    # inside the bracket the eps of the last success is kept (one solve per trial: the
+    # climb at ``hi`` found it a local maximum of the grid, and the best eps moves slowly
+    # with alpha); once closed, one climb at ``hi`` checks that no other eps certifies it
+    def single(x: float) -> tuple[float, InputDelayResult | None]:
+        sc, r = trial(x, climb=False)
+        if r is None:
+            refuted.append(x)
+        return sc, r
+
+    for _ in range(4):
+        refuted: list[float] = [hi]
+        # the first step halves the bracket: the strictness at the low end is often capped
+        # by the normalization (t <= 1 with a gain bound), which would skew the secant
+        lo, best, _ = largest_feasible_bracketed(single, lo, hi, best, tol=rel_tol * hi,
+                                                 lo_score=math.nan, hi_score=hi_s)
+        hi = min(refuted)
+        _, r = trial(hi)
+        if r is None:
+            break
+        lo, best = hi, r
+        while True:                 # another eps certifies hi: a new bracket above it
+            if lo >= hi_limit:
+                return best
+            hi = min(2.0 * lo, hi_limit)
+            hi_s, r = trial(hi)
+            if r is None:
+                break
+            lo, best = hi, r
+    return best

@@ -330,7 +330,9 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
             f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
             f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
             f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
-            f't = {t:.3g}). Use CLARABEL or raise the margin.')
+            f't = {t:.3g}). '
+            + ('Raise the margin (options.margin).' if solver == 'CLARABEL'
+               else 'Use CLARABEL or raise the margin (options.margin).'))
         err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
         raise err
     cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)

@@ -15,7 +15,9 @@ One place for what every synthesis module needs around cvxpy:
 * ONE bounded program cache: parametrized (DPP) cvxpy problems are expensive to build
   and cheap to re-solve with new parameter values, so each module builds a program
   once per shape/option key through :func:`cached_program`.  The cache is an LRU of
-  at most :data:`CACHE_SIZE` programs shared by all modules; :func:`clear_cache`
+  at most :data:`CACHE_SIZE` programs shared by all modules of a thread (one cache per
+  thread: a cached program is mutated by every solve, so threads of one process - a Dask
+  worker with several threads - must not share it); :func:`clear_cache`
   drops them (benchmarks use it to measure a cold build), :func:`cached_programs`
   lists them (diagnostics).
 
@@ -23,6 +25,7 @@ No ROS import; cvxpy is imported lazily by the programs themselves.
 """
 from __future__ import annotations
 
+import threading
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -161,7 +164,12 @@ class _LruCache:
         return value
 
 
-_CACHE = _LruCache(CACHE_SIZE)
+class _PerThread(threading.local):
+    def __init__(self) -> None:
+        self.cache = _LruCache(CACHE_SIZE)
+
+
+_LOCAL = _PerThread()
 
 
 def cached_program(key: Hashable, factory: Callable[[], T]) -> T:
@@ -182,15 +190,15 @@ def cached_program(key: Hashable, factory: Callable[[], T]) -> T:
     object
         The cached or new program (the most recently used of the cache).
     """
-    return _CACHE.get(key, factory)
+    return _LOCAL.cache.get(key, factory)
 
 
 def cached_programs() -> list[tuple[Hashable, Any]]:
     """``(key, program)`` pairs in the cache, least recently used first (diagnostics)."""
-    return list(_CACHE.items.items())
+    return list(_LOCAL.cache.items.items())
 
 
 def clear_cache() -> None:
     """Drop every cached program (the next synthesis builds and compiles again)."""
-    _CACHE.items.clear()
+    _LOCAL.cache.items.clear()
 

@@ -2,6 +2,8 @@
 
 * :func:`largest_feasible` - the one bisection for every "largest value that is still
   certified/feasible" search (decay rate, perturbation scale, delay);
+* :func:`largest_feasible_bracketed` - the same search once a bracket is known, by false
+  position on a continuous score (the solver's strictness ``t``) instead of halving;
 * :func:`golden_section_max` - golden-section refinement of a scalar;
 * :func:`eps_search` - the line search over the tuning scalar ``eps`` of the
   delay-dependent and input-delay LMIs: a whole log grid, or a local climb on it from
@@ -12,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Sequence, TypeVar, overload
 
-__all__ = ['largest_feasible', 'golden_section_max', 'eps_search']
+__all__ = ['largest_feasible', 'largest_feasible_bracketed', 'golden_section_max', 'eps_search']
 
 T = TypeVar('T')
 
@@ -53,6 +55,79 @@ def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *
             hi = mid
         else:
             lo, best = mid, r
+    return lo, best, trials
+
+
+def largest_feasible_bracketed(trial: Callable[[float], tuple[float, T | None]],
+                               lo: float, hi: float, lo_result: T, *, tol: float,
+                               lo_score: float = math.nan, hi_score: float = math.nan
+                               ) -> tuple[float, T, int]:
+    """Largest feasible ``x`` in ``[lo, hi)`` within ``tol``, by safeguarded false position.
+
+    ``lo`` is known feasible (its result ``lo_result``) and ``hi`` known infeasible.
+    ``trial(x)`` returns ``(score, result)``: ``result`` is None when ``x`` is infeasible,
+    and ``score`` is a continuous measure that crosses 0 at the boundary (the SDP's
+    strictness ``t - margin``: >= 0 feasible, < 0 not; ``nan`` when unknown).  The next
+    ``x`` is the root of the line through the last two feasible scores (the strictness
+    is smooth on the feasible side and often kinked at the boundary, where another
+    constraint becomes active; for a convex decreasing score the step lands just short of
+    the boundary), else of the secant through the bracket's scores (Illinois variant: the
+    score of an end that stays twice is halved), kept at least ``tol / 2`` inside the
+    bracket; once the estimate is within ``tol`` of an end the step to ``end +- tol`` is
+    taken, so a smooth score closes the bracket in a few trials where halving needs
+    ``log2((hi - lo) / tol)``; two steps in a row that do not halve the bracket are
+    followed by a bisection (a flat or saturated score, e.g. a strictness pinned at 0 on
+    the infeasible side, costs at most three times the halving).  Without usable scores
+    this is bisection.  Feasibility is decided by ``result`` only, so the returned ``x``
+    is always one ``trial`` accepted.
+    Returns ``(x, result, trials)`` with ``hi - x <= tol`` for the final bracket.
+    """
+    best, trials, side = lo_result, 0, 0
+    ls, hs = float(lo_score), float(hi_score)
+    feasible = [(lo, ls)] if math.isfinite(ls) else []
+    bisect, slow = False, 0
+    while hi - lo > tol:
+        width = hi - lo
+        x = math.nan
+        if not bisect and len(feasible) >= 2:
+            # extrapolate the last two feasible scores: the strictness is smooth on the
+            # feasible side, and often kinked at the boundary (another constraint becomes
+            # active), so a secant across the boundary is the worse model
+            (x1, s1), (x2, s2) = feasible[-2], feasible[-1]
+            if s1 > s2 > 0.0 and x2 > x1:
+                x = x2 + s2 * (x2 - x1) / (s1 - s2)
+        if math.isnan(x) and not bisect and math.isfinite(ls) and math.isfinite(hs) \
+                and ls > 0.0 > hs:
+            x = hi - hs * (hi - lo) / (hs - ls)
+        if math.isfinite(x):
+            if x - lo < tol:
+                x = lo + min(tol, 0.5 * width)
+            elif hi - x < tol:
+                x = hi - min(tol, 0.5 * width)
+        else:
+            x = 0.5 * (lo + hi)
+        x = min(max(x, lo + 0.5 * tol), hi - 0.5 * tol)
+        score, r = trial(x)
+        trials += 1
+        if r is not None:
+            lo, best = x, r
+            ls = max(float(score), 1e-300) if math.isfinite(score) else math.nan
+            if math.isfinite(ls):
+                feasible.append((x, ls))
+            if side > 0 and math.isfinite(hs):
+                hs *= 0.5
+            side = 1
+        else:
+            hi = x
+            hs = min(float(score), -1e-300) if math.isfinite(score) else math.nan
+            if side < 0 and math.isfinite(ls):
+                ls *= 0.5
+            side = -1
+        # safeguard (as in Brent's method): two steps in a row that did not halve the
+        # bracket are followed by a bisection, so a poor score costs at most three times
+        # the halving
+        slow = 0 if bisect or hi - lo <= 0.5 * width else slow + 1
+        bisect = slow >= 2
     return lo, best, trials
 
 

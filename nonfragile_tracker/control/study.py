@@ -2,7 +2,8 @@
 
 :func:`sample_study_cases` draws ``N`` cases (seeded) around a base scenario,
 :func:`run_study` runs them with :func:`control.batch.simulate_batch` (split over
-processes when ``N`` is large) and :func:`summarize` reports the worst case, the
+workers when ``N`` is large: local processes or a Dask cluster, :mod:`..parallel`) and
+:func:`summarize` reports the worst case, the
 distribution of settling time and steady error, and the fraction of cases inside the
 certified region:
 
@@ -21,16 +22,14 @@ settle, steady error over the cases that stay finite.  No ROS import.
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
-import threading
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
 from ..errors import InputError
+from ..parallel import EXECUTORS, default_workers, map_tasks
 from .batch import (BatchCases, BatchError, BatchRun, PathBatch, perturbation_schedule,
                     sample_deltas, simulate_batch)
 from .loop import PlantConfig, TrackerConfig
@@ -51,11 +50,8 @@ MIN_CASES_PER_JOB = 1000
 
 
 def default_jobs() -> int:
-    """Cores this process may use (``os.sched_getaffinity``)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:                     # not Linux
-        return max(1, os.cpu_count() or 1)
+    """Cores this process may use (:func:`..parallel.default_workers`)."""
+    return default_workers()
 
 
 def _range(value, name: str, low: float = 0.0) -> tuple[float, float]:
@@ -203,6 +199,10 @@ def _run_chunk(plant, tracker, path, steps, batch, tolerance, steady_from):
                           steady_from=steady_from, exact=False)
 
 
+def _chunk_task(task):
+    return _run_chunk(*task)
+
+
 @dataclass(frozen=True)
 class StudyResult:
     """Per-case outcome of a study (arrays over cases) and its inputs."""
@@ -232,7 +232,8 @@ def _concat(runs: list[BatchRun]) -> BatchRun:
 
 
 def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path, E, F,
-              design: Mapping[str, Any] | None = None, jobs: int | None = None
+              design: Mapping[str, Any] | None = None, jobs: int | None = None, *,
+              executor: str | Executor = 'local', scheduler: str | None = None
               ) -> StudyResult:
     """Sample the cases of ``spec`` and simulate them all.
 
@@ -248,11 +249,22 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path,
     design : mapping, optional
         The gain file's design record (:func:`control.gains.read_gain_design`).
     jobs : int, optional
-        Worker processes (default: the cores available); fewer are used when there are
-        fewer than :data:`MIN_CASES_PER_JOB` cases per worker, none for one job.
+        Workers, i.e. shares of the cases (default: the cores available); fewer are used
+        when there are fewer than :data:`MIN_CASES_PER_JOB` cases per worker, none (this
+        process) for one share on the local executor.
+    executor : {'local', 'dask'} or concurrent.futures.Executor
+        Where the shares run (:func:`..parallel.map_tasks`): local processes, a Dask
+        cluster (``scheduler`` address, or a LocalCluster of ``jobs`` workers), or an
+        executor the caller made.  The cases and their results do not depend on it.
+    scheduler : str, optional
+        Dask scheduler address (``executor='dask'``).
     """
     if not isinstance(path, PathBatch):
         raise BatchError('run_study needs the path as a PathBatch (sent to worker processes)')
+    if isinstance(executor, str) and executor not in EXECUTORS:
+        raise InputError(f'executor must be one of {EXECUTORS}, got {executor!r}')
+    if scheduler is not None and executor != 'dask':
+        raise InputError('--scheduler applies to --executor dask only')
     jobs = default_jobs() if jobs is None else jobs
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise InputError(f'jobs must be an integer >= 1, got {jobs!r}')
@@ -261,18 +273,14 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path,
     n = spec.cases
     jobs = int(max(1, min(jobs, n // MIN_CASES_PER_JOB)))
     args = (plant, tracker, path, steps)
-    if jobs == 1:
+    if jobs == 1 and isinstance(executor, str) and executor == 'local':
         run = _run_chunk(*args, cases.batch, spec.tolerance, spec.steady_from)
     else:
         bounds = np.linspace(0, n, jobs + 1).round().astype(int)
         chunks = [cases.batch.take(slice(a, b)) for a, b in zip(bounds[:-1], bounds[1:])]
-        # fork is fastest; with threads running in this process fork is unsafe: spawn
-        method = 'fork' if threading.active_count() == 1 and os.name == 'posix' else 'spawn'
-        with ProcessPoolExecutor(max_workers=jobs,
-                                 mp_context=multiprocessing.get_context(method)) as pool:
-            futures = [pool.submit(_run_chunk, *args, c, spec.tolerance, spec.steady_from)
-                       for c in chunks]
-            run = _concat([f.result() for f in futures])
+        tasks = [(*args, c, spec.tolerance, spec.steady_from) for c in chunks]
+        run = _concat(map_tasks(_chunk_task, tasks, executor=executor, workers=jobs,
+                                scheduler=scheduler))
     limits = certified_limits(design)
     inside = in_certified_region(cases, limits, plant.odom_latency)
     return StudyResult(spec, cases, run, inside, limits, jobs)

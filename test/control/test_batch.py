@@ -220,6 +220,25 @@ def test_study_fractions_and_percentiles_match_single_runs(monkeypatch):
     assert np.array_equal(two.run.settling_time, res.run.settling_time, equal_nan=True)
 
 
+def test_study_on_a_dask_local_cluster_equals_the_local_run(monkeypatch):
+    """The study's shares through Dask (an in-process LocalCluster, the executor
+    abstraction of ``nonfragile_tracker.parallel``) give the numbers of one process."""
+    distributed = pytest.importorskip('distributed')
+    pc, tc, path = study_setup()
+    E, F = paper_EF()
+    spec = StudySpec(cases=6, seed=3, duration=3.0, latency=(0.0, 0.2))
+    one = run_study(spec, pc, tc, path, E, F, None, jobs=1)
+    monkeypatch.setattr(study_mod, 'MIN_CASES_PER_JOB', 1)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        got = run_study(spec, pc, tc, path, E, F, None, jobs=2, executor=client.get_executor())
+    assert got.jobs == 2
+    assert np.array_equal(got.run.steady_error, one.run.steady_error)
+    assert np.array_equal(got.run.settling_time, one.run.settling_time, equal_nan=True)
+    assert np.array_equal(got.inside, one.inside)
+
+
 def test_study_command_writes_json_and_plot(tmp_path, capsys):
     out, png = tmp_path / 's.json', tmp_path / 's.png'
     code = cli.main(['study', str(GAINS), '--cases', '30', '--duration', '3', '--jobs', '1',
@@ -242,6 +261,8 @@ def test_study_command_writes_json_and_plot(tmp_path, capsys):
     ['study', str(GAINS), '--duration', 'nan'],
     ['study', str(GAINS), '--problem', str(CONFIG / 'paper_scenario.yaml'), '--cases', '2'],
     ['study', str(CONFIG / 'paper_problem.yaml'), '--cases', '2'],
+    ['study', str(GAINS), '--cases', '2', '--scheduler', 'tcp://127.0.0.1:1'],
+    ['study', str(GAINS), '--cases', '2', '--executor', 'ray'],
 ])
 def test_study_bad_input_exits_2(argv, capsys):
     try:

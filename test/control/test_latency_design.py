@@ -68,7 +68,8 @@ def test_max_delay_design_with_lag_is_checked_exactly():
     for D in perturbation_set(p):
         assert delay_margin(p.A, p.B @ (r.K + p.E @ D @ p.F)) > r.certified_h_max
         assert delay_margin(lp.A, lp.B @ (K_aug + lp.E @ D @ lp.F)) > r.lag_certified_h_max
-    assert r.true_delay_margin > r.certified_h_max and r.abscissa_at_h_max < 0
+    # the exact figures are the lagged loop's (the robot's), above its certified latency
+    assert r.true_delay_margin > r.lag_certified_h_max and r.abscissa_at_h_max < 0
     # the lagged certificate is a real one (verified in numpy)
     c = certify_input_delay(lp, K_aug, 0.02, 0.1)
     assert c.certified and c.verification.ok
@@ -142,3 +143,85 @@ def test_cli_infeasible_exits_3(tmp_path, di, capsys):
                '--objective', 'max-delay', '-o', str(out)])
     assert rc == 3 and not out.exists()
     assert 'below the 5 s asked for' in capsys.readouterr().err
+
+
+def delayed_problem():
+    """The double integrator with a state delay (exact figures must include it)."""
+    p = di_problem()
+    return Problem(A=p.A, B=p.B, A_tau=np.array([[0.0, 0.0], [-0.3, 0.0]]), tau=0.1, E=p.E,
+                   F=p.F, name='di-tau', perturbations=dict(p.perturbations),
+                   options={'gain_bound': 3.0})
+
+
+def test_exact_abscissa_matches_the_one_delay_analysis_and_converges_with_a_state_delay():
+    from nonfragile_tracker.control.delay import spectral_abscissa
+    from nonfragile_tracker.control.latency_design import exact_abscissa
+    p = delayed_problem()
+    K = np.array([[-2.0, -2.5]])
+    A1 = p.B @ K
+    for h in (0.02, 0.15, 0.4):
+        assert exact_abscissa(p.A, np.zeros((2, 2)), 0.1, A1, h) == pytest.approx(
+            spectral_abscissa(p.A, A1, h), abs=1e-9)
+        two = exact_abscissa(p.A, p.A_tau, p.tau, A1, h)
+        assert two == pytest.approx(exact_abscissa(p.A, p.A_tau, p.tau, A1, h, N=40), abs=1e-9)
+        # the state delay moves the roots: the figure is not the one-delay one
+        assert abs(two - spectral_abscissa(p.A, A1, h)) > 1e-3
+    # h = 0 and no delay at all: the eigenvalues of the delay-free matrix
+    assert exact_abscissa(p.A, np.zeros((2, 2)), 0.1, A1, 0.0) == pytest.approx(
+        max(np.linalg.eigvals(p.A + A1).real))
+
+
+def test_exact_figures_include_the_state_delay_and_cover_the_interval():
+    from nonfragile_tracker.control.latency_design import exact_abscissa, exact_figures
+    p = delayed_problem()
+    K = np.array([[-2.0, -2.5]])
+    margin, at_max, worst = exact_figures(p, K, 0.05, 0.2, samples=5)
+    A1s = [p.B @ (K + p.E @ D @ p.F) for D in perturbation_set(p)]
+    # a root on the imaginary axis at the margin for the worst D, none just below it
+    ab = [exact_abscissa(p.A, p.A_tau, p.tau, A1, margin + 2e-4) for A1 in A1s]
+    assert max(ab) >= 0
+    assert max(exact_abscissa(p.A, p.A_tau, p.tau, A1, margin - 2e-4) for A1 in A1s) < 0
+    # differs from the margin without A_tau (the figure before the fix)
+    assert abs(margin - min(delay_margin(p.A, A1) for A1 in A1s)) > 1e-3
+    hs = np.linspace(0.05, 0.2, 5)
+    assert worst == pytest.approx(max(exact_abscissa(p.A, p.A_tau, p.tau, A1, h)
+                                      for A1 in A1s for h in hs))
+    assert at_max == pytest.approx(max(exact_abscissa(p.A, p.A_tau, p.tau, A1, 0.2)
+                                       for A1 in A1s))
+    assert worst >= at_max
+
+
+def test_a_design_with_a_lag_prints_only_the_lagged_loops_figures():
+    p = delayed_problem()
+    r = design_for_latency(p, 0.0, 0.05, gain_bound=3.0, lag=0.05)
+    text = r.summary()
+    lp = lagged_problem(p, 0.05)
+    K_aug = np.hstack([r.K, np.zeros((1, 1))])
+    from nonfragile_tracker.control.latency_design import exact_figures
+    margin, _, worst = exact_figures(lp, K_aug, 0.0, 0.05)
+    assert r.true_delay_margin == pytest.approx(margin) and r.worst_abscissa == worst < 0
+    assert f'{r.lag_certified_h_max:.4g}' in text and 'lagged loop' in text
+    # the no-lag latency is not printed (it is not the robot's) and every printed latency
+    # is below the lagged loop's exact margin
+    assert 'certified: every latency' not in text
+    assert text.count('every latency in') == 1 and 'certified (with the actuator lag' in text
+    assert r.lag_certified_h_max < r.true_delay_margin
+    meta = r.metadata()
+    assert meta['state_delay_in_exact_check'] is True and meta['exact_figures_loop'] == 'lagged'
+    assert meta['true_delay_margin'] == pytest.approx(margin)
+
+
+def test_congruent_verification_accepts_a_strict_point_the_relative_test_refuses(paper_problem):
+    """[0, 0.2] s at alpha 0.71: t = 0.01 in the solver's coordinates, max eig Psi = -1.5e-7
+    against 1e-9 ||Psi|| = 1.05e-6 in the original ones (cond(X) about 50)."""
+    from nonfragile_tracker.control import input_delay as idm
+    p = paper_problem
+    r = idm.synthesize_input_delay(p, 0.0, 0.2, alpha=0.71, eps=0.31622776601683794,
+                                   gain_bound=8.67)
+    v = r.verification
+    assert v.ok and v.congruent and r.margin_achieved > 1e-3
+    assert -v.tolerance * v.scale < v.max_eig_Psi < 0         # fails only the relative test
+    # the certificate itself: Psi < 0 (inertia is that of the congruent matrix)
+    Psi = idm.input_delay_verification_matrix(p.A, p.B, p.A_tau, p.tau, p.E, p.F, r.K, 0.0,
+                                              0.2, 0.71, r.certificate)
+    assert np.linalg.eigvalsh(Psi)[-1] < 0

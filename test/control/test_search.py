@@ -114,3 +114,38 @@ def test_a_value_past_accept_that_did_not_stop_the_search_scans_the_rest():
     g, calls = recorder(lambda e: bump(0.2)(e) - 2.0)
     eps_search(g, GRID, 8, start=0.2, accept=0.5)
     assert len(calls) == 1 + 3 + 8
+
+
+def bracketed_trial(root: float, calls: list, score=lambda x, r: r - x):
+    def trial(x):
+        calls.append(x)
+        s = score(x, root)
+        return s, (x if x <= root else None)
+    return trial
+
+
+def test_bracketed_search_closes_a_smooth_score_in_fewer_trials_than_halving():
+    from nonfragile_tracker.control.search import largest_feasible_bracketed
+    calls: list = []
+    root, tol = 0.7312, 1e-4
+    x, res, n = largest_feasible_bracketed(bracketed_trial(root, calls), 0.0, 2.0, 0.0,
+                                           tol=tol, lo_score=root, hi_score=root - 2.0)
+    assert x <= root < x + tol and res == x and n == len(calls)
+    assert n <= 4 < math.ceil(math.log2(2.0 / tol))          # bisection: 15 trials
+    # the result is always a point the trial accepted
+    assert all((c <= root) == (c <= x) for c in calls if c <= x)
+
+
+def test_bracketed_search_without_scores_is_bisection_and_never_worse_than_thrice():
+    from nonfragile_tracker.control.search import largest_feasible_bracketed
+    calls: list = []
+    root, tol = 0.3, 1e-3
+    x, _, n = largest_feasible_bracketed(
+        bracketed_trial(root, calls, score=lambda x, r: math.nan), 0.0, 1.0, 0.0, tol=tol)
+    assert x <= root < x + tol and n == math.ceil(math.log2(1.0 / tol))
+    # a saturated score (flat beyond the root, as the certification LMI's strictness)
+    calls2: list = []
+    x2, _, n2 = largest_feasible_bracketed(
+        bracketed_trial(root, calls2, score=lambda x, r: max(r - x, -1e-12) if x > r
+                        else 1.0), 0.0, 1.0, 0.0, tol=tol, lo_score=1.0, hi_score=-1e-12)
+    assert x2 <= root < x2 + tol and n2 <= 3 * math.ceil(math.log2(1.0 / tol))
