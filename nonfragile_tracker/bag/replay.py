@@ -61,7 +61,7 @@ TRACKER_DEFAULTS: dict[str, Any] = {
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0, 'max_stamp_jump': 1.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
-    'predict_lag_w': 0.0,
+    'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
 }
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}

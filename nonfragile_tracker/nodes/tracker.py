@@ -24,7 +24,10 @@ so a plant with odometry latency pairs each measurement with the reference of it
 measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
 ``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
 the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
-stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).  Real
+stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
+With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
+unknown) each command differs from the previous by at most the limit times ``dt`` and the
+predictor models the limits (:class:`control.loop.Tracker`).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
@@ -100,6 +103,12 @@ PARAMS = [
           '0 = none', low=0.0, high=10.0, read_only=True),
     Param('predict_lag_w', 0.0, 'assumed time constant of the base\'s angular speed (s); '
           '0 = none', low=0.0, high=10.0, read_only=True),
+    Param('max_linear_accel', 0.0, 'the base\'s linear acceleration limit (m/s^2): commands '
+          'change by at most this times dt per command and the predictor models it; '
+          '0 = unknown (off)', low=0.0, high=1e3, read_only=True),
+    Param('max_angular_accel', 0.0, 'the base\'s angular acceleration limit (rad/s^2): '
+          'commands change by at most this times dt per command and the predictor models it; '
+          '0 = unknown (off)', low=0.0, high=1e3, read_only=True),
     Param('lockstep_subscribers', 0, 'lockstep: answer an odometry step only once cmd_vel has '
           'this many matched subscribers (plant and recorder: 2); until then the step is left '
           'for the plant to republish; 0 = answer at once', read_only=True),
