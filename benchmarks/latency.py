@@ -42,9 +42,11 @@ the tracker's limit parameters at 0 = unknown) at 100 and 150 ms with the old de
 the paper's ``K_nf``, from the paper scenario's start (0.7, 0.1, pi/2; at 0.05 m/s) and
 from beside the path (the latency scenario's start); targets 15 / 25 mm.  (2) After the
 bring-up, per latency 100 / 200 / 300 ms: record a run of the new default (no predictor,
-from beside the path), ``identify`` it, ``latency-design --identification``, then run
+from beside the path; through the nodes with TwistStamped commands, whose stamps time the
+commands exactly - a lockstep Twist's bag receive time lags the command by up to a step
+of the recorder's clock), ``identify`` it, ``latency-design --identification``, then run
 the designed gain file (its predictor) with the tracker's limit parameters set; target
-2 mm.  In process, and with ``--nodes`` through the nodes (``config/latency_scenario.yaml``
+2 mm.  ``--part default|bringup`` runs one of the two tables.  In process, and with ``--nodes`` through the nodes (``config/latency_scenario.yaml``
 with the overrides above, one process per node) in lockstep and in real time.  RMS of
 the true position error after 10 s, median of ``--seeds`` noise seeds (worst in brackets).
 """
@@ -363,13 +365,17 @@ def main_real_base(args) -> int:
           f'0.2 rad/s; RMS position error after 10 s, mm: median of {len(seeds)} seeds '
           f'(worst); {args.duration:g} s runs')
     # (1) no bring-up
+    if args.part == 'bringup':
+        modes_1: list = []
+    else:
+        modes_1 = modes
     starts = list(STARTS) if not args.nodes else ['paper start']
     head = f'{"mode":10} {"start":11} {"gain":24} | ' + ' | '.join(
         f'{lat * 1e3:3.0f} ms (<= {tgt:2.0f})' for lat, tgt in NO_BRINGUP.items())
     print('\n(1) default configuration, no bring-up (no predictor, tracker limits unknown)')
     print(head)
     print('-' * len(head))
-    for mode in modes:
+    for mode in modes_1:
         for start in (starts if mode == 'in process' else ['paper start']):
             for gname, gfile in base_gains().items():
                 cells = []
@@ -391,19 +397,22 @@ def main_real_base(args) -> int:
     head = f'{"mode":10} {"latency":>7} | {"identified":>28} | {"designed for":>30} | RMS'
     print(head)
     print('-' * (len(head) + 20))
-    for mode in modes:
+    # the recording: the default tracker, no predictor (and its limits if --record-limits)
+    record_tracker = dict(ZERO_PREDICT, **(TRACKER_LIMITS if args.record_limits else {}))
+    for mode in (modes if args.part != 'default' else []):
         for lat in BRINGUP_LATENCIES:
             work = tmp / f'bringup_{mode.replace(" ", "_")}_{int(lat * 1e3)}'
             work.mkdir(parents=True, exist_ok=True)
             try:
                 if mode == 'in process':
                     _, _, c, o = base_sim(CONFIG / 'tracker_gains.yaml', lat, 1, 'beside',
-                                          max(args.duration, 30.0), record=True)
+                                          max(args.duration, 30.0), record=True,
+                                          tracker=dict(record_tracker))
                     ident = identify_file(c, o, work / 'lat.yaml', f'sim {lat}')
                 else:
                     rec = node_batch(args, tmp, [dict(
                         mode=mode, latency=lat, seed=1, gains=str(CONFIG / 'tracker_gains.yaml'),
-                        start='beside', tracker=dict(ZERO_PREDICT), keep_bag=True,
+                        start='beside', tracker=dict(record_tracker), stamped=True,
                         duration=max(args.duration, 30.0))], bags=True)[0]
                     ident = identify_bag(rec, work / 'lat.yaml')
                 g, text = design_from(ident, work / 'g.yaml')
@@ -443,6 +452,10 @@ def base_node_run(job: dict) -> dict:
     plant['odom_noise'] = list(plant['odom_noise'])
     ov = {'plant': {'ros__parameters': plant},
           'tracker': {'ros__parameters': dict(job['tracker'])}}
+    if job.get('stamped'):        # command stamps: identify times commands exactly
+        for node in ('tracker', 'plant', 'recorder'):
+            ov.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
+                'enable_stamped_cmd_vel'] = True
     if job['mode'] == 'realtime':
         runner.merge(ov, runner.realtime_overrides())
     params = runner.scenario_parameters(CONFIG / 'latency_scenario.yaml', Path(job['gains']), ov)
@@ -507,6 +520,11 @@ def main(argv=None) -> int:
                     help='--nodes: one mode only (default both)')
     ap.add_argument('--latencies', type=float, nargs='+',
                     help='--nodes: command latencies in s (default 0.1 0.2 0.3)')
+    ap.add_argument('--part', choices=['all', 'default', 'bringup'], default='all',
+                    help='--real-base: both tables (default), or only one')
+    ap.add_argument('--record-limits', action='store_true',
+                    help='--real-base: the bring-up recording with the tracker\'s limit '
+                    'parameters set too (default: unknown, 0)')
     ap.add_argument('--real-base', action='store_true',
                     help='issue 22: old vs new default vs K_nf without bring-up, and the '
                     'bring-up, on the base with acceleration limits (with --nodes also '
