@@ -42,7 +42,8 @@ the tracker's limit parameters at 0 = unknown) at 100 and 150 ms with the old de
 the paper's ``K_nf``, from the paper scenario's start (0.7, 0.1, pi/2; at 0.05 m/s) and
 from beside the path (the latency scenario's start); targets 15 / 25 mm.  (2) After the
 bring-up, per latency 100 / 200 / 300 ms: record a run of the new default (no predictor,
-from beside the path; through the nodes with TwistStamped commands, whose stamps time the
+the tracker's limit parameters set unless ``--record-unknown-limits``, from beside the
+path; through the nodes with TwistStamped commands, whose stamps time the
 commands exactly - a lockstep Twist's bag receive time lags the command by up to a step
 of the recorder's clock), ``identify`` it, ``latency-design --identification``, then run
 the designed gain file (its predictor) with the tracker's limit parameters set; target
@@ -397,8 +398,10 @@ def main_real_base(args) -> int:
     head = f'{"mode":10} {"latency":>7} | {"identified":>28} | {"designed for":>30} | RMS'
     print(head)
     print('-' * (len(head) + 20))
-    # the recording: the default tracker, no predictor (and its limits if --record-limits)
-    record_tracker = dict(ZERO_PREDICT, **(TRACKER_LIMITS if args.record_limits else {}))
+    # the recording: the default tracker, no predictor, with its limit parameters set
+    # (unless --record-unknown-limits): its commands then stay within the base's limits
+    record_tracker = dict(ZERO_PREDICT,
+                          **({} if args.record_unknown_limits else TRACKER_LIMITS))
     for mode in (modes if args.part != 'default' else []):
         for lat in BRINGUP_LATENCIES:
             work = tmp / f'bringup_{mode.replace(" ", "_")}_{int(lat * 1e3)}'
@@ -522,9 +525,9 @@ def main(argv=None) -> int:
                     help='--nodes: command latencies in s (default 0.1 0.2 0.3)')
     ap.add_argument('--part', choices=['all', 'default', 'bringup'], default='all',
                     help='--real-base: both tables (default), or only one')
-    ap.add_argument('--record-limits', action='store_true',
+    ap.add_argument('--record-unknown-limits', action='store_true',
                     help='--real-base: the bring-up recording with the tracker\'s limit '
-                    'parameters set too (default: unknown, 0)')
+                    'parameters at 0 (default: set, as in the designed run)')
     ap.add_argument('--real-base', action='store_true',
                     help='issue 22: old vs new default vs K_nf without bring-up, and the '
                     'bring-up, on the base with acceleration limits (with --nodes also '
