@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh machine (see README.md):
 #   make demo   - create .venv, install pinned dependencies, run the paper's scenario end to end
-#                 in the recommended configuration (shipped gain, delay compensation);
+#                 in the recommended configuration (the shipped latency-certified default gain
+#                 config/tracker_gains.yaml, delay compensation);
 #                 make demo ARGS=--paper: the paper's configuration (K_nf, no compensation)
 #   make test   - create .venv if needed and run the whole test suite
 #   (make docs  - build the documentation in doc/ into doc/_build/html, warnings as errors)

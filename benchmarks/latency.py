@@ -31,6 +31,25 @@ samples more than 10 s after the plant's start (last pose stamp - duration).  La
 columns: the latency ``identify`` finds on the bags of the "exact" runs (median;
 bootstrap 50) against the configured one (one plant step = 10 ms).  Independent runs go
 ``--jobs`` at a time, each on its own ROS_DOMAIN_ID.
+
+    .venv/bin/python benchmarks/latency.py --real-base [--nodes] [--duration 20] [--seeds 3]
+
+Issue 22's "what it must show", on the base with acceleration limits (:data:`REAL_BASE`:
+50 ms lag on v and w, 1 m/s^2 and 3 rad/s^2, odometry 50 Hz with 1 mm noise, figure
+eight r = 1 m at 0.2 rad/s).  (1) No bring-up: the default configuration (no predictor,
+the tracker's limit parameters at 0 = unknown) at 100 and 150 ms with the old default
+(``config/max_decay_gains.yaml``), the new default (``config/tracker_gains.yaml``) and
+the paper's ``K_nf``, from the paper scenario's start (0.7, 0.1, pi/2; at 0.05 m/s) and
+from beside the path (the latency scenario's start); targets 15 / 25 mm.  (2) After the
+bring-up, per latency 100 / 200 / 300 ms: record a run of the new default (no predictor,
+the tracker's limit parameters set unless ``--record-unknown-limits``, from beside the
+path; through the nodes with TwistStamped commands, whose stamps time the
+commands exactly - a lockstep Twist's bag receive time lags the command by up to a step
+of the recorder's clock), ``identify`` it, ``latency-design --identification``, then run
+the designed gain file (its predictor) with the tracker's limit parameters set; target
+2 mm.  ``--part default|bringup`` runs one of the two tables.  In process, and with ``--nodes`` through the nodes (``config/latency_scenario.yaml``
+with the overrides above, one process per node) in lockstep and in real time.  RMS of
+the true position error after 10 s, median of ``--seeds`` noise seeds (worst in brackets).
 """
 from __future__ import annotations
 
@@ -229,6 +248,267 @@ def main_nodes(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ issue 22: a real base
+
+#: The issue's base: lag, acceleration limits, odometry rate and noise (plant parameters).
+REAL_BASE = dict(lag_v=LAG, lag_w=LAG, max_linear_accel=1.0, max_angular_accel=3.0,
+                 odom_rate=ODOM_RATE, odom_noise=NOISE)
+#: The tracker told the base's limits (after the bring-up).
+TRACKER_LIMITS = {'max_linear_accel': 1.0, 'max_angular_accel': 3.0}
+#: Initial (x, y, yaw, speed): the paper scenario's and the latency scenario's.
+STARTS = {'paper start': (0.7, 0.1, math.pi / 2, 0.05), 'beside': (0.0, -0.1, math.pi / 4, 0.0)}
+NO_BRINGUP = {0.1: 15.0, 0.15: 25.0}           # latency (s): target RMS (mm), issue 22
+BRINGUP_LATENCIES = (0.1, 0.2, 0.3)
+BRINGUP_TARGET_MM = 2.0
+ZERO_PREDICT = {'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
+                'predict_lag_w': 0.0}
+
+
+def base_gains() -> dict:
+    return {'old default (max-decay)': CONFIG / 'max_decay_gains.yaml',
+            'new default': CONFIG / 'tracker_gains.yaml',
+            'paper K_nf': CONFIG / 'paper_gains_tracker.yaml'}
+
+
+def tracker_section(gains: Path) -> dict:
+    """The tracker parameters of a gain file (K, K_shape and whatever else it sets)."""
+    data = yaml.safe_load(Path(gains).read_text())
+    for key, sec in data.items():
+        if str(key).split('/')[-1] == 'tracker':
+            return dict(sec['ros__parameters'])
+    raise ValueError(f'{gains}: no tracker section')
+
+
+def base_sim(gains: Path, latency: float, seed: int, start: str, duration: float,
+             tracker: dict | None = None, record: bool = False):
+    """In process on the real base; (RMS after 10 s in m, run[, commands, odometry])."""
+    from nonfragile_tracker.control.identify import CommandSamples, OdometrySamples
+    from nonfragile_tracker.control.loop import Tracker, step_time
+    from nonfragile_tracker.control.simulate import run_loop
+    x0, y0, th0, v0 = STARTS[start]
+    pc = PlantConfig(dt=DT, tau=0.0, A_tau=np.zeros((4, 4)), x0=x0, y0=y0, th0=th0, v0=v0,
+                     cmd_latency=latency, noise_seed=seed, **REAL_BASE)
+    sec = tracker_section(gains)
+    extra = {k: float(v) for k, v in sec.items() if k.startswith('predict_')}
+    extra.update(tracker or {})
+    tr = Tracker(TrackerConfig(K=read_gain_file(gains), dt=DT * round(1.0 / (ODOM_RATE * DT)),
+                               max_angular_speed=MAX_W, **extra))
+    path = figure_eight(radius=1.0, rate=0.2)
+    cmds, odom = [], []
+
+    def command(meas, th, k, ref):             # simulate_tracking's, logging what was sent
+        ts = step_time(meas.step, DT)
+        cmd = tr.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
+        cmds.append((step_time(k, DT), cmd.v, cmd.w))
+        odom.append((ts, meas.x, meas.y, th, meas.v, meas.w))
+        return cmd
+
+    run = run_loop(pc, int(round(duration / DT)), command,
+                   lambda k: path.sample(step_time(k, DT)))
+    late = run.t > 10.0
+    rms = float(np.sqrt(np.mean(run.error[late] ** 2)))
+    if not record:
+        return rms, run
+    c, o = np.array(cmds).T, np.array(odom).T
+    return rms, run, CommandSamples(*c), OdometrySamples(*o)
+
+
+def design_from(ident_file: Path, out: Path) -> tuple[Path, str]:
+    """``latency-design config/paper_problem.yaml --identification FILE -o OUT`` (the CLI)."""
+    import contextlib
+    import io
+    from nonfragile_tracker.cli import main as cli_main
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        code = cli_main(['latency-design', str(CONFIG / 'paper_problem.yaml'),
+                         '--identification', str(ident_file), '-o', str(out), '--force'])
+    if code != 0:
+        raise RuntimeError(f'latency-design exit {code}: {buf.getvalue()[-500:]}')
+    return out, buf.getvalue()
+
+
+def identify_file(commands, odometry, out: Path, source: str) -> Path:
+    from nonfragile_tracker.control.identify import (identify_latency, with_source,
+                                                     write_identification)
+    res = with_source(identify_latency(commands, odometry, bootstrap=50), source)
+    return write_identification(out, res, overwrite=True)
+
+
+def identify_bag(bag: Path, out: Path) -> Path:
+    """``identify BAG -o OUT`` (the CLI)."""
+    import contextlib
+    import io
+    from nonfragile_tracker.cli import main as cli_main
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        code = cli_main(['identify', str(bag), '-o', str(out), '--force'])
+    if code != 0:
+        raise RuntimeError(f'identify exit {code}: {buf.getvalue()[-500:]}')
+    return out
+
+
+def ident_summary(path: Path) -> str:
+    from nonfragile_tracker.control.identify import read_identification
+    r = read_identification(path)
+    return f'L {r.latency_s * 1e3:.1f} ms, tau {r.tau_v_s * 1e3:.0f}/{r.tau_w_s * 1e3:.0f} ms'
+
+
+def main_real_base(args) -> int:
+    import tempfile
+    tmp = Path(tempfile.mkdtemp(prefix='nfbase_'))
+    seeds = list(range(1, args.seeds + 1))
+    modes = ['in process'] + (([args.only_mode] if args.only_mode else
+                               ['lockstep', 'realtime']) if args.nodes else [])
+    raw: dict = {}
+    t0 = time.perf_counter()
+    print(f'Issue 22, real base: lag {LAG * 1e3:.0f} ms on v and w, limits 1 m/s^2 and '
+          f'3 rad/s^2, odometry {ODOM_RATE:.0f} Hz with 1 mm noise, figure eight r = 1 m at '
+          f'0.2 rad/s; RMS position error after 10 s, mm: median of {len(seeds)} seeds '
+          f'(worst); {args.duration:g} s runs')
+    # (1) no bring-up
+    if args.part == 'bringup':
+        modes_1: list = []
+    else:
+        modes_1 = modes
+    starts = list(STARTS) if not args.nodes else ['paper start']
+    head = f'{"mode":10} {"start":11} {"gain":24} | ' + ' | '.join(
+        f'{lat * 1e3:3.0f} ms (<= {tgt:2.0f})' for lat, tgt in NO_BRINGUP.items())
+    print('\n(1) default configuration, no bring-up (no predictor, tracker limits unknown)')
+    print(head)
+    print('-' * len(head))
+    for mode in modes_1:
+        for start in (starts if mode == 'in process' else ['paper start']):
+            for gname, gfile in base_gains().items():
+                cells = []
+                for lat, tgt in NO_BRINGUP.items():
+                    if mode == 'in process':
+                        vals = [base_sim(gfile, lat, s, start, args.duration)[0] for s in seeds]
+                    else:
+                        vals = node_batch(args, tmp, [dict(
+                            mode=mode, latency=lat, seed=s, gains=str(gfile), start=start,
+                            tracker=dict(ZERO_PREDICT)) for s in seeds])
+                    raw[f'nobringup/{mode}/{start}/{gname}/{lat}'] = vals
+                    ok = all(math.isfinite(v) and v * 1e3 <= tgt for v in vals)
+                    cells.append(cell(vals) + (' met   ' if ok else ' MISSED'))
+                print(f'{mode:10} {start:11} {gname:24} | ' + ' | '.join(cells), flush=True)
+    # (2) after the bring-up
+    print('\n(2) after the bring-up: record (new default, no predictor) -> identify -> '
+          'latency-design -> run with the predictor and the tracker limits set '
+          f'(target <= {BRINGUP_TARGET_MM:g} mm)')
+    head = f'{"mode":10} {"latency":>7} | {"identified":>28} | {"designed for":>30} | RMS'
+    print(head)
+    print('-' * (len(head) + 20))
+    # the recording: the default tracker, no predictor, with its limit parameters set
+    # (unless --record-unknown-limits): its commands then stay within the base's limits
+    record_tracker = dict(ZERO_PREDICT,
+                          **({} if args.record_unknown_limits else TRACKER_LIMITS))
+    for mode in (modes if args.part != 'default' else []):
+        for lat in BRINGUP_LATENCIES:
+            work = tmp / f'bringup_{mode.replace(" ", "_")}_{int(lat * 1e3)}'
+            work.mkdir(parents=True, exist_ok=True)
+            try:
+                if mode == 'in process':
+                    _, _, c, o = base_sim(CONFIG / 'tracker_gains.yaml', lat, 1, 'beside',
+                                          max(args.duration, 30.0), record=True,
+                                          tracker=dict(record_tracker))
+                    ident = identify_file(c, o, work / 'lat.yaml', f'sim {lat}')
+                else:
+                    rec = node_batch(args, tmp, [dict(
+                        mode=mode, latency=lat, seed=1, gains=str(CONFIG / 'tracker_gains.yaml'),
+                        start='beside', tracker=dict(record_tracker), stamped=True,
+                        duration=max(args.duration, 30.0))], bags=True)[0]
+                    ident = identify_bag(rec, work / 'lat.yaml')
+                g, text = design_from(ident, work / 'g.yaml')
+                rec_d = yaml.safe_load(g.read_text())['gain_design']['ros__parameters']
+                designed = (f'[{rec_d["latency_interval"][0]:.3f}, '
+                            f'{rec_d["latency_interval"][1]:.3f}] s, lag {rec_d["actuator_lag"]:.3f}')
+                if mode == 'in process':
+                    vals = [base_sim(g, lat, s, 'beside', args.duration,
+                                     tracker=dict(TRACKER_LIMITS))[0] for s in seeds]
+                else:
+                    vals = node_batch(args, tmp, [dict(
+                        mode=mode, latency=lat, seed=s, gains=str(g), start='beside',
+                        tracker=dict(TRACKER_LIMITS)) for s in seeds])
+                raw[f'bringup/{mode}/{lat}'] = {'rms': vals, 'identified': ident_summary(ident),
+                                                'designed': designed}
+                ok = all(math.isfinite(v) and v * 1e3 <= BRINGUP_TARGET_MM for v in vals)
+                print(f'{mode:10} {lat * 1e3:5.0f}ms | {ident_summary(ident):>28} | '
+                      f'{designed:>30} | {cell(vals)} {"met" if ok else "MISSED"}', flush=True)
+            except Exception as exc:      # noqa: BLE001 - one failed chain must not hide the rest
+                raw[f'bringup/{mode}/{lat}'] = {'error': repr(exc)}
+                print(f'{mode:10} {lat * 1e3:5.0f}ms | failed: {exc!r}'[:300], flush=True)
+    print(f'({time.perf_counter() - t0:.0f} s wall)')
+    if args.json:
+        Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
+    return 0
+
+
+def base_node_run(job: dict) -> dict:
+    """One run through the nodes on the real base (``job``: mode, latency, seed, gains,
+    start, tracker overrides); returns the job with ``rms_m`` (and ``bag`` if kept)."""
+    import os
+    from nonfragile_tracker import runner
+    x0, y0, th0, v0 = STARTS[job['start']]
+    plant = {'cmd_latency': job['latency'], 'noise_seed': job['seed'],
+             'duration': job['duration'], 'initial_pose': [x0, y0, th0],
+             'initial_speed': v0, **{k: v for k, v in REAL_BASE.items()}}
+    plant['odom_noise'] = list(plant['odom_noise'])
+    ov = {'plant': {'ros__parameters': plant},
+          'tracker': {'ros__parameters': dict(job['tracker'])}}
+    if job.get('stamped'):        # command stamps: identify times commands exactly
+        for node in ('tracker', 'plant', 'recorder'):
+            ov.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
+                'enable_stamped_cmd_vel'] = True
+    if job['mode'] == 'realtime':
+        runner.merge(ov, runner.realtime_overrides())
+    params = runner.scenario_parameters(CONFIG / 'latency_scenario.yaml', Path(job['gains']), ov)
+    run_dir = Path(job['dir'])
+    run_dir.mkdir(parents=True)
+    env = runner.isolated_env({**os.environ, 'ROS_DOMAIN_ID': str(job['domain'])})
+    out = {**job, 'rms_m': math.nan}
+    try:
+        res = runner.run_processes(params, run_dir, record=True, env=env, timeout=300.0,
+                                   progress=lambda _line: None, record_all=True)
+        out['exit_codes'] = res.exit_codes
+        out['rms_m'] = bag_rms_after(res.bag, job['duration'])
+        out['bag'] = str(res.bag)
+    except Exception as exc:          # noqa: BLE001 - one bad run must not hide the table
+        out['error'] = repr(exc)
+    return out
+
+
+_RUN_COUNTER = [0]
+
+
+def node_batch(args, tmp: Path, jobs: list[dict], bags: bool = False) -> list:
+    """Run ``jobs`` through the nodes ``--jobs`` at a time; their RMS (or bags)."""
+    import queue
+    from concurrent.futures import ThreadPoolExecutor
+    free: queue.Queue = queue.Queue()
+    for d in range(args.domain, args.domain + args.jobs):
+        free.put(d)
+    for j in jobs:
+        _RUN_COUNTER[0] += 1
+        j.setdefault('duration', args.duration)
+        j['dir'] = str(tmp / f'run{_RUN_COUNTER[0]:04d}')
+
+    def go(job):
+        job['domain'] = free.get()
+        try:
+            return base_node_run(job)
+        finally:
+            free.put(job['domain'])
+    with ThreadPoolExecutor(max_workers=args.jobs) as ex:
+        res = list(ex.map(go, jobs))
+    for r in res:
+        if r.get('error') or any(c not in (0, None, -2) for c in r.get('exit_codes', {}).values()):
+            print(f'  run {r["mode"]} {r["latency"]} seed {r["seed"]} {Path(r["gains"]).name}: '
+                  f'exit codes {r.get("exit_codes")} {r.get("error", "")}', file=sys.stderr)
+    if bags:
+        return [Path(r['bag']) if 'bag' in r else None for r in res]
+    return [r['rms_m'] for r in res]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--duration', type=float, default=None,
@@ -243,12 +523,25 @@ def main(argv=None) -> int:
                     help='--nodes: one mode only (default both)')
     ap.add_argument('--latencies', type=float, nargs='+',
                     help='--nodes: command latencies in s (default 0.1 0.2 0.3)')
+    ap.add_argument('--part', choices=['all', 'default', 'bringup'], default='all',
+                    help='--real-base: both tables (default), or only one')
+    ap.add_argument('--record-unknown-limits', action='store_true',
+                    help='--real-base: the bring-up recording with the tracker\'s limit '
+                    'parameters at 0 (default: set, as in the designed run)')
+    ap.add_argument('--real-base', action='store_true',
+                    help='issue 22: old vs new default vs K_nf without bring-up, and the '
+                    'bring-up, on the base with acceleration limits (with --nodes also '
+                    'through the nodes)')
     args = ap.parse_args(argv)
+    if args.real_base:
+        args.duration = args.duration or (20.0 if args.nodes else 40.0)
+        return main_real_base(args)
     if args.nodes:
         args.duration = args.duration or 20.0
         return main_nodes(args)
     args.duration = args.duration or 40.0
     gains = {'shipped': read_gain_file(CONFIG / 'tracker_gains.yaml'),
+             'max-decay': read_gain_file(CONFIG / 'max_decay_gains.yaml'),
              'K_nf': np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'],
                               dtype=float)}
     seeds = list(range(1, args.seeds + 1))

@@ -92,7 +92,9 @@ def generate_launch_description():
         DeclareLaunchArgument('scenario', default_value=os.path.join(config, 'paper_scenario.yaml'),
                               description='parameter file of the three nodes'),
         DeclareLaunchArgument('gains', default_value=os.path.join(config, 'tracker_gains.yaml'),
-                              description='tracker gain file (nonfragile_tracker synthesize)'),
+                              description='tracker gain file (default: certified for command '
+                              'latency up to 0.15 s through a 50 ms lag; after the bring-up '
+                              'the file latency-design wrote for your base)'),
         DeclareLaunchArgument('trajectory', default_value='',
                               description='waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) '
                               'to follow; "" = the path of the scenario'),

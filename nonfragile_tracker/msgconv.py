@@ -20,7 +20,7 @@ from .control.validate import as_matrix
 
 __all__ = ['stamp_ns', 'ns_to_stamp', 'fill_pose', 'pose_from_odom', 'fill_reference',
            'reference_from_msgs', 'path_to_trajectory', 'multidof_to_trajectory',
-           'PREDICT_PARAMS', 'tracker_config']
+           'PREDICT_PARAMS', 'LIMIT_PARAMS', 'tracker_config']
 
 
 def stamp_ns(stamp) -> int:
@@ -82,6 +82,8 @@ def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample |
 
 #: Tracker parameters of the latency predictor (all 0: no prediction, today's law).
 PREDICT_PARAMS = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'predict_lag_w')
+#: Tracker parameters of the base's acceleration limits (0 = unknown: no rate limit).
+LIMIT_PARAMS = ('max_linear_accel', 'max_angular_accel')
 
 
 def tracker_config(values: dict) -> TrackerConfig:
@@ -100,7 +102,7 @@ def tracker_config(values: dict) -> TrackerConfig:
                          delay_compensation=values['delay_compensation'],
                          A_tau=tuple(map(tuple, a_tau.tolist())),
                          tau=values['tau'],
-                         **{n: values.get(n, 0.0) for n in PREDICT_PARAMS})
+                         **{n: values.get(n, 0.0) for n in PREDICT_PARAMS + LIMIT_PARAMS})
 
 
 def _yaw(q, source: str, i: int) -> float:

@@ -133,7 +133,8 @@ def paper_gains():
 
 #: The gain budget of the shipped gain (``options.gain_bound`` of ``config/paper_problem.yaml``).
 SHIPPED_NORM = 8.67
-#: The command that regenerates ``config/tracker_gains.yaml`` (doc/getting-started.md).
+#: The command that regenerates ``config/max_decay_gains.yaml`` (the max-decay design: ideal
+#: plants, lockstep; doc/getting-started.md "The shipped gain").
 SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objective', 'decay',
                        '--norm', str(SHIPPED_NORM)]
 
@@ -163,7 +164,7 @@ def _design_shipped_gain(path: Path) -> SimpleNamespace:
 
 @pytest.fixture(scope='session')
 def shipped_design(request, tmp_path_factory):
-    """The shipped gain's command run once per test run (its max-decay design costs seconds).
+    """The max-decay gain's command run once per test run (its max-decay design costs seconds).
 
     ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
     ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records

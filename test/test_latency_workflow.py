@@ -125,7 +125,7 @@ def test_identification_of_the_simulated_run(recorded):
 
 
 def test_chain_gain_certified_for_the_plan_tracks_to_millimetres(recorded):
-    """Design-step check without the synthesis (about 14 s): the shipped (max-decay) gain is
+    """Design-step check without the synthesis (about 14 s): the shipped default gain is
     certified on the plan's residual interval with the identified lag, and a run with
     the plan's predictor settings tracks within the issue's 5 mm at 100 ms."""
     res, path = recorded
@@ -231,7 +231,7 @@ def follow_lap(predict: dict, latency: float = 0.2):
     traj = load_waypoints(CONFIG / 'trajectories' / 'lap.csv')
     pc = PlantConfig(dt=DT, tau=0.0, A_tau=np.zeros((4, 4)), x0=0.0, y0=-0.02, th0=0.0, v0=0.0,
                      cmd_latency=latency, lag_v=LAG, lag_w=LAG, odom_rate=50.0)
-    tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'), dt=0.02,
+    tc = TrackerConfig(K=read_gain_file(CONFIG / 'max_decay_gains.yaml'), dt=0.02,
                        max_angular_speed=2.0, **predict)
     run = simulate_following(pc, tc, traj, int(round((traj.t_end + 3.0) / DT)))
     return run, traj

@@ -43,6 +43,10 @@ def cmd_study(args: argparse.Namespace) -> int:
             or tparams.get('predict_lag_w') or tparams.get('predict_odom_latency'):
         raise InputError(f'{scenario}: the study does not simulate the latency predictor '
                          '(predict_* tracker parameters); use a scenario without it')
+    if tparams.get('max_linear_accel') or tparams.get('max_angular_accel'):
+        raise InputError(f'{scenario}: the study does not simulate the tracker\'s command rate '
+                         'limit (max_linear_accel, max_angular_accel tracker parameters); use a '
+                         'scenario without it (the plant\'s limits are simulated)')
     tracker = TrackerConfig(
         K=tuple(map(tuple, K.tolist())), dt=float(tparams.get('dt', plant.dt)),
         max_linear_speed=float(tparams.get('max_linear_speed', 1.0)),

@@ -511,12 +511,18 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     Raises
     ------
     BatchError
-        A bad per-case value, or a feature that is not vectorized (the predictor).
+        A bad per-case value, or a feature that is not vectorized (the predictor, the
+        tracker's command rate limit).
     """
     if tracker.predicts:
         raise BatchError('the batch simulation does not vectorize the latency predictor '
                          '(predict_latency, predict_odom_latency, predict_lag_v, predict_lag_w); '
                          'set them to 0 or use simulate_tracking for single runs')
+    if tracker.rate_limited:
+        raise BatchError('the batch simulation does not vectorize the tracker\'s command rate '
+                         'limit (max_linear_accel, max_angular_accel of the tracker; the '
+                         'plant\'s limits are simulated); set them to 0 or use '
+                         'simulate_tracking for single runs')
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise BatchError(f'steps must be an integer >= 1, got {steps!r}')
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):

@@ -405,6 +405,16 @@ class UnicyclePlant:
 # ---------------------------------------------------------------------------------------------
 # Tracker
 
+def _toward(cmd: float, prev: float, step: float) -> float:
+    """``cmd`` moved at most ``step`` away from ``prev`` (``step = 0``: unchanged)."""
+    if step > 0.0:
+        if cmd > prev + step:
+            return prev + step
+        if cmd < prev - step:
+            return prev - step
+    return cmd
+
+
 def validate_gain(K, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
                   A=None, B=None) -> np.ndarray:
     """The one gain check used everywhere: shape, finiteness, Hurwitz nominal loop.
@@ -443,7 +453,12 @@ def validate_gain(K, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Tracker settings.  ``K`` is m x n (2 x 4); ``perturbation`` is ``E D F`` (added to K)."""
+    """Tracker settings.  ``K`` is m x n (2 x 4); ``perturbation`` is ``E D F`` (added to K).
+
+    ``max_linear_accel`` (m/s^2) and ``max_angular_accel`` (rad/s^2) are the base's
+    acceleration limits (0 = unknown, off): the tracker rate-limits its commands to them
+    and its predictor models them (see :class:`Tracker`).
+    """
 
     K: tuple
     dt: float = 0.01
@@ -458,6 +473,8 @@ class TrackerConfig:
     predict_odom_latency: float = 0.0
     predict_lag_v: float = 0.0
     predict_lag_w: float = 0.0
+    max_linear_accel: float = 0.0
+    max_angular_accel: float = 0.0
     #: The gain actually applied, ``K + E D F`` (set from ``K`` and ``perturbation``).
     K_effective: tuple = field(init=False, repr=False, compare=False)
 
@@ -485,12 +502,17 @@ class TrackerConfig:
                 self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
             delay_steps(self.tau, self.dt)
         for name in ('predict_latency', 'predict_odom_latency', 'predict_lag_v',
-                     'predict_lag_w'):
+                     'predict_lag_w', 'max_linear_accel', 'max_angular_accel'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
 
         K_eff = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
         object.__setattr__(self, 'K_effective', K_eff)   # the gain actually applied: K + E D F
+
+    @property
+    def rate_limited(self) -> bool:
+        """True if the commands are rate-limited (an acceleration limit is set)."""
+        return bool(self.max_linear_accel or self.max_angular_accel)
 
     @property
     def predicts(self) -> bool:
@@ -537,6 +559,13 @@ class Tracker:
     compensator's next speed for ``v``, ``w`` itself for ``w``).  The compensator speed
     ``v`` is the speed at ``t_act``.  With every ``predict_*`` at 0 the law is
     today's, operation for operation.
+
+    Acceleration limits (``max_linear_accel``, ``max_angular_accel``; 0 = off, the law
+    above operation for operation): the compensator's acceleration ``a`` is clipped to
+    ``max_linear_accel`` and each command differs from the previous one sent by at most
+    the limit times ``dt`` (the first from the measured speed and ``w = 0``, the state
+    the predictor starts from); a clipped step counts as ``saturated``.  The predictor's
+    actuator model has the same limits, so it predicts the speeds the base can reach.
     """
 
     def __init__(self, config: TrackerConfig):
@@ -550,11 +579,15 @@ class Tracker:
         if config.predicts:
             self.predictor = LatencyPredictor(
                 config.predict_latency, config.predict_odom_latency,
-                ActuatorModel(config.predict_lag_v, config.predict_lag_w), config.dt)
+                ActuatorModel(config.predict_lag_v, config.predict_lag_w,
+                              config.max_linear_accel, config.max_angular_accel), config.dt)
+        #: The last command sent (v, w), for the rate limit; None until the first.
+        self._last_cmd: tuple[float, float] | None = None
 
     def reset(self, v: float | None = None) -> None:
         """Forget the compensator state (re-initialised from the next measured speed)."""
         self.v = v
+        self._last_cmd = None
         if self._ref_hist is not None:
             self._ref_hist.clear()
         if self.predictor is not None:
@@ -596,6 +629,9 @@ class Tracker:
         a = u1 * cth + u2 * sth
         w = (u2 * cth - u1 * sth) / vf
         saturated = False
+        amax = c.max_linear_accel
+        if amax > 0.0 and abs(a) > amax:          # the base cannot follow more than this
+            a, saturated = math.copysign(amax, a), True
         if w > c.max_angular_speed:
             w, saturated = c.max_angular_speed, True
         elif w < -c.max_angular_speed:
@@ -625,9 +661,28 @@ class Tracker:
                     w, saturated = math.copysign(c.max_angular_speed, w), True
             if not (math.isfinite(cmd_v) and math.isfinite(w)):
                 cmd_v = w = 0.0
+        if c.rate_limited:
+            cmd_v, w, limited = self._rate_limit(cmd_v, w, v)
+            saturated = saturated or limited
+        if pred is not None:
             pred.record(p.t, cmd_v, w)
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
                        floored=floored)
+
+    def _rate_limit(self, cv: float, cw: float, v0: float) -> tuple[float, float, bool]:
+        """``(cv, cw)`` moved at most ``max_*_accel * dt`` from the previous command.
+
+        Before the first command the previous one is ``(v0, 0)`` (the compensator's
+        initial speed, at rest in rotation: the predictor's initial state).
+        """
+        c = self.config
+        pv, pw = self._last_cmd if self._last_cmd is not None else (v0, 0.0)
+        cv2 = _toward(cv, pv, c.max_linear_accel * c.dt)
+        cw2 = _toward(cw, pw, c.max_angular_accel * c.dt)
+        limited = cv2 != cv or cw2 != cw
+        cv, cw = cv2, cw2
+        self._last_cmd = (cv, cw)
+        return cv, cw, limited
 
     def _compensated_reference(self, ref: RefSample) -> tuple[tuple, tuple]:
         """Delay-consistent reference ``xi*`` and its feedforward input ``u*``.

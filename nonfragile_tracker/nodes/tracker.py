@@ -24,7 +24,10 @@ so a plant with odometry latency pairs each measurement with the reference of it
 measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
 ``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
 the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
-stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).  Real
+stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
+With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
+unknown) each command differs from the previous by at most the limit times ``dt`` and the
+predictor models the limits (:class:`control.loop.Tracker`).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
@@ -83,10 +86,14 @@ PARAMS = [
           high=10.0, read_only=True),
     Param('max_linear_speed', 1.0, 'limit on |cmd_vel.linear.x| (m/s)', low=1e-9, high=1e3),
     Param('max_angular_speed', 2.0, 'limit on |cmd_vel.angular.z| (rad/s)', low=1e-9, high=1e3),
-    Param('max_linear_accel', 0.0, 'the base\'s limit on |dv/dt| (m/s^2); 0 = unknown. '
-          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
-    Param('max_angular_accel', 0.0, 'the base\'s limit on |dw/dt| (rad/s^2); 0 = unknown. '
-          'Trajectories are checked and re-timed against it', low=0.0, high=1e3),
+    Param('max_linear_accel', 0.0, 'the base\'s limit on |dv/dt| (m/s^2): commands change by '
+          'at most this times dt per command, the predictor models it, trajectories are '
+          'checked and re-timed against it, the certificate monitor skips where it binds; '
+          '0 = unknown (off)', low=0.0, high=1e3, read_only=True),
+    Param('max_angular_accel', 0.0, 'the base\'s limit on |dw/dt| (rad/s^2): commands change '
+          'by at most this times dt per command, the predictor models it, trajectories are '
+          'checked and re-timed against it, the certificate monitor skips where it binds; '
+          '0 = unknown (off)', low=0.0, high=1e3, read_only=True),
     Param('min_turning_radius', 0.0, 'smallest radius the base can turn on (m; car-like '
           'bases: wheelbase / tan(max steering angle)); a trajectory tighter than it is '
           'refused; 0 = none', low=0.0, high=1e3),

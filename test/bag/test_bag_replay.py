@@ -40,15 +40,16 @@ def _pose(x, y, th):
                                                       w=math.cos(th / 2)))
 
 
-def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60):
+def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None):
     """A real-time run simulated in process and written as the recorder would see it.
 
     Odometry k is stamped T0 + 10k ms; reference j 5 ms later, except reference
     ``swapped`` which the tracker received 0.5 ms *after* odometry ``swapped`` and the
     recorder 0.2 ms *before* it.  The tracker (the node's input rules) runs in the true
-    order; the recorder missed the tracker's first ``late`` commands.
+    order; the recorder missed the tracker's first ``late`` commands.  ``params``: the
+    tracker's parameter file (default: the paper scenario's).
     """
-    config, _ = load_tracker_parameters()
+    config, _ = load_tracker_parameters(params=params)
     tracker = TrackerInputs(config, 'realtime')
     plant = UnicyclePlant(PlantConfig())
     ref_path = make_path('circle', radius=0.5, rate=0.01)
@@ -120,6 +121,27 @@ def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
     # without the order fix the swapped step (and what follows) would differ
     res_other = replay(tmp_path / 'rt', expected=tmp_path / 'rt')
     assert not res_other.comparison.equal
+
+
+def test_replay_reproduces_a_run_with_acceleration_limits(tmp_path):
+    """The tracker's limits are recorded parameters: replay with them reproduces the
+    run; a replay that does not know them does not (the limits bound the first turn)."""
+    import yaml
+    from nonfragile_tracker.scenario import scenario_file
+    data = yaml.safe_load(scenario_file().read_text())
+    data['/**/tracker']['ros__parameters'].update(max_linear_accel=0.5, max_angular_accel=1.5)
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump(data))
+    config, _ = load_tracker_parameters(params=params)
+    assert (config.max_linear_accel, config.max_angular_accel) == (0.5, 1.5)
+    # recorded from the first command (a recording that joins mid-run does not tell the
+    # rate limit's previous command; see README)
+    n = simulated_realtime_bag(tmp_path / 'rt', params=params, late=0)
+    res = replay(tmp_path / 'rt', params=params)
+    assert res.comparison.equal and len(res.commands) == n, res.comparison.differences[:3]
+    w = [m.angular.z for _, m in res.recorded]
+    assert np.max(np.abs(np.diff(w))) <= 1.5 * 0.01 + 1e-12       # the limit held (dt 10 ms)
+    assert not replay(tmp_path / 'rt').comparison.equal           # without the limits
 
 
 def test_replay_cli(tmp_path, capsys):

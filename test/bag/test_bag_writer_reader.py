@@ -37,7 +37,9 @@ RUN = ['/odom', '/pose', '/reference/pose', '/reference/twist', '/reference/acce
 
 
 def gain():
-    data = yaml.safe_load((ROOT / 'config' / 'tracker_gains.yaml').read_text())
+    # the paper's ideal plant: the max-decay design (bag_report's test needs a run that
+    # settles within 1 cm in 6 s; the shipped default settles at 4.4 s with compensation)
+    data = yaml.safe_load((ROOT / 'config' / 'max_decay_gains.yaml').read_text())
     return np.array(data['/**/tracker']['ros__parameters']['K'], float).reshape(2, 4)
 
 

@@ -24,7 +24,7 @@ from nonfragile_tracker.control.study import StudySpec, run_study, summarize
 from nonfragile_tracker.scenario import paper_plant_config
 
 CONFIG = ROOT / 'config'
-GAINS = CONFIG / 'tracker_gains.yaml'
+GAINS = CONFIG / 'max_decay_gains.yaml'     # its record: Theorem 1's certified_latency
 
 
 def K():

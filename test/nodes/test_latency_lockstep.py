@@ -32,18 +32,22 @@ PLANT = dict(cmd_latency=0.05, lag_v=0.05, lag_w=0.03, max_linear_accel=2.0,
              odom_noise=[0.001, 0.001, 0.002], noise_seed=7)
 TRACKER = dict(dt=0.02, predict_latency=0.05, predict_odom_latency=0.03, predict_lag_v=0.05,
                predict_lag_w=0.03)
+#: The tracker told the base's acceleration limits (it rate-limits and predicts with them).
+LIMITS = dict(max_linear_accel=2.0, max_angular_accel=5.0)
 
 
-def parameters():
+def parameters(limits: bool = False):
+    tracker = dict(TRACKER, **LIMITS) if limits else TRACKER
     ov = {'plant': {'ros__parameters': dict(PLANT, duration=DURATION)},
-          'tracker': {'ros__parameters': TRACKER}}
+          'tracker': {'ros__parameters': tracker}}
     return scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', ov)
 
 
-def simulation():
+def simulation(limits: bool = False):
     pc = paper_plant_config(**dict(PLANT, odom_noise=tuple(PLANT['odom_noise'])))
+    tracker = dict(TRACKER, **LIMITS) if limits else TRACKER
     tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'), A_tau=pc.A_tau,
-                       tau=pc.tau, **TRACKER)
+                       tau=pc.tau, **tracker)
     # the tracker samples the trajectory at the time its command acts (Follower), as the
     # in-process following does; the path is the exact circle
     return simulate_following(pc, tc, Trajectory.analytic(circle()), STEPS)
@@ -76,25 +80,26 @@ def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp('latency')
     env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('latency')))
     out = {}
-    for name in ('processes', 'composed'):
+    for name in ('processes', 'composed', 'limits'):
         run_dir = tmp / name
         run_dir.mkdir()
         # the true pose at every step is needed: record every topic (the lean default
         # has odom and cmd_vel only)
-        if name == 'processes':
-            res = run_processes(parameters(), run_dir, env=env, progress=lambda s: None,
-                                record_all=True)
-        else:
+        if name == 'composed':
             res = run_composed(parameters(), run_dir, record_all=True)
+        else:
+            res = run_processes(parameters(limits=name == 'limits'), run_dir, env=env,
+                                progress=lambda s: None, record_all=True)
         assert all(c == 0 for c in res.exit_codes.values()), (res.exit_codes, [
             (p.name, p.read_text()[-2000:]) for p in run_dir.glob('*.log')])
         out[name] = recorded(res.bag)
     return out
 
 
-def test_lockstep_with_latency_equals_the_simulation(runs):
-    pose, odom, cmd = runs['processes']
-    sim = simulation()
+@pytest.mark.parametrize('limits', [False, True], ids=['no-limits', 'limits'])
+def test_lockstep_with_latency_equals_the_simulation(runs, limits):
+    pose, odom, cmd = runs['limits' if limits else 'processes']
+    sim = simulation(limits)
     commanded = sim.commanded.astype(bool)
     # odom: measured every 2nd step, published 3 steps later with the measurement stamp
     expected = [k * 10_000_000 for k in range(0, STEPS - 3 + 1, 2)]
@@ -106,6 +111,11 @@ def test_lockstep_with_latency_equals_the_simulation(runs):
     np.testing.assert_allclose(cmd[:, 0], sim.cmd_v[commanded], rtol=0, atol=1e-9)
     np.testing.assert_allclose(cmd[:, 1], sim.cmd_w[commanded], rtol=0, atol=1e-9)
     assert np.ptp(cmd[:, 1]) > 0.1                      # the loop really steered
+    if limits:                   # the rate limit binds on w and holds on both (dt = 0.02 s)
+        step = np.abs(np.diff(cmd, axis=0))
+        assert np.all(step[:, 0] <= LIMITS['max_linear_accel'] * 0.02 + 1e-12)
+        assert np.all(step[:, 1] <= LIMITS['max_angular_accel'] * 0.02 + 1e-12)
+        assert np.sum(step[:, 1] >= LIMITS['max_angular_accel'] * 0.02 - 1e-12) >= 3
 
 
 def test_lockstep_with_latency_is_deterministic(runs):
@@ -139,7 +149,8 @@ def test_latency_parameters_reach_the_core(context):
         Parameter(k, value=v) for k, v in PLANT.items()])
     K = [float(v) for v in read_gain_file(CONFIG / 'tracker_gains.yaml').ravel()]
     tracker = TrackerNode(context=context, parameter_overrides=[
-        Parameter('K', value=K), *(Parameter(k, value=v) for k, v in TRACKER.items())])
+        Parameter('K', value=K), *(Parameter(k, value=v) for k, v in TRACKER.items()),
+        *(Parameter(k, value=v) for k, v in LIMITS.items())])
     try:
         c = plant.plant.config
         assert (plant.plant.cmd_delay, c.odometry.latency_steps, c.odometry.period_steps) == \
@@ -149,8 +160,24 @@ def test_latency_parameters_reach_the_core(context):
         p = tracker.tracker.predictor
         assert p is not None and p.horizon == pytest.approx(0.08)
         assert (p.actuator.lag_v, p.actuator.lag_w) == (0.05, 0.03)
+        assert (p.actuator.max_linear_accel, p.actuator.max_angular_accel) == (2.0, 5.0)
+        tc = tracker.tracker.config
+        assert (tc.max_linear_accel, tc.max_angular_accel) == (2.0, 5.0) and tc.rate_limited
+        for name in LIMITS:
+            res = tracker.set_parameters([Parameter(name, value=1.0)])[0]
+            assert not res.successful                    # read-only: fixed at start
         res = tracker.set_parameters([Parameter('predict_latency', value=0.1)])[0]
         assert not res.successful                        # read-only: fixed at start
     finally:
         plant.destroy_node()
         tracker.destroy_node()
+
+
+@pytest.mark.parametrize('name', list(LIMITS))
+def test_tracker_refuses_a_negative_acceleration_limit(context, name):
+    """The descriptor's range (>= 0, like every tracker limit) refuses it at start."""
+    from rclpy.exceptions import InvalidParameterValueException
+    K = [float(v) for v in read_gain_file(CONFIG / 'tracker_gains.yaml').ravel()]
+    with pytest.raises(InvalidParameterValueException, match=name):
+        TrackerNode(context=context, parameter_overrides=[
+            Parameter('K', value=K), Parameter(name, value=-1.0)])

@@ -66,7 +66,7 @@ def test_colcon_build_installs_executables_launch_and_config(tmp_path):
     share = prefix / 'share' / 'nonfragile_tracker'
     assert (share / 'launch' / 'tracking.launch.py').is_file()
     for cfg in ('paper_problem.yaml', 'paper_scenario.yaml', 'tracker_gains.yaml',
-                'paper_gains.yaml', 'paper_gains_tracker.yaml'):
+                'max_decay_gains.yaml', 'paper_gains.yaml', 'paper_gains_tracker.yaml'):
         assert (share / 'config' / cfg).is_file(), cfg
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / 'nonfragile_tracker').is_file()
