@@ -81,12 +81,15 @@ def test_radius_scales_with_the_level_and_reference_acceleration(paper):
         SaturationLimits(2.0, 0.0)
 
 
-def test_cli_analyse_reports_the_saturation_certificate(capsys):
-    """`analyse --min-speed` prints the certified radius and the reference acceleration."""
+def test_cli_analyse_reports_the_saturation_certificate(capsys, paper):
+    """`analyse --min-speed` prints the certified radius (the library's, in mm) and the
+    reference acceleration."""
     from nonfragile_tracker.cli import main
     assert main(['analyse', str(CONFIG / 'paper_problem.yaml'), '--gains',
                  str(CONFIG / 'tracker_gains.yaml'), '--no-margins', '--min-speed', '0.005',
                  '--reference-accel', '5e-5']) == 0
     out = capsys.readouterr().out
     assert 'saturation (|w| <= 2 rad/s at |v| >= 0.005 m/s' in out
-    assert 'every initial position error up to 7.5' in out and 'numpy check' in out
+    radius_mm = paper[2].radius * 1e3
+    assert f'every initial position error up to {radius_mm:.4g} mm' in out, out
+    assert 'numpy check' in out
