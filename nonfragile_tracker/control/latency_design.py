@@ -492,12 +492,16 @@ class LatencyPlan:
         return {k: float(getattr(self, k)) for k in keys}
 
     def actuator_parameters(self) -> dict[str, float]:
-        """The tracker's acceleration limits, with or without the predictor.
+        """The tracker's acceleration limits the identification found (with or without predictor).
 
-        ``max_linear_accel`` in m/s^2, ``max_angular_accel`` in rad/s^2; 0 = unknown.
+        ``max_linear_accel`` in m/s^2, ``max_angular_accel`` in rad/s^2.  A limit the
+        recording did not show binding (0 = unknown) is left out: the gain file's tracker
+        section overrides the robot's parameter file, and a 0 there would switch off a limit
+        the user knows (and the re-timing and rate limiting that come with it).
         """
-        return {'max_linear_accel': float(self.max_linear_accel),
-                'max_angular_accel': float(self.max_angular_accel)}
+        found = {'max_linear_accel': float(self.max_linear_accel),
+                 'max_angular_accel': float(self.max_angular_accel)}
+        return {k: v for k, v in found.items() if v > 0.0}
 
     def metadata(self) -> dict[str, Any]:
         """Flat record for the gain file's design section."""
@@ -509,7 +513,8 @@ class LatencyPlan:
             'identified_command_age': list(self.command_age),
             'command_period': self.command_period,
             **{k: v for k, v in self.tracker_parameters().items()},
-            **self.actuator_parameters()}
+            'max_linear_accel': float(self.max_linear_accel),      # 0 = unknown
+            'max_angular_accel': float(self.max_angular_accel)}
         if self.latency_range_from:
             out['latency_range_from'] = self.latency_range_from
         return out

@@ -300,4 +300,7 @@ def test_an_older_identification_file_still_reads_and_plans(tmp_path):
     assert old.commands_follow_odometry is None
     plan = plan_from_identification(old)
     assert (plan.predict_latency, plan.h_max) == pytest.approx((0.098, 0.004 + 0.02))
-    assert plan.actuator_parameters() == {'max_linear_accel': 0.0, 'max_angular_accel': 0.0}
+    # limits not found are left out of the tracker section (a 0 there would switch off the
+    # robot's own limits); the design record still says 0 = unknown
+    assert plan.actuator_parameters() == {}
+    assert plan.metadata()['max_linear_accel'] == plan.metadata()['max_angular_accel'] == 0.0
