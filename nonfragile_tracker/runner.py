@@ -191,7 +191,7 @@ def realtime_handshake(record: bool) -> dict[str, dict[str, Any]]:
     """
     if not record:
         return {}
-    return {'plant': {'lockstep_recorder': True, 'lockstep_subscribers': 2},
+    return {'plant': {'realtime_recorder': True, 'lockstep_subscribers': 2},
             'tracker': {'lockstep_subscribers': 2}, 'recorder': {'lockstep_gate': True}}
 
 
