@@ -170,6 +170,31 @@ def lockstep_handshake(record: bool) -> dict[str, dict[str, Any]]:
     return out
 
 
+def realtime_handshake(record: bool) -> dict[str, dict[str, Any]]:
+    """Start-up handshake parameters of a real-time run, per node (``{node: {name: value}}``).
+
+    With a recorder, the plant starts stepping (the run's clock) only once the recorder
+    has announced on ``recorder/ready`` that its odom and cmd_vel subscriptions have
+    matched and odom has two matched subscribers (DDS discovery can take seconds under
+    load, and matches each side on its own), and the tracker adopts a trajectory only
+    once cmd_vel has two (plant, recorder): the bag has every odometry message and
+    every command from the first (what a replay needs).
+
+    Parameters
+    ----------
+    record : bool
+        Whether a recorder takes part.
+
+    Returns
+    -------
+    dict
+    """
+    if not record:
+        return {}
+    return {'plant': {'realtime_recorder': True, 'lockstep_subscribers': 2},
+            'tracker': {'lockstep_subscribers': 2}, 'recorder': {'lockstep_gate': True}}
+
+
 def with_horizon(params: dict[str, Any]) -> dict[str, Any]:
     """``params`` with the reference's ``horizon`` fitted to the plant's ``duration``.
 
@@ -431,16 +456,16 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
 
     realtime = is_realtime(params)
     names = recorded_topics(params, recorder_topics, record_all)
-    hand = lockstep_handshake(record) if realtime else \
+    hand = realtime_handshake(record) if realtime else \
         lockstep_parameters(record, records_samples(names))
     try:
         if record:
-            extra = ['-p', f'output:={bag}'] + ([] if realtime else [
-                '-p', 'use_sim_time:=true', *_ros_args(hand['recorder'])])
+            extra = ['-p', f'output:={bag}'] + _ros_args(hand['recorder']) + (
+                [] if realtime else ['-p', 'use_sim_time:=true'])
             extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in names) + ']']
             start('recorder', extra)
         def lockstep_args(node: str) -> list[str]:
-            return [] if realtime else _ros_args(hand[node])
+            return _ros_args(hand.get(node, {}))
 
         start('tracker', lockstep_args('tracker'))
         if realtime and record:
@@ -603,24 +628,24 @@ def run_composed(params: dict[str, Any], run_dir: Path | None, *, record: bool =
     nodes: list[AdapterNode[Any]] = []
     bag = None
     names = recorded_topics(params, recorder_topics, record_all)
-    hand = lockstep_handshake(record) if is_realtime(params) else \
-        lockstep_parameters(record, records_samples(names))
+    # real time in one process: no start gate (the nodes share one executor)
+    hand = {} if is_realtime(params) else lockstep_parameters(record, records_samples(names))
     try:
         if record:
             from .nodes.recorder import Recorder
             if run_dir is None:
                 raise InputError('a recorded run needs a run directory (got None)')
             bag = run_dir / 'bag'
-            rec_params = {'output': str(bag), 'use_sim_time': True, **hand['recorder']}
+            rec_params = {'output': str(bag), 'use_sim_time': True, **hand.get('recorder', {})}
             rec_params.update(params.get('recorder', {}).get('ros__parameters', {}))
             rec_params['topics'] = names
             nodes.append(Recorder(context=ctx, parameter_overrides=overrides(**rec_params)))
-        nodes.append(TrackerNode(parameter_overrides=node_overrides('tracker', hand['tracker']),
-                                 context=ctx))
+        nodes.append(TrackerNode(parameter_overrides=node_overrides(
+            'tracker', hand.get('tracker')), context=ctx))
         nodes.append(ReferenceNode(parameter_overrides=node_overrides(
-            'reference', hand['reference']), context=ctx))
+            'reference', hand.get('reference')), context=ctx))
         plant = PlantNode(context=ctx, parameter_overrides=node_overrides('plant',
-                                                                          hand['plant']))
+                                                                          hand.get('plant')))
         nodes.append(plant)
         ex = make_executor(ctx)
         for n in nodes:

@@ -79,7 +79,8 @@ _TRAJECTORY_TOPICS = (topics.TRAJECTORY_MULTIDOF, topics.TRAJECTORY)
 class ReplayEvent:
     """One recorded input or command, in bag order."""
 
-    kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd, trajectory
+    kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd, trajectory,
+                               # followed (tracker/trajectory: not fed, says where adopted)
     receive_ns: int
     topic: str
     msgtype: str
@@ -114,7 +115,8 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
     reader = open_reader(path)
     try:
         by_topic = {c.topic: c for c in reader.connections}
-        tmap = resolve_topics(by_topic, list(_KINDS) + list(_TRAJECTORY_TOPICS), namespace)
+        tmap = resolve_topics(by_topic, list(_KINDS) + list(_TRAJECTORY_TOPICS)
+                              + [topics.FOLLOWED_TRAJECTORY], namespace)
         missing = [n for n in (topics.ODOM, topics.REF_POSE, topics.REF_TWIST,
                                topics.REF_ACCEL) if n not in tmap]
         lean = [n for n in _TRAJECTORY_TOPICS if n in tmap]
@@ -130,6 +132,9 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
             # the tracker follows a trajectory message whenever it has one (lockstep or real
             # time, lean or full recording): feed that, not the per-step samples
             kinds[tmap[lean[0]]] = 'trajectory'
+            if topics.FOLLOWED_TRAJECTORY in tmap:
+                # where the tracker adopted it (the odometry stamp of its first command)
+                kinds[tmap[topics.FOLLOWED_TRAJECTORY]] = 'followed'
         ts = typestore_for(reader)
         conns = [c for c in reader.connections if c.topic in kinds]
         out = []
@@ -336,10 +341,14 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
     """A bag with a trajectory message: the trajectory message(s) and odometry, in bag order.
 
     Real time (one trajectory message, recorded commands): the tracker adopted the
-    trajectory at some odometry near the one the recorder saw before it (later when it
-    re-timed it in its worker thread); the placement from which the first
-    :data:`START_CHECK` recorded commands are reproduced is searched (up to
-    :data:`FOLLOW_SEARCH` odometry messages after the bag's), else bag order is used.
+    trajectory at some odometry after the one the recorder saw before it (seconds later
+    when it re-timed it in its worker thread).  The tracker says at which: the first
+    ``tracker/trajectory`` it published after it is stamped with that odometry's stamp, and
+    the trajectory is adopted right before the odometry with that stamp (no command before
+    it).  A bag without it (an older tracker), or whose recorder missed that odometry, gets
+    the placement from which the first :data:`START_CHECK` recorded commands are reproduced
+    (searched up to :data:`FOLLOW_SEARCH` odometry messages after the bag's; ambiguous when
+    they are the zeros of a wait for a future start stamp), else bag order.
     """
     built: dict[int, Any] = {}
 
@@ -374,6 +383,18 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
     steps = np.diff([stamp_ns(e.msg.header.stamp) for e in data if e.kind == 'odom'])
     mode = 'lockstep' if bag_mode(events) == 'lockstep' or (
         steps.size and int(steps.max() - steps.min()) <= 1000) else 'realtime'
+    if mode == 'realtime' and len(trajs) == 1 and recorded:
+        ti = trajs[0]
+        rest = data[:ti] + data[ti + 1:]
+        adopted = next((stamp_ns(e.msg.header.stamp) for e in events if e.kind == 'followed'),
+                       None)
+        at = next((p for p, e in enumerate(rest) if e.kind == 'odom'
+                   and stamp_ns(e.msg.header.stamp) == adopted), None)
+        if at is not None:
+            order = rest[:at] + [data[ti]] + rest[at:]
+            inputs, commands = run(order, True)
+            return ReplayPlan('realtime', order, commands, recorded, fed,
+                              dict(inputs.ignored), adopted_ns=adopted)
     if mode == 'realtime' and len(trajs) == 1 and len(recorded) >= START_CHECK:
         ti = trajs[0]
         rest = data[:ti] + data[ti + 1:]
@@ -483,6 +504,8 @@ class ReplayPlan:
     initial_speed: float | None = None
     skipped_inputs: int = 0          # inputs before the tracker's first recorded command
     swaps: int = 0                   # odometry/reference pairs taken in the other order
+    adopted_ns: int | None = None    # real-time follower bags: the odometry stamp at which
+                                     # the tracker said (tracker/trajectory) it adopted it
 
 
 #: Receive-time window (s) within which the recorder and the tracker may have received an
@@ -577,11 +600,12 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}
     for e in events:
-        fed[e.kind] = fed.get(e.kind, 0) + 1
+        if e.kind != 'followed':
+            fed[e.kind] = fed.get(e.kind, 0) + 1
     if 'trajectory' in fed:
         return _plan_follow(events, config, recorded, fed, values or {})
     mode = bag_mode(events)
-    data = [e for e in events if e.kind != 'cmd']
+    data = [e for e in events if e.kind not in ('cmd', 'followed')]
     if use_recorded and mode == 'realtime' and recorded:
         plan = _plan_realtime(events, data, recorded, config, max_stamp_jump, atol)
         if plan is not None:
@@ -783,6 +807,9 @@ def format_replay(res: ReplayResult) -> str:
         lines.append(f'started at the tracker\'s first recorded command ({plan.skipped_inputs} '
                      'earlier inputs skipped), compensator speed recovered from it: '
                      f'{plan.initial_speed!r} m/s')
+    if plan is not None and plan.adopted_ns is not None:
+        lines.append(f'trajectory adopted at the odometry stamped {plan.adopted_ns * 1e-9:.9f} s '
+                     f'(as the tracker announced on {topics.FOLLOWED_TRAJECTORY})')
     if plan is not None and plan.swaps:
         lines.append(f'{plan.swaps} odometry message(s) paired with another reference state '
                      'than the bag order gives (the one the recorded command shows)')

@@ -71,6 +71,10 @@ PARAMS = [
     Param('lockstep_recorder', False, 'lockstep: also wait until a recorder (lockstep_gate) '
           'has announced on recorder/ready that its subscriptions are matched (and pose has a '
           'matched subscriber if the graph shows one)', read_only=True),
+    Param('realtime_recorder', False, 'real time: start stepping (the run\'s clock) only once '
+          'a recorder (lockstep_gate) has announced on recorder/ready that its odom and '
+          'cmd_vel subscriptions are matched and odom has lockstep_subscribers matched '
+          'subscribers, so the bag has every odometry message', read_only=True),
     Param('lockstep_lead', 30, 'lockstep with lockstep_recorder: run at most this many steps '
           '(plus the odometry latency and period) ahead of the recorder\'s progress, so its '
           'queues (depth 100) never overflow under load; 0 = do not wait for the recorder',
@@ -128,6 +132,7 @@ class PlantSettings:
     stamped: bool
     odom_frame: str
     base_frame: str
+    realtime_recorder: bool = False
 
 
 def plant_settings(values: dict) -> PlantSettings:
@@ -167,7 +172,8 @@ def plant_settings(values: dict) -> PlantSettings:
                          lockstep_lead=values['lockstep_lead'],
                          cmd_timeout=values['cmd_timeout'],
                          stamped=values['enable_stamped_cmd_vel'],
-                         odom_frame=values['odom_frame'], base_frame=values['base_frame'])
+                         odom_frame=values['odom_frame'], base_frame=values['base_frame'],
+                         realtime_recorder=values['realtime_recorder'])
 
 
 class PlantNode(AdapterNode[PlantSettings]):
@@ -237,7 +243,14 @@ class PlantNode(AdapterNode[PlantSettings]):
             self.watchdog = self.create_timer(0.02, self._lockstep_watchdog)
         else:
             self.last_cmd_time: float | None = None
-            self.timer = self.create_timer(cfg.dt, self._realtime_step)
+            self.timer = None
+            self.recorder_ready = False
+            if self.config.realtime_recorder:      # step once the recorder is subscribed
+                self.create_subscription(UInt64, topics.RECORDER_READY, self._on_recorder_ready,
+                                         LATCHED_QOS)
+                self._gate = self.create_timer(0.02, self._realtime_gate)
+            else:
+                self.timer = self.create_timer(cfg.dt, self._realtime_step)
 
     # ------------------------------------------------------------------ publishing
     def _publish_state(self, stamp_ns: int) -> bool:
@@ -265,6 +278,18 @@ class PlantNode(AdapterNode[PlantSettings]):
         return meas is not None
 
     # ------------------------------------------------------------------ lockstep
+    def _realtime_gate(self) -> None:
+        """Real time with ``realtime_recorder``: start stepping once both sides matched.
+
+        The recorder says its side (recorder/ready); odom counts ``lockstep_subscribers``
+        matched subscriptions on ours (tracker and recorder).
+        """
+        if self.timer is None and self.recorder_ready and \
+                self.pub_odom.get_subscription_count() >= self.config.lockstep_subscribers:
+            self._gate.cancel()
+            self.log('info', 'recorder ready and odom matched: stepping')
+            self.timer = self.create_timer(self.dt, self._realtime_step)
+
     def _on_recorder_ready(self, msg: UInt64) -> None:
         if not self.recorder_ready:
             self.log('info', 'recorder ready: its subscriptions are matched')

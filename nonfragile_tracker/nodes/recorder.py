@@ -71,6 +71,8 @@ __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rc
 LOCKSTEP_TOPICS = topics.LOCKSTEP_TOPICS
 #: Topics whose subscriptions must have matched a publisher before the gate opens.
 _GATED = frozenset(topics.LOCKSTEP_TOPICS) | {topics.CLOCK}
+#: ... in real time (the recorder without sim time).
+_GATED_REALTIME = frozenset({topics.ODOM, topics.CMD_VEL})
 _STAMPED = {topics.ODOM, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL}
 #: Topics with one message per step whose latest stamp is the recorder's progress.
 _PER_STEP = (topics.CLOCK, topics.POSE, topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
@@ -96,10 +98,12 @@ PARAMS = [
           'bytes (1 .. 1048576)', read_only=True),
     Param('flush_period', DEFAULT_FLUSH_PERIOD, 'write pending messages to disk at least this '
           'often (wall s)', low=0.01, high=3600.0, read_only=True),
-    Param('lockstep_gate', False, 'lockstep start gate: publish recorder/ready once the '
-          'subscription of every recorded lockstep topic has matched its publisher (a plant '
-          'with lockstep_recorder starts the run only then, so nothing is missed)',
-          read_only=True),
+    Param('lockstep_gate', False, 'start gate: publish recorder/ready once the '
+          'subscription of every recorded lockstep topic (with use_sim_time: odom, pose, '
+          'reference samples, cmd_vel, /clock; else odom and cmd_vel) has matched its '
+          'publisher (a plant with '
+          'lockstep_recorder starts the run only then, in lockstep and in real time, so '
+          'nothing is missed)', read_only=True),
     Param('gate_timeout', 30.0, 'lockstep_gate: announce readiness anyway after this long '
           '(wall s), with a warning naming the unmatched topics', low=0.0, high=3600.0,
           read_only=True),
@@ -272,8 +276,12 @@ class Recorder(AdapterNode[RecorderSettings]):
         has, its samples are dropped here.  So the recorder says when its own side is
         matched, for every recorded lockstep topic, and the plant waits for that.
         """
+        # real time (no sim time): the loop's odometry and commands (nobody publishes /clock,
+        # and a reference that publishes a trajectory may publish no samples)
+        gated = _GATED if self.get_parameter('use_sim_time').value else \
+            _GATED_REALTIME
         waiting = [self._resolved[n] for n, sub in self._subs.items()
-                   if n in _GATED and sub.get_publisher_count() < 1]
+                   if n in gated and sub.get_publisher_count() < 1]
         elapsed = (self._steady.now() - self._gate_started).nanoseconds * 1e-9
         if waiting and elapsed < self.config.gate_timeout:
             return

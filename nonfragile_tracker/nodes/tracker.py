@@ -125,7 +125,9 @@ PARAMS = [
           '0 = none', low=0.0, high=10.0, read_only=True),
     Param('lockstep_subscribers', 0, 'lockstep: answer an odometry step only once cmd_vel has '
           'this many matched subscribers (plant and recorder: 2); until then the step is left '
-          'for the plant to republish; 0 = answer at once', read_only=True),
+          'for the plant to republish; real time: adopt a trajectory re-timed in the '
+          'background only then (a recorder gets its first command); 0 = at once',
+          read_only=True),
     Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
           'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
     Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
@@ -304,6 +306,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._pool: Any = None             # real time: the re-timing worker thread
         self._retimed: list = []           # (future, origin, source) ready to adopt
         self.origin_ns = 0
+        self._announce = False             # tracker/trajectory due at the next step
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
@@ -512,6 +515,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         else:
             self.follower.set_trajectory(traj)
         self.origin_ns = origin
+        self._announce = True                 # at the step that first follows it
         self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
                          f'({traj.kind}), {traj.duration:.3f} s from stamp '
                          f'{origin * 1e-9:.3f} s: starting a new run')
@@ -561,8 +565,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 self.deadline_misses += 1
         self._odom = msg
         self.last_odom_stamp = s
-        if self._retimed:                  # real time: a trajectory re-timed meanwhile
-            self._take_retimed()
+        if self._retimed and self.pub_cmd.get_subscription_count() >= \
+                self.config.lockstep_subscribers:
+            self._take_retimed()           # real time: a trajectory re-timed meanwhile
         self._try_compute()                # cmd_vel first: the clock read is bookkeeping
         self._odom_received()
         self._monitor_odom(s, msg)
@@ -661,8 +666,11 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         was_finished, was_started = f.finished, f.started
         cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
                      measured_speed=speed if math.isfinite(speed) else 0.0)
+        announce, self._announce = self._announce, False
         if f.started and not was_started:
-            self._started(f)
+            self._started(f, s, announce)
+        elif announce:
+            self._announce_followed(f, s)
         if f.finished and not was_finished:
             e = math.hypot(cmd.error[0], cmd.error[2])
             self.log('info',
@@ -673,8 +681,12 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._publish(cmd.v, cmd.w, s)
         self._outputs(s, pose, f.last_ref, cmd)
 
-    def _started(self, f: Follower) -> None:
-        """Say how the trajectory started: re-based, on its stamps, or refused."""
+    def _started(self, f: Follower, stamp: int, announce: bool) -> None:
+        """Say how the trajectory started: re-based, on its stamps, or refused.
+
+        ``stamp`` is the odometry stamp of this step; ``announce``: the trajectory was
+        adopted at it (:meth:`_announce_followed`).
+        """
         if f.refused:
             self.rejected += 1
             self.last_refusal = f.refused
@@ -685,9 +697,20 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         elif f.offset:
             self.log('info', f'trajectory started {f.offset:.3f} s after its start stamp: '
                              're-based to start now (its own speed profile, no chase)')
-        if not f.trajectory.is_analytic:      # what it follows, as it follows it
+        if announce or f.offset:              # re-based after its adoption: again
+            self._announce_followed(f, stamp)
+
+    def _announce_followed(self, f: Follower, stamp: int) -> None:
+        """Publish what the tracker follows, as it follows it, on tracker/trajectory.
+
+        Stamped with the odometry stamp ``stamp`` of the step that adopted it (its first
+        command; or of its re-based start), its points' times counted from there: a bag
+        replay adopts it at exactly that odometry, however long a re-timing took.
+        """
+        if not f.trajectory.is_analytic and not f.refused:
             self.pub_followed.publish(followed_to_multidof(
-                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame))
+                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame,
+                header_ns=stamp))
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
         """cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.

@@ -37,11 +37,12 @@ if TYPE_CHECKING:
     from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 
-def followed_to_multidof(traj: Trajectory, origin_ns: int,
-                         frame: str) -> 'MultiDOFJointTrajectory':
+def followed_to_multidof(traj: Trajectory, origin_ns: int, frame: str,
+                         header_ns: int | None = None) -> 'MultiDOFJointTrajectory':
     """MultiDOFJointTrajectory of a bounded trajectory at its knots (pose, velocity, accel).
 
-    Stamped ``origin_ns + t_start`` with times from ``t_start``; its quintic Hermite
+    Stamped ``origin_ns + t_start`` with times from ``t_start`` (or stamped ``header_ns``
+    with times from there: the same knots at the same absolute times); its quintic Hermite
     rebuild (:func:`multidof_to_trajectory`) is the trajectory itself (a cubic or quintic
     piece is matched exactly by its end values), sampled at the same stamps.
 
@@ -53,6 +54,9 @@ def followed_to_multidof(traj: Trajectory, origin_ns: int,
         Stamp [ns] of the trajectory's ``t = 0``.
     frame : str
         ``frame_id`` of the header.
+    header_ns : int, optional
+        The header's stamp [ns] (the tracker: the odometry at which it adopted the
+        trajectory); default ``origin_ns + t_start``.
 
     Returns
     -------
@@ -60,9 +64,12 @@ def followed_to_multidof(traj: Trajectory, origin_ns: int,
     """
     import numpy as np
     knots = traj.knots
-    t0_ns = int(round(traj.t_start * 1e9))
-    t_ns = np.round((knots - traj.t_start) * 1e9).astype(np.int64)
-    return states_to_multidof(t_ns, traj.evaluate(knots), int(origin_ns) + t0_ns, frame)
+    if header_ns is None:
+        t0_ns = int(round(traj.t_start * 1e9))
+        t_ns = np.round((knots - traj.t_start) * 1e9).astype(np.int64)
+        return states_to_multidof(t_ns, traj.evaluate(knots), int(origin_ns) + t0_ns, frame)
+    t_ns = np.round(knots * 1e9).astype(np.int64) + (int(origin_ns) - int(header_ns))
+    return states_to_multidof(t_ns, traj.evaluate(knots), int(header_ns), frame)
 
 
 def trajectory_to_path(traj: Trajectory, origin_ns: int, frame: str,

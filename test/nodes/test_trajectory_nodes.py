@@ -14,6 +14,7 @@ from nonfragile_tracker.control.gains import read_gain_file
 from nonfragile_tracker.control.loop import TrackerConfig
 from nonfragile_tracker.control.trajectory import load_waypoints
 from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.msgconv import stamp_ns
 
 from conftest import CONFIG, ROOT, unique_domain_id
 
@@ -637,8 +638,11 @@ def test_replay_reproduces_a_waypoint_run_with_predictor_and_retiming(tmp_path, 
 @pytest.mark.slow
 def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(tmp_path):
     """Real time, one process per node: the tracker re-times the lap in its worker thread and
-    adopts it at a later odometry; bag replay finds that odometry and reproduces every
-    recorded command exactly (predictor from the gain file)."""
+    adopts it at the first odometry after that (whenever the re-timing ends), announcing
+    that odometry's stamp on tracker/trajectory; bag replay adopts it there and reproduces
+    every recorded command exactly (predictor from the gain file).  The run's start gate
+    (plant and tracker wait for the recorder's matched subscriptions) puts every odometry
+    message and command in the bag."""
     import yaml
     from nonfragile_tracker.bag.replay import replay
     from nonfragile_tracker.runner import realtime_overrides, run_processes, scenario_parameters
@@ -660,5 +664,12 @@ def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(t
     assert 're-timed for max_angular_accel' in log        # lap.csv's turns exceed 3 rad/s^2
     rep = replay(res.bag, gains=gains, params=scenario_file)
     assert rep.mode == 'realtime' and len(rep.recorded) > 500
+    # adopted where the tracker said, not where a search guessed: the trajectory is fed
+    # right before the odometry with the announced stamp, which answers first
+    ev = rep.plan.events
+    at = next(i for i, e in enumerate(ev) if e.kind == 'trajectory')
+    assert rep.plan.adopted_ns is not None
+    assert stamp_ns(ev[at + 1].msg.header.stamp) == rep.plan.adopted_ns
+    assert rep.commands[0][0] == ev[at + 1].receive_ns
     assert len(rep.commands) == len(rep.recorded)
     assert rep.comparison.equal and rep.max_abs_error <= 1e-9
