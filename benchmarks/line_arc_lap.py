@@ -83,8 +83,12 @@ def bring_up(out: Path) -> Path:
     data['/**/plant']['ros__parameters']['initial_pose'] = [0.0, -0.1, 0.7853981633974483]
     rec.write_text(yaml.safe_dump(data))
     t0 = time.monotonic()
+    # TwistStamped commands (Jazzy's diff_drive_controller input): identify times them by their
+    # stamps; a plain Twist is timed by the bag's receive time, which in lockstep follows the
+    # recorder's /clock subscription and biased the latency by most of a plant step
     cli('run', '--scenario', str(rec), '--duration', '30', '--path', 'figure_eight',
-        '--out', str(out), '--name', 'record', ros=True, log=out / 'record.log')
+        '--stamped-cmd-vel', '--out', str(out), '--name', 'record', ros=True,
+        log=out / 'record.log')
     ident = cli('identify', str(out / 'record' / 'bag'), '-o', str(out / 'latency.yaml'))
     (out / 'identify.txt').write_text(ident)
     gains = out / 'g.yaml'
