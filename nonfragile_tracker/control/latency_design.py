@@ -402,7 +402,8 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
         # the robot's figure to half the tolerance (one solve more than ``tol``)
         lag_h = certified_input_delay_of_gain(
             lp, K_aug, h0, h_hi=max(hi, guess + tol), tol=0.5 * tol, h_certified=guess,
-            certified_margin=start.margin_achieved, h_hi_refuted=hi == margin > guess,
+            certified_margin=start.margin_achieved, certified_slope=start.slope,
+            h_hi_refuted=hi == margin > guess,
             h_guess=None if guess > h1 else GUESS_OF_MARGIN * hi)
     return LatencyDesign(problem=problem.name, objective=objective, K=res.K, gain_bound=bound,
                          h_min=h0, h_max=h1, lag=T, certified_h_max=float(certified),
