@@ -1023,8 +1023,10 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     ``alpha = 0.5`` first, by a climb on the ``eps`` grid from its middle stopping at the
     first verified point (certified, it proves ``alpha = 0`` too; if not, ``alpha = 0``
     decides feasibility the same way, the whole grid if the climb finds none), then
-    doubling until a rate fails, each trial one solve at the ``eps`` of the last success
-    (a failing rate is not climbed: the climb at the end checks the other ``eps``); then
+    doubling until a rate fails or a Newton step from the last certified rate predicts
+    the boundary below the next doubling, each trial one solve at the ``eps`` of the last
+    success (a failing rate is not climbed: the climb at the end checks the other
+    ``eps``); then
     Newton steps on the strictness ``t(alpha) - margin`` from the certified end, with the
     slope ``dt/dalpha`` read from the dual of the same solve (:func:`_alpha_slope`,
     envelope theorem), until the next step would gain less than a quarter of the
@@ -1045,7 +1047,7 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     ``[0, 0.2]`` s, and it is kinked at the boundary), and the best ``eps`` moves slowly
     with ``alpha`` (0.32 on both intervals).  False position closed a ``rel_tol`` 0.2 %
     bracket in 14 and 17 solves (1.511 and 0.716 1/s); the Newton steps, which for a
-    convex ``t`` stay on the certified side, take 10 and 9 solves, with 1.5111 and
+    convex ``t`` stay on the certified side, take 9 and 8 solves, with 1.5111 and
     0.7167 1/s.  A generalized-eigenvalue formulation was not used: ``alpha`` enters
     through the ``exp(-2 alpha h)`` weights as well as ``2 alpha P``, so the problem is
     not a GEVP in ``alpha`` (and cvxpy has no GEVP solver: it would be bisected over SDPs
@@ -1127,9 +1129,17 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
         slope_of(a, r)
         return r.margin_achieved - margin, r
 
+    def newton_below(x: float, a: float) -> bool:
+        # Newton from the certified rate x predicts the boundary below the next doubling a
+        g, sx = slopes.get(x, math.nan), best.margin_achieved - margin
+        return x > 0 and math.isfinite(g) and g < 0 and sx > 0 and x + sx / -g < a
+
     lo, best = first, base
     a, hi, hi_s = 2.0 * first if first else 0.5, math.nan, math.nan
     while True:
+        if newton_below(lo, a):     # no bracket needed: Newton steps from lo (below)
+            hi = math.inf
+            break
         # one solve at the eps of the last success: a failing rate is not climbed here
         # (the climb at the bracket's upper end below checks the other eps)
         s, r = trial(a, climb=False)
@@ -1151,11 +1161,15 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
 
     for _ in range(4):
         refuted: list[float] = [hi]
-        tol = rel_tol * hi
+        # without a refuted rate yet (hi = inf) the tolerance is that of the doubling's
+        # next bracket [lo, 2 lo]
+        tol = rel_tol * (hi if math.isfinite(hi) else min(2.0 * lo, hi_limit))
         # Newton steps from the certified end (docstring): each lands below the boundary
         # while t(alpha) is convex there; a refuted step hands over to false position
         newton = False
         while hi - lo > tol:
+            if lo >= hi_limit:
+                return best
             g, s_lo = slopes.get(lo, math.nan), best.margin_achieved - margin
             if not (math.isfinite(g) and g < 0 and s_lo > 0):
                 break
@@ -1163,7 +1177,7 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
             if step < 0.25 * tol:
                 newton = True
                 break
-            x = min(lo + step, hi - 0.5 * tol)
+            x = min(lo + step, hi - 0.5 * tol, hi_limit)
             sc, r = single(x)
             if r is None:
                 hi, hi_s = x, sc
@@ -1171,6 +1185,19 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
             lo, best = x, r
         if newton:
             top = min(lo + tol, hi)
+        elif not math.isfinite(hi):
+            # Newton gave out before any rate was refuted: doubling from lo, as above
+            a = min(2.0 * lo, hi_limit)
+            while True:
+                hi_s, r = trial(a, climb=False)
+                if r is None:
+                    hi = a
+                    break
+                lo, best = a, r
+                if a >= hi_limit:
+                    return best
+                a = min(2.0 * a, hi_limit)
+            continue
         else:
             # the first step halves the bracket: the strictness at the low end is often
             # capped by the normalization (t <= 1 with a gain bound): it would skew the secant

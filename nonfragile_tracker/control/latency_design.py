@@ -29,9 +29,9 @@ Newton steps on the certification LMI's strictness from 0.8 of the exact margin
 (:func:`.input_delay.certified_input_delay_of_gain`), each slope read from the dual of
 the solve just made (envelope theorem), so that every step is one solve and lands on a
 certified value while the strictness is convex (it is, on the paper's loops).  On the
-paper problem with a 50 ms lag: ``[0, 0.03]`` s 10 synthesis + 2 certification solves
+paper problem with a 50 ms lag: ``[0, 0.03]`` s 9 synthesis + 2 certification solves
 (the previous bracketed searches 14 + 6, the bisections before them 99 + 23), ``[0, 0.15]``
-s 9 + 2 (17 + 7; 164 + 23); figures 1.5111 1/s / 0.1485 s and 0.7167 1/s / 0.2208 s (were
+s 8 + 2 (17 + 7; 164 + 23); figures 1.5111 1/s / 0.1485 s and 0.7167 1/s / 0.2208 s (were
 1.511 / 0.1484 and 0.716 / 0.2206).  The solver, its tolerances and the margin are
 unchanged, and every certificate is verified in numpy as before.
 """
