@@ -130,8 +130,14 @@ def open_executor(executor: str | Executor = 'local', *, workers: int | None = N
 
 def map_tasks(fn: Callable[[T], R], tasks: Sequence[T], *,
               executor: str | Executor = 'local', workers: int | None = None,
-              scheduler: str | None = None) -> list[R]:
+              scheduler: str | None = None,
+              cost: Callable[[T], float] | None = None) -> list[R]:
     """``[fn(t) for t in tasks]``, computed on ``executor`` (module docstring).
+
+    With ``cost``, the tasks are handed to the engine most costly first (a stable sort:
+    equal costs keep their order), so that the last tasks to start are short ones and
+    the workers finish together (longest-processing-time first); the results are still
+    returned in the order of ``tasks``.
 
     Parameters
     ----------
@@ -142,6 +148,8 @@ def map_tasks(fn: Callable[[T], R], tasks: Sequence[T], *,
     executor, workers, scheduler
         As in :func:`open_executor`; one task, or ``'local'`` with one worker, runs
         in this process.
+    cost : callable, optional
+        An estimate of a task's run time (any scale; called here, not on the workers).
 
     Returns
     -------
@@ -156,4 +164,10 @@ def map_tasks(fn: Callable[[T], R], tasks: Sequence[T], *,
     with open_executor(executor, workers=workers, scheduler=scheduler) as ex:
         if ex is None:
             return [fn(t) for t in tasks]
-        return list(ex.map(fn, tasks))
+        if cost is None:
+            return list(ex.map(fn, tasks))
+        order = sorted(range(len(tasks)), key=lambda i: -float(cost(tasks[i])))
+        out: list[Any] = [None] * len(tasks)
+        for i, r in zip(order, ex.map(fn, [tasks[i] for i in order])):
+            out[i] = r
+        return out

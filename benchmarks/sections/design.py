@@ -72,6 +72,37 @@ def _figures(text: str) -> str:
     return ' / '.join(k.strip() for k in keep)[:300]
 
 
+#: What each command imports before its first solve (the start-up share of 12.1).
+IMPORTS = {
+    'synthesize': 'import nonfragile_tracker.cli, nonfragile_tracker.commands.synthesis, '
+                  'nonfragile_tracker.control.lmi, cvxpy',
+    'latency-design': 'import nonfragile_tracker.cli, nonfragile_tracker.commands.latency_design, '
+                      'nonfragile_tracker.control.latency_design, '
+                      'nonfragile_tracker.control.monitor, nonfragile_tracker.control.gains, cvxpy',
+}
+
+
+def _startup(code: str) -> float:
+    """Wall time of a fresh interpreter that only imports (s)."""
+    t0 = time.perf_counter()
+    subprocess.run([PY, '-c', code], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    return time.perf_counter() - t0
+
+
+def bench_startup(cfg, table: Table, raw: dict) -> None:
+    """12.1.s: the start-up (imports) share of both commands, medians of alternated runs."""
+    reps = 3 if cfg.quick else 5
+    got: dict[str, list[float]] = {k: [] for k in IMPORTS}
+    for _ in range(reps):
+        for k, code in IMPORTS.items():
+            got[k].append(_startup(code))
+    s = {k: summary(v) for k, v in got.items()}
+    raw['startup'] = s
+    table.note('12.1.s', 'start-up (imports) of synthesize / latency-design',
+               f'{fmt(s["synthesize"]["median"])} s / {fmt(s["latency-design"]["median"])} s '
+               '(median; counted in both commands of 12.1.1 and 12.1.2)')
+
+
 def bench_latency_design(cfg, table: Table, raw: dict) -> None:
     """12.1: latency-design / synthesize, today and now, medians of alternated runs."""
     reps = 1 if cfg.quick else 3
@@ -185,4 +216,5 @@ def bench_sweep(cfg, table: Table, raw: dict) -> None:
 def bench_design(cfg, table: Table, raw: dict) -> None:
     """Section 12 (issue 24)."""
     bench_latency_design(cfg, table, raw)
+    bench_startup(cfg, table, raw)
     bench_sweep(cfg, table, raw)

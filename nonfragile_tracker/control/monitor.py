@@ -56,7 +56,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..errors import InputError
 
@@ -212,6 +211,16 @@ class LatencyEstimate:
         return max(vals) if vals else math.nan
 
 
+def _lfilter(b: Any, a: Any, x: Any, zi: Any) -> Any:
+    """:func:`scipy.signal.lfilter`, imported on first use.
+
+    ``scipy.signal`` takes about 0.3 s to import; ``latency-design`` and the tracker import
+    this module for the certificate record alone, and never filter.
+    """
+    from scipy.signal import lfilter
+    return lfilter(b, a, x, zi=zi)
+
+
 def _dilate(mask: np.ndarray, t: np.ndarray, before: float, after: float) -> np.ndarray:
     """Samples within ``[t_i - before, t_i + after]`` of a True sample (t sorted)."""
     if not mask.any():
@@ -335,7 +344,7 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                 ym = up
             else:
                 a = math.exp(-res / tau)
-                ym = lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
+                ym = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
             Y = ym[ii]                                            # (nL, n_ok)
             yy = np.einsum('ij,ij->i', Y, Y)
             yd = Y @ yo
@@ -374,7 +383,7 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
         tau = bt[i0]
         if tau > 0:
             a = math.exp(-res / tau)
-            up = lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
+            up = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
         slope = np.gradient(up)[np.clip(base_idx - i0, 0, grid_n - 1)]
         e_all = float(slope @ slope)
         info[name] = float(slope[masks[c]] @ slope[masks[c]]) / e_all if e_all > 0 else 0.0

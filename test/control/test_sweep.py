@@ -1,6 +1,7 @@
 """control.sweep and parallel: the grid, one design's record, the front, executors (local, Dask)."""
 import json
 import sys
+from concurrent.futures import Executor, Future
 
 import numpy as np
 import pytest
@@ -115,6 +116,40 @@ def test_dask_local_cluster_gives_the_same_records(serial):
             distributed.Client(cluster) as client:
         got = run_sweep(di_problem(), POINTS, executor=client.get_executor())
     assert strip(got) == strip(serial)
+
+
+class _Recording(Executor):
+    """Runs each task at once, in this thread, and records the order it was handed out."""
+
+    def __init__(self):
+        self.order = []
+
+    def submit(self, fn, /, *args, **kwargs):
+        self.order.append(args[0])
+        fut = Future()
+        fut.set_result(fn(*args, **kwargs))
+        return fut
+
+
+def test_tasks_are_handed_out_longest_first_and_results_kept_in_order():
+    ex = _Recording()
+    tasks = [1, -5, 3, -2, 4, 2]
+    got = map_tasks(abs, tasks, executor=ex, cost=abs)
+    assert got == [1, 5, 3, 2, 4, 2]
+    assert ex.order == [-5, 4, 3, -2, 2, 1]          # stable: -2 before 2 (equal cost)
+    ex = _Recording()
+    assert map_tasks(abs, tasks, executor=ex) == [1, 5, 3, 2, 4, 2]
+    assert ex.order == tasks                         # no cost: the tasks' order
+    # a sweep hands the lagged designs out first, the records stay in the points' order
+    ex = _Recording()
+    pts = [SweepPoint((0.0, 0.03), 0.0, None, 'decay', False),
+           SweepPoint((0.0, 0.03), 0.05, None, 'decay', False),
+           SweepPoint((0.0, 0.08), 0.0, None, 'decay', True)]
+    recs = run_sweep(di_problem(), pts, executor=ex)
+    assert [t[1] for t in ex.order] == [pts[1], pts[2], pts[0]]
+    assert [(r['lag'], r['latency']) for r in recs] == [(0.0, [0.0, 0.03]),
+                                                        (0.05, [0.0, 0.03]),
+                                                        (0.0, [0.0, 0.08])]
 
 
 def test_executor_arguments_are_checked(monkeypatch):
