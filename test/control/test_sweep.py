@@ -110,7 +110,7 @@ def test_two_local_workers_give_the_same_records(serial):
 
 
 def test_dask_local_cluster_gives_the_same_records(serial):
-    distributed = pytest.importorskip('distributed')
+    import distributed          # pinned in requirements.txt: the suite runs the Dask path
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
