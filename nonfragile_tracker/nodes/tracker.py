@@ -424,7 +424,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                                  f'(latency estimate {est.latency:.4f} s)')
                 pred.cmd_latency = P = new_p
         if self._stopped:
-            est = LatencyEstimate(False, 'inputs stale: the tracker is publishing stop')
+            est = LatencyEstimate(False, 'inputs stale: the tracker has stopped the robot')
         verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
             self._monitor_last_level = verdict.level
