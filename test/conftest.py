@@ -131,6 +131,30 @@ def paper_gains():
     return {k: np.array(v, dtype=float) for k, v in data.items()}
 
 
+#: A double integrator with a small perturbation: a problem file for fast latency designs.
+DI_PROBLEM = """
+name: di
+A: [[0.0, 1.0], [0.0, 0.0]]
+B: [[0.0], [1.0]]
+A_tau: [[0.0, 0.0], [0.0, 0.0]]
+tau: 0.1
+E: [[1.0]]
+F: [[0.2, 0.2]]
+perturbations: {minus: [[-1.0]], plus: [[1.0]]}
+options: {gain_bound: 3.0}
+"""
+
+
+def mapped(pid: int, marker: str) -> bool:
+    """Whether a shared object whose path holds ``marker`` is mapped into process ``pid``
+    (a defined moment of a process's start-up, e.g. numpy's extension loaded)."""
+    try:
+        with open(f'/proc/{pid}/maps') as fh:
+            return marker in fh.read()
+    except OSError:
+        return False
+
+
 #: The gain budget of the shipped gain (``options.gain_bound`` of ``config/paper_problem.yaml``).
 SHIPPED_NORM = 8.67
 #: The command that regenerates ``config/max_decay_gains.yaml`` (the max-decay design: ideal

@@ -27,7 +27,7 @@ from nonfragile_tracker.control.reference import figure_eight
 from nonfragile_tracker.control.simulate import run_loop
 from nonfragile_tracker.errors import InputError
 
-from conftest import CONFIG
+from conftest import CONFIG, DI_PROBLEM
 
 DT = 0.01            # plant step (config/latency_scenario.yaml)
 LATENCY = 0.1
@@ -140,19 +140,6 @@ def test_chain_gain_certified_for_the_plan_tracks_to_millimetres(recorded):
     # the same robot without the predictor is far worse (the reason for the workflow)
     bare, _, _ = scenario_run(K, {}, duration=20.0, seed=2)
     assert rms_after(bare) > 2 * rms_after(run)
-
-
-DI_PROBLEM = """
-name: di
-A: [[0.0, 1.0], [0.0, 0.0]]
-B: [[0.0], [1.0]]
-A_tau: [[0.0, 0.0], [0.0, 0.0]]
-tau: 0.1
-E: [[1.0]]
-F: [[0.2, 0.2]]
-perturbations: {minus: [[-1.0]], plus: [[1.0]]}
-options: {gain_bound: 3.0}
-"""
 
 
 def test_cli_design_from_identification_records_it(tmp_path, capsys):

@@ -21,17 +21,9 @@ import pytest
 from nonfragile_tracker import cli
 from nonfragile_tracker.errors import EXIT_INTERRUPTED
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG, ROOT, mapped
 
 CLEAN = (EXIT_INTERRUPTED, -signal.SIGINT)
-
-
-def _loaded(pid: int, marker: str) -> bool:
-    try:
-        with open(f'/proc/{pid}/maps') as fh:
-            return marker in fh.read()
-    except OSError:
-        return False
 
 
 def _interrupted_run(delay: float, out) -> subprocess.CompletedProcess:
@@ -45,7 +37,7 @@ def _interrupted_run(delay: float, out) -> subprocess.CompletedProcess:
                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     deadline = time.monotonic() + 60
-    while not _loaded(proc.pid, '_multiarray_umath') and proc.poll() is None \
+    while not mapped(proc.pid, '_multiarray_umath') and proc.poll() is None \
             and time.monotonic() < deadline:
         time.sleep(0.002)
     time.sleep(delay)

@@ -16,21 +16,9 @@ from nonfragile_tracker.control.latency_design import (design_for_latency, lagge
 from nonfragile_tracker.control.problem import Problem
 from nonfragile_tracker.errors import InputError
 
-from conftest import CONFIG, ROOT
+from conftest import CONFIG, ROOT, DI_PROBLEM
 
 PAPER = str(CONFIG / 'paper_problem.yaml')
-
-DI_PROBLEM = """
-name: di
-A: [[0.0, 1.0], [0.0, 0.0]]
-B: [[0.0], [1.0]]
-A_tau: [[0.0, 0.0], [0.0, 0.0]]
-tau: 0.1
-E: [[1.0]]
-F: [[0.2, 0.2]]
-perturbations: {minus: [[-1.0]], plus: [[1.0]]}
-options: {gain_bound: 3.0}
-"""
 
 
 @pytest.fixture(scope='module')

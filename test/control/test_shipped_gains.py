@@ -25,6 +25,16 @@ DEFAULT_DESIGN_ARGV = ['latency-design', PAPER, '--delay-interval', '0', '0.15',
                        '--gain-bound', '8.67']
 
 
+
+def assert_same_gain_file(written, shipped_file):
+    """The gain (1e-6) and every ``gain_design`` figure (1e-6 relative) of ``written`` are
+    the shipped file's."""
+    np.testing.assert_allclose(read_gain_file(written), read_gain_file(shipped_file), atol=1e-6)
+    got, shipped = read_gain_design(written), read_gain_design(shipped_file)
+    assert set(got) == set(shipped)
+    for k, v in shipped.items():
+        assert got[k] == (pytest.approx(v, rel=1e-6) if isinstance(v, float) else v), k
+
 def test_default_gain_records_its_latency_certificate(paper_problem):
     """gain_design says what the default is: an input-delay design for h(t) in [0, 0.15] s
     through a 50 ms lag at the paper's gain bound; an independent certification of the
@@ -63,11 +73,7 @@ def test_default_gain_file_is_what_latency_design_writes(tmp_path):
     out = tmp_path / 'g.yaml'
     with contextlib.redirect_stdout(io.StringIO()):
         assert main(DEFAULT_DESIGN_ARGV + ['-o', str(out)]) == 0
-    np.testing.assert_allclose(read_gain_file(out), read_gain_file(DEFAULT), atol=1e-6)
-    got, shipped = read_gain_design(out), read_gain_design(DEFAULT)
-    assert set(got) == set(shipped)
-    for k, v in shipped.items():
-        assert got[k] == (pytest.approx(v, rel=1e-6) if isinstance(v, float) else v), k
+    assert_same_gain_file(out, DEFAULT)
 
 
 def test_max_decay_gain_file_is_what_design_writes(shipped_design):
@@ -75,11 +81,7 @@ def test_max_decay_gain_file_is_what_design_writes(shipped_design):
     assert shipped_design.code == 0
     assert SHIPPED_DESIGN_ARGV == ['design', PAPER, '--objective', 'decay', '--norm', '8.67']
     out = shipped_design.path
-    np.testing.assert_allclose(read_gain_file(out), read_gain_file(MAX_DECAY), atol=1e-6)
-    got, shipped = read_gain_design(out), read_gain_design(MAX_DECAY)
-    assert set(got) == set(shipped)
-    for k, v in shipped.items():
-        assert got[k] == (pytest.approx(v, rel=1e-6) if isinstance(v, float) else v), k
+    assert_same_gain_file(out, MAX_DECAY)
 
 
 def test_max_decay_gain_beats_the_papers_gain(paper_problem):

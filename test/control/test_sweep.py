@@ -6,6 +6,8 @@ from concurrent.futures import Executor, Future
 import numpy as np
 import pytest
 
+from conftest import DI_PROBLEM
+
 from nonfragile_tracker.cli import main
 from nonfragile_tracker.control.input_delay import certify_input_delay
 from nonfragile_tracker.control.latency_design import lagged_problem
@@ -14,18 +16,6 @@ from nonfragile_tracker.control.sweep import (SweepPoint, design_point, pareto_f
                                               sweep_points, sweep_table)
 from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.parallel import map_tasks, open_executor
-
-DI_PROBLEM = """
-name: di
-A: [[0.0, 1.0], [0.0, 0.0]]
-B: [[0.0], [1.0]]
-A_tau: [[0.0, 0.0], [0.0, 0.0]]
-tau: 0.1
-E: [[1.0]]
-F: [[0.2, 0.2]]
-perturbations: {minus: [[-1.0]], plus: [[1.0]]}
-options: {gain_bound: 3.0}
-"""
 
 
 def di_problem():

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, mapped
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -104,15 +104,6 @@ def test_installed_executables_start_and_refuse_clearly(installed, tmp_path, run
         assert out.returncode == 2 and 'missing.yaml' in out.stderr, (version, mode, out.stderr)
 
 
-def _loaded(pid: int, marker: str) -> bool:
-    """Whether a shared object whose path holds ``marker`` is mapped into process ``pid``."""
-    try:
-        with open(f'/proc/{pid}/maps') as fh:
-            return marker in fh.read()
-    except OSError:
-        return False
-
-
 #: Moments of a node's start-up, as the first shared object mapped after them: the entry's
 #: main() notes stop signals before it imports the node module (numpy, then rclpy).
 MOMENTS = ('_multiarray_umath', '_rclpy_pybind11')
@@ -128,7 +119,7 @@ def test_sigint_while_an_installed_node_starts_ends_it_cleanly(installed, tmp_pa
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=run_env, cwd=tmp_path)
         deadline = time.monotonic() + 60
-        while not _loaded(proc.pid, marker) and proc.poll() is None \
+        while not mapped(proc.pid, marker) and proc.poll() is None \
                 and time.monotonic() < deadline:
             time.sleep(0.002)
         assert proc.poll() is None, (version, marker, proc.communicate())
