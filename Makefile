@@ -13,7 +13,7 @@ STAMP := $(VENV)/.installed
 # directory of its own: test/package/test_colcon_setuptools.py builds the package with each
 COLCON_SETUPTOOLS := 68.1.2 79.0.1
 
-.PHONY: demo test docs venv bench bench-env tdcpy-env reproduce clean
+.PHONY: demo test soak docs venv bench bench-env tdcpy-env reproduce clean
 
 $(STAMP): requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -28,14 +28,20 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m nonfragile_tracker.cli run $(if $(filter --paper,$(ARGS)),,--delay-compensation) $(ARGS)
 
-# The ROS-free tests on every core (pytest-xdist), then the ROS tests one after another in
-# this process (-n 0) with the machine to themselves: they start nodes and keep time.
+# Every test but the real-time ones on every core (pytest-xdist, whole modules per worker; ROS
+# tests in lockstep or about processes do not depend on the load, each worker has ROS domains
+# of its own), then the real-time tests one after another (-n 0) with the machine to
+# themselves: they run nodes on the wall clock and judge timing.
 # Exit 5 (no tests) is a failure unless the other part ran tests (ARGS may select one part).
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -m "not ros" test $(ARGS); a=$$?; \
-	$(PY) -m pytest -q -p no:cacheprovider -n 0 -m ros test $(ARGS); b=$$?; \
+	$(PY) -m pytest -q -p no:cacheprovider -m "not realtime" test $(ARGS); a=$$?; \
+	$(PY) -m pytest -q -p no:cacheprovider -n 0 -m realtime test $(ARGS); b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	for rc in $$a $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
+
+# The signal tests repeated to catch rare races (20 trials of every pattern instead of 8).
+soak: $(STAMP)
+	NONFRAGILE_SOAK=1 $(PY) -m pytest -q -p no:cacheprovider -n 0 test/nodes/test_signals.py $(ARGS)
 
 # The Sphinx + MyST project in doc/ (rosdoc2's layout), as test/package/test_docs.py builds it.
 docs: $(STAMP)

@@ -35,9 +35,20 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 ROS_MODULES = {'test_bag_writer_reader', 'test_failures', 'test_golden_regression',
                'test_node_parameters', 'test_realtime_faults', 'test_recorder_node',
                'test_ros_lockstep', 'test_tracker_safety'}
+#: Modules whose tests run nodes on the wall clock and judge timing or quality (marked
+#: ``realtime`` and ``ros``): they run one after another with the machine to themselves.
+#: Other tests mark theirs with ``@pytest.mark.realtime``.
+REALTIME_MODULES = {'test_bag_realtime', 'test_netns', 'test_realtime_faults',
+                    'test_certificate_monitor'}
 #: Modules whose tests take tens of seconds (marked ``slow``).
 SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_faults',
                 'test_ros_lockstep'}
+
+
+def realtime_may_run(config) -> bool:
+    """Whether the ``-m`` mark expression may select a ``realtime`` test (always also ``ros``:
+    ``-m "not ros"`` selects none)."""
+    return mark_expression_may_select(config.getoption('markexpr') or '', 'realtime', 'ros')
 
 
 def ros_may_run(config) -> bool:
@@ -52,9 +63,9 @@ def ros_may_run(config) -> bool:
 
 
 @functools.lru_cache(maxsize=None)      # asked for every collected path: parse once
-def mark_expression_may_select(expr: str, mark: str) -> bool:
-    """Whether ``-m expr`` is true for some test carrying ``mark`` (every combination of
-    the other names in ``expr``, present or absent, is tried)."""
+def mark_expression_may_select(expr: str, mark: str, *implied: str) -> bool:
+    """Whether ``-m expr`` is true for some test carrying ``mark`` and the ``implied`` marks
+    (every combination of the other names in ``expr``, present or absent, is tried)."""
     if not expr.strip():
         return True
     from _pytest.mark.expression import Expression     # pytest's own -m parser
@@ -62,9 +73,10 @@ def mark_expression_may_select(expr: str, mark: str) -> bool:
         compiled = Expression.compile(expr)
     except SyntaxError:                     # pytest reports the error itself
         return True
-    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not', mark})
+    given = {mark, *implied}
+    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not'} - given)
     for bits in itertools.product((False, True), repeat=len(names)):
-        marks = dict(zip(names, bits), **{mark: True})
+        marks = dict(zip(names, bits), **dict.fromkeys(given, True))
         if compiled.evaluate(lambda name, **kwargs: marks.get(name, False)):
             return True
     return False
@@ -72,15 +84,17 @@ def mark_expression_may_select(expr: str, mark: str) -> bool:
 
 @pytest.hookimpl(tryfirst=True)        # before pytest-xdist reads the number of workers
 def pytest_cmdline_main(config):
-    """Serial run (as ``-n 0``) whenever ROS tests may run.
+    """Serial run (as ``-n 0``) whenever real-time tests may run.
 
     pytest-xdist runs the tests on every core (``-n auto --dist loadfile`` in setup.cfg, whole
-    modules per worker so that module fixtures are computed once).  ROS tests start processes
-    and keep time: they must run one after another with the machine to themselves.  (xdist's
-    ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no effect,
-    pytest-xdist issue 1386.)
+    modules per worker so that module fixtures are computed once), ROS tests in lockstep or
+    about processes and signals included: their results do not depend on the load (each
+    worker has ROS domains of its own, :func:`domain_ids`).  Real-time tests (``realtime``)
+    keep wall-clock time: they must run one after another with the machine to themselves.
+    (xdist's ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no
+    effect, pytest-xdist issue 1386.)
     """
-    if ros_may_run(config) and getattr(config.option, 'numprocesses', None):
+    if realtime_may_run(config) and getattr(config.option, 'numprocesses', None):
         config.option.numprocesses = 0
 
 
@@ -98,24 +112,50 @@ def _ros_only(module_path: Path) -> bool:
 
 
 def pytest_report_header(config):
-    if ros_may_run(config) and getattr(config.option, 'numprocesses', None) == 0:
-        return 'ROS tests may run: one test after another (pytest-xdist off)'
+    if realtime_may_run(config) and getattr(config.option, 'numprocesses', None) == 0:
+        return 'real-time tests may run: one test after another (pytest-xdist off)'
     return None
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`; ``slow`` those
+    """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`, ``realtime``
+    those of :data:`REALTIME_MODULES` (a real-time test is a ROS test too); ``slow`` those
     of :data:`SLOW_MODULES`."""
     for item in items:
-        if _ros_only(item.path):
+        if item.path.stem in REALTIME_MODULES:
+            item.add_marker(pytest.mark.realtime)
+        if _ros_only(item.path) or item.get_closest_marker('realtime'):
             item.add_marker(pytest.mark.ros)
         if item.path.stem in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
 
 
+def _domain_range() -> range:
+    """The ROS_DOMAIN_IDs this test process may use: 100..199, split evenly between the
+    pytest-xdist workers (a worker runs its tests one after another)."""
+    worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+    count = max(int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1')), 1)
+    index = int(worker[2:]) if worker.startswith('gw') else 0
+    size = 100 // count
+    return range(100 + index * size, 100 + (index + 1) * size)
+
+
+def domain_ids(salt: str = '', n: int = 1) -> list[int]:
+    """``n`` distinct ROS_DOMAIN_IDs of this process's range, from the process id and a salt."""
+    ids = _domain_range()
+    assert n <= len(ids), f'{n} domains wanted, {len(ids)} in this worker\'s range'
+    first = (os.getpid() * 31 + sum(map(ord, salt))) % len(ids)
+    return [ids[(first + k) % len(ids)] for k in range(n)]
+
+
 def unique_domain_id(salt: str = '') -> int:
-    """A ROS_DOMAIN_ID in 100..199 derived from the process id and a salt."""
-    return 100 + (os.getpid() * 31 + sum(map(ord, salt))) % 100
+    """A ROS_DOMAIN_ID of this process's range (:func:`domain_ids`)."""
+    return domain_ids(salt)[0]
+
+
+if os.environ.get('PYTEST_XDIST_WORKER'):
+    # nodes started without a domain of their test's (runner.isolated_env keeps a set one)
+    os.environ['ROS_DOMAIN_ID'] = str(unique_domain_id('worker'))
 
 
 @pytest.fixture(scope='session')

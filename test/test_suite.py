@@ -1,30 +1,49 @@
-"""How the suite itself runs (``test/conftest.py``, ``setup.cfg``): the ROS-free tests on
-every core, whole modules per worker; every run that may select ROS tests serial."""
+"""How the suite itself runs (``test/conftest.py``, ``setup.cfg``): every test but the
+real-time ones on every core, whole modules per worker, each worker with ROS domains of its
+own; every run that may select real-time tests serial."""
 import re
 import subprocess
 import sys
 
 import pytest
 
-from conftest import ROOT, mark_expression_may_select
+from conftest import ROOT, domain_ids, mark_expression_may_select
 
 MODULES = ['test/control/test_model.py', 'test/control/test_trajectory.py']
 
 
-def _pytest(*args: str) -> str:
+def _pytest(*args: str, modules=MODULES) -> str:
     proc = subprocess.run([sys.executable, '-m', 'pytest', '-p', 'no:cacheprovider', '-v',
-                           '-n', '2', *args, *MODULES], capture_output=True, text=True,
+                           '-n', '2', *args, *modules], capture_output=True, text=True,
                           cwd=ROOT, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return proc.stdout
 
 
-def test_a_run_that_may_select_ros_tests_is_serial():
+def test_a_run_that_may_select_realtime_tests_is_serial():
     """Even with -n 2: no xdist worker runs anything, the header says why."""
     out = _pytest()
     assert 'one test after another (pytest-xdist off)' in out
     assert re.search(r'^test/control/test_model.py::\S+ PASSED', out, flags=re.M)
     assert '[gw' not in out
+
+
+def test_ros_tests_without_realtime_ones_run_on_the_workers():
+    """``-m "not realtime"`` (make test's first part) spreads ROS modules over the workers."""
+    out = _pytest('-m', 'not realtime', modules=MODULES + ['test/nodes/test_node_parameters.py'])
+    assert re.search(r'^\[gw\d\] .*PASSED test/nodes/test_node_parameters.py::', out, flags=re.M)
+    assert 'one test after another' not in out
+
+
+def test_workers_have_ros_domains_of_their_own(monkeypatch):
+    seen = []
+    for worker in ('gw0', 'gw1'):
+        monkeypatch.setenv('PYTEST_XDIST_WORKER', worker)
+        monkeypatch.setenv('PYTEST_XDIST_WORKER_COUNT', '2')
+        ids = domain_ids('x', 6)
+        assert len(set(ids)) == 6
+        seen.append(set(ids))
+    assert all(100 <= d < 150 for d in seen[0]) and all(150 <= d < 200 for d in seen[1])
 
 
 def test_the_ros_free_run_gives_each_worker_whole_modules():
@@ -43,5 +62,15 @@ def test_the_ros_free_run_gives_each_worker_whole_modules():
     ('not ros', False), ('not (ros)', False), ('not ros and not slow', False),
     ('(not ros) and slow', False)])
 def test_which_mark_expressions_may_select_ros_tests(expr, ros):
-    """From the expression, not its text: serial and every ROS module collected iff True."""
+    """From the expression, not its text: every ROS module collected iff True (the same
+    test decides a serial run for the ``realtime`` mark)."""
     assert mark_expression_may_select(expr, 'ros') is ros
+
+
+@pytest.mark.parametrize('expr, serial', [
+    ('', True), ('ros', True), ('realtime', True), ('slow', True), ('not slow', True),
+    ('not ros', False), ('not realtime', False), ('ros and not realtime', False),
+    ('not (ros or slow)', False), ('not ros or realtime', True)])
+def test_which_mark_expressions_make_the_run_serial(expr, serial):
+    """A real-time test is a ROS test too: ``-m "not ros"`` selects none."""
+    assert mark_expression_may_select(expr, 'realtime', 'ros') is serial

@@ -12,9 +12,10 @@ import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.cli import main
+from nonfragile_tracker import runner
 from nonfragile_tracker.runner import run_processes, scenario_parameters
 
-from conftest import CONFIG, ROOT, unique_domain_id
+from conftest import CONFIG, ROOT, domain_ids, unique_domain_id
 
 
 def params(duration, **plant):
@@ -23,10 +24,13 @@ def params(duration, **plant):
 
 
 @pytest.mark.parametrize('sig', [signal.SIGSTOP, signal.SIGKILL])
-def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path, sig):
+def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path, sig,
+                                                                        monkeypatch):
     """SIGSTOP: the tracker stops answering, the plant aborts after lockstep_timeout (exit 5).
     SIGKILL: the runner sees the dead node and stops the run.  Either way: no hang, a clear
-    message, and a closed, readable bag."""
+    message, and a closed, readable bag.  (The recorder's drain and the runner's wait for
+    the stopped tracker are shortened from 5 s and 10 s: what they end is the same.)"""
+    monkeypatch.setattr(runner, 'STOP_WAIT_S', 3.0)
     env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id(f'kill{int(sig)}')))
     hit = threading.Event()
     lines = []
@@ -41,9 +45,11 @@ def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path
                 hit.set()
 
     start = time.monotonic()
-    res = run_processes(params(200.0, lockstep_timeout=2.0), tmp_path, env=env,
-                        progress=progress)
-    assert hit.is_set() and time.monotonic() - start < 60          # no hang
+    p = params(200.0, lockstep_timeout=2.0)
+    p.setdefault('recorder', {}).setdefault('ros__parameters', {})['drain_timeout'] = 1.0
+    res = run_processes(p, tmp_path, env=env, progress=progress)
+    assert hit.is_set(), (lines[-10:], runner.log_tail(tmp_path, 'plant'))
+    assert time.monotonic() - start < 60                                 # no hang
     if sig == signal.SIGSTOP:
         assert res.exit_codes['plant'] == 5
         log = (tmp_path / 'plant.log').read_text()
@@ -109,10 +115,9 @@ def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
         d.mkdir()
         results[name] = run_processes(p, d, env=env, progress=lambda s: None)
 
-    a = threading.Thread(target=run, args=('a', unique_domain_id('two-a'), [0.0] * 4))
-    b = threading.Thread(target=run, args=('b', unique_domain_id('two-b') + 1 if
-                                           unique_domain_id('two-b') == unique_domain_id('two-a')
-                                           else unique_domain_id('two-b'), [1.0, 0.0, 0.0, 1.0]))
+    one, two = domain_ids('two-systems', 2)
+    a = threading.Thread(target=run, args=('a', one, [0.0] * 4))
+    b = threading.Thread(target=run, args=('b', two, [1.0, 0.0, 0.0, 1.0]))
     a.start(); b.start(); a.join(); b.join()
     bags = {k: read_bag(v.bag) for k, v in results.items()}
     from nonfragile_tracker.control.gains import read_gain_file

@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt64
 
-from conftest import ROOT
+from conftest import ROOT, domain_ids
 from nonfragile_tracker import topics
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag, read_messages
 from nonfragile_tracker.bag.repair import repair_bag, scan_mcap
@@ -39,7 +39,7 @@ DT_NS = 10_000_000
 
 
 def _domain(index: int) -> int:
-    return 100 + os.getpid() % 100 + index * 6                 # 100 .. 229
+    return domain_ids('recorder-node', 6)[index]
 
 
 class Session:

@@ -392,6 +392,7 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
         test.destroy_node()
 
 
+@pytest.mark.realtime
 def test_path_tracked_in_real_time(ros_context):
     """Real time (wall clock, timers): the tracker samples the Path at each odom stamp
     without reference samples; the errors stay within those of the simulation of the
@@ -514,6 +515,7 @@ def test_reference_relays_an_untimed_plan(ros_context):
             n.destroy_node()
 
 
+@pytest.mark.realtime
 def test_reference_started_5_s_before_the_tracker_does_not_make_it_chase(ros_context):
     """Real time: the reference node publishes the lap 5 s before the tracker starts; the
     tracker re-bases it, so its first second's commanded speed stays within 10 % of the
@@ -635,6 +637,7 @@ def test_replay_reproduces_a_waypoint_run_with_predictor_and_retiming(tmp_path, 
     assert params_only.max_abs_error > 1e-3
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(tmp_path):
     """Real time, one process per node: the tracker re-times the lap in its worker thread and
