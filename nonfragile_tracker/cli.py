@@ -45,7 +45,12 @@ COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'study', 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every command module's sub-commands."""
+    """The argument parser with every command module's sub-commands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     import argparse
     import importlib
     p = argparse.ArgumentParser(prog='nonfragile_tracker', description=__doc__,
@@ -79,6 +84,16 @@ def main(argv: list[str] | None = None) -> int:
     raises ImportError): main() notes every SIGINT (its handler, installed for the call
     where Python's own is, raises KeyboardInterrupt just the same), and any error after
     one is the interruption, 130.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit code (``errors.EXIT_*``).
     """
     import signal
     noted: list[int] = []

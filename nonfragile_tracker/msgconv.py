@@ -8,6 +8,8 @@ rosbags' deserialized messages (bag replay) alike - one meaning, one place.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -23,28 +25,115 @@ __all__ = ['stamp_ns', 'ns_to_stamp', 'fill_pose', 'pose_from_odom', 'fill_refer
            'PREDICT_PARAMS', 'LIMIT_PARAMS', 'tracker_config']
 
 
-def stamp_ns(stamp) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+# The fields these functions read or write, as protocols: rclpy's messages and rosbags'
+# deserialized ones both have them.  The whole-trajectory messages (nav_msgs/Path,
+# trajectory_msgs/MultiDOFJointTrajectory) are read field by field and typed ``Any``.
+
+class _Time(Protocol):
+    """builtin_interfaces/Time or Duration."""
+
+    sec: int
+    nanosec: int
 
 
-def ns_to_stamp(ns: int, stamp) -> None:
-    """Integer nanoseconds -> builtin_interfaces/Time ``stamp`` (in place)."""
+class _Vector(Protocol):
+    """geometry_msgs/Point or Vector3."""
+
+    x: float
+    y: float
+    z: float
+
+
+class _Quaternion(_Vector, Protocol):
+    """geometry_msgs/Quaternion."""
+
+    w: float
+
+
+class _Pose(Protocol):
+    """geometry_msgs/Pose."""
+
+    position: _Vector
+    orientation: _Quaternion
+
+
+class _PoseStamped(Protocol):
+    pose: _Pose
+
+
+class _Twist(Protocol):
+    linear: _Vector
+
+
+class _TwistStamped(Protocol):
+    twist: _Twist
+
+
+class _Accel(Protocol):
+    linear: _Vector
+
+
+class _AccelStamped(Protocol):
+    accel: _Accel
+
+
+def stamp_ns(stamp: _Time) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds.
+
+    Parameters
+    ----------
+    stamp : builtin_interfaces/Time or Duration
+        A message stamp.
+    """
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, stamp: _Time) -> None:
+    """Integer nanoseconds -> builtin_interfaces/Time ``stamp`` (in place).
+
+    Parameters
+    ----------
+    ns : int
+        Nanoseconds.
+    stamp : builtin_interfaces/Time
+        The message field to set.
+    """
     stamp.sec, stamp.nanosec = divmod(int(ns), 1_000_000_000)
 
 
-def fill_pose(pose, x: float, y: float, th: float) -> None:
-    """Fill a geometry_msgs/Pose from a planar pose (REP-103: yaw about +z)."""
+def fill_pose(pose: _Pose, x: float, y: float, th: float) -> None:
+    """Fill a geometry_msgs/Pose from a planar pose (REP-103: yaw about +z).
+
+    Parameters
+    ----------
+    pose : geometry_msgs/Pose
+        The message field to set (in place).
+    x, y : float
+        Position (m).
+    th : float
+        Yaw (rad).
+    """
     pose.position.x, pose.position.y, pose.position.z = float(x), float(y), 0.0
     q = pose.orientation
     q.x, q.y, q.z, q.w = yaw_to_quaternion(th)
 
 
-def pose_from_odom(pose) -> tuple[float, float, float] | str:
+def pose_from_odom(pose: _Pose) -> tuple[float, float, float] | str:
     """Planar pose from a geometry_msgs/Pose, or a reason string if it is unusable.
 
     On the tracker's real-time path: each field is read once (message fields are
     properties) and checked without building temporaries.
+
+    Parameters
+    ----------
+    pose : geometry_msgs/Pose
+        E.g. an odometry's ``pose.pose``.
+
+    Returns
+    -------
+    tuple of float or str
+        ``(x, y, yaw)`` (m, m, rad), or why the pose is unusable (not finite, not a unit
+        quaternion).
     """
     p, q = pose.position, pose.orientation
     px, py, qx, qy, qz, qw = p.x, p.y, q.x, q.y, q.z, q.w
@@ -58,8 +147,17 @@ def pose_from_odom(pose) -> tuple[float, float, float] | str:
     return (px, py, quaternion_to_yaw(qx, qy, qz, qw))
 
 
-def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
-    """Fill the three reference messages (pose, twist, accel) from a sample."""
+def fill_reference(ref: RefSample, pose_msg: _PoseStamped, twist_msg: _TwistStamped,
+                   accel_msg: _AccelStamped) -> None:
+    """Fill the three reference messages (pose, twist, accel) from a sample.
+
+    Parameters
+    ----------
+    ref : RefSample
+        The reference sample.
+    pose_msg, twist_msg, accel_msg : PoseStamped, TwistStamped, AccelStamped
+        The messages to fill (in place; headers untouched).
+    """
     fill_pose(pose_msg.pose, ref.x, ref.y, ref.heading)
     tw = twist_msg.twist.linear
     tw.x, tw.y, tw.z = ref.vx, ref.vy, 0.0
@@ -67,8 +165,17 @@ def fill_reference(ref: RefSample, pose_msg, twist_msg, accel_msg) -> None:
     ac.x, ac.y, ac.z = ref.ax, ref.ay, 0.0
 
 
-def reference_from_msgs(t: float, pose_msg, twist_msg, accel_msg) -> RefSample | str:
-    """RefSample from the three reference messages, or a reason string if unusable."""
+def reference_from_msgs(t: float, pose_msg: _PoseStamped, twist_msg: _TwistStamped,
+                        accel_msg: _AccelStamped) -> RefSample | str:
+    """RefSample from the three reference messages, or a reason string if unusable.
+
+    Parameters
+    ----------
+    t : float
+        The sample's time (s).
+    pose_msg, twist_msg, accel_msg : PoseStamped, TwistStamped, AccelStamped
+        The reference messages of one step.
+    """
     pose = pose_from_odom(pose_msg.pose)
     if isinstance(pose, str):
         return f'reference/pose: {pose}'
@@ -86,8 +193,21 @@ PREDICT_PARAMS = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'p
 LIMIT_PARAMS = ('max_linear_accel', 'max_angular_accel')
 
 
-def tracker_config(values: dict) -> TrackerConfig:
-    """Build and validate the TrackerConfig from parameter values (startup and runtime)."""
+def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
+    """Build and validate the TrackerConfig from parameter values (startup and runtime).
+
+    Parameters
+    ----------
+    values : mapping
+        The tracker's parameter values by name (``K``, ``K_shape``, ``E``, ``F``,
+        ``Delta``, ``A_tau``, ``dt``, speeds, ``tau``, ``delay_compensation``; the
+        predictor and acceleration-limit ones default to 0).
+
+    Raises
+    ------
+    LoopConfigError
+        If a value is invalid (an ``InputError``).
+    """
     K = gain_from_parameters(values['K'], values['K_shape'])
     E = as_matrix(values['E'], 'E', (2, 2), flat=True, error=LoopConfigError)
     F = as_matrix(values['F'], 'F', (2, 4), flat=True, error=LoopConfigError)
@@ -105,7 +225,7 @@ def tracker_config(values: dict) -> TrackerConfig:
                          **{n: values.get(n, 0.0) for n in PREDICT_PARAMS + LIMIT_PARAMS})
 
 
-def _yaw(q, source: str, i: int) -> float:
+def _yaw(q: _Quaternion, source: str, i: int) -> float:
     vals = (q.x, q.y, q.z, q.w)
     norm = math.sqrt(sum(v * v for v in vals))
     if not all(math.isfinite(v) for v in vals) or abs(norm - 1.0) > 1e-3:
@@ -114,13 +234,26 @@ def _yaw(q, source: str, i: int) -> float:
     return quaternion_to_yaw(*vals)
 
 
-def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | None = None,
-                       max_accel: float | None = None,
+def path_to_trajectory(msg: Any, *, frame: str, source: str,
+                       cruise_speed: float | None = None, max_accel: float | None = None,
                        now_ns: int | None = None) -> tuple[Trajectory, int]:
     """Trajectory and origin stamp (ns) of a nav_msgs/Path; :class:`TrajectoryError` if bad.
 
     An untimed Path (all pose stamps zero) starts at its header stamp, or at ``now_ns``
     (the receiver's clock) when that is zero too.
+
+    Parameters
+    ----------
+    msg : nav_msgs/Path
+        The path (rclpy's or rosbags' message).
+    frame : str
+        The frame its header and poses must be in ('' poses: the header's).
+    source : str
+        Where it came from, for error messages.
+    cruise_speed, max_accel : float, optional
+        The time law of an untimed path (m/s, m/s^2; default: the trajectory module's).
+    now_ns : int, optional
+        The receiver's clock (ns): the origin of an untimed path without a header stamp.
     """
     check_frame(msg.header.frame_id, frame, source)
     n = len(msg.poses)
@@ -142,8 +275,23 @@ def path_to_trajectory(msg, *, frame: str, source: str, cruise_speed: float | No
     return from_waypoints((stamps - origin) * 1e-9, x, y, yaw=yaw, source=source), origin
 
 
-def multidof_to_trajectory(msg, *, frame: str, source: str) -> tuple[Trajectory, int]:
-    """Trajectory and origin stamp (ns) of a trajectory_msgs/MultiDOFJointTrajectory."""
+def multidof_to_trajectory(msg: Any, *, frame: str, source: str) -> tuple[Trajectory, int]:
+    """Trajectory and origin stamp (ns) of a trajectory_msgs/MultiDOFJointTrajectory.
+
+    Parameters
+    ----------
+    msg : trajectory_msgs/MultiDOFJointTrajectory
+        The trajectory of one joint (the planar base; rclpy's or rosbags' message).
+    frame : str
+        The frame its header must be in.
+    source : str
+        Where it came from, for error messages.
+
+    Raises
+    ------
+    TrajectoryError
+        If it is not one joint with one transform per point, or the points are bad.
+    """
     check_frame(msg.header.frame_id, frame, source)
     if len(msg.joint_names) > 1:
         raise TrajectoryError(f'{source}: {len(msg.joint_names)} joints '

@@ -160,6 +160,8 @@ def lockstep_handshake(record: bool) -> dict[str, dict[str, Any]]:
     Returns
     -------
     dict
+        ``lockstep_subscribers`` of the plant, tracker and reference, the plant's
+        ``lockstep_recorder`` and, with a recorder, its ``lockstep_gate``.
     """
     n = 2 if record else 0
     out = {'plant': {'lockstep_subscribers': max(n, 1), 'lockstep_recorder': record},
@@ -183,11 +185,14 @@ def realtime_handshake(record: bool) -> dict[str, dict[str, Any]]:
     Parameters
     ----------
     record : bool
-        Whether a recorder takes part.
+        Whether a recorder takes part; without one nothing waits.
 
     Returns
     -------
     dict
+        Empty without a recorder; else the plant's ``realtime_recorder``
+        and the plant's and tracker's ``lockstep_subscribers``, the recorder's
+        ``lockstep_gate``.
     """
     if not record:
         return {}

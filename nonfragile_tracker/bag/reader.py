@@ -42,7 +42,7 @@ from .typestore import jazzy_typestore
 
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
-           'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag',
+           'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag', 'bag_location',
            'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
            'MCAP_MAGIC']
 
@@ -189,6 +189,34 @@ def mcap_is_complete(path: str | os.PathLike[str]) -> bool:
     return head == MCAP_MAGIC and tail == MCAP_MAGIC
 
 
+def bag_location(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a :class:`~pathlib.Path` once it exists and, if a file, is an MCAP file.
+
+    What every reader of a bag (and ``bag repair``) checks first; what the directory or
+    file holds is checked by :func:`check_bag` and :func:`~.repair.repair_bag`.
+
+    Parameters
+    ----------
+    path : path-like
+        The bag directory the recorder created, or one ``.mcap`` file.
+
+    Raises
+    ------
+    BagNotFoundError
+        If ``path`` does not exist.
+    NotABagError
+        If it is a file without the ``.mcap`` suffix.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
+                               'recorder created (it holds metadata.yaml and a .mcap file)')
+    if p.is_file() and p.suffix != '.mcap':
+        raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that '
+                           'holds metadata.yaml and the .mcap file (or a .mcap file)')
+    return p
+
+
 def check_bag(path: str | os.PathLike[str]) -> Path:
     """Check that ``path`` is a readable bag directory and return the path to open.
 
@@ -214,14 +242,8 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
     BagTruncatedError
         If an MCAP file was not closed (``bag repair`` recovers it).
     """
-    p = Path(path)
-    if not p.exists():
-        raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
-                               'recorder created (it holds metadata.yaml and a .mcap file)')
+    p = bag_location(path)
     if p.is_file():
-        if p.suffix != '.mcap':
-            raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that '
-                               'holds metadata.yaml and the .mcap file (or a .mcap file)')
         if not mcap_is_complete(p):
             raise BagTruncatedError(
                 f'{p} is not a complete MCAP file (no MCAP magic at both ends: truncated or not '
@@ -252,11 +274,12 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
     Parameters
     ----------
     path : path-like
-        A bag directory or an MCAP file.
+        A bag directory or an MCAP file, checked by :func:`check_bag`.
 
     Returns
     -------
     rosbags.rosbag2.Reader
+        Opened on what :func:`check_bag` returned (the directory, or the one MCAP file).
 
     Raises
     ------

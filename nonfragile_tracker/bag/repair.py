@@ -34,7 +34,7 @@ from rosbags.interfaces import Qos
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
-from .reader import MCAP_MAGIC, BagNotFoundError, NotABagError, mcap_is_complete, open_reader
+from .reader import MCAP_MAGIC, NotABagError, bag_location, mcap_is_complete, open_reader
 from .errors import BagError, BagExistsError, NothingToRepairError, RepairError
 from .writer import BagWriter
 
@@ -227,14 +227,8 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
     RepairError
         If no ROS 2 data can be recovered (or a topic has two types).
     """
-    src = Path(path)
-    if not src.exists():
-        raise BagNotFoundError(f'bag directory {src} does not exist; pass the directory the '
-                               'recorder created')
+    src = bag_location(path)
     if src.is_file():
-        if src.suffix != '.mcap':
-            raise NotABagError(f'{src} is a file but not .mcap; pass the bag directory that '
-                               'holds the .mcap file, or the .mcap file')
         mcaps = [src]
         default_out = src.with_name(src.stem + '_repaired')
     else:

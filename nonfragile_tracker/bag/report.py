@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -32,6 +33,9 @@ from .. import topics
 from ..control.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
 from .errors import BagError
+
+if TYPE_CHECKING:
+    from ..control.monitor import Certificate, MonitorSettings
 
 __all__ = ['Gap', 'PhaseErrors', 'Report', 'TimingMetrics', 'bag_report', 'format_report',
            'find_gaps', 'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH',
@@ -96,7 +100,7 @@ class TimingMetrics:
     latency_max: float
     stamp_latency_median: float      # s; NaN when the clocks differ
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """The timing figures as a plain dict (for JSON)."""
         return asdict(self)
 
@@ -163,6 +167,16 @@ class PhaseErrors:
         """The split of ``err`` by ``phase`` (0 before, 1 active, 2 after).
 
         None if no sample is after the end or none is active.
+
+        Parameters
+        ----------
+        t : numpy.ndarray
+            Sample times (s), increasing.
+        err : numpy.ndarray
+            Position error per sample (m).
+        phase : numpy.ndarray
+            Trajectory phase per sample (:attr:`ReferenceSeries.phase
+            <nonfragile_tracker.bag.reader.ReferenceSeries.phase>`).
         """
         act = phase == 1
         after = phase == 2
@@ -180,7 +194,17 @@ class PhaseErrors:
 
 def find_gaps(topic: str, t: np.ndarray, factor: float = GAP_FACTOR
               ) -> tuple[float, list[Gap]]:
-    """Median step of the sorted times ``t`` and the steps larger than ``factor`` x median."""
+    """Median step of the sorted times ``t`` and the steps larger than ``factor`` x median.
+
+    Parameters
+    ----------
+    topic : str
+        The topic the times are of (named in each :class:`Gap`).
+    t : numpy.ndarray
+        Message times (s), sorted.
+    factor : float, optional
+        A step longer than ``factor`` x the median step is a gap.
+    """
     if t.size < 3:
         return (float(t[1] - t[0]) if t.size == 2 else math.nan), []
     dt = np.diff(t)
@@ -200,8 +224,14 @@ def timing_metrics(odom_stamp_ns: np.ndarray, odom_receive_ns: np.ndarray,
                    ) -> TimingMetrics:
     """Timing of a real-time run (see :class:`TimingMetrics`); arrays in ns.
 
-    ``odom_stamp_ns`` and ``odom_receive_ns`` are per odometry message (sorted by
-    stamp); ``cmd_receive_ns`` per command.
+    Parameters
+    ----------
+    odom_stamp_ns, odom_receive_ns : numpy.ndarray
+        Header stamp and bag receive time of each odometry message (sorted by stamp).
+    cmd_receive_ns : numpy.ndarray
+        Receive time of each command.
+    late_threshold : float, optional
+        Latency (s) above which a command is late (default: the median odometry step).
     """
     st = np.asarray(odom_stamp_ns, dtype=np.int64)
     rv = np.sort(np.asarray(odom_receive_ns, dtype=np.int64))
@@ -244,7 +274,8 @@ def timing_metrics(odom_stamp_ns: np.ndarray, odom_receive_ns: np.ndarray,
 LOCKSTEP_MATCH = 0.5
 
 
-def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
+def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None,
+               *,
                tolerance: float = 0.01, plots: bool = True, namespace: str | None = None,
                overwrite: bool = False, topic_overrides: dict[str, str] | None = None,
                late_threshold: float | None = None) -> Report:
@@ -256,6 +287,33 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
     created); existing figures are never replaced unless ``overwrite``.  A bag without a
     reference still gets timing and the path (``notes`` say so); a bag with neither
     odometry/pose nor commands raises :class:`MissingTopicsError`.
+
+    Parameters
+    ----------
+    path : path-like
+        The bag directory (or MCAP file).
+    out_dir : path-like, optional
+        Where the figures go (default ``<path>_report``).
+    tolerance : float, optional
+        Position tolerance of "settled" (m).
+    plots : bool, optional
+        Write the PNG figures.
+    namespace : str, optional
+        The namespace of the topic names (guessed when ``None``; :func:`read_bag
+        <nonfragile_tracker.bag.reader.read_bag>`).
+    overwrite : bool, optional
+        Replace existing figures.
+    topic_overrides : dict, optional
+        ``{logical name: stored topic}`` (e.g. ``'odom'``, ``'cmd_vel'``) for topics
+        under other names.
+    late_threshold : float, optional
+        Latency (s) above which a command is late (default: the median odometry step).
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read, the tolerance is bad, or figures exist and not
+        ``overwrite``.
     """
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
         raise BagError(f'tolerance must be a finite distance > 0 m, got {tolerance!r}')
@@ -340,7 +398,7 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BagError(f'cannot create report directory {out}: {exc.strerror or exc}') from None
-    files = {}
+    files: dict[str, Callable[[], Figure]] = {}
     if len(pose):
         files['xy.png'] = lambda: _plot_xy(pose.x if metrics is None else x,
                                            pose.y if metrics is None else y, xd, yd, ref.x,
@@ -354,7 +412,7 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
     if existing and not overwrite:
         raise BagError(f'{out} already holds {", ".join(existing)}; pass --force to replace '
                        'them or choose another --out')
-    written = {}
+    written: dict[str, Path] = {}
     for name, make in files.items():
         fig = make()
         target = out / name
@@ -367,7 +425,8 @@ def bag_report(path: str | os.PathLike, out_dir: str | os.PathLike | None = None
 # ---------------------------------------------------------------------------------------------
 # Figures
 
-def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
+def _plot_xy(x: np.ndarray, y: np.ndarray, xd: np.ndarray, yd: np.ndarray, rx: np.ndarray,
+             ry: np.ndarray, pose_topic: str) -> Figure:
     fig = Figure(figsize=(6.4, 6.0))
     fig.subplots_adjust(left=0.13, right=0.97, top=0.93, bottom=0.09)
     ax = fig.add_subplot()
@@ -386,7 +445,7 @@ def _plot_xy(x, y, xd, yd, rx, ry, pose_topic: str) -> Figure:
     return fig
 
 
-def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
+def _plot_errors(t: np.ndarray, ex: np.ndarray, ey: np.ndarray, tolerance: float) -> Figure:
     fig = Figure(figsize=(7.5, 7.0))
     fig.subplots_adjust(left=0.12, right=0.97, top=0.94, bottom=0.08, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
@@ -406,7 +465,9 @@ def _plot_errors(t, ex, ey, tolerance: float) -> Figure:
     return fig
 
 
-def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
+def _plot_xi(t: np.ndarray, x: np.ndarray, y: np.ndarray, th: np.ndarray, v: np.ndarray,
+             xd: np.ndarray, yd: np.ndarray, vxd: np.ndarray, vyd: np.ndarray,
+             pose_topic: str) -> Figure:
     fig = Figure(figsize=(8.0, 8.0))
     fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.07, hspace=0.12)
     axes = fig.subplots(4, 1, sharex=True)
@@ -432,7 +493,7 @@ def _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose_topic: str) -> Figure:
     return fig
 
 
-def _plot_commands(t, v, w, note: str) -> Figure:
+def _plot_commands(t: np.ndarray, v: np.ndarray, w: np.ndarray, note: str) -> Figure:
     fig = Figure(figsize=(7.5, 5.5))
     fig.subplots_adjust(left=0.12, right=0.97, top=0.93, bottom=0.1, hspace=0.12)
     axes = fig.subplots(2, 1, sharex=True)
@@ -458,7 +519,13 @@ def _fmt(value: float, unit: str, digits: int = 4) -> str:
 
 
 def format_report(report: Report) -> str:
-    """A readable summary: metrics table, timing, messages per topic, gaps and plot files."""
+    """A readable summary: metrics table, timing, messages per topic, gaps and plot files.
+
+    Parameters
+    ----------
+    report : Report
+        What :func:`bag_report` found.
+    """
     m = report.metrics
     rows = []
     if m is not None:
@@ -551,7 +618,7 @@ class CertificateCheck:
     """
 
     source: str
-    certificate: Any                # control.monitor.Certificate or None
+    certificate: Certificate | None
     predict_latency: float
     t: np.ndarray
     latency: np.ndarray             # estimate per window (NaN: none)
@@ -564,7 +631,7 @@ class CertificateCheck:
     notes: tuple[str, ...] = ()
 
 
-def _tracker_section(path: Path) -> dict:
+def _tracker_section(path: Path) -> dict[str, Any]:
     from ..files import read_yaml
     data = read_yaml(path, 'parameter file', error=BagError)
     if isinstance(data, dict):
@@ -575,13 +642,27 @@ def _tracker_section(path: Path) -> dict:
     return {}
 
 
-def certificate_source(bag: str | os.PathLike, gains: str | os.PathLike | None = None
-                       ) -> tuple[Any, dict, str] | None:
+def certificate_source(bag: str | os.PathLike[str],
+                       gains: str | os.PathLike[str] | None = None
+                       ) -> tuple[Certificate | None, dict[str, Any], str] | None:
     """The certificate and tracker parameters to check a run against, and where they are from.
 
     ``gains`` (a gain file: its ``gain_design`` record and tracker section), else the run
     directory's ``params.yaml`` (the tracker parameters recorded with the run:
     ``certified_residual`` etc.).  None when neither gives one.
+
+    Parameters
+    ----------
+    bag : path-like
+        The run's bag (its directory's parent holds ``params.yaml`` for a run of ``run``).
+    gains : path-like, optional
+        A gain file to check against instead.
+
+    Returns
+    -------
+    tuple or None
+        ``(certificate, tracker parameters, source)``; the certificate is None when
+        ``gains`` records none.
     """
     from ..control.gains import read_gain_design
     from ..control.monitor import certificate_from_design, certificate_from_parameters
@@ -608,9 +689,9 @@ def certificate_source(bag: str | os.PathLike, gains: str | os.PathLike | None =
     return cert, params, str(recorded)
 
 
-def certificate_check(bag: str | os.PathLike, certificate: Any, params: dict, *,
-                      source: str = '', step: float = 1.0, settings: Any = None
-                      ) -> CertificateCheck:
+def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | None,
+                      params: Mapping[str, Any], *, source: str = '', step: float = 1.0,
+                      settings: MonitorSettings | None = None) -> CertificateCheck:
     """Run the tracker's certificate monitor over a recorded run, one window every ``step`` s.
 
     Parameters
@@ -675,7 +756,13 @@ def certificate_check(bag: str | os.PathLike, certificate: Any, params: dict, *,
 
 
 def format_certificate(chk: CertificateCheck) -> str:
-    """The certificate section of ``bag report``."""
+    """The certificate section of ``bag report``.
+
+    Parameters
+    ----------
+    chk : CertificateCheck
+        What :func:`certificate_check` found.
+    """
     lines = ['', f'certificate ({chk.source}):']
     if chk.certificate is None:
         lines.append('  none recorded: latency estimates only')

@@ -7,35 +7,27 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
+from typing import TypeVar
 
 __all__ = ['finite_float', 'positive_float', 'nonnegative_float', 'positive_int',
            'nonnegative_int', 'add_executor_arguments']
 
 
 def finite_float(text: str) -> float:
-    """A finite real number (no ``nan``/``inf``)."""
+    """A finite real number (no ``nan``/``inf``).
+
+    Parameters
+    ----------
+    text : str
+        The option's value as typed.
+    """
     try:
         x = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
     if not math.isfinite(x):
         raise argparse.ArgumentTypeError(f'expected a finite number, got {text!r}')
-    return x
-
-
-def positive_float(text: str) -> float:
-    """A finite number > 0 (a bound, a delay, a duration)."""
-    x = finite_float(text)
-    if x <= 0:
-        raise argparse.ArgumentTypeError(f'expected a number > 0, got {text!r}')
-    return x
-
-
-def nonnegative_float(text: str) -> float:
-    """A finite number >= 0."""
-    x = finite_float(text)
-    if x < 0:
-        raise argparse.ArgumentTypeError(f'expected a number >= 0, got {text!r}')
     return x
 
 
@@ -46,20 +38,36 @@ def _integer(text: str) -> int:
         raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
 
 
-def positive_int(text: str) -> int:
-    """An integer >= 1 (a count)."""
-    n = _integer(text)
-    if n < 1:
-        raise argparse.ArgumentTypeError(f'expected an integer >= 1, got {text!r}')
-    return n
+_X = TypeVar('_X', int, float)
 
 
-def nonnegative_int(text: str) -> int:
-    """An integer >= 0 (a seed)."""
-    n = _integer(text)
-    if n < 0:
-        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
-    return n
+def _at_least(parse: Callable[[str], _X], low: _X, strict: bool, kind: str, name: str,
+              summary: str) -> Callable[[str], _X]:
+    """The ``type=`` function ``name``: ``parse``, then check the lower bound.
+
+    A value must be above ``low`` (``strict``) or at least ``low``; else the usage error
+    names ``kind`` and the bound.  One rule for every bounded number of the CLI.
+    """
+    def check(text: str) -> _X:
+        x = parse(text)
+        if x < low or (strict and x == low):
+            raise argparse.ArgumentTypeError(
+                f'expected {kind} {">" if strict else ">="} {low:g}, got {text!r}')
+        return x
+    check.__name__ = check.__qualname__ = name
+    check.__doc__ = (f'{summary}\n\nParameters\n----------\ntext : str\n'
+                     "    The option's value as typed.\n")
+    return check
+
+
+positive_float = _at_least(finite_float, 0.0, True, 'a number', 'positive_float',
+                           'A finite number > 0 (a bound, a delay, a duration).')
+nonnegative_float = _at_least(finite_float, 0.0, False, 'a number', 'nonnegative_float',
+                              'A finite number >= 0.')
+positive_int = _at_least(_integer, 1, False, 'an integer', 'positive_int',
+                         'An integer >= 1 (a count).')
+nonnegative_int = _at_least(_integer, 0, False, 'an integer', 'nonnegative_int',
+                            'An integer >= 0 (a seed).')
 
 
 def add_executor_arguments(p: argparse.ArgumentParser) -> None:

@@ -10,12 +10,13 @@ import argparse
 from pathlib import Path
 
 from ..errors import EXIT_DIFFERENT, EXIT_OK
+from .common import Subparsers
 
-__all__ = ['register']
+__all__ = ['register', 'cmd_report', 'cmd_compare', 'cmd_replay', 'cmd_repair']
 
 
-def _overrides(args) -> dict[str, str]:
-    out = {}
+def _overrides(args: argparse.Namespace) -> dict[str, str]:
+    out: dict[str, str] = {}
     if getattr(args, 'odom', None):
         out['odom'] = args.odom
     if getattr(args, 'cmd', None):
@@ -23,7 +24,14 @@ def _overrides(args) -> dict[str, str]:
     return out
 
 
-def cmd_report(args) -> int:
+def cmd_report(args: argparse.Namespace) -> int:
+    """Print the report of a recorded run (plots into ``--out``) and its certificate check.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``bag report``.
+    """
     from ..bag.report import bag_report, format_report
     rep = bag_report(Path(args.bag), Path(args.out) if args.out else None,
                      overwrite=args.force, plots=not args.no_plots, tolerance=args.tolerance,
@@ -38,14 +46,28 @@ def cmd_report(args) -> int:
     return EXIT_OK
 
 
-def cmd_repair(args) -> int:
+def cmd_repair(args: argparse.Namespace) -> int:
+    """Write a closed copy of a bag that was not closed and print what was recovered.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``bag repair``.
+    """
     from ..bag.repair import repair_bag
     res = repair_bag(Path(args.bag), Path(args.out) if args.out else None)
     print(res.summary())
     return EXIT_OK
 
 
-def cmd_compare(args) -> int:
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Compare two runs field by field: exit 0 when equal within tolerance, else 1.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``bag compare``.
+    """
     from ..bag.compare import compare_bags, format_differences
     cmp = compare_bags(Path(args.expected), Path(args.actual), atol=args.atol, rtol=args.rtol,
                        tolerances=args.tol or (), align=args.align,
@@ -59,7 +81,17 @@ def cmd_compare(args) -> int:
     return EXIT_DIFFERENT
 
 
-def cmd_replay(args) -> int:
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Replay a bag's inputs into a fresh tracker; exit 1 if its commands differ.
+
+    In process, or through a tracker node with ``--ros``; the commands are compared with
+    the recorded ones (or ``--expected``'s).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``bag replay``.
+    """
     from ..bag.replay import format_replay, replay
     kw = dict(gains=Path(args.gains) if args.gains else None,
               params=Path(args.params) if args.params else None,
@@ -83,8 +115,15 @@ def _tolerance_args(p: argparse.ArgumentParser, atol: float) -> None:
                    help='differences listed (all are counted; default 20)')
 
 
-def register(subparsers) -> None:
-    """Add ``bag report|compare|replay|repair`` to the CLI."""
+def register(subparsers: Subparsers) -> None:
+    """Add ``bag report|compare|replay|repair`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``);
+        ``bag`` with ``report``, ``compare``, ``replay`` and ``repair`` is added to them.
+    """
     b = subparsers.add_parser('bag', help='bag tools: report, compare, replay, repair')
     bs = b.add_subparsers(dest='bag_command', required=True)
 

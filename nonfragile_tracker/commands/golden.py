@@ -1,15 +1,24 @@
 """``nonfragile_tracker golden``: re-run golden scenarios, show what changed, replace them."""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
 from ..errors import EXIT_DIFFERENT, EXIT_OK
+from .common import Subparsers
 
-__all__ = ['register']
+__all__ = ['register', 'cmd_golden']
 
 
-def cmd_golden(args) -> int:
+def cmd_golden(args: argparse.Namespace) -> int:
+    """Re-run the golden scenarios; exit 1 if a bag differs or is new (unless ``--write``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``golden``.
+    """
     from .. import golden
     if args.scenario:
         scenarios = [golden.scenario_from_file(p, args.gains) for p in args.scenario]
@@ -24,8 +33,14 @@ def cmd_golden(args) -> int:
     return EXIT_OK
 
 
-def register(subparsers) -> None:
-    """Add ``golden`` to the CLI."""
+def register(subparsers: Subparsers) -> None:
+    """Add ``golden`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``golden`` is added to them.
+    """
     from ..golden import DURATION
     g = subparsers.add_parser(
         'golden', help='re-run golden scenarios (the package\'s, or your --scenario files) in '

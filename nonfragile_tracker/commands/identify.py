@@ -3,8 +3,15 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
+from typing import TYPE_CHECKING
 
+from .common import Subparsers, check_outputs
+
+if TYPE_CHECKING:
+    from ..bag.motion import MotionData
+    from ..control.identify import Identification
+
+__all__ = ['register', 'cmd_identify']
 
 
 def _fmt_interval(lo: float, hi: float) -> str:
@@ -12,13 +19,17 @@ def _fmt_interval(lo: float, hi: float) -> str:
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    """Read the bag, identify, print the estimates and the next step, optionally write -o."""
+    """Read the bag, identify, print the estimates and the next step, optionally write -o.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``identify``.
+    """
     from ..bag.motion import read_motion
     from ..control.identify import (identify_latency, measurement_to_command_delay,
                                     with_source, write_identification)
-    from ..errors import InputError
-    if args.output and Path(args.output).exists() and not args.force:
-        raise InputError(f'{args.output} exists; pass --force to overwrite it')
+    check_outputs(args.force, args.output)
     data = read_motion(args.bag, cmd_topic=args.cmd_topic, odom_topic=args.odom_topic,
                        cmd_time=args.cmd_time)
     res = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
@@ -93,7 +104,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _limits_line(res) -> str:
+def _limits_line(res: Identification) -> str:
     parts = []
     for name, a, frac, unit in (('max_linear_accel', res.max_linear_accel, res.accel_binding_v,
                                  'm/s^2'),
@@ -104,7 +115,8 @@ def _limits_line(res) -> str:
     return 'acceleration limits: ' + ', '.join(parts)
 
 
-def _cross_check(args: argparse.Namespace, data, res) -> list[str]:
+def _cross_check(args: argparse.Namespace, data: MotionData, res: Identification
+                 ) -> list[str]:
     """The latency from the poses alone, against the twist-based one.
 
     A base whose twist echoes the command, or is stamped differently from the pose,
@@ -127,9 +139,15 @@ def _cross_check(args: argparse.Namespace, data, res) -> list[str]:
     return out
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``identify``."""
-    p = sub.add_parser(
+def register(subparsers: Subparsers) -> None:
+    """Add ``identify`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``identify`` is added to them.
+    """
+    p = subparsers.add_parser(
         'identify', help='command-to-motion latency and actuator lags from a bag',
         description='Estimate from a recorded run (cmd_vel as Twist or TwistStamped, '
         'nav_msgs/Odometry) the command-to-motion latency and the first-order time constants '

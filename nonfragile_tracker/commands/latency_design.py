@@ -5,27 +5,35 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
+
+from .common import Subparsers, check_outputs
 
 __all__ = ['register', 'run']
 
 
 def run(args: argparse.Namespace) -> int:
-    """Design, print the figures, write the gain file (with its design record) if asked."""
+    """Design, print the figures, write the gain file (with its design record) if asked.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``latency-design``.
+    """
     from ..control.gains import write_gain_file
     from ..control.latency_design import design_for_latency, plan_from_identification
     from ..control.monitor import certificate_from_design
     from ..control.problem import load_problem
     from ..errors import InputError
-    if args.output and Path(args.output).exists() and not args.force:
-        raise FileExistsError(f'{args.output} exists; pass --force to overwrite it')
+    check_outputs(args.force, args.output)
     if (args.delay_interval is None) == (args.identification is None):
         raise InputError('give the latency either as --delay-interval H_MIN H_MAX or as '
                          '--identification FILE (written by `identify BAG -o FILE`), not both')
     if args.identification is None and (args.no_predictor or args.command_period is not None):
         raise InputError('--no-predictor and --command-period apply to --identification only')
     problem = load_problem(args.problem)
-    extra: dict = {}
-    record: dict = {}
+    extra: dict[str, Any] = {}
+    record: dict[str, Any] = {}
     lag = 0.0 if args.lag is None else args.lag
     if args.identification is not None:
         from ..control.identify import read_identification
@@ -64,8 +72,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add the ``latency-design`` sub-command."""
+def register(subparsers: Subparsers) -> None:
+    """Add ``latency-design`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``latency-design`` is added to them.
+    """
     p = subparsers.add_parser(
         'latency-design', help='gain certified for a command latency interval (input delay)',
         description='Synthesize a non-fragile tracker gain certified for every command '

@@ -6,9 +6,12 @@ from pathlib import Path
 
 from ..errors import InputError
 from .argtypes import positive_float
+from .common import Subparsers
+
+__all__ = ['register', 'cmd_reproduce']
 
 
-def docs_dir(value: str | None) -> Path:
+def _docs_dir(value: str | None) -> Path:
     """Where ``--docs`` writes: the given directory, else ``docs/`` of a source checkout.
 
     Raises
@@ -28,10 +31,16 @@ def docs_dir(value: str | None) -> Path:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    """Compute the report into ``--out`` (and copy it into the ``--docs`` directory)."""
+    """Compute the report into ``--out`` (and copy it into the ``--docs`` directory).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``reproduce``.
+    """
     from .. import reproduce
     from ..resources import config_dir
-    docs = docs_dir(args.docs) if args.docs is not None else None
+    docs = _docs_dir(args.docs) if args.docs is not None else None
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f'--out {out} exists and is not a directory')
@@ -47,9 +56,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``reproduce``."""
-    r = sub.add_parser('reproduce', help="the paper's Section IV: gains, Figs. 2-6, report")
+def register(subparsers: Subparsers) -> None:
+    """Add ``reproduce`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``reproduce`` is added to them.
+    """
+    r = subparsers.add_parser('reproduce', help="the paper's Section IV: gains, Figs. 2-6, report")
     r.add_argument('--out', default='runs/reproduction', help='output directory')
     r.add_argument('--force', action='store_true', help='write into a non-empty --out')
     r.add_argument('--docs', nargs='?', const='', default=None, metavar='DIR',

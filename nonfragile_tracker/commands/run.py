@@ -4,12 +4,16 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from ..errors import EXIT_BAD_INPUT, EXIT_RUN, InputError
 from .argtypes import positive_float
+from .common import Subparsers
+
+__all__ = ['register', 'cmd_run']
 
 
-def last_error(log: Path) -> str:
+def _last_error(log: Path) -> str:
     """The last FATAL/ERROR line of a node's log (without the logger prefix), or a pointer."""
     try:
         lines = log.read_text(errors='replace').splitlines()
@@ -22,7 +26,13 @@ def last_error(log: Path) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """Run the scenario (one process per node or composed), then report on its bag."""
+    """Run the scenario (one process per node or composed), then report on its bag.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``run``.
+    """
     from .. import runner
     from ..control.gains import read_gain_file
     from ..resources import config_dir
@@ -32,8 +42,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenario = Path(args.scenario) if args.scenario else config_dir() / 'paper_scenario.yaml'
     gains = (Path(args.gains) if args.gains else config_dir() / (
         'paper_gains_tracker.yaml' if args.paper else 'tracker_gains.yaml'))
-    ov: dict = {'plant': {'ros__parameters': {}}, 'tracker': {'ros__parameters': {}},
-                'reference': {'ros__parameters': {}}}
+    ov: dict[str, dict[str, dict[str, Any]]] = {
+        'plant': {'ros__parameters': {}}, 'tracker': {'ros__parameters': {}},
+        'reference': {'ros__parameters': {}}}
     if args.duration is not None:
         ov['plant']['ros__parameters']['duration'] = float(args.duration)
     if args.delta:
@@ -81,7 +92,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if bad and all(code == EXIT_BAD_INPUT for code in bad.values()):
         # every failed node refused its parameters: bad input, say which and why
         for node in bad:
-            print(f'error: {node}: {last_error(run_dir / f"{node}.log")}', file=sys.stderr)
+            print(f'error: {node}: {_last_error(run_dir / f"{node}.log")}', file=sys.stderr)
         return EXIT_BAD_INPUT
     print(f'wall time {res.wall_time:.1f} s ({res.steps / max(res.wall_time, 1e-9):.0f} steps/s '
           'including start-up)')
@@ -96,9 +107,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``run``."""
-    r = sub.add_parser('run', help='the main job: paper scenario through the ROS nodes, '
+def register(subparsers: Subparsers) -> None:
+    """Add ``run`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``run`` is added to them.
+    """
+    r = subparsers.add_parser('run', help='the main job: paper scenario through the ROS nodes, '
                        'bag, report and plots')
     r.add_argument('--scenario', help='node parameter file (default config/paper_scenario.yaml)')
     r.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml: '

@@ -9,16 +9,23 @@ from pathlib import Path
 
 from .argtypes import (add_executor_arguments, nonnegative_float, nonnegative_int,
                        positive_float, positive_int)
+from .common import Subparsers, add_report_outputs, check_outputs
 
 __all__ = ['register', 'cmd_study']
 
 
-def _fmt(v, unit: str = '', prec: str = '.4g') -> str:
+def _fmt(v: float | None, unit: str = '', prec: str = '.4g') -> str:
     return '-' if v is None else f'{v:{prec}}{unit}'
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    """Sample, run the batch, print the summary; write JSON and the plot if asked."""
+    """Sample, run the batch, print the summary; write JSON and the plot if asked.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``study``.
+    """
     from ..control.batch import PathBatch
     from ..control.gains import read_gain_design, read_gain_file
     from ..control.loop import TrackerConfig
@@ -27,11 +34,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..resources import config_dir
     from ..scenario import node_parameters, plant_config
-    for out in (args.json, args.plot):
-        if out and Path(out).exists() and not args.force:
-            raise InputError(f'{out} exists; pass --force to overwrite it')
-        if out and not Path(out).resolve().parent.is_dir():
-            raise InputError(f'{out}: directory {Path(out).resolve().parent} does not exist')
+    check_outputs(args.force, args.json, args.plot)
     K = read_gain_file(args.gains)
     design = read_gain_design(args.gains)
     problem = load_problem(args.problem or config_dir() / 'paper_problem.yaml')
@@ -113,15 +116,21 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
-def _json_default(obj):
+def _json_default(obj: object) -> None:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     raise TypeError(f'not JSON serializable: {type(obj).__name__}')
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``study``."""
-    p = sub.add_parser(
+def register(subparsers: Subparsers) -> None:
+    """Add ``study`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``study`` is added to them.
+    """
+    p = subparsers.add_parser(
         'study', help='robustness study: many sampled perturbations, latencies and poses',
         description='Simulate the tracking loop of a gain for many sampled cases at once '
         '(vectorized batch, split over processes) and report the worst case, the '
@@ -159,7 +168,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument('--jobs', type=positive_int, default=None,
                    help='worker processes (default: the cores available)')
     add_executor_arguments(p)
-    p.add_argument('--json', metavar='OUT', help='write the summary and every case as JSON')
-    p.add_argument('--plot', metavar='OUT.png', help='write a PNG of the distributions')
-    p.add_argument('--force', action='store_true', help='overwrite --json/--plot files')
+    add_report_outputs(p, json_help='write the summary and every case as JSON',
+                       plot_help='write a PNG of the distributions')
     p.set_defaults(func=cmd_study)

@@ -7,21 +7,23 @@ import time
 from pathlib import Path
 
 from .argtypes import add_executor_arguments, nonnegative_float, positive_float, positive_int
+from .common import Subparsers, add_report_outputs, check_outputs
 
 __all__ = ['register', 'run']
 
 
 def run(args: argparse.Namespace) -> int:
-    """Make the grid, design every point, print the table; JSON and plot if asked."""
+    """Make the grid, design every point, print the table; JSON and plot if asked.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``sweep``.
+    """
     from ..control.problem import load_problem
     from ..control.sweep import (plot_sweep, records_for_json, run_sweep, sweep_points,
                                  sweep_table)
-    from ..errors import InputError
-    for out in (args.json, args.plot):
-        if out and Path(out).exists() and not args.force:
-            raise InputError(f'{out} exists; pass --force to overwrite it')
-        if out and not Path(out).resolve().parent.is_dir():
-            raise InputError(f'{out}: directory {Path(out).resolve().parent} does not exist')
+    check_outputs(args.force, args.json, args.plot)
     problem = load_problem(args.problem)
     latencies = args.latency or [[0.0, 0.03], [0.0, 0.15]]
     bounds = args.gain_bound or [None]
@@ -54,8 +56,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add the ``sweep`` sub-command."""
+def register(subparsers: Subparsers) -> None:
+    """Add ``sweep`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``sweep`` is added to them.
+    """
     p = subparsers.add_parser(
         'sweep', help='certified latency designs over a grid (parallel), Pareto front',
         description='Design a certified tracker gain (latency-design) for every point of a '
@@ -81,7 +89,6 @@ def register(subparsers) -> None:
     p.add_argument('--workers', type=positive_int, default=None,
                    help='worker processes (default: the cores available)')
     add_executor_arguments(p)
-    p.add_argument('--json', metavar='OUT', help='write every design and its figures as JSON')
-    p.add_argument('--plot', metavar='OUT.png', help='write the Pareto-front plot')
-    p.add_argument('--force', action='store_true', help='overwrite --json/--plot files')
+    add_report_outputs(p, json_help='write every design and its figures as JSON',
+                       plot_help='write the Pareto-front plot')
     p.set_defaults(func=run)

@@ -6,14 +6,23 @@ import json
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InputError
 from .argtypes import positive_float
+from .common import Subparsers
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ..control.problem import Problem
+
+__all__ = ['register', 'cmd_synthesize', 'cmd_design', 'cmd_delay_dependent', 'cmd_analyse']
 
 
-def gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
+def _gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
     """The gains named by ``--gains FILE`` (repeatable) and ``--paper``, by display name."""
     from ..control.gains import read_gain_file
     from ..resources import load_paper_gains
@@ -28,7 +37,13 @@ def gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
 
 
 def cmd_synthesize(args: argparse.Namespace) -> int:
-    """Theorem 1 -> gain file."""
+    """Theorem 1 -> gain file (``synthesize``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``synthesize``.
+    """
     from ..control.gains import write_gain_file
     from ..control.lmi import UntrustedGainWarning, synthesize
     from ..control.problem import load_problem
@@ -78,7 +93,7 @@ def cmd_synthesize(args: argparse.Namespace) -> int:
 
 
 def _write_gains(args: argparse.Namespace, K: np.ndarray, summary: str,
-                 design: dict | None = None) -> None:
+                 design: dict[str, Any] | None = None) -> None:
     from ..control.gains import write_gain_file
     print(summary)
     if args.output:
@@ -89,7 +104,13 @@ def _write_gains(args: argparse.Namespace, K: np.ndarray, summary: str,
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    """Optimized Theorem 1 gain."""
+    """Optimized Theorem 1 gain (``design``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``design``.
+    """
     from ..control import design
     from ..control.problem import load_problem
     problem = load_problem(args.problem)
@@ -148,7 +169,7 @@ def _add_saturation_args(p: argparse.ArgumentParser) -> None:
                    'the certified radius')
 
 
-def _saturation_text(args: argparse.Namespace, problem, K) -> str:
+def _saturation_text(args: argparse.Namespace, problem: Problem, K: ArrayLike) -> str:
     """The saturation certificate of ``K`` when --min-speed is given ('' otherwise)."""
     if getattr(args, 'min_speed', None) is None:
         return ''
@@ -169,7 +190,13 @@ def _saturation_text(args: argparse.Namespace, problem, K) -> str:
 
 
 def cmd_delay_dependent(args: argparse.Namespace) -> int:
-    """Delay-dependent (descriptor method) design."""
+    """Delay-dependent (descriptor method) design (``delay-dependent``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``delay-dependent``.
+    """
     from ..control import delay
     from ..control.delay_dependent import max_certified_delay, synthesize_delay_dependent
     from ..control.problem import load_problem
@@ -195,12 +222,20 @@ def cmd_delay_dependent(args: argparse.Namespace) -> int:
 
 
 def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
-    """Certificates, abscissae and margins of given gains (``margins``: margins only)."""
+    """Certificates, abscissae and margins of given gains (``analyse``, ``margins``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``analyse`` or ``margins``.
+    margins_only : bool, optional
+        ``margins``: print only the measured and certified fragility margins.
+    """
     from ..control.analysis import analyse_gain, format_analysis
     from ..control.problem import load_problem
     problem = load_problem(args.problem)
     rows = [analyse_gain(problem, K, name=name, margins=not args.no_margins)
-            for name, K in gains_from_args(args).items()]
+            for name, K in _gains_from_args(args).items()]
     if margins_only:
         w = max(len(r.name) for r in rows)
         print(f'{"gain":<{w}}  {"||K||_2":>8}  {"measured":>9}  {"certified":>9}')
@@ -230,9 +265,16 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``synthesize``, ``design``, ``delay-dependent``, ``analyse``, ``margins``."""
-    s = sub.add_parser('synthesize', help='solve Theorem 1 and write the tracker gain file')
+def register(subparsers: Subparsers) -> None:
+    """Add ``synthesize``, ``design``, ``delay-dependent``, ``analyse``, ``margins``.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``); ``synthesize``, ``design``,
+        ``delay-dependent``, ``analyse`` and ``margins`` are added to them.
+    """
+    s = subparsers.add_parser('synthesize', help='solve Theorem 1 and write the tracker gain file')
     s.add_argument('problem', help='problem YAML (e.g. config/paper_problem.yaml)')
     s.add_argument('-o', '--output', help='tracker parameter file to write (never overwritten '
                    'without --force)')
@@ -243,7 +285,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument('--json', help='also write the certificate as JSON')
     s.set_defaults(func=cmd_synthesize)
 
-    d = sub.add_parser('design', help='optimized Theorem 1 gain (decay rate, perturbation '
+    d = subparsers.add_parser('design', help='optimized Theorem 1 gain (decay rate, perturbation '
                        'scale, smallest norm)')
     d.add_argument('problem')
     d.add_argument('--objective', choices=['decay', 'scale', 'min-norm'], required=True)
@@ -255,7 +297,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_saturation_args(d)
     d.set_defaults(func=cmd_design)
 
-    dd = sub.add_parser('delay-dependent', help='delay-dependent design (Fridman-Shaked '
+    dd = subparsers.add_parser('delay-dependent', help='delay-dependent design (Fridman-Shaked '
                         'descriptor method) and the largest certified delay')
     dd.add_argument('problem')
     g = dd.add_mutually_exclusive_group()
@@ -272,7 +314,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name, margins_only, helptext in (
             ('analyse', False, 'certify a gain, delay-loop abscissae, fragility margins'),
             ('margins', True, 'measured and certified fragility margins of a gain')):
-        a = sub.add_parser(name, help=helptext)
+        a = subparsers.add_parser(name, help=helptext)
         a.add_argument('problem', help='problem YAML')
         a.add_argument('--gains', action='append', help='tracker gain file (repeatable)')
         a.add_argument('--paper', action='store_true', help="include the paper's printed gains")

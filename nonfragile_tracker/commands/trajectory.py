@@ -13,6 +13,13 @@ import argparse
 from ..control.limits import LIMIT_NAMES, Limits, check, retime
 from ..control.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
+from .common import Subparsers
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ..control.trajectory import Trajectory
+
+__all__ = ['register', 'cmd_check']
 
 
 def _limit(text: str) -> tuple[str, float]:
@@ -26,8 +33,15 @@ def _limit(text: str) -> tuple[str, float]:
         raise argparse.ArgumentTypeError(f'{text!r}: {value!r} is not a number') from None
 
 
-def register(subparsers) -> None:
-    """Add ``trajectory check`` to the CLI."""
+def register(subparsers: Subparsers) -> None:
+    """Add ``trajectory check`` to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The CLI's sub-commands (``cli.build_parser``);
+        ``trajectory`` with ``check`` is added to them.
+    """
     p = subparsers.add_parser('trajectory', help='timed trajectories (waypoint files)')
     sub = p.add_subparsers(dest='trajectory_command', required=True)
     c = sub.add_parser('check', help='build the trajectory of a waypoint file (CSV or YAML: '
@@ -48,7 +62,13 @@ def register(subparsers) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Load a waypoint file, print its summary and, with limits, the margins."""
+    """Load a waypoint file, print its summary and, with limits, the margins.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of ``trajectory check``.
+    """
     traj = load_waypoints(args.file, ends=args.ends, smoothing=args.smoothing)
     d = describe(traj)
     print(f'{args.file}: {d["points"]} points, {d["kind"]}, t = {d["t_start"]:g} .. '
@@ -85,7 +105,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
-def _write_csv(traj, path: str) -> None:
+def _write_csv(traj: Trajectory, path: str) -> None:
     import numpy as np
     t = np.arange(traj.t_start, traj.t_end, 0.02)
     t = np.append(t, traj.t_end)

@@ -1,0 +1,62 @@
+"""What several commands share: the output-file options and their check before any work.
+
+A command that writes files refuses an existing one without ``--force`` and a missing
+directory before it computes anything (exit 2 through ``cli.main``), with one message
+for every command.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import InputError
+
+__all__ = ['add_report_outputs', 'check_outputs']
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    #: The object ``ArgumentParser.add_subparsers()`` returns: each command module's
+    #: ``register`` adds its sub-commands to it.
+    Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]
+else:
+    Subparsers = argparse._SubParsersAction
+
+
+def check_outputs(force: bool, *outputs: str | None) -> None:
+    """Refuse output files that exist (unless ``force``) or whose directory does not.
+
+    Parameters
+    ----------
+    force : bool
+        ``--force``: an existing file may be overwritten.
+    *outputs : str or None
+        The output paths given on the command line; ``None`` (an option left out) is
+        skipped.
+
+    Raises
+    ------
+    InputError
+        If an output exists and ``force`` is false, or its directory does not exist.
+    """
+    for out in outputs:
+        if not out:
+            continue
+        if Path(out).exists() and not force:
+            raise InputError(f'{out} exists; pass --force to overwrite it')
+        if not Path(out).resolve().parent.is_dir():
+            raise InputError(f'{out}: directory {Path(out).resolve().parent} does not exist')
+
+
+def add_report_outputs(p: argparse.ArgumentParser, json_help: str, plot_help: str) -> None:
+    """``--json OUT``, ``--plot OUT.png`` and ``--force`` (checked by :func:`check_outputs`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The sub-command's parser.
+    json_help, plot_help : str
+        What the command writes as JSON and as a plot.
+    """
+    p.add_argument('--json', metavar='OUT', help=json_help)
+    p.add_argument('--plot', metavar='OUT.png', help=plot_help)
+    p.add_argument('--force', action='store_true', help='overwrite --json/--plot files')
