@@ -20,15 +20,16 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from .certificate import CertifiedGain, Verification, eigen_figures, passes, signs_hold
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
-                  cached_program, solve, sym)
+                  DescriptorParameters, cached_program, solve, solve_for_point, sym)
 from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
@@ -44,24 +45,39 @@ DEFAULT_REFINE = 8
 # records
 
 @dataclass(frozen=True)
-class InputDelayVerification:
-    """Outcome of :func:`verify_input_delay` (eigenvalues in original coordinates)."""
+class InputDelayVerification(Verification):
+    """Outcome of :func:`verify_input_delay` (:class:`.certificate.Verification`).
 
-    ok: bool
-    max_eig_Psi: float          # must be < -tolerance * scale
-    min_eig_lyapunov: float     # smallest eigenvalue over P, S0, S1, R0, R1 (and Q): > 0
-    min_eig_rc: float           # smallest eigenvalue of [[R1, S12], [S12^T, R1]]: > 0
-    lam: float | None           # Petersen scalar (> 0; None: nominal)
-    tolerance: float
-    scale: float                # spectral norm of Psi
-    #: acceptance decided in the congruent coordinates ``T^T Psi T``, ``T = diag(P2^-1, I)``
-    #: (see :func:`verify_input_delay`); ``max_eig_Psi`` and ``scale`` are still of ``Psi``
+    Eigenvalues in original coordinates.
+
+    Besides ``ok`` and the keywords ``tolerance`` and ``scale`` of the base:
+
+    Parameters
+    ----------
+    max_eig_Psi : float
+        Largest eigenvalue of ``Psi`` (must be ``< -tolerance * scale``).
+    min_eig_lyapunov : float
+        Smallest eigenvalue over ``P, S0, S1, R0, R1`` (and ``Q``): must be > 0.
+    min_eig_rc : float
+        Smallest eigenvalue of ``[[R1, S12], [S12^T, R1]]``: must be > 0.
+    lam : float or None
+        Petersen scalar (> 0; ``None``: nominal).
+    congruent : bool
+        Acceptance decided in the congruent coordinates ``T^T Psi T``,
+        ``T = diag(P2^-1, I)`` (see :func:`verify_input_delay`); ``max_eig_Psi`` and
+        ``scale`` are still of ``Psi``.
+    """
+
+    max_eig_Psi: float
+    min_eig_lyapunov: float
+    min_eig_rc: float
+    lam: float | None
     congruent: bool = False
 
-    @property
-    def worst_eigenvalue(self) -> float:
-        """Largest eigenvalue of the certificate matrix (negative when it holds)."""
-        return self.max_eig_Psi
+    MATRIX = 'Psi'
+    WORST = 'max_eig_Psi'
+    POSITIVE = (('min_eig_lyapunov', 'of the Lyapunov matrices'),
+                ('min_eig_rc', 'of the reciprocally convex block'))
 
 
 @dataclass(frozen=True)
@@ -83,33 +99,39 @@ class InputDelayCertificate:
     lam: float | None
 
 
-@dataclass(frozen=True)
-class InputDelayResult:
-    """A gain certified for input delays in ``[h_min, h_max]`` with decay rate ``alpha``."""
+@dataclass(frozen=True, kw_only=True)
+class InputDelayResult(CertifiedGain):
+    """A gain certified for input delays in ``[h_min, h_max]`` with decay rate ``alpha``.
 
-    K: np.ndarray
+    The fields of :class:`.certificate.CertifiedGain` (keywords) and:
+
+    Parameters
+    ----------
+    h_min, h_max : float
+        The certified latency interval (s).
+    alpha : float
+        The certified decay rate (1/s).
+    eps : float
+        The tuning scalar (``P3 = eps P2``).
+    verification : InputDelayVerification
+        The numpy check of ``certificate`` (always ``ok``).
+    state_delay : bool
+        ``A_tau`` is in the certificate.
+    gain_bound : float or None
+        The ``||K||_2`` bound imposed.
+    eps_scan : tuple of (float, float)
+        ``(eps, t)`` of every solve.
+    """
+
     h_min: float
     h_max: float
     alpha: float
     eps: float
     certificate: InputDelayCertificate
     verification: InputDelayVerification
-    margin_required: float
-    margin_achieved: float
-    status: str
-    solver: str
-    solve_time: float
-    wall_time: float
-    nominal: bool
     state_delay: bool
     gain_bound: float | None
     eps_scan: tuple[tuple[float, float], ...] = ()
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def gain_norm(self) -> float:
-        """Spectral norm ``||K||_2`` of the gain."""
-        return float(np.linalg.norm(self.K, 2))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -237,20 +259,16 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
                                           problem.E, problem.F, K, h_min, h_max, alpha, c)
     lyap = [c.P, c.S0, c.S1, c.R0, c.R1] + ([] if c.Q is None else [c.Q])
     rc = np.block([[c.R1, c.S12], [c.S12.T, c.R1]])
-    if not (np.all(np.isfinite(Psi)) and np.all(np.isfinite(rc))):
-        return InputDelayVerification(False, math.inf, -math.inf, -math.inf, c.lam, tol,
-                                      math.inf)
-    ev = np.linalg.eigvalsh(Psi)
-    top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
-    min_l = min(float(np.linalg.eigvalsh(sym(M))[0]) for M in lyap)
-    min_rc = float(np.linalg.eigvalsh(sym(rc))[0])
-    side = min_l > 0 and min_rc > 0 and (c.lam is None or c.lam > 0)
-    ok = top < -tol * scale and side
+    top, scale, mins = eigen_figures(Psi, lyap + [rc])
+    min_l, min_rc = min(mins[:-1]), mins[-1]
+    ok = passes(top, scale, mins, c.lam, tol)
     congruent = False
-    if side and not ok and top < 0:
+    if not ok and top < 0 and signs_hold(mins, c.lam):
+        # the sign conditions hold, the relative slack not: try the solver's coordinates
         congruent = _congruent_ok(Psi, c.P2, problem.n, 5 if c.Q is None else 6, tol)
         ok = congruent
-    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, tol, scale, congruent)
+    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, congruent,
+                                  tolerance=tol, scale=scale)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -271,7 +289,7 @@ class _Point:
         return float(self.t)
 
 
-class _InputDelayProgram:
+class _InputDelayProgram(DescriptorParameters):
     def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool,
                  state_delay: bool):
         import cvxpy as cp
@@ -338,12 +356,8 @@ class _InputDelayProgram:
         self.L, self.lmi = L, L << -self.t * np.eye(size)
         cons = [self.lmi, 0.5 * (RC + RC.T) >> self.t * np.eye(2 * n)]
         cons += [M >> self.t * In for M in lyap] + extra
-        self.kappa2: Any = None             # a cvxpy Parameter with the gain bound
         if gain_bound:
-            self.kappa2 = par(nonneg=True)
-            He = X + X.T
-            Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
-            cons += [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
+            cons += self.gain_bound_constraints(X, Y, self.t)
         else:
             norm = sum(cp.trace(M) for M in lyap) + cp.trace(X)
             if self.lam is not None:
@@ -359,14 +373,7 @@ class _InputDelayProgram:
             None if kappa is None else float(kappa))
         if data != self._data:
             self._data, self._last = data, None
-        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
-        if not self.nominal:
-            self.BE.value = problem.B @ problem.E
-            self.F.value = problem.F
-        if self.kappa2 is not None:
-            if kappa is None:
-                raise InputError('this program has a gain bound: kappa is required')
-            self.kappa2.value = float(kappa) ** 2
+        self.set_problem(problem, kappa)
 
     def solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
               solver: str) -> _Point:
@@ -381,23 +388,15 @@ class _InputDelayProgram:
 
     def _solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
                solver: str) -> _Point:
-        self.eps.value = eps
+        self.set_eps(problem, eps)
         self.two_a.value = 2.0 * alpha
         self.w0.value = math.exp(-2 * alpha * h0)
         self.w1.value = math.exp(-2 * alpha * h1)
         self.wt.value = math.exp(-2 * alpha * problem.tau)
         self.h0sq.value, self.h10sq.value = h0 * h0, (h1 - h0) ** 2
-        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
-        self.eAd.value = eps * problem.A_tau
-        if not self.nominal:
-            self.eBE.value = eps * (problem.B @ problem.E)
-        try:
-            out = solve(self.problem, solver, what='the input-delay LMI', quiet_inaccurate=True)
-        except SolverFailure as exc:
-            return _Point(f'solver_error: {exc}', None, 0.0, eps)
-        tv = self.t.value
-        t = None if tv is None else float(tv)
-        if out.status in OK_STATUSES and self.X.value is not None:
+        out, t, usable = solve_for_point(self.problem, solver, 'the input-delay LMI', self.t,
+                                         self.X)
+        if usable:
             vals: dict[str, Any] = {k: np.array(v.value) for k, v in self.sv.items()}
             vals.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
                         S12b=np.array(self.S12b.value),

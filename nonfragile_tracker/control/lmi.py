@@ -20,12 +20,15 @@ from __future__ import annotations
 import contextvars
 import time
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
+from .certificate import (CertifiedGain, eigen_figures, from_certificate, passes,
+                          retry_advice)
+from .certificate import Verification as BaseVerification
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
                   solve)
@@ -38,20 +41,26 @@ __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', '
 
 
 @dataclass(frozen=True)
-class Verification:
-    """Outcome of :func:`verify_certificate`: all eigenvalue checks, worst first."""
+class Verification(BaseVerification):
+    """Outcome of :func:`verify_certificate` (:class:`.certificate.Verification`).
 
-    ok: bool
-    max_eig_V: float         # largest eigenvalue of V (must be < 0)
-    min_eig_P: float         # smallest eigenvalue of P (must be > 0)
-    min_eig_Q: float         # smallest eigenvalue of Q (must be > 0)
-    tolerance: float         # relative slack demanded: max_eig_V < -tolerance * scale
-    scale: float             # spectral norm of V
+    Besides ``ok`` and the keywords ``tolerance`` and ``scale`` of the base:
 
-    @property
-    def worst_eigenvalue(self) -> float:
-        """Largest eigenvalue of ``V`` (verified when below ``-tolerance * scale``)."""
-        return self.max_eig_V
+    Parameters
+    ----------
+    max_eig_V : float
+        Largest eigenvalue of ``V`` (must be ``< -tolerance * scale``).
+    min_eig_P, min_eig_Q : float
+        Smallest eigenvalues of ``P`` and ``Q`` (must be > 0).
+    """
+
+    max_eig_V: float
+    min_eig_P: float
+    min_eig_Q: float
+
+    MATRIX = 'V'
+    WORST = 'max_eig_V'
+    POSITIVE = (('min_eig_P', 'P'), ('min_eig_Q', 'Q'))
 
 
 @dataclass(frozen=True)
@@ -68,35 +77,20 @@ class Certificate:
     verification: Verification
 
 
-@dataclass(frozen=True)
-class SynthesisResult:
-    """A synthesized gain with its verified certificate and solver facts."""
+@dataclass(frozen=True, kw_only=True)
+class SynthesisResult(CertifiedGain):
+    """A synthesized gain with its verified certificate and solver facts.
 
-    K: np.ndarray
+    The fields are those of :class:`.certificate.CertifiedGain` (keywords), ``certificate``
+    a :class:`Certificate`.
+    """
+
     certificate: Certificate
-    margin_required: float
-    margin_achieved: float
-    status: str
-    solver: str
-    solve_time: float        # seconds inside the solver
-    wall_time: float         # seconds for build + solve + verification
-    nominal: bool
-    extra: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def P(self) -> np.ndarray:
-        """Lyapunov-Krasovskii matrix ``P`` of the certificate."""
-        return self.certificate.P
-
-    @property
-    def Q(self) -> np.ndarray:
-        """Lyapunov-Krasovskii matrix ``Q`` of the certificate."""
-        return self.certificate.Q
-
-    @property
-    def eps(self) -> float | None:
-        """Scalar ``eps`` of the certificate (None: the nominal condition, D = 0)."""
-        return self.certificate.eps
+    P = from_certificate('P', 'Lyapunov-Krasovskii matrix ``P`` of the certificate.')
+    Q = from_certificate('Q', 'Lyapunov-Krasovskii matrix ``Q`` of the certificate.')
+    eps = from_certificate('eps', 'Scalar ``eps`` of the certificate (None: the nominal '
+                           'condition, D = 0).')
 
 
 @dataclass(frozen=True)
@@ -127,25 +121,46 @@ def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
     return _sym(V)
 
 
-def verify_certificate(problem: Problem, K, P, Q, eps, *, tol: float = 1e-9) -> Verification:
+def verify_certificate(problem: Problem, K: Any, P: Any, Q: Any, eps: float | None, *,
+                       tol: float = 1e-9) -> Verification:
     """Check Theorem 1's condition from ``(K, P, Q, eps)`` alone, with eigenvalues.
 
     Passes iff ``P > 0``, ``Q > 0``, ``eps > 0`` (unless nominal) and
-    ``max eig(V) < -tol * ||V||``.  Never raises for a failed check: see ``ok``.
+    ``max eig(V) < -tol * ||V||`` (:func:`.certificate.passes`).  Never raises for a
+    failed check: see ``ok``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain (:meth:`.problem.Problem.gain` checks its shape).
+    P, Q : array_like, shape (n, n)
+        The Lyapunov-Krasovskii matrices (their symmetric parts are used).
+    eps : float or None
+        Petersen's scalar; ``None``: the nominal condition (``D = 0``).
+    tol : float, optional
+        Relative slack demanded of ``V``.
+
+    Returns
+    -------
+    Verification
     """
-    K = np.asarray(K, float)
+    K = problem.gain(K)
     P = _sym(np.asarray(P, float))
     Q = _sym(np.asarray(Q, float))
     V = verification_matrix(problem.A, problem.B, problem.A_tau, problem.E, problem.F,
                             K, P, Q, eps)
-    ev = np.linalg.eigvalsh(V)
-    scale = float(np.max(np.abs(ev)))
-    min_p = float(np.linalg.eigvalsh(P)[0])
-    min_q = float(np.linalg.eigvalsh(Q)[0])
-    ok = (bool(np.all(np.isfinite(V))) and ev[-1] < -tol * scale and min_p > 0 and min_q > 0
-          and (eps is None or eps > 0))
-    return Verification(ok=bool(ok), max_eig_V=float(ev[-1]), min_eig_P=min_p, min_eig_Q=min_q,
+    top, scale, (min_p, min_q) = eigen_figures(V, (P, Q))
+    return Verification(passes(top, scale, (min_p, min_q), eps, tol), top, min_p, min_q,
                         tolerance=tol, scale=scale)
+
+
+def _certificate(problem: Problem, K: np.ndarray, P: np.ndarray, Q: np.ndarray,
+                 eps: float | None, verify_tol: float) -> Certificate:
+    """``(K, P, Q, eps)`` with their :func:`verify_certificate` (``ok`` or not)."""
+    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
+    return Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -276,31 +291,12 @@ def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Prog
 def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
                      solver: str | None = None, gain_bound: float | None = None,
                      verify_tol: float = 1e-9) -> SynthesisResult:
-    """One solve of Theorem 1 (or its nominal form), verified (see :func:`synthesize`).
+    """One solve of Theorem 1 (or its nominal form), verified.
 
-    Parameters
-    ----------
-    problem : Problem
-        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
-        delay-independent).
-    nominal : bool
-        Drop the ``E, F`` terms (the paper's "normal state feedback").
-    margin : float
-        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
-        or 1e-6.
-    solver : str
-        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
-    gain_bound : float, optional
-        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
-
-    Raises
-    ------
-    InfeasibleError
-        No point with ``t >= margin`` exists; nothing is returned.
-    SolverFailure
-        The solver is missing or returned no solution.
-    CertificateError
-        The solver's point failed :func:`verify_certificate`.
+    The arguments are those of :func:`synthesize` (``margin``, ``solver`` default to the
+    problem's options).  Raises ``InfeasibleError`` (no point with ``t >= margin``),
+    ``SolverFailure`` (no solution) or ``CertificateError`` (the point fails
+    :func:`verify_certificate`; ``margin_achieved`` holds the solver's ``t``).
     """
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
@@ -323,19 +319,15 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
                             f'{problem.name!r}; no gain was produced')
     P = np.linalg.inv(_sym(X))
     K = R @ P
-    eps_val = None if nominal else float(eps)
-    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
+    cert = _certificate(problem, K, P, Q, None if nominal else float(eps), verify_tol)
+    ver = cert.verification
     if not ver.ok:
         err = CertificateError(
             f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
-            f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
-            f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
-            f't = {t:.3g}). '
-            + ('Raise the margin (options.margin).' if solver == 'CLARABEL'
-               else 'Use CLARABEL or raise the margin (options.margin).'))
+            f'verification: {ver.describe()} (||V|| = {ver.scale:.3g}, best margin '
+            f't = {t:.3g}). ' + retry_advice(solver))
         err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
         raise err
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
     return SynthesisResult(K=K, certificate=cert, margin_required=margin,
                            margin_achieved=float(t), status=status, solver=solver,
                            solve_time=solve_time, wall_time=time.perf_counter() - t0,
@@ -566,11 +558,9 @@ def _min_norm_stage(problem: Problem, nominal: bool, solver: str, t_req: float,
     except np.linalg.LinAlgError:
         return None
     K = R @ P
-    eps_val = None if nominal else float(eps)
-    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
-    if not ver.ok:
+    cert = _certificate(problem, K, P, Q, None if nominal else float(eps), verify_tol)
+    if not cert.verification.ok:
         return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
     return SynthesisResult(K=K, certificate=cert, margin_required=t_req,
                            margin_achieved=float(t), status=status,
                            solver=solver, solve_time=solve_time,
@@ -597,11 +587,8 @@ def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
     K = c.K @ Ti
     P = _sym(Ti.T @ c.P @ Ti)
     Q = _sym(Ti.T @ c.Q @ Ti)
-    ver = verify_certificate(problem, K, P, Q, c.eps, tol=verify_tol)
-    if not ver.ok:
-        return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=c.eps, verification=ver)
-    return replace(res, K=K, certificate=cert)
+    cert = _certificate(problem, K, P, Q, c.eps, verify_tol)
+    return None if not cert.verification.ok else replace(res, K=K, certificate=cert)
 
 
 def _verified(problem: Problem, **kw) -> SynthesisResult:
@@ -787,11 +774,9 @@ def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: f
         P[np.ix_(st, st)] = c * r.P
         Q[np.ix_(st, st)] = c * r.Q
         parts.append(r)
-    eps = None if nominal else 1.0
-    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
-    if not ver.ok:
+    cert = _certificate(problem, K, P, Q, None if nominal else 1.0, verify_tol)
+    if not cert.verification.ok:
         return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
     first = parts[0]
     extra = dict(first.extra, blocks=[int(b[0].size) for b in blocks])
     for key in ('t_max', 'stage1_norm'):
@@ -971,10 +956,8 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     if tv < margin:
         return CertifyResult(False, tv, None, status)
     eps = None if prog.d is None else 1.0 / float(prog.d.value)
-    P, Q = np.array(P), np.array(Q)
-    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
-    cert = Certificate(K=K, P=_sym(P), Q=_sym(Q), eps=eps, verification=ver)
-    return CertifyResult(ver.ok, tv, cert, status)
+    cert = _certificate(problem, K, _sym(np.array(P)), _sym(np.array(Q)), eps, verify_tol)
+    return CertifyResult(cert.verification.ok, tv, cert, status)
 
 
 def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
