@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -500,6 +500,109 @@ def _describe(problem: Problem, h0: float, h1: float, alpha: float, nominal: boo
 # ---------------------------------------------------------------------------------------------
 # synthesis
 
+_Checked = tuple[np.ndarray, InputDelayCertificate, InputDelayVerification]
+_Found = tuple[_Point, np.ndarray, InputDelayCertificate, InputDelayVerification]
+
+
+class _Stop(Exception):
+    """The first verified point of a ``stop_at_first`` search was found."""
+
+
+def _checked(problem: Problem, pt: _Point, sd: bool, h0: float, h1: float, alpha: float,
+             verify_tol: float) -> _Checked | None:
+    """``(K, certificate, verification)`` of a solver point (``None``: singular ``X``)."""
+    try:
+        K, cert = _back(pt, sd)
+    except np.linalg.LinAlgError:
+        return None
+    ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
+    return K, cert, ver
+
+
+def _search_eps(solve_at: Callable[[float], _Point], check: Callable[[_Point], _Checked | None],
+                grid: list[float], eps: float | None, refine: int, eps_start: float | None,
+                margin: float, stop_at_first: bool) -> tuple[list[_Point], _Found | None]:
+    """The points of the ``eps`` search of :func:`synthesize_input_delay`, in solve order.
+
+    With ``stop_at_first`` the search stops at the first point with ``t >= margin`` that
+    passes ``check``; that point is returned second (``None`` otherwise).
+    """
+    points: list[_Point] = []
+    found: list[_Found] = []
+
+    def run(e: float) -> float:
+        pt = solve_at(e)
+        points.append(pt)
+        t = pt.strictness
+        if stop_at_first and t >= margin:
+            v = check(pt)
+            if v is not None and v[2].ok:
+                found.append((pt,) + v)
+                raise _Stop
+        return t
+
+    try:
+        if eps is not None:
+            run(float(eps))
+        else:
+            # a warm-started trial of a search whose point is rejected by the independent
+            # check stops at the climb's local maximum (the search counts it as failed,
+            # just beyond the boundary) instead of scanning the whole grid
+            eps_search(run, grid, refine, start=eps_start,
+                       accept=margin if stop_at_first and eps_start is None else math.inf)
+    except _Stop:
+        pass
+    return points, (found[-1] if found else None)
+
+
+def _strictest_verified(points: list[_Point], check: Callable[[_Point], _Checked | None],
+                        margin: float, what: str, solver: str) -> _Found:
+    """The strictest point with ``t >= margin`` that passes ``check``, or the error why none.
+
+    Raises ``SolverFailure`` (no status of a solve), ``InfeasibleError`` (no point with
+    ``t >= margin``) or ``CertificateError`` (none passes the independent check); the
+    latter two carry the best ``t`` as ``margin_achieved``.
+    """
+    best = max(points, key=lambda p: p.strictness)
+    if best.strictness < margin:
+        if not any(p.status in OK_STATUSES + INFEASIBLE_STATUSES for p in points):
+            raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
+                                f'(statuses {sorted({p.status for p in points})}); no '
+                                'gain was produced. Check that the solver is installed.')
+        txt = ('no feasible point' if best.strictness == -math.inf
+               else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
+        err = InfeasibleError(
+            f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
+            'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
+            'smaller decay rate, a smaller F, or nominal=True.')
+        err.margin_achieved = float(best.strictness)
+        raise err
+    # refinement: a point that fails the independent check (typically only its relative
+    # tolerance, near the feasibility boundary) is replaced by the strictest other point
+    # already solved that passes it - every eps point of the search is a candidate
+    usable = sorted((p for p in points if p.strictness >= margin), key=lambda p: -p.strictness)
+    first: tuple[_Point, _Checked | None] | None = None
+    for cand in usable:
+        v = check(cand)
+        if v is not None and v[2].ok:
+            return (cand,) + v
+        first = first or (cand, v)
+    cand, v = first if first is not None else (best, None)
+    if v is None:
+        raise CertificateError(f'{solver} returned a singular X for the {what}; no '
+                               'gain can be recovered')
+    ver = v[2]
+    cerr = CertificateError(
+        f'{solver} returned no point for the {what} that passes independent '
+        f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
+        f'{cand.eps:.3g}: {ver.describe()}, relative tolerance {ver.tolerance:g} x '
+        f'{ver.scale:.3g}). The point is at the edge of feasibility: ask for '
+        'a little less (smaller h_max or decay rate) or a larger margin '
+        '(options.margin of the problem).')
+    cerr.margin_achieved = float(cand.strictness)
+    raise cerr
+
+
 def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                            alpha: float = 0.0, eps: float | None = None,
                            eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
@@ -562,91 +665,21 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
     sd = _uses_state_delay(problem, state_delay)
     prog = _program(problem, nominal, gain_bound is not None, sd)
     prog.set_data(problem, gain_bound)
-    points: list[_Point] = []
-    found: list[tuple[_Point, np.ndarray, InputDelayCertificate, InputDelayVerification]] = []
 
-    class _Stop(Exception):
-        pass
+    def check(pt: _Point) -> _Checked | None:
+        return _checked(problem, pt, sd, h0, h1, alpha, verify_tol)
 
-    def verified(pt: _Point):
-        try:
-            K, cert = _back(pt, sd)
-        except np.linalg.LinAlgError:
-            return None
-        ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
-        return K, cert, ver
+    def solve_at(e: float) -> _Point:
+        return prog.solve(problem, h0, h1, alpha, e, solver)
 
-    def run(e: float) -> float:
-        pt = prog.solve(problem, h0, h1, alpha, e, solver)
-        points.append(pt)
-        t = pt.strictness
-        if stop_at_first and t >= margin:
-            v = verified(pt)
-            if v is not None and v[2].ok:
-                found.append((pt,) + v)
-                raise _Stop
-        return t
-
-    try:
-        if eps is not None:
-            run(float(eps))
-        else:
-            # a warm-started trial of a search whose point is rejected by the independent
-            # check stops at the climb's local maximum (the search counts it as failed,
-            # just beyond the boundary) instead of scanning the whole grid
-            eps_search(run, grid, refine, start=eps_start,
-                       accept=margin if stop_at_first and eps_start is None else math.inf)
-    except _Stop:
-        pass
+    points, found = _search_eps(solve_at, check, grid, eps, refine, eps_start, margin,
+                                stop_at_first)
     solve_time = sum(p.solve_time for p in points)
     scan = tuple((p.eps, p.strictness) for p in points)
     what = _describe(problem, h0, h1, alpha, nominal, gain_bound)
-    if found:
-        best, K, cert, ver = found[-1]
-    else:
-        best = max(points, key=lambda p: p.strictness)
-        if best.strictness < margin:
-            if not any(p.status in OK_STATUSES + INFEASIBLE_STATUSES for p in points):
-                raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
-                                    f'(statuses {sorted({p.status for p in points})}); no '
-                                    'gain was produced. Check that the solver is installed.')
-            txt = ('no feasible point' if best.strictness == -math.inf
-                   else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
-            err = InfeasibleError(
-                f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
-                'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
-                'smaller decay rate, a smaller F, or nominal=True.')
-            err.margin_achieved = float(best.strictness)
-            raise err
-        # refinement: a point that fails the independent check (typically only its relative
-        # tolerance, near the feasibility boundary) is replaced by the strictest other point
-        # already solved that passes it - every eps point of the search is a candidate
-        usable = sorted((p for p in points if p.strictness >= margin),
-                        key=lambda p: -p.strictness)
-        first = None
-        for cand in usable:
-            v = verified(cand)
-            if v is not None and v[2].ok:
-                best, (K, cert, ver) = cand, v
-                break
-            first = first or (cand, v)
-        else:
-            cand, v = first if first is not None else (best, None)
-            if v is None:
-                raise CertificateError(f'{solver} returned a singular X for the {what}; no '
-                                       'gain can be recovered')
-            ver = v[2]
-            cerr = CertificateError(
-                f'{solver} returned no point for the {what} that passes independent '
-                f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
-                f'{cand.eps:.3g}: max eig Psi = {ver.max_eig_Psi:.3g}, relative tolerance '
-                f'{ver.tolerance:g} x {ver.scale:.3g}, min eig of the Lyapunov matrices = '
-                f'{ver.min_eig_lyapunov:.3g}, reciprocally convex block = '
-                f'{ver.min_eig_rc:.3g}). The point is at the edge of feasibility: ask for '
-                'a little less (smaller h_max or decay rate) or a larger margin '
-                '(options.margin of the problem).')
-            cerr.margin_achieved = float(cand.strictness)
-            raise cerr
+    if found is None:
+        found = _strictest_verified(points, check, margin, what, solver)
+    best, K, cert, ver = found
     return InputDelayResult(
         K=K, h_min=h0, h_max=h1, alpha=alpha, eps=best.eps, certificate=cert,
         verification=ver, margin_required=margin, margin_achieved=float(best.strictness),
@@ -1010,6 +1043,187 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     return full
 
 
+class _DecaySearch:
+    """The state of :func:`max_input_delay_decay_rate`'s search (see its docstring).
+
+    ``lo``/``best`` is the largest certified rate and its result, ``hi`` the smallest
+    refuted one (``inf``: none yet) with its score ``hi_s``; ``last`` the ``eps`` of every
+    success, ``slopes`` ``dt/dalpha`` by rate (:func:`_alpha_slope`).
+    """
+
+    def __init__(self, problem: Problem, h_min: float, h_max: float, kw: dict[str, Any],
+                 margin: float, hi_limit: float, prog: _InputDelayProgram) -> None:
+        self.problem, self.h_min, self.h_max, self.kw = problem, h_min, h_max, kw
+        self.margin, self.hi_limit, self.prog = margin, hi_limit, prog
+        self.slopes: dict[float, float] = {}
+        self.last: list[float] = []
+        self.refuted: list[float] = []
+        self.lo, self.hi, self.hi_s = 0.0, math.nan, math.nan
+        self.best: InputDelayResult
+
+    def slope_of(self, a: float, r: InputDelayResult) -> None:
+        """Record ``dt/dalpha`` at ``a`` if the program's last solve was ``r``'s point."""
+        # the program's duals are those of ``r`` iff its last solve was ``r``'s point
+        prog = self.prog
+        key = prog._last[0] if prog._last is not None else None
+        if key is not None and key[1:5] == (self.h_min, self.h_max, float(a), r.eps):
+            self.slopes[a] = _alpha_slope(prog, self.h_min, self.h_max, a, self.problem.tau)
+
+    def start(self, middle: float, refine: int) -> bool:
+        """The first certified rate and the doubling to a bracket; ``True``: done (``best``).
+
+        The first rate of the doubling first: when it is certified (the common case) it
+        proves ``alpha = 0`` as well, one solve fewer.
+        """
+        problem, h_min, h_max, kw = self.problem, self.h_min, self.h_max, self.kw
+        first = min(0.5, self.hi_limit)
+        base = _try(problem, h_min, h_max, alpha=first, stop_at_first=True, refine=0,
+                    eps_start=middle, **kw)
+        if base is not None:
+            if first >= self.hi_limit:
+                self.best = base
+                return True
+            self.slope_of(first, base)
+        else:
+            first = 0.0
+            base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, refine=refine,
+                        eps_start=middle, **kw)
+        if base is None:    # the whole grid (raises with the reason if nothing is certified)
+            base = synthesize_input_delay(problem, h_min, h_max, alpha=0.0, refine=refine,
+                                          **kw)
+        self.last.append(base.eps)
+        self.lo, self.best = first, base
+        return self.double(2.0 * first if first else 0.5, newton_first=True)
+
+    def trial(self, a: float, climb: bool = True) -> tuple[float, InputDelayResult | None]:
+        """``(t - margin, result or None)`` at ``a``: a climb, or one solve at the last ``eps``."""
+        problem, h_min, h_max, kw, last = self.problem, self.h_min, self.h_max, self.kw, self.last
+        try:
+            if climb:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, stop_at_first=True,
+                                           eps_start=last[-1], refine=0, **kw)
+            else:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, eps=last[-1],
+                                           **{k: v for k, v in kw.items() if k != 'eps_grid'})
+        except (InfeasibleError, CertificateError) as exc:
+            return getattr(exc, 'margin_achieved', math.nan) - self.margin, None
+        except SolverFailure:
+            return math.nan, None
+        last.append(r.eps)
+        self.slope_of(a, r)
+        return r.margin_achieved - self.margin, r
+
+    def single(self, x: float) -> tuple[float, InputDelayResult | None]:
+        """One solve at the ``eps`` of the last success; a refuted ``x`` is recorded."""
+        sc, r = self.trial(x, climb=False)
+        if r is None:
+            self.refuted.append(x)
+        return sc, r
+
+    def newton_below(self, x: float, a: float) -> bool:
+        """Newton from the certified rate ``x`` predicts the boundary below ``a``."""
+        g, sx = self.slopes.get(x, math.nan), self.best.margin_achieved - self.margin
+        return x > 0 and math.isfinite(g) and g < 0 and sx > 0 and x + sx / -g < a
+
+    def double(self, a: float, newton_first: bool = False) -> bool:
+        """Double the rate from ``a`` until one is refuted (``hi``); ``True``: ``hi_limit`` holds.
+
+        One solve at the ``eps`` of the last success: a failing rate is not climbed here
+        (the climb at the bracket's upper end checks the other ``eps``).  With
+        ``newton_first``, a Newton step from ``lo`` predicting the boundary below ``a``
+        ends the doubling without a bracket (``hi = inf``).
+        """
+        while True:
+            if newton_first and self.newton_below(self.lo, a):
+                self.hi = math.inf
+                return False
+            s, r = self.trial(a, climb=False)
+            if r is None:
+                self.hi, self.hi_s = a, s
+                return False
+            self.lo, self.best = a, r
+            if a >= self.hi_limit:
+                return True
+            a = min(2.0 * a, self.hi_limit)
+
+    def newton(self, tol: float) -> bool | None:
+        """Newton steps from the certified end; ``True``: converged, ``None``: ``hi_limit``.
+
+        Each step lands below the boundary while ``t(alpha)`` is convex there; a refuted
+        step (``hi``) or an unusable slope hands over (``False``).
+        """
+        while self.hi - self.lo > tol:
+            if self.lo >= self.hi_limit:
+                return None
+            g = self.slopes.get(self.lo, math.nan)
+            s_lo = self.best.margin_achieved - self.margin
+            if not (math.isfinite(g) and g < 0 and s_lo > 0):
+                return False
+            step = s_lo / -g
+            if step < 0.25 * tol:
+                return True
+            x = min(self.lo + step, self.hi - 0.5 * tol, self.hi_limit)
+            sc, r = self.single(x)
+            if r is None:
+                self.hi, self.hi_s = x, sc
+                return False
+            self.lo, self.best = x, r
+        return False
+
+    def climb_above(self) -> bool:
+        """Another ``eps`` certifies ``hi``: brackets above it; ``True``: ``hi_limit`` reached."""
+        while True:
+            if self.lo >= self.hi_limit:
+                return True
+            self.hi = min(2.0 * self.lo, self.hi_limit)
+            self.hi_s, r = self.trial(self.hi)
+            if r is None:
+                return False
+            self.lo, self.best = self.hi, r
+
+    def close(self, rel_tol: float) -> InputDelayResult:
+        """Close the bracket to ``rel_tol``, then check it with a climb (docstring).
+
+        Inside the bracket the ``eps`` of the last success is kept (one solve per trial:
+        the climb at ``hi`` found it a local maximum of the grid, and the best ``eps``
+        moves slowly with ``alpha``); once closed, one climb at ``hi`` checks that no other
+        ``eps`` certifies it.
+        """
+        for _ in range(4):
+            self.refuted = [self.hi]
+            # without a refuted rate yet (hi = inf) the tolerance is that of the doubling's
+            # next bracket [lo, 2 lo]
+            tol = rel_tol * (self.hi if math.isfinite(self.hi)
+                             else min(2.0 * self.lo, self.hi_limit))
+            newton = self.newton(tol)
+            if newton is None:
+                return self.best
+            if newton:
+                top = min(self.lo + tol, self.hi)
+            elif not math.isfinite(self.hi):
+                # Newton gave out before any rate was refuted: doubling from lo, as above
+                if self.double(min(2.0 * self.lo, self.hi_limit)):
+                    return self.best
+                continue
+            else:
+                # the first step halves the bracket: the strictness at the low end is often
+                # capped by the normalization (t <= 1 with a gain bound): it would skew the
+                # secant
+                self.lo, self.best, _ = largest_feasible_bracketed(
+                    self.single, self.lo, self.hi, self.best, tol=tol, lo_score=math.nan,
+                    hi_score=self.hi_s)
+                top = self.hi = min(self.refuted)
+            _, r = self.trial(top)
+            if r is None:
+                break
+            self.lo, self.best = top, r
+            if newton and top < self.hi:     # certified by another eps: on from there
+                continue
+            if self.climb_above():
+                return self.best
+        return self.best
+
+
 def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
                                gain_bound: float | None = None, nominal: bool = False,
                                state_delay: bool | None = None, rel_tol: float = 2e-3,
@@ -1084,137 +1298,10 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
                               state_delay=state_delay, eps_grid=eps_grid, margin=margin,
                               solver=solver)
     grid = sorted(float(e) for e in eps_grid)
-    middle = grid[len(grid) // 2]
     prog = _program(problem, nominal, gain_bound is not None,
                     _uses_state_delay(problem, state_delay))
-    slopes: dict[float, float] = {}
-
-    def slope_of(a: float, r: InputDelayResult) -> None:
-        # the program's duals are those of ``r`` iff its last solve was ``r``'s point
-        key = prog._last[0] if prog._last is not None else None
-        if key is not None and key[1:5] == (float(h_min), float(h_max), float(a), r.eps):
-            slopes[a] = _alpha_slope(prog, float(h_min), float(h_max), a, problem.tau)
-
-    # the first rate of the doubling first: when it is certified (the common case) it
-    # proves alpha = 0 as well, one solve fewer
-    first = min(0.5, float(hi_limit))
-    base = _try(problem, h_min, h_max, alpha=first, stop_at_first=True, refine=0,
-                eps_start=middle, **kw)
-    if base is not None:
-        if first >= hi_limit:
-            return base
-        slope_of(first, base)
-    else:
-        first = 0.0
-        base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, refine=refine,
-                    eps_start=middle, **kw)
-    if base is None:    # the whole grid (raises with the reason if nothing is certified)
-        base = synthesize_input_delay(problem, h_min, h_max, alpha=0.0, refine=refine, **kw)
-    last = [base.eps]
-
-    def trial(a: float, climb: bool = True) -> tuple[float, InputDelayResult | None]:
-        try:
-            if climb:
-                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, stop_at_first=True,
-                                           eps_start=last[-1], refine=0, **kw)
-            else:
-                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, eps=last[-1],
-                                           **{k: v for k, v in kw.items() if k != 'eps_grid'})
-        except (InfeasibleError, CertificateError) as exc:
-            return getattr(exc, 'margin_achieved', math.nan) - margin, None
-        except SolverFailure:
-            return math.nan, None
-        last.append(r.eps)
-        slope_of(a, r)
-        return r.margin_achieved - margin, r
-
-    def newton_below(x: float, a: float) -> bool:
-        # Newton from the certified rate x predicts the boundary below the next doubling a
-        g, sx = slopes.get(x, math.nan), best.margin_achieved - margin
-        return x > 0 and math.isfinite(g) and g < 0 and sx > 0 and x + sx / -g < a
-
-    lo, best = first, base
-    a, hi, hi_s = 2.0 * first if first else 0.5, math.nan, math.nan
-    while True:
-        if newton_below(lo, a):     # no bracket needed: Newton steps from lo (below)
-            hi = math.inf
-            break
-        # one solve at the eps of the last success: a failing rate is not climbed here
-        # (the climb at the bracket's upper end below checks the other eps)
-        s, r = trial(a, climb=False)
-        if r is None:
-            hi, hi_s = a, s
-            break
-        lo, best = a, r
-        if a >= hi_limit:
-            return best
-        a = min(2.0 * a, hi_limit)
-    # inside the bracket the eps of the last success is kept (one solve per trial: the
-    # climb at ``hi`` found it a local maximum of the grid, and the best eps moves slowly
-    # with alpha); once closed, one climb at ``hi`` checks that no other eps certifies it
-    def single(x: float) -> tuple[float, InputDelayResult | None]:
-        sc, r = trial(x, climb=False)
-        if r is None:
-            refuted.append(x)
-        return sc, r
-
-    for _ in range(4):
-        refuted: list[float] = [hi]
-        # without a refuted rate yet (hi = inf) the tolerance is that of the doubling's
-        # next bracket [lo, 2 lo]
-        tol = rel_tol * (hi if math.isfinite(hi) else min(2.0 * lo, hi_limit))
-        # Newton steps from the certified end (docstring): each lands below the boundary
-        # while t(alpha) is convex there; a refuted step hands over to false position
-        newton = False
-        while hi - lo > tol:
-            if lo >= hi_limit:
-                return best
-            g, s_lo = slopes.get(lo, math.nan), best.margin_achieved - margin
-            if not (math.isfinite(g) and g < 0 and s_lo > 0):
-                break
-            step = s_lo / -g
-            if step < 0.25 * tol:
-                newton = True
-                break
-            x = min(lo + step, hi - 0.5 * tol, hi_limit)
-            sc, r = single(x)
-            if r is None:
-                hi, hi_s = x, sc
-                break
-            lo, best = x, r
-        if newton:
-            top = min(lo + tol, hi)
-        elif not math.isfinite(hi):
-            # Newton gave out before any rate was refuted: doubling from lo, as above
-            a = min(2.0 * lo, hi_limit)
-            while True:
-                hi_s, r = trial(a, climb=False)
-                if r is None:
-                    hi = a
-                    break
-                lo, best = a, r
-                if a >= hi_limit:
-                    return best
-                a = min(2.0 * a, hi_limit)
-            continue
-        else:
-            # the first step halves the bracket: the strictness at the low end is often
-            # capped by the normalization (t <= 1 with a gain bound): it would skew the secant
-            lo, best, _ = largest_feasible_bracketed(single, lo, hi, best, tol=tol,
-                                                     lo_score=math.nan, hi_score=hi_s)
-            top = hi = min(refuted)
-        _, r = trial(top)
-        if r is None:
-            break
-        lo, best = top, r
-        if newton and top < hi:     # certified by another eps: on from there, same bracket
-            continue
-        while True:                 # another eps certifies hi: a new bracket above it
-            if lo >= hi_limit:
-                return best
-            hi = min(2.0 * lo, hi_limit)
-            hi_s, r = trial(hi)
-            if r is None:
-                break
-            lo, best = hi, r
-    return best
+    search = _DecaySearch(problem, float(h_min), float(h_max), kw, margin, float(hi_limit),
+                          prog)
+    if search.start(grid[len(grid) // 2], refine):
+        return search.best
+    return search.close(rel_tol)
