@@ -161,9 +161,33 @@ class DescriptorSolution:
 # ---------------------------------------------------------------------------------------------
 # independent verification (numpy only)
 
-def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, lam
+def descriptor_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray,
+                                   E: np.ndarray, F: np.ndarray, K: np.ndarray, h: float,
+                                   P1: np.ndarray, P2: np.ndarray, P3: np.ndarray,
+                                   S: np.ndarray, R: np.ndarray, lam: float | None
                                    ) -> np.ndarray:
-    """``Psi`` of the module docstring, step 5 (``Phi_0`` alone when ``lam is None``)."""
+    """``Psi`` of the delay-dependent condition (doc/theory.md, step 5), symmetric.
+
+    Parameters
+    ----------
+    A, B, A_tau : numpy.ndarray
+        The plant (``n x n``, ``n x m``, ``n x n``).
+    E, F : numpy.ndarray
+        The perturbation structure (``m x q``, ``p x n``).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    h : float
+        The delay (s).
+    P1, P2, P3, S, R : numpy.ndarray, shape (n, n)
+        The certificate's matrices.
+    lam : float or None
+        Petersen scalar; ``None``: ``Phi_0`` alone (nominal, ``3n x 3n``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3n + q + p)`` square, or ``3n`` square for the nominal form.
+    """
     n = A.shape[0]
     Ac = A + B @ K
     phi11 = P2.T @ Ac + Ac.T @ P2 + S - R
@@ -189,14 +213,32 @@ def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, la
     return _sym(psi)
 
 
-def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDependentCertificate,
-                           *, tol: float = 1e-9) -> DelayDependentVerification:
+def verify_delay_dependent(problem: Problem, K: Any, h: float,
+                           certificate: DelayDependentCertificate, *, tol: float = 1e-9
+                           ) -> DelayDependentVerification:
     """Check the delay-dependent condition from ``(K, h, P1, P2, P3, S, R, lam)`` with numpy.
 
     Uses only ``K``, ``h`` (the arguments) and the matrices/scalar of ``certificate``
     (its own ``K``, ``h``, ``eps`` and ``verification`` are ignored).  Passes iff
     ``P1, S, R > 0``, ``lam > 0`` (unless nominal) and
     ``max eig(Psi) < -tol * ||Psi||``.  Never raises for a failed check: see ``ok``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain.
+    h : float
+        The delay (s, finite, >= 0).
+    certificate : DelayDependentCertificate
+        The matrices ``P1, P2, P3, S, R`` and ``lam``.
+    tol : float, optional
+        Relative slack demanded of ``Psi``.
+
+    Returns
+    -------
+    DelayDependentVerification
     """
     K = problem.gain(K)
     h = float(h)
@@ -215,8 +257,8 @@ def _verify(problem: Problem, K: np.ndarray, h: float, P1: Any, P2: Any, P3: Any
     Psi = descriptor_verification_matrix(problem.A, problem.B, problem.A_tau, problem.E,
                                          problem.F, K, h, P1, P2, P3, S, R, lam)
     top, scale, mins = eigen_figures(Psi, (P1, S, R))
-    return DelayDependentVerification(passes(top, scale, mins, lam, tol), top, *mins, lam,
-                                      tolerance=tol, scale=scale)
+    return DelayDependentVerification(passes(top, scale, mins, lam, tol), top, mins[0],
+                                      mins[1], mins[2], lam, tolerance=tol, scale=scale)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -333,7 +375,8 @@ def _certificate(problem: Problem, h: float, sol: DescriptorSolution, verify_tol
                                      lam=sol.lam, verification=ver)
 
 
-def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_bound) -> None:
+def _check_args(problem: Problem, h: float, eps_grid: Sequence[float],
+                gain_bound: float | None) -> None:
     if not (math.isfinite(h) and h > 0):
         raise ValueError(f'h must be a finite delay > 0 (seconds), got {h!r}')
     if gain_bound is not None and not gain_bound > 0:
@@ -342,7 +385,7 @@ def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_boun
         raise ValueError(f'eps_grid must be a non-empty sequence of numbers > 0, got {eps_grid!r}')
 
 
-def _describe(problem: Problem, h: float, nominal: bool, gain_bound) -> str:
+def _describe(problem: Problem, h: float, nominal: bool, gain_bound: float | None) -> str:
     kind = 'nominal' if nominal else 'non-fragile'
     bound = '' if gain_bound is None else f', ||K||_2 <= {gain_bound:g}'
     return f'delay-dependent design ({kind}{bound}) for problem {problem.name!r} at h = {h:g}'
@@ -371,8 +414,20 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         Drop the ``E D F`` terms (``D = 0``).
     gain_bound : float, optional
         Also impose ``||K||_2 <= gain_bound``.
+    eps_grid : sequence of float
+        The ``eps`` grid of the line search.
+    refine : int
+        Golden-section steps after the grid.
     margin : float
         Required strictness ``t`` (normalized units, see module docstring).
+    solver : str
+        cvxpy solver.
+    verify_tol : float
+        Relative tolerance of :func:`verify_delay_dependent`.
+
+    Returns
+    -------
+    DelayDependentResult
 
     Raises
     ------
@@ -437,7 +492,8 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
 
 
 def _feasible_at(problem: Problem, h: float, grid: list[float], start: float | None, *,
-                 nominal, gain_bound, margin, solver, verify_tol,
+                 nominal: bool, gain_bound: float | None, margin: float, solver: str,
+                 verify_tol: float,
                  refine: int = DEFAULT_REFINE) -> float | None:
     """An eps giving a verified certificate at ``h`` (None if none is found).
 
@@ -489,6 +545,28 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
     Returns ``(lo, result)``, ``result`` the full line search (with refinement) at ``lo``
     (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi``
     means ``h_hi`` itself is certified (the condition may hold for every delay, e.g. ``A_tau = 0``).
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    nominal : bool, optional
+        Drop the ``E D F`` terms.
+    gain_bound : float, optional
+        ``||K||_2`` bound.
+    h_hi : float, optional
+        Largest delay tried (s).
+    tol : float, optional
+        Absolute width of the final bracket (s).
+    eps_grid, refine, margin, solver, verify_tol
+        As in :func:`synthesize_delay_dependent`.
+
+    Returns
+    -------
+    h : float
+        The largest certified delay found (s).
+    result : DelayDependentResult
+        The design at ``h``.
 
     Raises
     ------

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Any, Callable, NamedTuple, Sequence, cast
 
 import numpy as np
 
@@ -29,7 +29,8 @@ from ..errors import CertificateError, InfeasibleError, InputError, SolverFailur
 from .certificate import CertifiedGain, Verification, eigen_figures, passes, signs_hold
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
-                  DescriptorParameters, cached_program, solve, solve_for_point, sym)
+                  DescriptorParameters, SolveOutcome, cached_program, solve, solve_for_point,
+                  sym)
 from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
@@ -155,7 +156,8 @@ def _weights(h_min: float, h_max: float, alpha: float, tau: float) -> _Weights:
                     math.exp(-2 * a * float(tau)), h0 * h0, h10 * h10)
 
 
-def _phi_rows(A, A1, A_tau, wt: _Weights, P, P2, P3, S0, S1, R0, R1, S12, Q
+def _phi_rows(A: Any, A1: Any, A_tau: Any, wt: _Weights, P: Any, P2: Any, P3: Any, S0: Any,
+              S1: Any, R0: Any, R1: Any, S12: Any, Q: Any
               ) -> list[list[Any]]:
     """Block rows of ``Phi_0`` (module docstring step 4).
 
@@ -185,11 +187,35 @@ def _phi_rows(A, A1, A_tau, wt: _Weights, P, P2, P3, S0, S1, R0, R1, S12, Q
     return rows
 
 
-def input_delay_verification_matrix(A, B, A_tau, tau, E, F, K, h_min, h_max, alpha,
+def input_delay_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray,
+                                    tau: float, E: np.ndarray, F: np.ndarray, K: np.ndarray,
+                                    h_min: float, h_max: float, alpha: float,
                                     cert: InputDelayCertificate) -> np.ndarray:
-    """``Psi`` of the module docstring (``Phi_0`` alone when ``cert.lam is None``).
+    """``Psi`` of the input-delay condition (doc/theory.md, step 4/5), symmetric.
 
-    ``A_tau`` is ignored (no state-delay block) when ``cert.Q is None``.
+    ``Phi_0`` alone when ``cert.lam is None``; ``A_tau`` is ignored (no state-delay
+    block) when ``cert.Q is None``.
+
+    Parameters
+    ----------
+    A, B, A_tau : numpy.ndarray
+        The plant (``n x n``, ``n x m``, ``n x n``).
+    tau : float
+        The state delay (s).
+    E, F : numpy.ndarray
+        The perturbation structure (``m x q``, ``p x n``).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    h_min, h_max : float
+        The latency interval (s).
+    alpha : float
+        The decay rate (1/s).
+    cert : InputDelayCertificate
+        The certificate's matrices.
+
+    Returns
+    -------
+    numpy.ndarray
     """
     n = A.shape[0]
     c = cert
@@ -242,7 +268,7 @@ def _congruent_ok(Psi: np.ndarray, P2: np.ndarray, n: int, k: int, tol: float) -
     return bool(top < -max(tol * scale, rounding))
 
 
-def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
+def verify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float,
                        certificate: InputDelayCertificate, *, alpha: float = 0.0,
                        tol: float = 1e-9) -> InputDelayVerification:
     """Check the input-delay condition from ``K``, the interval, ``alpha`` and the matrices.
@@ -251,6 +277,28 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
     ``lam > 0`` (unless nominal) and ``max eig(Psi) < -tol * ||Psi||``.  Uses nothing
     from the solver but the matrices in ``certificate``.  Never raises for a failed
     check: see ``ok``.
+
+    When only the relative slack fails, the test is repeated in the solver's congruent
+    coordinates (:func:`_congruent_ok`; ``congruent`` of the result).
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain.
+    h_min, h_max : float
+        The latency interval (s).
+    certificate : InputDelayCertificate
+        The matrices.
+    alpha : float, optional
+        The decay rate the certificate shows (1/s).
+    tol : float, optional
+        Relative slack demanded of ``Psi``.
+
+    Returns
+    -------
+    InputDelayVerification
     """
     K = problem.gain(K)
     _check_interval(h_min, h_max)
@@ -452,7 +500,7 @@ def _back(point: _Point, state_delay: bool) -> tuple[np.ndarray, InputDelayCerti
     Xi = np.linalg.inv(v['X'])
 
     def orig(M: np.ndarray) -> np.ndarray:
-        return Xi.T @ M @ Xi
+        return cast(np.ndarray, Xi.T @ M @ Xi)
 
     K = v['Y'] @ Xi
     cert = InputDelayCertificate(
@@ -637,6 +685,16 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         Warm start of the ``eps`` search: a local climb on ``eps_grid`` from this value
         instead of the whole grid (the bisections pass the ``eps`` of their last
         success).
+    eps_grid : sequence of float
+        The ``eps`` grid.
+    refine : int
+        Golden-section steps after the grid.
+    margin : float
+        Required strictness ``t`` (normalised units).
+    solver : str
+        cvxpy solver.
+    verify_tol : float
+        Relative tolerance of :func:`verify_input_delay`.
 
     Returns
     -------
@@ -744,7 +802,8 @@ class _CertifyProgram:
         cons += [M >> t * np.eye(n) for M in lyap]
         self.problem = cp.Problem(cp.Maximize(t), cons)
 
-    def solve(self, problem: Problem, K: np.ndarray, weights: _Weights, solver: str):
+    def solve(self, problem: Problem, K: np.ndarray, weights: _Weights, solver: str
+              ) -> SolveOutcome:
         self.A.value, self.A1.value = problem.A, problem.B @ K
         self.Ad.value = problem.A_tau
         for p, v in zip(self.wts, weights):
@@ -756,7 +815,7 @@ class _CertifyProgram:
                      quiet_inaccurate=True)
 
 
-def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
+def certify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float, *,
                         alpha: float = 0.0, nominal: bool = False,
                         state_delay: bool | None = None, margin: float = DEFAULT_MARGIN,
                         solver: str = DEFAULT_SOLVER, verify_tol: float = 1e-9
@@ -774,7 +833,33 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
     ``Phi_0``, each linearly, so with ``Z >= 0`` the dual of ``L <= -t I`` the derivative of
     the optimal ``t`` is ``-<Z, dL/dh_max>`` (``dL/dh_max``: ``Phi_0`` of the solved matrices
     with the weights' derivatives).  It is a first-order figure for the searches (one solve
-    gives a Newton step), never part of a certificate.
+    gives a Newton step), never part of a certificate (test/control/test_dual_slopes.py
+    compares it with finite differences).
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop (state delay as ``state_delay`` decides).
+    K : array_like, shape (m, n)
+        The gain.
+    h_min, h_max : float
+        The latency interval (s).
+    alpha : float, optional
+        The decay rate the certificate must show (1/s).
+    nominal : bool, optional
+        Certify ``D = 0`` only.
+    state_delay : bool, optional
+        Include ``A_tau x(t - tau)``; default: iff ``A_tau != 0``.
+    margin : float, optional
+        Required strictness.
+    solver : str, optional
+        cvxpy solver.
+    verify_tol : float, optional
+        Relative tolerance of :func:`verify_input_delay`.
+
+    Returns
+    -------
+    InputDelayCertification
     """
     h0, h1 = _check_interval(h_min, h_max)
     _check(None, alpha, [1.0])
@@ -825,7 +910,7 @@ def _slope(prog: _CertifyProgram, problem: Problem, K: np.ndarray,
     return out if math.isfinite(out) else math.nan
 
 
-def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
+def certified_input_delay_of_gain(problem: Problem, K: Any, h_min: float = 0.0, *,
                                   alpha: float = 0.0, nominal: bool = False,
                                   state_delay: bool | None = None, h_hi: float = 2.0,
                                   tol: float = 1e-3, solver: str = DEFAULT_SOLVER,
@@ -966,7 +1051,7 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
     return float(x)
 
 
-def _try(problem: Problem, h0: float, h1: float, **kw) -> InputDelayResult | None:
+def _try(problem: Problem, h0: float, h1: float, **kw: Any) -> InputDelayResult | None:
     try:
         return synthesize_input_delay(problem, h0, h1, **kw)
     except (InfeasibleError, CertificateError, SolverFailure):
@@ -989,6 +1074,31 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     returned ``h_max`` is within ``tol`` of the largest the LMI family certifies for
     the ``eps`` tried (a lower bound: ``eps`` is searched heuristically).  Returns the
     result at ``h_max`` (``result.h_max``); ``h_hi`` itself if it is certified.
+
+    Parameters
+    ----------
+    problem : Problem
+        Plant, perturbation and state delay.
+    h_min : float, optional
+        Low end of the latency interval (s).
+    gain_bound : float, optional
+        ``||K||_2`` bound.
+    alpha : float, optional
+        Decay rate the certificate must show (1/s).
+    nominal : bool, optional
+        Drop the ``E D F`` terms.
+    state_delay : bool, optional
+        Include ``A_tau`` (default: iff nonzero).
+    h_hi : float, optional
+        Largest ``h_max`` tried (s).
+    tol : float, optional
+        Absolute tolerance of ``h_max`` (s).
+    eps_grid, refine, margin, solver
+        As in :func:`synthesize_input_delay`.
+
+    Returns
+    -------
+    InputDelayResult
 
     Raises
     ------

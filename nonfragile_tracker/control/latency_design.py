@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -154,6 +154,18 @@ def lagged_problem(problem: Problem, lag: float) -> Problem:
 
     ``A = [[A, B], [0, -I/T]]``, ``B = [0; I/T]``, ``A_tau = diag(A_tau, 0)``,
     ``E`` unchanged, ``F = [F, 0]``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop without the lag.
+    lag : float
+        The actuator time constant ``T`` (s, > 0).
+
+    Returns
+    -------
+    Problem
+        The augmented problem (``n + m`` states).
     """
     T = float(lag)
     if not (math.isfinite(T) and T > 0):
@@ -170,7 +182,18 @@ def lagged_problem(problem: Problem, lag: float) -> Problem:
 
 
 def perturbation_set(problem: Problem) -> list[np.ndarray]:
-    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow)."""
+    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow).
+
+    Parameters
+    ----------
+    problem : Problem
+        Its ``E``, ``F`` and ``perturbations``.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The constant perturbations the exact figures are taken over.
+    """
     q, p = problem.E.shape[1], problem.F.shape[0]
     out = [np.zeros((q, p))] + [np.asarray(D, float) for D in problem.perturbations.values()]
     if q == p:
@@ -191,7 +214,7 @@ def _interpolation_row(x: np.ndarray, t: float) -> np.ndarray:
         out[hit[0]] = 1.0
         return out
     c = w / d
-    return c / c.sum()
+    return cast(np.ndarray, c / c.sum())
 
 
 def exact_abscissa(A: np.ndarray, A_tau: np.ndarray, tau: float, A1: np.ndarray, h: float,
@@ -450,7 +473,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
                          state_delay=res.state_delay, synthesis=res, worst_abscissa=worst)
 
 
-def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
+def latency_figures(problem: Problem, K: Any, *, tol: float = 2e-3, h_hi: float = 2.0
                     ) -> dict[str, float]:
     """Command-latency figures of any gain ``K`` (e.g. a Theorem 1 design).
 
@@ -458,6 +481,22 @@ def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
     :func:`.input_delay.certify_input_delay` (non-fragile, state delay included when
     ``A_tau != 0``); ``true_latency_margin``: exact delay margin of the input-delay loop,
     minimum over :func:`perturbation_set` (constant delay and ``D``, ``A_tau`` left out).
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop.
+    K : array_like, shape (m, n)
+        The gain.
+    tol : float, optional
+        Absolute tolerance of ``certified_latency`` (s).
+    h_hi : float, optional
+        Largest latency tried (s).
+
+    Returns
+    -------
+    dict
+        ``certified_latency`` and ``true_latency_margin`` (s).
     """
     K = problem.gain(K)
     margin = min(delay_margin(problem.A, problem.B @ (K + problem.E @ D @ problem.F))

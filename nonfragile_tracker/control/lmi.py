@@ -21,7 +21,7 @@ import contextvars
 import time
 import warnings
 from dataclasses import dataclass, replace
-from typing import Any, cast
+from typing import Any, Sequence, cast
 
 import numpy as np
 
@@ -103,8 +103,29 @@ class CertifyResult:
     status: str
 
 
-def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
-    """The matrix ``V`` of the module docstring (nominal form when ``eps is None``)."""
+def verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray, E: np.ndarray,
+                        F: np.ndarray, K: np.ndarray, P: np.ndarray, Q: np.ndarray,
+                        eps: float | None) -> np.ndarray:
+    """The matrix ``V`` of Theorem 1 (doc/theory.md #theorem-1), symmetric.
+
+    Parameters
+    ----------
+    A, B, A_tau : numpy.ndarray
+        The plant (``n x n``, ``n x m``, ``n x n``).
+    E, F : numpy.ndarray
+        The perturbation structure (``m x q``, ``p x n``).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    P, Q : numpy.ndarray, shape (n, n)
+        The Lyapunov-Krasovskii matrices.
+    eps : float or None
+        Petersen's scalar; ``None``: the nominal form (``2n x 2n``, no ``E, F`` terms).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(2n + q) x (2n + q)``, or ``2n x 2n`` for the nominal form.
+    """
     A0 = A + B @ K
     top = P @ A0 + A0.T @ P + Q
     n = A.shape[0]
@@ -209,7 +230,8 @@ class _Theorem1Program:
             extra = [self.eps >= self.t]
         self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
 
-    def _maximize_strictness(self, blocks: list, size: int, norm, extra: list, n: int, m: int,
+    def _maximize_strictness(self, blocks: list[Any], size: int, norm: Any, extra: list[Any],
+                             n: int, m: int,
                              gain_bound: bool, lean: bool = False) -> None:
         """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (all forms).
 
@@ -256,7 +278,7 @@ class _Theorem1Program:
         if self.kappa2 is not None:
             self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
-    def point(self, status: str, solve_time: float) -> tuple:
+    def point(self, status: str, solve_time: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` with ``Q = W^-1`` (``None`` if singular)."""
         W = self.W.value
         try:
@@ -275,7 +297,8 @@ class _Theorem1Program:
         self.solves += 1
         return self.cold_first and self.solves == 1
 
-    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None
+              ) -> tuple[Any, ...]:
         """Solve for ``problem``: ``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`point`)."""
         self.set_data(problem, kappa)
         out = solve(self.problem, solver, what=f'problem {problem.name!r}',
@@ -402,8 +425,8 @@ class _ReducedProgram(_Theorem1Program):
         top = S + S.T
         norm = cp.trace(self.X)
         Z = np.zeros
-        cols: list = []             # blocks right of ``top`` in the first block row
-        diag: list = []             # their diagonal blocks
+        cols: list[Any] = []        # blocks right of ``top`` in the first block row
+        diag: list[Any] = []        # their diagonal blocks
         self.W: Any = None           # cvxpy Variable / Parameter when r > 0
         self.M: Any = None
         if r:
@@ -453,7 +476,7 @@ class _ReducedProgram(_Theorem1Program):
         if self.kappa2 is not None:
             self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
-    def point(self, status: str, solve_time: float) -> tuple:
+    def point(self, status: str, solve_time: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` in the original coordinates."""
         t, X, R = self.t.value, self.X.value, self.R.value
         eps = None if self.eps is None else self.eps.value
@@ -521,7 +544,7 @@ class _MinNormProgram:
         cons = [c for c in b.problem.constraints] + [b.t >= self.t_req, 0.5 * (G + G.T) >> 0]
         self.problem = cp.Problem(cp.Minimize(self.s), cons)
 
-    def solve(self, problem: Problem, solver: str, t_req: float) -> tuple:
+    def solve(self, problem: Problem, solver: str, t_req: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`_Theorem1Program.point`)."""
         self.base.set_data(problem)
         self.t_req.value = float(t_req)
@@ -591,7 +614,7 @@ def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
     return None if not cert.verification.ok else replace(res, K=K, certificate=cert)
 
 
-def _verified(problem: Problem, **kw) -> SynthesisResult:
+def _verified(problem: Problem, **kw: Any) -> SynthesisResult:
     """:func:`_verified_chain`; for ``n >= COMPACT_FROM_N`` the paper's form as a last resort.
 
     When no point of the reduced program verifies, the whole chain is run again with the
@@ -617,7 +640,7 @@ def _verified(problem: Problem, **kw) -> SynthesisResult:
     return res
 
 
-def _verified_chain(problem: Problem, **kw) -> SynthesisResult:
+def _verified_chain(problem: Problem, **kw: Any) -> SynthesisResult:
     """Synthesize once; if the point fails verification, retry before giving up.
 
     The retries are the balanced problem, a 100x higher margin, then the second solver.
@@ -674,7 +697,7 @@ def _verified_chain(problem: Problem, **kw) -> SynthesisResult:
                            + ' | '.join(tried))
 
 
-def gain_trust_message(problem: Problem, K, P) -> str | None:
+def gain_trust_message(problem: Problem, K: np.ndarray, P: np.ndarray) -> str | None:
     """Why a double-precision check cannot vouch for this certified gain, or ``None``.
 
     Rule: ``||K||_2 > 1e3`` or ``cond(P) > 1e8``.  The check is an eigenvalue test of
@@ -683,6 +706,20 @@ def gain_trust_message(problem: Problem, K, P) -> str | None:
     ``V < 0`` lives on directions where ``P`` is small (``~ ||P|| / cond(P)``).  With
     ``cond(P) > 1e8`` or a gain that large the proof rests on digits that round-off
     reaches - and no actuator applies such a gain anyway.
+
+    Parameters
+    ----------
+    problem : Problem
+        For the message (its name).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    P : numpy.ndarray, shape (n, n)
+        The certificate's ``P``.
+
+    Returns
+    -------
+    str or None
+        The warning, or ``None`` when the gain is within the rule.
     """
     norm = float(np.linalg.norm(K, 2))
     cond = float(np.linalg.cond(P))
@@ -704,6 +741,16 @@ def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.
     or ``F[r, j]`` joins two of them.  Each connected component with at least one of
     each kind is a block; one block (or a component without inputs or perturbation)
     means no decoupling and returns ``[]``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, A_tau, B, E, F`` (their sparsity pattern).
+
+    Returns
+    -------
+    list of tuple of numpy.ndarray
+        ``(states, inputs, q, p)`` index arrays per block; ``[]``: no decoupling.
     """
     n, m = problem.n, problem.m
     q, p = problem.E.shape[1], problem.F.shape[0]
@@ -748,8 +795,8 @@ def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.
     return blocks
 
 
-def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: float,
-                       **kw) -> SynthesisResult | None:
+def _synthesize_blocks(problem: Problem, blocks: Sequence[tuple[np.ndarray, ...]], *,
+                       nominal: bool, verify_tol: float, **kw: Any) -> SynthesisResult | None:
     """Solve each decoupled block, assemble, verify the whole; ``None`` if that fails.
 
     With block-diagonal data and a common ``eps`` the matrix ``V`` of the module
@@ -935,13 +982,33 @@ class _CertifyProgram:
         return solve(self.problem, solver, what='the certification LMI for K').status
 
 
-def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | None = None,
+def certify_gain(problem: Problem, K: Any, *, nominal: bool = False,
+                 margin: float | None = None,
                  solver: str | None = None, verify_tol: float = 1e-9) -> CertifyResult:
     """Decide whether Theorem 1's condition holds for the fixed gain ``K``.
 
     Solves ``maximize t`` s.t. ``V(P, Q, d) <= -t I``, ``P, Q >= t I``, ``d >= t``,
     ``tr P + tr Q + d <= 1`` where ``d = 1/eps``; certified iff ``t >= margin`` and the
     resulting certificate passes :func:`verify_certificate`.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain.
+    nominal : bool, optional
+        Certify ``D = 0`` only.
+    margin : float, optional
+        Required strictness; default ``problem.options['margin']`` or 1e-6.
+    solver : str, optional
+        cvxpy solver; default ``problem.options['solver']`` or ``'CLARABEL'``.
+    verify_tol : float, optional
+        Relative tolerance of :func:`verify_certificate`.
+
+    Returns
+    -------
+    CertifyResult
     """
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
@@ -960,7 +1027,7 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     return CertifyResult(cert.verification.ok, tv, cert, status)
 
 
-def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
+def certified_perturbation_scale(problem: Problem, K: Any, *, upper: float = 100.0,
                                  rel_tol: float = 1e-3, solver: str | None = None) -> float:
     """Largest ``s`` such that :func:`certify_gain` certifies ``K`` with ``F -> s F``.
 
@@ -968,10 +1035,28 @@ def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
     certifies every smaller scale).  Returns 0.0 if even the nominal condition fails
     and ``upper`` if ``upper`` itself is certified.  A solver failure at a trial
     scale (it happens for extreme scales) counts as "not certified" there.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data (``F`` is scaled).
+    K : array_like, shape (m, n)
+        The gain.
+    upper : float, optional
+        Largest scale tried.
+    rel_tol : float, optional
+        Relative width of the final bracket.
+    solver : str, optional
+        cvxpy solver (default as in :func:`certify_gain`).
+
+    Returns
+    -------
+    float
+        The largest certified scale (a lower bound within ``rel_tol``).
     """
     from .search import largest_feasible
 
-    def trial(s: float):
+    def trial(s: float) -> CertifyResult | None:
         try:
             res = certify_gain(problem.replace(F=s * problem.F), K, solver=solver)
         except SolverFailure:

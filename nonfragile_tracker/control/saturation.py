@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -71,7 +72,7 @@ class SaturationLimits:
     max_linear_accel: float = 0.0
     max_reference_accel: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ('max_angular_speed', 'min_speed'):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -120,11 +121,32 @@ class SaturationCertificate:
         return self.max_eig < 0 and self.inclusion <= 1 + 1e-9 and self.radius > 0
 
     def max_reference_accel(self, radius: float) -> float:
-        """Largest ``||u_d||_inf`` (m/s^2) for which a position error ``radius`` is certified."""
+        """Largest ``||u_d||_inf`` (m/s^2) for which a position error ``radius`` is certified.
+
+        Parameters
+        ----------
+        radius : float
+            The initial position error to certify (m).
+
+        Returns
+        -------
+        float
+            In m/s^2 (negative: not even with zero reference acceleration).
+        """
         return self.limits.box - radius / self.radius_per_level
 
-    def contains(self, e0) -> bool:
-        """A constant initial history ``e0`` (error state) is inside the certified set."""
+    def contains(self, e0: Any) -> bool:
+        """A constant initial history ``e0`` (error state) is inside the certified set.
+
+        Parameters
+        ----------
+        e0 : array_like, shape (n,)
+            The error state.
+
+        Returns
+        -------
+        bool
+        """
         e0 = np.asarray(e0, float)
         return float(e0 @ (self.P + self.tau * self.Q) @ e0) <= 1.0
 
@@ -137,7 +159,8 @@ def _position_selector(n: int) -> np.ndarray:
     return C
 
 
-def saturation_certificate(A, B, K, A_tau, tau: float, limits: SaturationLimits, *,
+def saturation_certificate(A: Any, B: Any, K: Any, A_tau: Any, tau: float,
+                           limits: SaturationLimits, *,
                            solver: str = 'CLARABEL', margin: float = 1e-7
                            ) -> SaturationCertificate:
     """Largest certified initial position error of the saturated loop (see module text).
@@ -220,7 +243,8 @@ def saturation_certificate(A, B, K, A_tau, tau: float, limits: SaturationLimits,
                              status=out.status)
 
 
-def verify_saturation(A, B, K, A_tau, tau: float, limits: SaturationLimits, P, Q, G, T, *,
+def verify_saturation(A: Any, B: Any, K: Any, A_tau: Any, tau: float, limits: SaturationLimits,
+                      P: Any, Q: Any, G: Any, T: Any, *,
                       status: str = 'given') -> SaturationCertificate:
     """Check a saturation certificate in numpy and compute its radius.
 
@@ -265,13 +289,33 @@ def verify_saturation(A, B, K, A_tau, tau: float, limits: SaturationLimits, P, Q
                                  status)
 
 
-def simulate_saturated(A, B, K, A_tau, tau: float, limits: SaturationLimits, e0, *,
-                       duration: float = 20.0, dt: float = 5e-3,
-                       u_d=None) -> np.ndarray:
+def simulate_saturated(A: Any, B: Any, K: Any, A_tau: Any, tau: float,
+                       limits: SaturationLimits, e0: Any, *, duration: float = 20.0,
+                       dt: float = 5e-3, u_d: Callable[[float], Any] | None = None
+                       ) -> np.ndarray:
     """The saturated error loop from a constant history ``e0`` (RK-free Euler, small ``dt``).
 
-    ``u_d`` (callable ``t -> (m,)`` or None = 0) is the reference acceleration.  Returns
-    the error trajectory (rows per step).
+    Parameters
+    ----------
+    A, B, K, A_tau : array_like
+        The loop.
+    tau : float
+        The state delay (s).
+    limits : SaturationLimits
+        The input box.
+    e0 : array_like, shape (n,)
+        The constant initial history.
+    duration : float, optional
+        Simulated time (s).
+    dt : float, optional
+        Euler step (s).
+    u_d : callable, optional
+        ``t -> (m,)`` reference acceleration (default 0).
+
+    Returns
+    -------
+    numpy.ndarray, shape (steps + 1, n)
+        The error trajectory, a row per step.
     """
     A, B, K, Ad = (np.asarray(M, float) for M in (A, B, K, A_tau))
     n, m = B.shape
@@ -295,7 +339,17 @@ def simulate_saturated(A, B, K, A_tau, tau: float, limits: SaturationLimits, e0,
 
 
 def format_saturation(cert: SaturationCertificate) -> str:
-    """A few lines: the limits, the certified radius, the largest reference acceleration."""
+    """A few lines: the limits, the certified radius, the largest reference acceleration.
+
+    Parameters
+    ----------
+    cert : SaturationCertificate
+        The certificate.
+
+    Returns
+    -------
+    str
+    """
     lim = cert.limits
     head = (f'saturation (|w| <= {lim.max_angular_speed:g} rad/s at |v| >= {lim.min_speed:g} '
             f'm/s' + (f', |dv/dt| <= {lim.max_linear_accel:g} m/s^2' if lim.max_linear_accel
@@ -324,7 +378,8 @@ class SimulationCheck:
     outside_total: int
 
 
-def check_by_simulation(cert: SaturationCertificate, A, B, K, A_tau, *, directions: int = 8,
+def check_by_simulation(cert: SaturationCertificate, A: Any, B: Any, K: Any, A_tau: Any, *,
+                        directions: int = 8,
                         inside: float = 0.99, outside: float = 1.5, duration: float = 20.0,
                         tolerance: float = 1e-3) -> SimulationCheck:
     """Simulate the saturated loop from position errors at ``inside`` and ``outside`` x radius.
@@ -353,7 +408,7 @@ def check_by_simulation(cert: SaturationCertificate, A, B, K, A_tau, *, directio
     n = np.asarray(A).shape[0]
     d = cert.limits.max_reference_accel
 
-    def u_d(t: float):
+    def u_d(t: float) -> np.ndarray:
         return d * np.array([math.cos(t), math.sin(t)])
 
     counts = []
