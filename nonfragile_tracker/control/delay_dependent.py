@@ -170,12 +170,8 @@ def descriptor_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarr
 
     Parameters
     ----------
-    A, B, A_tau : numpy.ndarray
-        The plant (``n x n``, ``n x m``, ``n x n``).
-    E, F : numpy.ndarray
-        The perturbation structure (``m x q``, ``p x n``).
-    K : numpy.ndarray, shape (m, n)
-        The gain.
+    A, B, A_tau, E, F, K : numpy.ndarray
+        Plant, perturbation structure and gain, as in :func:`.lmi.verification_matrix`.
     h : float
         The delay (s).
     P1, P2, P3, S, R : numpy.ndarray, shape (n, n)
@@ -225,16 +221,12 @@ def verify_delay_dependent(problem: Problem, K: Any, h: float,
 
     Parameters
     ----------
-    problem : Problem
-        The data ``A, B, A_tau, E, F``.
-    K : array_like, shape (m, n)
-        The gain.
+    problem, K, tol
+        As in :func:`.lmi.verify_certificate` (``tol``: the slack demanded of ``Psi``).
     h : float
         The delay (s, finite, >= 0).
     certificate : DelayDependentCertificate
         The matrices ``P1, P2, P3, S, R`` and ``lam``.
-    tol : float, optional
-        Relative slack demanded of ``Psi``.
 
     Returns
     -------

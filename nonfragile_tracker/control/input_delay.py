@@ -198,14 +198,10 @@ def input_delay_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndar
 
     Parameters
     ----------
-    A, B, A_tau : numpy.ndarray
-        The plant (``n x n``, ``n x m``, ``n x n``).
+    A, B, A_tau, E, F, K : numpy.ndarray
+        Plant, perturbation structure and gain, as in :func:`.lmi.verification_matrix`.
     tau : float
         The state delay (s).
-    E, F : numpy.ndarray
-        The perturbation structure (``m x q``, ``p x n``).
-    K : numpy.ndarray, shape (m, n)
-        The gain.
     h_min, h_max : float
         The latency interval (s).
     alpha : float
@@ -283,18 +279,14 @@ def verify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float,
 
     Parameters
     ----------
-    problem : Problem
-        The data ``A, B, A_tau, tau, E, F``.
-    K : array_like, shape (m, n)
-        The gain.
+    problem, K, tol
+        As in :func:`.lmi.verify_certificate` (``tol``: the slack demanded of ``Psi``).
     h_min, h_max : float
         The latency interval (s).
     certificate : InputDelayCertificate
         The matrices.
     alpha : float, optional
         The decay rate the certificate shows (1/s).
-    tol : float, optional
-        Relative slack demanded of ``Psi``.
 
     Returns
     -------
@@ -1028,8 +1020,27 @@ def certified_input_delay_of_gain(problem: Problem, K: Any, h_min: float = 0.0, 
             lo, lo_s = float(h_guess), sc
         else:
             hi, hi_s = float(h_guess), sc
+    done, lo, lo_s, hi, hi_s = _newton_steps(trial, slopes, lo, lo_s, hi, hi_s, tol)
+    if done:
+        return float(lo)
+    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
+                                         hi_score=hi_s)
+    return float(x)
+
+
+def _newton_steps(trial: Callable[[float], tuple[float, bool | None]],
+                  slopes: dict[float, float], lo: float, lo_s: float, hi: float, hi_s: float,
+                  tol: float) -> tuple[bool, float, float, float, float]:
+    """Newton steps on the strictness from the certified ``lo`` (the search's Notes).
+
+    See :func:`certified_input_delay_of_gain`.  ``trial(h) -> (t - margin, True or
+    None)`` records ``slopes[h]``.  Returns ``(done, lo, lo_s, hi, hi_s)``: ``done``
+    when the estimated remaining gain is below ``tol / 2`` (``lo`` is the answer), else
+    the bracket for the false-position search (a refuted step or an unusable slope ends
+    the steps).
+    """
     prev = math.nan
-    while hi - lo > tol:        # Newton steps on the strictness (Notes)
+    while hi - lo > tol:
         g = slopes.get(lo, math.nan)
         if not (math.isfinite(g) and g < 0 and math.isfinite(lo_s) and lo_s > 0):
             break
@@ -1038,7 +1049,7 @@ def certified_input_delay_of_gain(problem: Problem, K: Any, h_min: float = 0.0, 
         # of the last two (a kinked strictness converges linearly)
         rate = min(step / prev, 0.9) if math.isfinite(prev) and prev > 0 else 0.0
         if step / (1.0 - rate) < 0.5 * tol:
-            return float(lo)
+            return True, lo, lo_s, hi, hi_s
         prev = step
         x = min(lo + step, hi - 0.5 * tol)
         sc, ok = trial(x)
@@ -1046,9 +1057,7 @@ def certified_input_delay_of_gain(problem: Problem, K: Any, h_min: float = 0.0, 
             hi, hi_s = x, sc
             break
         lo, lo_s = x, sc
-    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
-                                         hi_score=hi_s)
-    return float(x)
+    return False, lo, lo_s, hi, hi_s
 
 
 def _try(problem: Problem, h0: float, h1: float, **kw: Any) -> InputDelayResult | None:

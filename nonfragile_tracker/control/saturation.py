@@ -1,36 +1,21 @@
 """A region of attraction of the tracking loop with saturating inputs.
 
 The law commands ``u = u_d + K e`` (``e = xi - xi_d``, ``u`` the acceleration of the
-linearized robot, ``u_d`` the reference acceleration).  The base bounds the tangential
-acceleration ``|a| <= max_linear_accel`` (a rate limit on ``v``) and the turn rate
-``|w| = |u_n| / |v| <= max_angular_speed``: with ``|v| >= min_speed`` along the motion
-both hold while ``||u|| <= u_max = min(max_linear_accel, min_speed * max_angular_speed)``,
-in particular while each world-frame component ``|u_i| <= u_max / sqrt(2)``.  The certified
-loop saturates ``u`` to that box:
+linearized robot, ``u_d`` the reference acceleration).  The base's turn-rate and
+acceleration limits hold while each world-frame component of ``u`` stays in a box; the
+certified loop saturates ``u`` to that box::
 
     e' = A e + B (sat(u_d + K e) - u_d) + A_tau e(t - tau),   ||u_d||_inf <= d.
 
-``sat(u_d + K e) - u_d = K e - psi`` where ``psi`` lies between 0 and the dead-zone of
-level ``l = u_max / sqrt(2) - d`` (a shifted saturation), so the **generalized sector
-condition** holds (Tarbouriech, Garcia, Gomes da Silva and Queinnec, *Stability and
-Stabilization of Linear Systems with Saturating Actuators*, Springer 2011, Lemma 1.6):
-``psi' T (psi - G e) <= 0`` for any diagonal ``T > 0`` wherever ``|(K - G)_i e| <= l``.
-With ``V = e' P e + int_{t-tau}^t e' Q e`` (delay-independent Krasovskii) the LMIs in
-``W = P^-1``, ``Z = G W``, ``S = T^-1`` (diagonal), ``R = W Q W``:
+The generalized sector condition (Tarbouriech, Garcia, Gomes da Silva and Queinnec, 2011,
+Lemma 1.6) and a delay-independent Krasovskii functional give two LMIs whose solution
+certifies that every constant initial history in an ellipsoid converges; the program
+maximizes the largest initial *position* error in it, and the radius scales with the
+dead-zone level, which gives the largest reference acceleration for a wanted radius.
 
-    [ (A+BK) W + W (A+BK)' + R    A_tau W    -B S + Z' ]
-    [          *                   -R            0     ]  < 0
-    [          *                    *          -2 S    ]
-
-    [ W               W K_i' - Z_i' ]
-    [ *               l^2           ]  >= 0      (E(P, 1) inside the sector region)
-
-certify that every constant initial history ``e0`` with ``e0' (P + tau Q) e0 <= 1``
-converges to 0 (``V`` decreases, so ``e(t)`` stays in ``E(P, 1)``).  The program
-maximizes the largest initial *position* error ``r`` (zero velocity error) in that set
-(``C W^-1 C' <= beta I``, minimize ``beta``).  The LMIs are homogeneous in ``l``: the
-certified radius is ``r = rho * l`` (``rho``: per unit of level), so the largest
-reference acceleration for a wanted radius is ``d = u_max / sqrt(2) - r / rho``.
+The box model, the LMIs (in ``W = P^-1``, ``Z = G W``, ``S = T^-1``, ``R = W Q W``), the
+radius and the assumptions are in the documentation: doc/theory.md, section "Saturation: a
+certified region of attraction" (#saturation-a-certified-region-of-attraction).
 
 The certificate is checked independently in numpy (:func:`verify_saturation`): the
 eigenvalues of the first LMI in the ``P``-form and the inclusion, from the solver's point.

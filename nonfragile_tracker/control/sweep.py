@@ -262,7 +262,7 @@ def sweep_table(records: Sequence[dict[str, Any]]) -> str:
     Parameters
     ----------
     records : sequence of dict
-        Sweep records.
+        Sweep records; a failed design's line has its status and no figures.
 
     Returns
     -------
@@ -344,7 +344,7 @@ def records_for_json(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     Parameters
     ----------
     records : sequence of dict
-        Sweep records.
+        Sweep records (not modified).
 
     Returns
     -------
