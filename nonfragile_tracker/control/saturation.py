@@ -29,6 +29,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
+from .certificate import eigen_figures, passes
+from .sdp import sym
 
 __all__ = ['SaturationLimits', 'SaturationCertificate', 'saturation_certificate',
            'verify_saturation', 'simulate_saturated', 'format_saturation', 'SimulationCheck',
@@ -258,7 +260,8 @@ def verify_saturation(A: Any, B: Any, K: Any, A_tau: Any, tau: float, limits: Sa
     L = np.block([[Acl.T @ P + P @ Acl + Q, P @ Ad, -P @ B + G.T @ T],
                   [Ad.T @ P, -Q, np.zeros((n, m))],
                   [(-P @ B + G.T @ T).T, np.zeros((m, n)), -2 * T]])
-    max_eig = float(np.linalg.eigvalsh(0.5 * (L + L.T)).max())
+    # the certificate check of the LMI modules (no relative slack here: tol = 0)
+    max_eig, scale, min_p = eigen_figures(sym(L), (P,))
     lev = limits.level
     Pinv = np.linalg.inv(P)
     H = K - G
@@ -267,7 +270,7 @@ def verify_saturation(A: Any, B: Any, K: Any, A_tau: Any, tau: float, limits: Sa
     Pt = P + tau * Q
     # e0 = C' z (zero velocity error): e0' Pt e0 <= 1 for all ||z|| <= r
     lam = float(np.linalg.eigvalsh(C @ Pt @ C.T).max())
-    ok = max_eig < 0 and incl <= 1 + 1e-9 and np.all(np.linalg.eigvalsh(P) > 0)
+    ok = passes(max_eig, scale, min_p, None, 0.0) and incl <= 1 + 1e-9
     radius = 1.0 / math.sqrt(lam) if ok and lam > 0 else 0.0
     per = radius / lev if lev > 0 else 0.0
     return SaturationCertificate(limits, P, Q, G, T, float(tau), radius, per, max_eig, incl,
