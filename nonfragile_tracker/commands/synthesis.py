@@ -71,8 +71,7 @@ def cmd_synthesize(args: argparse.Namespace) -> int:
         + (f' (bound {bound:g})' if bound is not None else '') + '\n'
         f'margin achieved t = {res.margin_achieved:.4g} (required {res.margin_required:g})\n'
         f'eps = {res.eps}\n'
-        f'verification: max eig V = {ver.max_eig_V:.4g}, min eig P = {ver.min_eig_P:.4g}, '
-        f'min eig Q = {ver.min_eig_Q:.4g} -> {"OK" if ver.ok else "FAILED"}\n'
+        f'verification: {ver.describe()} -> {"OK" if ver.ok else "FAILED"}\n'
         f'solver {res.solver}: status {res.status}, {1e3 * res.solve_time:.1f} ms in solver, '
         f'{1e3 * res.wall_time:.1f} ms total' + ('\n' + rule.rstrip() if rule else '')
         + (f"\nWARNING: {res.extra['warning']}" if 'warning' in res.extra else ''))

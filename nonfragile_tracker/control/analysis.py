@@ -66,7 +66,7 @@ def analyse_gain(problem: Problem, K: ArrayLike, *, name: str = 'K', margins: bo
     -------
     GainAnalysis
     """
-    K = np.asarray(K, dtype=float)
+    K = problem.gain(K)
     A, B, Ad, tau, E, F = problem.A, problem.B, problem.A_tau, problem.tau, problem.E, problem.F
     nom = certify_gain(problem, K, nominal=True)
     nf = certify_gain(problem, K)

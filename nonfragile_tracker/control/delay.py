@@ -1042,6 +1042,52 @@ class FragilityResult:
     evaluations: int
 
 
+def _unstable(v: float) -> bool:
+    """A worst-case abscissa ``v`` that counts as unstable (the :func:`is_stable` convention)."""
+    return v >= -STABLE_TOL
+
+
+_Bracket = tuple[float, float, float, float, np.ndarray]
+
+
+def _grow_bracket(w: Callable[[float], tuple[float, np.ndarray]], nominal: float, w1: float,
+                  D1: np.ndarray, amax: float) -> _Bracket:
+    """``[lo, hi]`` with ``w(lo) < 0 <= w(hi)`` from ``[0, 1]`` (:func:`fragility_margin`).
+
+    Grown by linear extrapolation, x1.25 to x4 per step, up to ``amax`` (where ``w(hi)``
+    may still be stable).  Returns ``(lo, w(lo), hi, w(hi), maximizer at hi)``.
+    """
+    lo, w_lo, hi, w_hi, D_hi = 0.0, nominal, 1.0, w1, D1
+    while not _unstable(w_hi):
+        if hi >= amax:
+            break
+        guess = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi > w_lo else 4.0 * hi
+        x = min(amax, max(1.25 * hi, min(4.0 * hi, guess)))
+        lo, w_lo = hi, w_hi
+        hi, (w_hi, D_hi) = x, w(x)
+    return lo, w_lo, hi, w_hi, D_hi
+
+
+def _regula_falsi(w: Callable[[float], tuple[float, np.ndarray]], lo: float, w_lo: float,
+                  hi: float, w_hi: float, D_hi: np.ndarray, rtol: float) -> _Bracket:
+    """Illinois regula falsi on ``w`` with a bisection safeguard, to ``hi - lo <= rtol hi``."""
+    side = 0
+    while hi - lo > rtol * hi:
+        x = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi != w_lo else 0.5 * (lo + hi)
+        if not lo + 0.01 * (hi - lo) < x < hi - 0.01 * (hi - lo):
+            x = 0.5 * (lo + hi)
+        v, D = w(x)
+        if _unstable(v):
+            hi, w_hi, D_hi = x, v, D
+            w_lo *= 0.5 if side == 1 else 1.0
+            side = 1
+        else:
+            lo, w_lo = x, v
+            w_hi *= 0.5 if side == -1 else 1.0
+            side = -1
+    return lo, w_lo, hi, w_hi, D_hi
+
+
 def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: Any, *,
                      seed: int = 0, alpha_max: float = 1e3, rtol: float = 1e-6,
                      n_random: int = 8, n_starts: int = 3, maxit: int = 60
@@ -1125,50 +1171,23 @@ def fragility_margin(A: Any, B: Any, K: Any, A_tau: Any, tau: float, E: Any, F: 
     if nominal >= -STABLE_TOL:
         return FragilityResult(0.0, 0.0, zero, w1, D1, fn.evaluations)
 
-    def unstable(v: float) -> bool:          # the is_stable convention
-        return v >= -STABLE_TOL
-
     # bracket [lo, hi]: w(lo) < 0 <= w(hi); grow by linear extrapolation (x1.25 .. x4)
-    lo, w_lo, hi, w_hi, D_hi = 0.0, nominal, 1.0, w1, D1
-    while not unstable(w_hi):
-        if hi >= amax:
-            return FragilityResult(math.inf, math.inf, D_hi, w1, D1, fn.evaluations)
-        guess = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi > w_lo else 4.0 * hi
-        x = min(amax, max(1.25 * hi, min(4.0 * hi, guess)))
-        lo, w_lo = hi, w_hi
-        hi, (w_hi, D_hi) = x, w(x, quick)
-
-    def locate(lo: float, w_lo: float, hi: float, w_hi: float, D_hi: np.ndarray,
-               opts: dict[str, Any]) -> tuple[float, float, float, float, np.ndarray]:
-        """Illinois regula falsi with a bisection safeguard."""
-        side = 0
-        while hi - lo > rtol * hi:
-            x = hi - w_hi * (hi - lo) / (w_hi - w_lo) if w_hi != w_lo else 0.5 * (lo + hi)
-            if not lo + 0.01 * (hi - lo) < x < hi - 0.01 * (hi - lo):
-                x = 0.5 * (lo + hi)
-            v, D = w(x, opts)
-            if unstable(v):
-                hi, w_hi, D_hi = x, v, D
-                w_lo *= 0.5 if side == 1 else 1.0
-                side = 1
-            else:
-                lo, w_lo = x, v
-                w_hi *= 0.5 if side == -1 else 1.0
-                side = -1
-        return lo, w_lo, hi, w_hi, D_hi
-
-    lo, w_lo, hi, w_hi, D_hi = locate(lo, w_lo, hi, w_hi, D_hi, quick)
+    grown = _grow_bracket(lambda x: w(x, quick), nominal, w1, D1, amax)
+    if not _unstable(grown[3]):         # stable up to alpha_max
+        return FragilityResult(math.inf, math.inf, grown[4], w1, D1, fn.evaluations)
+    lo, w_lo, hi, w_hi, D_hi = _regula_falsi(lambda x: w(x, quick), *grown, rtol)
     # confirm the stable end with the full search; if it finds instability there,
     # back off and locate again with full searches
     for _ in range(4):
         v, D = w(lo, full)
-        if not unstable(v):
+        if not _unstable(v):
             break
         hi, w_hi, D_hi = lo, v, D
         x = lo
-        while unstable(v) and x > 0:
+        while _unstable(v) and x > 0:
             hi, w_hi, D_hi = x, v, D
             x *= 0.5
             v, D = w(x, full)
-        lo, w_lo, hi, w_hi, D_hi = locate(x, v, hi, w_hi, D_hi, full)
+        lo, w_lo, hi, w_hi, D_hi = _regula_falsi(lambda x: w(x, full), x, v, hi, w_hi, D_hi,
+                                                 rtol)
     return FragilityResult(lo, hi, D_hi, w1, D1, fn.evaluations)

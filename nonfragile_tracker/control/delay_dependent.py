@@ -20,16 +20,18 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Sequence, cast
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, SolverFailure
+from .certificate import (CertifiedGain, Verification, eigen_figures, from_certificate,
+                          passes, retry_advice)
 from .problem import Problem
 from .search import eps_search
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
-                  cached_program, solve)
+                  DescriptorParameters, cached_program, solve_for_point)
 from .sdp import sym as _sym
 
 __all__ = ['DEFAULT_EPS_GRID', 'DescriptorSolution',
@@ -47,22 +49,32 @@ _INFEASIBLE = INFEASIBLE_STATUSES
 # records
 
 @dataclass(frozen=True)
-class DelayDependentVerification:
-    """Outcome of :func:`verify_delay_dependent` (eigenvalue checks in original coordinates)."""
+class DelayDependentVerification(Verification):
+    """Outcome of :func:`verify_delay_dependent` (:class:`.certificate.Verification`).
 
-    ok: bool
-    max_eig_Psi: float       # largest eigenvalue of Psi (must be < -tolerance * scale)
-    min_eig_P1: float        # must be > 0
-    min_eig_S: float         # must be > 0
-    min_eig_R: float         # must be > 0
-    lam: float | None        # Petersen scalar (must be > 0; None: nominal)
-    tolerance: float
-    scale: float             # spectral norm of Psi
+    Eigenvalue checks in original coordinates.
 
-    @property
-    def worst_eigenvalue(self) -> float:
-        """Largest eigenvalue of ``Psi`` (verified when below ``-tolerance * scale``)."""
-        return self.max_eig_Psi
+    Besides ``ok`` and the keywords ``tolerance`` and ``scale`` of the base:
+
+    Parameters
+    ----------
+    max_eig_Psi : float
+        Largest eigenvalue of ``Psi`` (must be ``< -tolerance * scale``).
+    min_eig_P1, min_eig_S, min_eig_R : float
+        Smallest eigenvalues of ``P1``, ``S``, ``R`` (must be > 0).
+    lam : float or None
+        Petersen scalar (must be > 0; ``None``: nominal).
+    """
+
+    max_eig_Psi: float
+    min_eig_P1: float
+    min_eig_S: float
+    min_eig_R: float
+    lam: float | None
+
+    MATRIX = 'Psi'
+    WORST = 'max_eig_Psi'
+    POSITIVE = (('min_eig_P1', 'P1'), ('min_eig_S', 'S'), ('min_eig_R', 'R'))
 
 
 @dataclass(frozen=True)
@@ -85,54 +97,38 @@ class DelayDependentCertificate:
     verification: DelayDependentVerification
 
 
-@dataclass(frozen=True)
-class DelayDependentResult:
-    """A delay-dependent gain with its verified certificate and solver facts."""
+@dataclass(frozen=True, kw_only=True)
+class DelayDependentResult(CertifiedGain):
+    """A delay-dependent gain with its verified certificate and solver facts.
 
-    K: np.ndarray
+    The fields of :class:`.certificate.CertifiedGain` (keywords; ``margin_achieved`` is the
+    strictness at the chosen ``eps``, ``solve_time`` summed over the ``eps`` search) and:
+
+    Parameters
+    ----------
+    h : float
+        The certified delay (s).
+    eps : float
+        The tuning scalar used (``P3 = eps P2``).
+    gain_bound : float or None
+        The ``||K||_2`` bound imposed.
+    eps_scan : tuple of (float, float)
+        ``(eps, t)`` of every solve (``t = -inf``: no point).
+    """
+
     h: float
-    eps: float                       # the tuning scalar used (P3 = eps P2)
+    eps: float
     certificate: DelayDependentCertificate
-    margin_required: float
-    margin_achieved: float           # strictness t at the chosen eps (normalized units)
-    status: str
-    solver: str
-    solve_time: float                # seconds inside the solver, summed over the eps search
-    wall_time: float                 # seconds for build + all solves + verification
-    nominal: bool
     gain_bound: float | None
-    eps_scan: tuple[tuple[float, float], ...] = ()   # (eps, t) of every solve; t = -inf: none
-    extra: dict[str, Any] = field(default_factory=dict)
+    eps_scan: tuple[tuple[float, float], ...] = ()
 
-    @property
-    def gain_norm(self) -> float:
-        """Spectral norm ``||K||_2`` of the gain."""
-        return float(np.linalg.norm(self.K, 2))
-
-    @property
-    def P1(self) -> np.ndarray:
-        """Matrix ``P1`` of the certificate (must be positive definite)."""
-        return self.certificate.P1
-
-    @property
-    def S(self) -> np.ndarray:
-        """Matrix ``S`` of the certificate (must be positive definite)."""
-        return self.certificate.S
-
-    @property
-    def R(self) -> np.ndarray:
-        """Matrix ``R`` of the certificate (must be positive definite)."""
-        return self.certificate.R
-
-    @property
-    def lam(self) -> float | None:
-        """Petersen scalar of the certificate (None: the nominal condition)."""
-        return self.certificate.lam
-
-    @property
-    def verification(self) -> DelayDependentVerification:
-        """The independent check of the certificate."""
-        return self.certificate.verification
+    P1 = from_certificate('P1', 'Matrix ``P1`` of the certificate (positive definite).')
+    S = from_certificate('S', 'Matrix ``S`` of the certificate (positive definite).')
+    R = from_certificate('R', 'Matrix ``R`` of the certificate (positive definite).')
+    lam = from_certificate('lam', 'Petersen scalar of the certificate (None: the nominal '
+                           'condition).')
+    verification = from_certificate('verification', 'The independent check of the '
+                                    'certificate.')
 
 
 @dataclass(frozen=True)
@@ -165,9 +161,29 @@ class DescriptorSolution:
 # ---------------------------------------------------------------------------------------------
 # independent verification (numpy only)
 
-def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, lam
+def descriptor_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray,
+                                   E: np.ndarray, F: np.ndarray, K: np.ndarray, h: float,
+                                   P1: np.ndarray, P2: np.ndarray, P3: np.ndarray,
+                                   S: np.ndarray, R: np.ndarray, lam: float | None
                                    ) -> np.ndarray:
-    """``Psi`` of the module docstring, step 5 (``Phi_0`` alone when ``lam is None``)."""
+    """``Psi`` of the delay-dependent condition (doc/theory.md, step 5), symmetric.
+
+    Parameters
+    ----------
+    A, B, A_tau, E, F, K : numpy.ndarray
+        Plant, perturbation structure and gain, as in :func:`.lmi.verification_matrix`.
+    h : float
+        The delay (s).
+    P1, P2, P3, S, R : numpy.ndarray, shape (n, n)
+        The certificate's matrices.
+    lam : float or None
+        Petersen scalar; ``None``: ``Phi_0`` alone (nominal, ``3n x 3n``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3n + q + p)`` square, or ``3n`` square for the nominal form.
+    """
     n = A.shape[0]
     Ac = A + B @ K
     phi11 = P2.T @ Ac + Ac.T @ P2 + S - R
@@ -193,14 +209,28 @@ def descriptor_verification_matrix(A, B, A_tau, E, F, K, h, P1, P2, P3, S, R, la
     return _sym(psi)
 
 
-def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDependentCertificate,
-                           *, tol: float = 1e-9) -> DelayDependentVerification:
+def verify_delay_dependent(problem: Problem, K: Any, h: float,
+                           certificate: DelayDependentCertificate, *, tol: float = 1e-9
+                           ) -> DelayDependentVerification:
     """Check the delay-dependent condition from ``(K, h, P1, P2, P3, S, R, lam)`` with numpy.
 
     Uses only ``K``, ``h`` (the arguments) and the matrices/scalar of ``certificate``
     (its own ``K``, ``h``, ``eps`` and ``verification`` are ignored).  Passes iff
     ``P1, S, R > 0``, ``lam > 0`` (unless nominal) and
     ``max eig(Psi) < -tol * ||Psi||``.  Never raises for a failed check: see ``ok``.
+
+    Parameters
+    ----------
+    problem, K, tol
+        As in :func:`.lmi.verify_certificate` (``tol``: the slack demanded of ``Psi``).
+    h : float
+        The delay (s, finite, >= 0).
+    certificate : DelayDependentCertificate
+        The matrices ``P1, P2, P3, S, R`` and ``lam``.
+
+    Returns
+    -------
+    DelayDependentVerification
     """
     K = problem.gain(K)
     h = float(h)
@@ -210,32 +240,23 @@ def verify_delay_dependent(problem: Problem, K, h: float, certificate: DelayDepe
     return _verify(problem, K, h, c.P1, c.P2, c.P3, c.S, c.R, c.lam, tol)
 
 
-def _verify(problem: Problem, K: np.ndarray, h: float, P1, P2, P3, S, R, lam: float | None,
-            tol: float) -> DelayDependentVerification:
+def _verify(problem: Problem, K: np.ndarray, h: float, P1: Any, P2: Any, P3: Any, S: Any,
+            R: Any, lam: float | None, tol: float) -> DelayDependentVerification:
     """:func:`verify_delay_dependent` on the matrices themselves (``K``, ``h`` checked)."""
     P1, S, R = (_sym(np.asarray(M, float)) for M in (P1, S, R))
     P2, P3 = np.asarray(P2, float), np.asarray(P3, float)
     lam = None if lam is None else float(lam)
     Psi = descriptor_verification_matrix(problem.A, problem.B, problem.A_tau, problem.E,
                                          problem.F, K, h, P1, P2, P3, S, R, lam)
-    finite = bool(np.all(np.isfinite(Psi)))
-    if finite:
-        ev = np.linalg.eigvalsh(Psi)
-        top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
-        mins = [float(np.linalg.eigvalsh(M)[0]) for M in (P1, S, R)]
-    else:
-        top, scale, mins = math.inf, math.inf, [-math.inf] * 3
-    ok = (finite and top < -tol * scale and all(m > 0 for m in mins)
-          and (lam is None or lam > 0))
-    return DelayDependentVerification(ok=bool(ok), max_eig_Psi=top, min_eig_P1=mins[0],
-                                      min_eig_S=mins[1], min_eig_R=mins[2], lam=lam,
-                                      tolerance=tol, scale=scale)
+    top, scale, mins = eigen_figures(Psi, (P1, S, R))
+    return DelayDependentVerification(passes(top, scale, mins, lam, tol), top, mins[0],
+                                      mins[1], mins[2], lam, tolerance=tol, scale=scale)
 
 
 # ---------------------------------------------------------------------------------------------
 # the SDP (built once per shape, re-solved with new data through DPP parameters)
 
-class _DescriptorProgram:
+class _DescriptorProgram(DescriptorParameters):
     def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool):
         import cvxpy as cp
         self.cp = cp
@@ -288,46 +309,30 @@ class _DescriptorProgram:
                 Rb >> self.t * I] + extra
         if gain_bound:
             # ||K||_2 <= kappa with K = Y X^-1, X not symmetric: see the module docstring.
-            self.kappa2: cp.Parameter | None = par(nonneg=True)
-            He = X + X.T
-            Gk = cp.bmat([[self.kappa2 * (He - I), Y.T], [Y, np.eye(m)]])
-            cons += [0.5 * He >> I, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
+            cons += self.gain_bound_constraints(X, Y, self.t)
         else:
-            self.kappa2 = None
             cons += [norm <= 1]
         self.problem = cp.Problem(cp.Maximize(self.t), cons)
 
     def set_data(self, problem: Problem, kappa: float | None) -> None:
-        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
-        if not self.nominal:
-            self.BE.value = problem.B @ problem.E
-            self.F.value = problem.F
-        if self.kappa2 is not None:
-            self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
+        """Put ``problem``'s data (and the gain bound ``kappa``) into the parameters."""
+        self.set_problem(problem, kappa)
 
     def solve(self, problem: Problem, h: float, eps: float, solver: str) -> DescriptorSolution:
-        self.eps.value = eps
+        """Solve at delay ``h`` and tuning scalar ``eps`` (after :meth:`set_data`)."""
+        self.set_eps(problem, eps)
         self.h2.value = h * h
-        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
-        self.eAd.value = eps * problem.A_tau
-        if not self.nominal:
-            self.eBE.value = eps * (problem.B @ problem.E)
-        try:
-            # 'optimal_inaccurate' is reported in the status; the point is verified anyway
-            out = solve(self.problem, solver, what='the descriptor LMI', quiet_inaccurate=True)
-        except SolverFailure as exc:
-            return DescriptorSolution(status=f'solver_error: {exc}', t=None, solve_time=0.0,
-                                      eps=eps)
-        t = self.t.value
-        if out.status in _OK and self.X.value is not None:
+        # 'optimal_inaccurate' is reported in the status; the point is verified anyway
+        out, t, usable = solve_for_point(self.problem, solver, 'the descriptor LMI', self.t,
+                                         self.X)
+        if usable:
             return DescriptorSolution(
-                status=out.status, t=None if t is None else float(t),
-                solve_time=out.solve_time, eps=eps, X=np.array(self.X.value),
-                Y=np.array(self.Y.value), Pb=np.array(self.Pb.value),
-                Sb=np.array(self.Sb.value), Rb=np.array(self.Rb.value),
+                status=out.status, t=t, solve_time=out.solve_time, eps=eps,
+                X=np.array(self.X.value), Y=np.array(self.Y.value),
+                Pb=np.array(self.Pb.value), Sb=np.array(self.Sb.value),
+                Rb=np.array(self.Rb.value),
                 lam=None if self.lam is None else float(cast(np.ndarray, self.lam.value)))
-        return DescriptorSolution(status=out.status, t=None if t is None else float(t),
-                                  solve_time=out.solve_time, eps=eps)
+        return DescriptorSolution(status=out.status, t=t, solve_time=out.solve_time, eps=eps)
 
 
 def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _DescriptorProgram:
@@ -362,7 +367,8 @@ def _certificate(problem: Problem, h: float, sol: DescriptorSolution, verify_tol
                                      lam=sol.lam, verification=ver)
 
 
-def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_bound) -> None:
+def _check_args(problem: Problem, h: float, eps_grid: Sequence[float],
+                gain_bound: float | None) -> None:
     if not (math.isfinite(h) and h > 0):
         raise ValueError(f'h must be a finite delay > 0 (seconds), got {h!r}')
     if gain_bound is not None and not gain_bound > 0:
@@ -371,7 +377,7 @@ def _check_args(problem: Problem, h: float, eps_grid: Sequence[float], gain_boun
         raise ValueError(f'eps_grid must be a non-empty sequence of numbers > 0, got {eps_grid!r}')
 
 
-def _describe(problem: Problem, h: float, nominal: bool, gain_bound) -> str:
+def _describe(problem: Problem, h: float, nominal: bool, gain_bound: float | None) -> str:
     kind = 'nominal' if nominal else 'non-fragile'
     bound = '' if gain_bound is None else f', ||K||_2 <= {gain_bound:g}'
     return f'delay-dependent design ({kind}{bound}) for problem {problem.name!r} at h = {h:g}'
@@ -400,8 +406,20 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
         Drop the ``E D F`` terms (``D = 0``).
     gain_bound : float, optional
         Also impose ``||K||_2 <= gain_bound``.
+    eps_grid : sequence of float
+        The ``eps`` grid of the line search.
+    refine : int
+        Golden-section steps after the grid.
     margin : float
         Required strictness ``t`` (normalized units, see module docstring).
+    solver : str
+        cvxpy solver.
+    verify_tol : float
+        Relative tolerance of :func:`verify_delay_dependent`.
+
+    Returns
+    -------
+    DelayDependentResult
 
     Raises
     ------
@@ -457,10 +475,7 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
     if not ver.ok:
         raise CertificateError(
             f'{solver} returned a point for the {what} (eps = {best.eps:.3g}) that fails '
-            f'independent verification: max eig Psi = {ver.max_eig_Psi:.3g}, min eig P1 = '
-            f'{ver.min_eig_P1:.3g}, S = {ver.min_eig_S:.3g}, R = {ver.min_eig_R:.3g}. '
-            + ('Raise the margin (options.margin).' if solver == 'CLARABEL'
-               else 'Use CLARABEL or raise the margin (options.margin).'))
+            f'independent verification: {ver.describe()}. ' + retry_advice(solver))
     return DelayDependentResult(
         K=cert.K, h=h, eps=float(best.eps), certificate=cert, margin_required=margin,
         margin_achieved=t_best, status=str(best.status), solver=solver,
@@ -469,7 +484,8 @@ def synthesize_delay_dependent(problem: Problem, h: float | None = None, *,
 
 
 def _feasible_at(problem: Problem, h: float, grid: list[float], start: float | None, *,
-                 nominal, gain_bound, margin, solver, verify_tol,
+                 nominal: bool, gain_bound: float | None, margin: float, solver: str,
+                 verify_tol: float,
                  refine: int = DEFAULT_REFINE) -> float | None:
     """An eps giving a verified certificate at ``h`` (None if none is found).
 
@@ -521,6 +537,28 @@ def max_certified_delay(problem: Problem, *, nominal: bool = False,
     Returns ``(lo, result)``, ``result`` the full line search (with refinement) at ``lo``
     (``result.eps`` may differ from the ``eps`` that decided feasibility).  ``lo == h_hi``
     means ``h_hi`` itself is certified (the condition may hold for every delay, e.g. ``A_tau = 0``).
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    nominal : bool, optional
+        Drop the ``E D F`` terms.
+    gain_bound : float, optional
+        ``||K||_2`` bound.
+    h_hi : float, optional
+        Largest delay tried (s).
+    tol : float, optional
+        Absolute width of the final bracket (s).
+    eps_grid, refine, margin, solver, verify_tol
+        As in :func:`synthesize_delay_dependent`.
+
+    Returns
+    -------
+    h : float
+        The largest certified delay found (s).
+    result : DelayDependentResult
+        The design at ``h``.
 
     Raises
     ------

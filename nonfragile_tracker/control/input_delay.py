@@ -20,15 +20,17 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Sequence
+from dataclasses import dataclass
+from typing import Any, Callable, NamedTuple, Sequence, cast
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from .certificate import CertifiedGain, Verification, eigen_figures, passes, signs_hold
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
-                  cached_program, solve, sym)
+                  DescriptorParameters, SolveOutcome, cached_program, solve, solve_for_point,
+                  sym)
 from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',
@@ -44,24 +46,39 @@ DEFAULT_REFINE = 8
 # records
 
 @dataclass(frozen=True)
-class InputDelayVerification:
-    """Outcome of :func:`verify_input_delay` (eigenvalues in original coordinates)."""
+class InputDelayVerification(Verification):
+    """Outcome of :func:`verify_input_delay` (:class:`.certificate.Verification`).
 
-    ok: bool
-    max_eig_Psi: float          # must be < -tolerance * scale
-    min_eig_lyapunov: float     # smallest eigenvalue over P, S0, S1, R0, R1 (and Q): > 0
-    min_eig_rc: float           # smallest eigenvalue of [[R1, S12], [S12^T, R1]]: > 0
-    lam: float | None           # Petersen scalar (> 0; None: nominal)
-    tolerance: float
-    scale: float                # spectral norm of Psi
-    #: acceptance decided in the congruent coordinates ``T^T Psi T``, ``T = diag(P2^-1, I)``
-    #: (see :func:`verify_input_delay`); ``max_eig_Psi`` and ``scale`` are still of ``Psi``
+    Eigenvalues in original coordinates.
+
+    Besides ``ok`` and the keywords ``tolerance`` and ``scale`` of the base:
+
+    Parameters
+    ----------
+    max_eig_Psi : float
+        Largest eigenvalue of ``Psi`` (must be ``< -tolerance * scale``).
+    min_eig_lyapunov : float
+        Smallest eigenvalue over ``P, S0, S1, R0, R1`` (and ``Q``): must be > 0.
+    min_eig_rc : float
+        Smallest eigenvalue of ``[[R1, S12], [S12^T, R1]]``: must be > 0.
+    lam : float or None
+        Petersen scalar (> 0; ``None``: nominal).
+    congruent : bool
+        Acceptance decided in the congruent coordinates ``T^T Psi T``,
+        ``T = diag(P2^-1, I)`` (see :func:`verify_input_delay`); ``max_eig_Psi`` and
+        ``scale`` are still of ``Psi``.
+    """
+
+    max_eig_Psi: float
+    min_eig_lyapunov: float
+    min_eig_rc: float
+    lam: float | None
     congruent: bool = False
 
-    @property
-    def worst_eigenvalue(self) -> float:
-        """Largest eigenvalue of the certificate matrix (negative when it holds)."""
-        return self.max_eig_Psi
+    MATRIX = 'Psi'
+    WORST = 'max_eig_Psi'
+    POSITIVE = (('min_eig_lyapunov', 'of the Lyapunov matrices'),
+                ('min_eig_rc', 'of the reciprocally convex block'))
 
 
 @dataclass(frozen=True)
@@ -83,33 +100,39 @@ class InputDelayCertificate:
     lam: float | None
 
 
-@dataclass(frozen=True)
-class InputDelayResult:
-    """A gain certified for input delays in ``[h_min, h_max]`` with decay rate ``alpha``."""
+@dataclass(frozen=True, kw_only=True)
+class InputDelayResult(CertifiedGain):
+    """A gain certified for input delays in ``[h_min, h_max]`` with decay rate ``alpha``.
 
-    K: np.ndarray
+    The fields of :class:`.certificate.CertifiedGain` (keywords) and:
+
+    Parameters
+    ----------
+    h_min, h_max : float
+        The certified latency interval (s).
+    alpha : float
+        The certified decay rate (1/s).
+    eps : float
+        The tuning scalar (``P3 = eps P2``).
+    verification : InputDelayVerification
+        The numpy check of ``certificate`` (always ``ok``).
+    state_delay : bool
+        ``A_tau`` is in the certificate.
+    gain_bound : float or None
+        The ``||K||_2`` bound imposed.
+    eps_scan : tuple of (float, float)
+        ``(eps, t)`` of every solve.
+    """
+
     h_min: float
     h_max: float
     alpha: float
     eps: float
     certificate: InputDelayCertificate
     verification: InputDelayVerification
-    margin_required: float
-    margin_achieved: float
-    status: str
-    solver: str
-    solve_time: float
-    wall_time: float
-    nominal: bool
     state_delay: bool
     gain_bound: float | None
     eps_scan: tuple[tuple[float, float], ...] = ()
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def gain_norm(self) -> float:
-        """Spectral norm ``||K||_2`` of the gain."""
-        return float(np.linalg.norm(self.K, 2))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,7 +156,8 @@ def _weights(h_min: float, h_max: float, alpha: float, tau: float) -> _Weights:
                     math.exp(-2 * a * float(tau)), h0 * h0, h10 * h10)
 
 
-def _phi_rows(A, A1, A_tau, wt: _Weights, P, P2, P3, S0, S1, R0, R1, S12, Q
+def _phi_rows(A: Any, A1: Any, A_tau: Any, wt: _Weights, P: Any, P2: Any, P3: Any, S0: Any,
+              S1: Any, R0: Any, R1: Any, S12: Any, Q: Any
               ) -> list[list[Any]]:
     """Block rows of ``Phi_0`` (module docstring step 4).
 
@@ -163,11 +187,31 @@ def _phi_rows(A, A1, A_tau, wt: _Weights, P, P2, P3, S0, S1, R0, R1, S12, Q
     return rows
 
 
-def input_delay_verification_matrix(A, B, A_tau, tau, E, F, K, h_min, h_max, alpha,
+def input_delay_verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray,
+                                    tau: float, E: np.ndarray, F: np.ndarray, K: np.ndarray,
+                                    h_min: float, h_max: float, alpha: float,
                                     cert: InputDelayCertificate) -> np.ndarray:
-    """``Psi`` of the module docstring (``Phi_0`` alone when ``cert.lam is None``).
+    """``Psi`` of the input-delay condition (doc/theory.md, step 4/5), symmetric.
 
-    ``A_tau`` is ignored (no state-delay block) when ``cert.Q is None``.
+    ``Phi_0`` alone when ``cert.lam is None``; ``A_tau`` is ignored (no state-delay
+    block) when ``cert.Q is None``.
+
+    Parameters
+    ----------
+    A, B, A_tau, E, F, K : numpy.ndarray
+        Plant, perturbation structure and gain, as in :func:`.lmi.verification_matrix`.
+    tau : float
+        The state delay (s).
+    h_min, h_max : float
+        The latency interval (s).
+    alpha : float
+        The decay rate (1/s).
+    cert : InputDelayCertificate
+        The certificate's matrices.
+
+    Returns
+    -------
+    numpy.ndarray
     """
     n = A.shape[0]
     c = cert
@@ -220,7 +264,7 @@ def _congruent_ok(Psi: np.ndarray, P2: np.ndarray, n: int, k: int, tol: float) -
     return bool(top < -max(tol * scale, rounding))
 
 
-def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
+def verify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float,
                        certificate: InputDelayCertificate, *, alpha: float = 0.0,
                        tol: float = 1e-9) -> InputDelayVerification:
     """Check the input-delay condition from ``K``, the interval, ``alpha`` and the matrices.
@@ -229,6 +273,24 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
     ``lam > 0`` (unless nominal) and ``max eig(Psi) < -tol * ||Psi||``.  Uses nothing
     from the solver but the matrices in ``certificate``.  Never raises for a failed
     check: see ``ok``.
+
+    When only the relative slack fails, the test is repeated in the solver's congruent
+    coordinates (:func:`_congruent_ok`; ``congruent`` of the result).
+
+    Parameters
+    ----------
+    problem, K, tol
+        As in :func:`.lmi.verify_certificate` (``tol``: the slack demanded of ``Psi``).
+    h_min, h_max : float
+        The latency interval (s).
+    certificate : InputDelayCertificate
+        The matrices.
+    alpha : float, optional
+        The decay rate the certificate shows (1/s).
+
+    Returns
+    -------
+    InputDelayVerification
     """
     K = problem.gain(K)
     _check_interval(h_min, h_max)
@@ -237,20 +299,16 @@ def verify_input_delay(problem: Problem, K, h_min: float, h_max: float,
                                           problem.E, problem.F, K, h_min, h_max, alpha, c)
     lyap = [c.P, c.S0, c.S1, c.R0, c.R1] + ([] if c.Q is None else [c.Q])
     rc = np.block([[c.R1, c.S12], [c.S12.T, c.R1]])
-    if not (np.all(np.isfinite(Psi)) and np.all(np.isfinite(rc))):
-        return InputDelayVerification(False, math.inf, -math.inf, -math.inf, c.lam, tol,
-                                      math.inf)
-    ev = np.linalg.eigvalsh(Psi)
-    top, scale = float(ev[-1]), float(np.max(np.abs(ev)))
-    min_l = min(float(np.linalg.eigvalsh(sym(M))[0]) for M in lyap)
-    min_rc = float(np.linalg.eigvalsh(sym(rc))[0])
-    side = min_l > 0 and min_rc > 0 and (c.lam is None or c.lam > 0)
-    ok = top < -tol * scale and side
+    top, scale, mins = eigen_figures(Psi, lyap + [rc])
+    min_l, min_rc = min(mins[:-1]), mins[-1]
+    ok = passes(top, scale, mins, c.lam, tol)
     congruent = False
-    if side and not ok and top < 0:
+    if not ok and top < 0 and signs_hold(mins, c.lam):
+        # the sign conditions hold, the relative slack not: try the solver's coordinates
         congruent = _congruent_ok(Psi, c.P2, problem.n, 5 if c.Q is None else 6, tol)
         ok = congruent
-    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, tol, scale, congruent)
+    return InputDelayVerification(bool(ok), top, min_l, min_rc, c.lam, congruent,
+                                  tolerance=tol, scale=scale)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -271,7 +329,7 @@ class _Point:
         return float(self.t)
 
 
-class _InputDelayProgram:
+class _InputDelayProgram(DescriptorParameters):
     def __init__(self, n: int, m: int, q: int, p: int, nominal: bool, gain_bound: bool,
                  state_delay: bool):
         import cvxpy as cp
@@ -338,12 +396,8 @@ class _InputDelayProgram:
         self.L, self.lmi = L, L << -self.t * np.eye(size)
         cons = [self.lmi, 0.5 * (RC + RC.T) >> self.t * np.eye(2 * n)]
         cons += [M >> self.t * In for M in lyap] + extra
-        self.kappa2: Any = None             # a cvxpy Parameter with the gain bound
         if gain_bound:
-            self.kappa2 = par(nonneg=True)
-            He = X + X.T
-            Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
-            cons += [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, self.t <= 1]
+            cons += self.gain_bound_constraints(X, Y, self.t)
         else:
             norm = sum(cp.trace(M) for M in lyap) + cp.trace(X)
             if self.lam is not None:
@@ -359,14 +413,7 @@ class _InputDelayProgram:
             None if kappa is None else float(kappa))
         if data != self._data:
             self._data, self._last = data, None
-        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
-        if not self.nominal:
-            self.BE.value = problem.B @ problem.E
-            self.F.value = problem.F
-        if self.kappa2 is not None:
-            if kappa is None:
-                raise InputError('this program has a gain bound: kappa is required')
-            self.kappa2.value = float(kappa) ** 2
+        self.set_problem(problem, kappa)
 
     def solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
               solver: str) -> _Point:
@@ -381,23 +428,15 @@ class _InputDelayProgram:
 
     def _solve(self, problem: Problem, h0: float, h1: float, alpha: float, eps: float,
                solver: str) -> _Point:
-        self.eps.value = eps
+        self.set_eps(problem, eps)
         self.two_a.value = 2.0 * alpha
         self.w0.value = math.exp(-2 * alpha * h0)
         self.w1.value = math.exp(-2 * alpha * h1)
         self.wt.value = math.exp(-2 * alpha * problem.tau)
         self.h0sq.value, self.h10sq.value = h0 * h0, (h1 - h0) ** 2
-        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
-        self.eAd.value = eps * problem.A_tau
-        if not self.nominal:
-            self.eBE.value = eps * (problem.B @ problem.E)
-        try:
-            out = solve(self.problem, solver, what='the input-delay LMI', quiet_inaccurate=True)
-        except SolverFailure as exc:
-            return _Point(f'solver_error: {exc}', None, 0.0, eps)
-        tv = self.t.value
-        t = None if tv is None else float(tv)
-        if out.status in OK_STATUSES and self.X.value is not None:
+        out, t, usable = solve_for_point(self.problem, solver, 'the input-delay LMI', self.t,
+                                         self.X)
+        if usable:
             vals: dict[str, Any] = {k: np.array(v.value) for k, v in self.sv.items()}
             vals.update(X=np.array(self.X.value), Y=np.array(self.Y.value),
                         S12b=np.array(self.S12b.value),
@@ -453,7 +492,7 @@ def _back(point: _Point, state_delay: bool) -> tuple[np.ndarray, InputDelayCerti
     Xi = np.linalg.inv(v['X'])
 
     def orig(M: np.ndarray) -> np.ndarray:
-        return Xi.T @ M @ Xi
+        return cast(np.ndarray, Xi.T @ M @ Xi)
 
     K = v['Y'] @ Xi
     cert = InputDelayCertificate(
@@ -501,6 +540,109 @@ def _describe(problem: Problem, h0: float, h1: float, alpha: float, nominal: boo
 # ---------------------------------------------------------------------------------------------
 # synthesis
 
+_Checked = tuple[np.ndarray, InputDelayCertificate, InputDelayVerification]
+_Found = tuple[_Point, np.ndarray, InputDelayCertificate, InputDelayVerification]
+
+
+class _Stop(Exception):
+    """The first verified point of a ``stop_at_first`` search was found."""
+
+
+def _checked(problem: Problem, pt: _Point, sd: bool, h0: float, h1: float, alpha: float,
+             verify_tol: float) -> _Checked | None:
+    """``(K, certificate, verification)`` of a solver point (``None``: singular ``X``)."""
+    try:
+        K, cert = _back(pt, sd)
+    except np.linalg.LinAlgError:
+        return None
+    ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
+    return K, cert, ver
+
+
+def _search_eps(solve_at: Callable[[float], _Point], check: Callable[[_Point], _Checked | None],
+                grid: list[float], eps: float | None, refine: int, eps_start: float | None,
+                margin: float, stop_at_first: bool) -> tuple[list[_Point], _Found | None]:
+    """The points of the ``eps`` search of :func:`synthesize_input_delay`, in solve order.
+
+    With ``stop_at_first`` the search stops at the first point with ``t >= margin`` that
+    passes ``check``; that point is returned second (``None`` otherwise).
+    """
+    points: list[_Point] = []
+    found: list[_Found] = []
+
+    def run(e: float) -> float:
+        pt = solve_at(e)
+        points.append(pt)
+        t = pt.strictness
+        if stop_at_first and t >= margin:
+            v = check(pt)
+            if v is not None and v[2].ok:
+                found.append((pt,) + v)
+                raise _Stop
+        return t
+
+    try:
+        if eps is not None:
+            run(float(eps))
+        else:
+            # a warm-started trial of a search whose point is rejected by the independent
+            # check stops at the climb's local maximum (the search counts it as failed,
+            # just beyond the boundary) instead of scanning the whole grid
+            eps_search(run, grid, refine, start=eps_start,
+                       accept=margin if stop_at_first and eps_start is None else math.inf)
+    except _Stop:
+        pass
+    return points, (found[-1] if found else None)
+
+
+def _strictest_verified(points: list[_Point], check: Callable[[_Point], _Checked | None],
+                        margin: float, what: str, solver: str) -> _Found:
+    """The strictest point with ``t >= margin`` that passes ``check``, or the error why none.
+
+    Raises ``SolverFailure`` (no status of a solve), ``InfeasibleError`` (no point with
+    ``t >= margin``) or ``CertificateError`` (none passes the independent check); the
+    latter two carry the best ``t`` as ``margin_achieved``.
+    """
+    best = max(points, key=lambda p: p.strictness)
+    if best.strictness < margin:
+        if not any(p.status in OK_STATUSES + INFEASIBLE_STATUSES for p in points):
+            raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
+                                f'(statuses {sorted({p.status for p in points})}); no '
+                                'gain was produced. Check that the solver is installed.')
+        txt = ('no feasible point' if best.strictness == -math.inf
+               else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
+        err = InfeasibleError(
+            f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
+            'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
+            'smaller decay rate, a smaller F, or nominal=True.')
+        err.margin_achieved = float(best.strictness)
+        raise err
+    # refinement: a point that fails the independent check (typically only its relative
+    # tolerance, near the feasibility boundary) is replaced by the strictest other point
+    # already solved that passes it - every eps point of the search is a candidate
+    usable = sorted((p for p in points if p.strictness >= margin), key=lambda p: -p.strictness)
+    first: tuple[_Point, _Checked | None] | None = None
+    for cand in usable:
+        v = check(cand)
+        if v is not None and v[2].ok:
+            return (cand,) + v
+        first = first or (cand, v)
+    cand, v = first if first is not None else (best, None)
+    if v is None:
+        raise CertificateError(f'{solver} returned a singular X for the {what}; no '
+                               'gain can be recovered')
+    ver = v[2]
+    cerr = CertificateError(
+        f'{solver} returned no point for the {what} that passes independent '
+        f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
+        f'{cand.eps:.3g}: {ver.describe()}, relative tolerance {ver.tolerance:g} x '
+        f'{ver.scale:.3g}). The point is at the edge of feasibility: ask for '
+        'a little less (smaller h_max or decay rate) or a larger margin '
+        '(options.margin of the problem).')
+    cerr.margin_achieved = float(cand.strictness)
+    raise cerr
+
+
 def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
                            alpha: float = 0.0, eps: float | None = None,
                            eps_grid: Sequence[float] = DEFAULT_EPS_GRID,
@@ -535,6 +677,16 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
         Warm start of the ``eps`` search: a local climb on ``eps_grid`` from this value
         instead of the whole grid (the bisections pass the ``eps`` of their last
         success).
+    eps_grid : sequence of float
+        The ``eps`` grid.
+    refine : int
+        Golden-section steps after the grid.
+    margin : float
+        Required strictness ``t`` (normalised units).
+    solver : str
+        cvxpy solver.
+    verify_tol : float
+        Relative tolerance of :func:`verify_input_delay`.
 
     Returns
     -------
@@ -563,91 +715,21 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
     sd = _uses_state_delay(problem, state_delay)
     prog = _program(problem, nominal, gain_bound is not None, sd)
     prog.set_data(problem, gain_bound)
-    points: list[_Point] = []
-    found: list[tuple[_Point, np.ndarray, InputDelayCertificate, InputDelayVerification]] = []
 
-    class _Stop(Exception):
-        pass
+    def check(pt: _Point) -> _Checked | None:
+        return _checked(problem, pt, sd, h0, h1, alpha, verify_tol)
 
-    def verified(pt: _Point):
-        try:
-            K, cert = _back(pt, sd)
-        except np.linalg.LinAlgError:
-            return None
-        ver = verify_input_delay(problem, K, h0, h1, cert, alpha=alpha, tol=verify_tol)
-        return K, cert, ver
+    def solve_at(e: float) -> _Point:
+        return prog.solve(problem, h0, h1, alpha, e, solver)
 
-    def run(e: float) -> float:
-        pt = prog.solve(problem, h0, h1, alpha, e, solver)
-        points.append(pt)
-        t = pt.strictness
-        if stop_at_first and t >= margin:
-            v = verified(pt)
-            if v is not None and v[2].ok:
-                found.append((pt,) + v)
-                raise _Stop
-        return t
-
-    try:
-        if eps is not None:
-            run(float(eps))
-        else:
-            # a warm-started trial of a search whose point is rejected by the independent
-            # check stops at the climb's local maximum (the search counts it as failed,
-            # just beyond the boundary) instead of scanning the whole grid
-            eps_search(run, grid, refine, start=eps_start,
-                       accept=margin if stop_at_first and eps_start is None else math.inf)
-    except _Stop:
-        pass
+    points, found = _search_eps(solve_at, check, grid, eps, refine, eps_start, margin,
+                                stop_at_first)
     solve_time = sum(p.solve_time for p in points)
     scan = tuple((p.eps, p.strictness) for p in points)
     what = _describe(problem, h0, h1, alpha, nominal, gain_bound)
-    if found:
-        best, K, cert, ver = found[-1]
-    else:
-        best = max(points, key=lambda p: p.strictness)
-        if best.strictness < margin:
-            if not any(p.status in OK_STATUSES + INFEASIBLE_STATUSES for p in points):
-                raise SolverFailure(f'{what}: solver {solver} failed for every eps tried '
-                                    f'(statuses {sorted({p.status for p in points})}); no '
-                                    'gain was produced. Check that the solver is installed.')
-            txt = ('no feasible point' if best.strictness == -math.inf
-                   else f'best margin t = {best.strictness:.3g} at eps = {best.eps:.3g}')
-            err = InfeasibleError(
-                f'{what} is infeasible: {txt} (< required margin {margin:g}). Try a smaller '
-                'h_max (max_certified_input_delay gives the largest), a looser gain bound, a '
-                'smaller decay rate, a smaller F, or nominal=True.')
-            err.margin_achieved = float(best.strictness)
-            raise err
-        # refinement: a point that fails the independent check (typically only its relative
-        # tolerance, near the feasibility boundary) is replaced by the strictest other point
-        # already solved that passes it - every eps point of the search is a candidate
-        usable = sorted((p for p in points if p.strictness >= margin),
-                        key=lambda p: -p.strictness)
-        first = None
-        for cand in usable:
-            v = verified(cand)
-            if v is not None and v[2].ok:
-                best, (K, cert, ver) = cand, v
-                break
-            first = first or (cand, v)
-        else:
-            cand, v = first if first is not None else (best, None)
-            if v is None:
-                raise CertificateError(f'{solver} returned a singular X for the {what}; no '
-                                       'gain can be recovered')
-            ver = v[2]
-            cerr = CertificateError(
-                f'{solver} returned no point for the {what} that passes independent '
-                f'verification ({len(usable)} with t >= {margin:g}; strictest at eps = '
-                f'{cand.eps:.3g}: max eig Psi = {ver.max_eig_Psi:.3g}, relative tolerance '
-                f'{ver.tolerance:g} x {ver.scale:.3g}, min eig of the Lyapunov matrices = '
-                f'{ver.min_eig_lyapunov:.3g}, reciprocally convex block = '
-                f'{ver.min_eig_rc:.3g}). The point is at the edge of feasibility: ask for '
-                'a little less (smaller h_max or decay rate) or a larger margin '
-                '(options.margin of the problem).')
-            cerr.margin_achieved = float(cand.strictness)
-            raise cerr
+    if found is None:
+        found = _strictest_verified(points, check, margin, what, solver)
+    best, K, cert, ver = found
     return InputDelayResult(
         K=K, h_min=h0, h_max=h1, alpha=alpha, eps=best.eps, certificate=cert,
         verification=ver, margin_required=margin, margin_achieved=float(best.strictness),
@@ -712,7 +794,8 @@ class _CertifyProgram:
         cons += [M >> t * np.eye(n) for M in lyap]
         self.problem = cp.Problem(cp.Maximize(t), cons)
 
-    def solve(self, problem: Problem, K: np.ndarray, weights: _Weights, solver: str):
+    def solve(self, problem: Problem, K: np.ndarray, weights: _Weights, solver: str
+              ) -> SolveOutcome:
         self.A.value, self.A1.value = problem.A, problem.B @ K
         self.Ad.value = problem.A_tau
         for p, v in zip(self.wts, weights):
@@ -724,7 +807,7 @@ class _CertifyProgram:
                      quiet_inaccurate=True)
 
 
-def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
+def certify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float, *,
                         alpha: float = 0.0, nominal: bool = False,
                         state_delay: bool | None = None, margin: float = DEFAULT_MARGIN,
                         solver: str = DEFAULT_SOLVER, verify_tol: float = 1e-9
@@ -742,7 +825,33 @@ def certify_input_delay(problem: Problem, K, h_min: float, h_max: float, *,
     ``Phi_0``, each linearly, so with ``Z >= 0`` the dual of ``L <= -t I`` the derivative of
     the optimal ``t`` is ``-<Z, dL/dh_max>`` (``dL/dh_max``: ``Phi_0`` of the solved matrices
     with the weights' derivatives).  It is a first-order figure for the searches (one solve
-    gives a Newton step), never part of a certificate.
+    gives a Newton step), never part of a certificate (test/control/test_dual_slopes.py
+    compares it with finite differences).
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop (state delay as ``state_delay`` decides).
+    K : array_like, shape (m, n)
+        The gain.
+    h_min, h_max : float
+        The latency interval (s).
+    alpha : float, optional
+        The decay rate the certificate must show (1/s).
+    nominal : bool, optional
+        Certify ``D = 0`` only.
+    state_delay : bool, optional
+        Include ``A_tau x(t - tau)``; default: iff ``A_tau != 0``.
+    margin : float, optional
+        Required strictness.
+    solver : str, optional
+        cvxpy solver.
+    verify_tol : float, optional
+        Relative tolerance of :func:`verify_input_delay`.
+
+    Returns
+    -------
+    InputDelayCertification
     """
     h0, h1 = _check_interval(h_min, h_max)
     _check(None, alpha, [1.0])
@@ -793,7 +902,7 @@ def _slope(prog: _CertifyProgram, problem: Problem, K: np.ndarray,
     return out if math.isfinite(out) else math.nan
 
 
-def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
+def certified_input_delay_of_gain(problem: Problem, K: Any, h_min: float = 0.0, *,
                                   alpha: float = 0.0, nominal: bool = False,
                                   state_delay: bool | None = None, h_hi: float = 2.0,
                                   tol: float = 1e-3, solver: str = DEFAULT_SOLVER,
@@ -911,8 +1020,27 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
             lo, lo_s = float(h_guess), sc
         else:
             hi, hi_s = float(h_guess), sc
+    done, lo, lo_s, hi, hi_s = _newton_steps(trial, slopes, lo, lo_s, hi, hi_s, tol)
+    if done:
+        return float(lo)
+    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
+                                         hi_score=hi_s)
+    return float(x)
+
+
+def _newton_steps(trial: Callable[[float], tuple[float, bool | None]],
+                  slopes: dict[float, float], lo: float, lo_s: float, hi: float, hi_s: float,
+                  tol: float) -> tuple[bool, float, float, float, float]:
+    """Newton steps on the strictness from the certified ``lo`` (the search's Notes).
+
+    See :func:`certified_input_delay_of_gain`.  ``trial(h) -> (t - margin, True or
+    None)`` records ``slopes[h]``.  Returns ``(done, lo, lo_s, hi, hi_s)``: ``done``
+    when the estimated remaining gain is below ``tol / 2`` (``lo`` is the answer), else
+    the bracket for the false-position search (a refuted step or an unusable slope ends
+    the steps).
+    """
     prev = math.nan
-    while hi - lo > tol:        # Newton steps on the strictness (Notes)
+    while hi - lo > tol:
         g = slopes.get(lo, math.nan)
         if not (math.isfinite(g) and g < 0 and math.isfinite(lo_s) and lo_s > 0):
             break
@@ -921,7 +1049,7 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
         # of the last two (a kinked strictness converges linearly)
         rate = min(step / prev, 0.9) if math.isfinite(prev) and prev > 0 else 0.0
         if step / (1.0 - rate) < 0.5 * tol:
-            return float(lo)
+            return True, lo, lo_s, hi, hi_s
         prev = step
         x = min(lo + step, hi - 0.5 * tol)
         sc, ok = trial(x)
@@ -929,12 +1057,10 @@ def certified_input_delay_of_gain(problem: Problem, K, h_min: float = 0.0, *,
             hi, hi_s = x, sc
             break
         lo, lo_s = x, sc
-    x, _, _ = largest_feasible_bracketed(trial, lo, hi, True, tol=tol, lo_score=lo_s,
-                                         hi_score=hi_s)
-    return float(x)
+    return False, lo, lo_s, hi, hi_s
 
 
-def _try(problem: Problem, h0: float, h1: float, **kw) -> InputDelayResult | None:
+def _try(problem: Problem, h0: float, h1: float, **kw: Any) -> InputDelayResult | None:
     try:
         return synthesize_input_delay(problem, h0, h1, **kw)
     except (InfeasibleError, CertificateError, SolverFailure):
@@ -957,6 +1083,31 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
     returned ``h_max`` is within ``tol`` of the largest the LMI family certifies for
     the ``eps`` tried (a lower bound: ``eps`` is searched heuristically).  Returns the
     result at ``h_max`` (``result.h_max``); ``h_hi`` itself if it is certified.
+
+    Parameters
+    ----------
+    problem : Problem
+        Plant, perturbation and state delay.
+    h_min : float, optional
+        Low end of the latency interval (s).
+    gain_bound : float, optional
+        ``||K||_2`` bound.
+    alpha : float, optional
+        Decay rate the certificate must show (1/s).
+    nominal : bool, optional
+        Drop the ``E D F`` terms.
+    state_delay : bool, optional
+        Include ``A_tau`` (default: iff nonzero).
+    h_hi : float, optional
+        Largest ``h_max`` tried (s).
+    tol : float, optional
+        Absolute tolerance of ``h_max`` (s).
+    eps_grid, refine, margin, solver
+        As in :func:`synthesize_input_delay`.
+
+    Returns
+    -------
+    InputDelayResult
 
     Raises
     ------
@@ -1009,6 +1160,187 @@ def max_certified_input_delay(problem: Problem, h_min: float = 0.0, *,
         full = synthesize_input_delay(problem, h0, lo_h, eps=last[-1], **{
             k: v for k, v in kw.items() if k != 'eps_grid'})
     return full
+
+
+class _DecaySearch:
+    """The state of :func:`max_input_delay_decay_rate`'s search (see its docstring).
+
+    ``lo``/``best`` is the largest certified rate and its result, ``hi`` the smallest
+    refuted one (``inf``: none yet) with its score ``hi_s``; ``last`` the ``eps`` of every
+    success, ``slopes`` ``dt/dalpha`` by rate (:func:`_alpha_slope`).
+    """
+
+    def __init__(self, problem: Problem, h_min: float, h_max: float, kw: dict[str, Any],
+                 margin: float, hi_limit: float, prog: _InputDelayProgram) -> None:
+        self.problem, self.h_min, self.h_max, self.kw = problem, h_min, h_max, kw
+        self.margin, self.hi_limit, self.prog = margin, hi_limit, prog
+        self.slopes: dict[float, float] = {}
+        self.last: list[float] = []
+        self.refuted: list[float] = []
+        self.lo, self.hi, self.hi_s = 0.0, math.nan, math.nan
+        self.best: InputDelayResult
+
+    def slope_of(self, a: float, r: InputDelayResult) -> None:
+        """Record ``dt/dalpha`` at ``a`` if the program's last solve was ``r``'s point."""
+        # the program's duals are those of ``r`` iff its last solve was ``r``'s point
+        prog = self.prog
+        key = prog._last[0] if prog._last is not None else None
+        if key is not None and key[1:5] == (self.h_min, self.h_max, float(a), r.eps):
+            self.slopes[a] = _alpha_slope(prog, self.h_min, self.h_max, a, self.problem.tau)
+
+    def start(self, middle: float, refine: int) -> bool:
+        """The first certified rate and the doubling to a bracket; ``True``: done (``best``).
+
+        The first rate of the doubling first: when it is certified (the common case) it
+        proves ``alpha = 0`` as well, one solve fewer.
+        """
+        problem, h_min, h_max, kw = self.problem, self.h_min, self.h_max, self.kw
+        first = min(0.5, self.hi_limit)
+        base = _try(problem, h_min, h_max, alpha=first, stop_at_first=True, refine=0,
+                    eps_start=middle, **kw)
+        if base is not None:
+            if first >= self.hi_limit:
+                self.best = base
+                return True
+            self.slope_of(first, base)
+        else:
+            first = 0.0
+            base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, refine=refine,
+                        eps_start=middle, **kw)
+        if base is None:    # the whole grid (raises with the reason if nothing is certified)
+            base = synthesize_input_delay(problem, h_min, h_max, alpha=0.0, refine=refine,
+                                          **kw)
+        self.last.append(base.eps)
+        self.lo, self.best = first, base
+        return self.double(2.0 * first if first else 0.5, newton_first=True)
+
+    def trial(self, a: float, climb: bool = True) -> tuple[float, InputDelayResult | None]:
+        """``(t - margin, result or None)`` at ``a``: a climb, or one solve at the last ``eps``."""
+        problem, h_min, h_max, kw, last = self.problem, self.h_min, self.h_max, self.kw, self.last
+        try:
+            if climb:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, stop_at_first=True,
+                                           eps_start=last[-1], refine=0, **kw)
+            else:
+                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, eps=last[-1],
+                                           **{k: v for k, v in kw.items() if k != 'eps_grid'})
+        except (InfeasibleError, CertificateError) as exc:
+            return getattr(exc, 'margin_achieved', math.nan) - self.margin, None
+        except SolverFailure:
+            return math.nan, None
+        last.append(r.eps)
+        self.slope_of(a, r)
+        return r.margin_achieved - self.margin, r
+
+    def single(self, x: float) -> tuple[float, InputDelayResult | None]:
+        """One solve at the ``eps`` of the last success; a refuted ``x`` is recorded."""
+        sc, r = self.trial(x, climb=False)
+        if r is None:
+            self.refuted.append(x)
+        return sc, r
+
+    def newton_below(self, x: float, a: float) -> bool:
+        """Newton from the certified rate ``x`` predicts the boundary below ``a``."""
+        g, sx = self.slopes.get(x, math.nan), self.best.margin_achieved - self.margin
+        return x > 0 and math.isfinite(g) and g < 0 and sx > 0 and x + sx / -g < a
+
+    def double(self, a: float, newton_first: bool = False) -> bool:
+        """Double the rate from ``a`` until one is refuted (``hi``); ``True``: ``hi_limit`` holds.
+
+        One solve at the ``eps`` of the last success: a failing rate is not climbed here
+        (the climb at the bracket's upper end checks the other ``eps``).  With
+        ``newton_first``, a Newton step from ``lo`` predicting the boundary below ``a``
+        ends the doubling without a bracket (``hi = inf``).
+        """
+        while True:
+            if newton_first and self.newton_below(self.lo, a):
+                self.hi = math.inf
+                return False
+            s, r = self.trial(a, climb=False)
+            if r is None:
+                self.hi, self.hi_s = a, s
+                return False
+            self.lo, self.best = a, r
+            if a >= self.hi_limit:
+                return True
+            a = min(2.0 * a, self.hi_limit)
+
+    def newton(self, tol: float) -> bool | None:
+        """Newton steps from the certified end; ``True``: converged, ``None``: ``hi_limit``.
+
+        Each step lands below the boundary while ``t(alpha)`` is convex there; a refuted
+        step (``hi``) or an unusable slope hands over (``False``).
+        """
+        while self.hi - self.lo > tol:
+            if self.lo >= self.hi_limit:
+                return None
+            g = self.slopes.get(self.lo, math.nan)
+            s_lo = self.best.margin_achieved - self.margin
+            if not (math.isfinite(g) and g < 0 and s_lo > 0):
+                return False
+            step = s_lo / -g
+            if step < 0.25 * tol:
+                return True
+            x = min(self.lo + step, self.hi - 0.5 * tol, self.hi_limit)
+            sc, r = self.single(x)
+            if r is None:
+                self.hi, self.hi_s = x, sc
+                return False
+            self.lo, self.best = x, r
+        return False
+
+    def climb_above(self) -> bool:
+        """Another ``eps`` certifies ``hi``: brackets above it; ``True``: ``hi_limit`` reached."""
+        while True:
+            if self.lo >= self.hi_limit:
+                return True
+            self.hi = min(2.0 * self.lo, self.hi_limit)
+            self.hi_s, r = self.trial(self.hi)
+            if r is None:
+                return False
+            self.lo, self.best = self.hi, r
+
+    def close(self, rel_tol: float) -> InputDelayResult:
+        """Close the bracket to ``rel_tol``, then check it with a climb (docstring).
+
+        Inside the bracket the ``eps`` of the last success is kept (one solve per trial:
+        the climb at ``hi`` found it a local maximum of the grid, and the best ``eps``
+        moves slowly with ``alpha``); once closed, one climb at ``hi`` checks that no other
+        ``eps`` certifies it.
+        """
+        for _ in range(4):
+            self.refuted = [self.hi]
+            # without a refuted rate yet (hi = inf) the tolerance is that of the doubling's
+            # next bracket [lo, 2 lo]
+            tol = rel_tol * (self.hi if math.isfinite(self.hi)
+                             else min(2.0 * self.lo, self.hi_limit))
+            newton = self.newton(tol)
+            if newton is None:
+                return self.best
+            if newton:
+                top = min(self.lo + tol, self.hi)
+            elif not math.isfinite(self.hi):
+                # Newton gave out before any rate was refuted: doubling from lo, as above
+                if self.double(min(2.0 * self.lo, self.hi_limit)):
+                    return self.best
+                continue
+            else:
+                # the first step halves the bracket: the strictness at the low end is often
+                # capped by the normalization (t <= 1 with a gain bound): it would skew the
+                # secant
+                self.lo, self.best, _ = largest_feasible_bracketed(
+                    self.single, self.lo, self.hi, self.best, tol=tol, lo_score=math.nan,
+                    hi_score=self.hi_s)
+                top = self.hi = min(self.refuted)
+            _, r = self.trial(top)
+            if r is None:
+                break
+            self.lo, self.best = top, r
+            if newton and top < self.hi:     # certified by another eps: on from there
+                continue
+            if self.climb_above():
+                return self.best
+        return self.best
 
 
 def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
@@ -1085,137 +1417,10 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
                               state_delay=state_delay, eps_grid=eps_grid, margin=margin,
                               solver=solver)
     grid = sorted(float(e) for e in eps_grid)
-    middle = grid[len(grid) // 2]
     prog = _program(problem, nominal, gain_bound is not None,
                     _uses_state_delay(problem, state_delay))
-    slopes: dict[float, float] = {}
-
-    def slope_of(a: float, r: InputDelayResult) -> None:
-        # the program's duals are those of ``r`` iff its last solve was ``r``'s point
-        key = prog._last[0] if prog._last is not None else None
-        if key is not None and key[1:5] == (float(h_min), float(h_max), float(a), r.eps):
-            slopes[a] = _alpha_slope(prog, float(h_min), float(h_max), a, problem.tau)
-
-    # the first rate of the doubling first: when it is certified (the common case) it
-    # proves alpha = 0 as well, one solve fewer
-    first = min(0.5, float(hi_limit))
-    base = _try(problem, h_min, h_max, alpha=first, stop_at_first=True, refine=0,
-                eps_start=middle, **kw)
-    if base is not None:
-        if first >= hi_limit:
-            return base
-        slope_of(first, base)
-    else:
-        first = 0.0
-        base = _try(problem, h_min, h_max, alpha=0.0, stop_at_first=True, refine=refine,
-                    eps_start=middle, **kw)
-    if base is None:    # the whole grid (raises with the reason if nothing is certified)
-        base = synthesize_input_delay(problem, h_min, h_max, alpha=0.0, refine=refine, **kw)
-    last = [base.eps]
-
-    def trial(a: float, climb: bool = True) -> tuple[float, InputDelayResult | None]:
-        try:
-            if climb:
-                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, stop_at_first=True,
-                                           eps_start=last[-1], refine=0, **kw)
-            else:
-                r = synthesize_input_delay(problem, h_min, h_max, alpha=a, eps=last[-1],
-                                           **{k: v for k, v in kw.items() if k != 'eps_grid'})
-        except (InfeasibleError, CertificateError) as exc:
-            return getattr(exc, 'margin_achieved', math.nan) - margin, None
-        except SolverFailure:
-            return math.nan, None
-        last.append(r.eps)
-        slope_of(a, r)
-        return r.margin_achieved - margin, r
-
-    def newton_below(x: float, a: float) -> bool:
-        # Newton from the certified rate x predicts the boundary below the next doubling a
-        g, sx = slopes.get(x, math.nan), best.margin_achieved - margin
-        return x > 0 and math.isfinite(g) and g < 0 and sx > 0 and x + sx / -g < a
-
-    lo, best = first, base
-    a, hi, hi_s = 2.0 * first if first else 0.5, math.nan, math.nan
-    while True:
-        if newton_below(lo, a):     # no bracket needed: Newton steps from lo (below)
-            hi = math.inf
-            break
-        # one solve at the eps of the last success: a failing rate is not climbed here
-        # (the climb at the bracket's upper end below checks the other eps)
-        s, r = trial(a, climb=False)
-        if r is None:
-            hi, hi_s = a, s
-            break
-        lo, best = a, r
-        if a >= hi_limit:
-            return best
-        a = min(2.0 * a, hi_limit)
-    # inside the bracket the eps of the last success is kept (one solve per trial: the
-    # climb at ``hi`` found it a local maximum of the grid, and the best eps moves slowly
-    # with alpha); once closed, one climb at ``hi`` checks that no other eps certifies it
-    def single(x: float) -> tuple[float, InputDelayResult | None]:
-        sc, r = trial(x, climb=False)
-        if r is None:
-            refuted.append(x)
-        return sc, r
-
-    for _ in range(4):
-        refuted: list[float] = [hi]
-        # without a refuted rate yet (hi = inf) the tolerance is that of the doubling's
-        # next bracket [lo, 2 lo]
-        tol = rel_tol * (hi if math.isfinite(hi) else min(2.0 * lo, hi_limit))
-        # Newton steps from the certified end (docstring): each lands below the boundary
-        # while t(alpha) is convex there; a refuted step hands over to false position
-        newton = False
-        while hi - lo > tol:
-            if lo >= hi_limit:
-                return best
-            g, s_lo = slopes.get(lo, math.nan), best.margin_achieved - margin
-            if not (math.isfinite(g) and g < 0 and s_lo > 0):
-                break
-            step = s_lo / -g
-            if step < 0.25 * tol:
-                newton = True
-                break
-            x = min(lo + step, hi - 0.5 * tol, hi_limit)
-            sc, r = single(x)
-            if r is None:
-                hi, hi_s = x, sc
-                break
-            lo, best = x, r
-        if newton:
-            top = min(lo + tol, hi)
-        elif not math.isfinite(hi):
-            # Newton gave out before any rate was refuted: doubling from lo, as above
-            a = min(2.0 * lo, hi_limit)
-            while True:
-                hi_s, r = trial(a, climb=False)
-                if r is None:
-                    hi = a
-                    break
-                lo, best = a, r
-                if a >= hi_limit:
-                    return best
-                a = min(2.0 * a, hi_limit)
-            continue
-        else:
-            # the first step halves the bracket: the strictness at the low end is often
-            # capped by the normalization (t <= 1 with a gain bound): it would skew the secant
-            lo, best, _ = largest_feasible_bracketed(single, lo, hi, best, tol=tol,
-                                                     lo_score=math.nan, hi_score=hi_s)
-            top = hi = min(refuted)
-        _, r = trial(top)
-        if r is None:
-            break
-        lo, best = top, r
-        if newton and top < hi:     # certified by another eps: on from there, same bracket
-            continue
-        while True:                 # another eps certifies hi: a new bracket above it
-            if lo >= hi_limit:
-                return best
-            hi = min(2.0 * lo, hi_limit)
-            hi_s, r = trial(hi)
-            if r is None:
-                break
-            lo, best = hi, r
-    return best
+    search = _DecaySearch(problem, float(h_min), float(h_max), kw, margin, float(hi_limit),
+                          prog)
+    if search.start(grid[len(grid) // 2], refine):
+        return search.best
+    return search.close(rel_tol)

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -154,6 +154,18 @@ def lagged_problem(problem: Problem, lag: float) -> Problem:
 
     ``A = [[A, B], [0, -I/T]]``, ``B = [0; I/T]``, ``A_tau = diag(A_tau, 0)``,
     ``E`` unchanged, ``F = [F, 0]``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop without the lag.
+    lag : float
+        The actuator time constant ``T`` (s, > 0).
+
+    Returns
+    -------
+    Problem
+        The augmented problem (``n + m`` states).
     """
     T = float(lag)
     if not (math.isfinite(T) and T > 0):
@@ -170,7 +182,18 @@ def lagged_problem(problem: Problem, lag: float) -> Problem:
 
 
 def perturbation_set(problem: Problem) -> list[np.ndarray]:
-    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow)."""
+    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow).
+
+    Parameters
+    ----------
+    problem : Problem
+        Its ``E``, ``F`` and ``perturbations``.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The constant perturbations the exact figures are taken over.
+    """
     q, p = problem.E.shape[1], problem.F.shape[0]
     out = [np.zeros((q, p))] + [np.asarray(D, float) for D in problem.perturbations.values()]
     if q == p:
@@ -191,7 +214,7 @@ def _interpolation_row(x: np.ndarray, t: float) -> np.ndarray:
         out[hit[0]] = 1.0
         return out
     c = w / d
-    return c / c.sum()
+    return cast(np.ndarray, c / c.sum())
 
 
 def exact_abscissa(A: np.ndarray, A_tau: np.ndarray, tau: float, A1: np.ndarray, h: float,
@@ -319,6 +342,64 @@ def _number(value: Any, name: str, *, positive: bool = False, allow_zero: bool =
     return x
 
 
+def _max_delay_synthesis(problem: Problem, h0: float, h1: float, bound: float | None,
+                         tol: float) -> InputDelayResult:
+    """The ``'max-delay'`` objective of :func:`design_for_latency` (at least ``h1``).
+
+    The interval asked for first: an infeasible request fails fast.
+    """
+    res: InputDelayResult | None
+    try:
+        synthesize_input_delay(problem, h0, h1, gain_bound=bound, stop_at_first=True)
+        res = max_certified_input_delay(problem, h0, gain_bound=bound, tol=tol,
+                                        h_hi=max(4 * h1, 1.0))
+    except (InfeasibleError, CertificateError):
+        res = None
+    if res is None or res.h_max < h1:
+        best = ' is' if res is None else f' is {res.h_max:.4g} s (from h_min = {h0:g} s),'
+        raise InfeasibleError(
+            f'the latency certified for problem {problem.name!r}'
+            + (f' with ||K||_2 <= {bound:g}' if bound is not None else '')
+            + f'{best} below the {h1:g} s '
+            'asked for. Loosen the gain bound, reduce the latency (a predictor in the '
+            'tracker removes the known part of it) or shrink the interval.')
+    return res
+
+
+def _lagged_figures(problem: Problem, K: np.ndarray, h0: float, h1: float, T: float,
+                    tol: float) -> tuple[float, float, float, float]:
+    """Exact figures and certified latency of ``K`` on the loop with the actuator lag ``T``.
+
+    Returns ``(true margin, abscissa at h1, worst abscissa, certified h_max)``; raises
+    ``InfeasibleError`` if ``[h0, h1]`` itself is not certified with the lag.
+    """
+    lp = lagged_problem(problem, T)
+    K_aug = np.hstack([K, np.zeros((problem.m, problem.m))])
+    margin, absc, worst = exact_figures(lp, K_aug, h0, h1)
+    hi = min(margin, max(4 * h1, 1.0))
+    guess = GUESS_OF_MARGIN * hi
+    # [h0, guess] certified (monotone in h_max) implies the [h0, h1] asked for: one
+    # solve decides both when the guess holds, the search then starts from there
+    start = certify_input_delay(lp, K_aug, h0, guess) if guess > h1 + tol else None
+    if start is None or not start.certified:
+        start, guess = certify_input_delay(lp, K_aug, h0, h1), h1
+    if not start.certified:
+        raise InfeasibleError(
+            f'the gain designed for problem {problem.name!r} is not certified with the '
+            f'actuator lag {T:g} s on [{h0:g}, {h1:g}] s; try a smaller gain bound, the '
+            "'max-delay' objective, or a shorter latency interval.")
+    # the robot's figure: Newton steps from the guess, the slope of the strictness
+    # read from the dual of the solve just made (certified_input_delay_of_gain's
+    # Notes): on the paper's loops one more solve, landing above the 7-solve bracketed
+    # search's figure (0.1485 / 0.2208 s against 0.1484 / 0.2206 s)
+    lag_h = certified_input_delay_of_gain(
+        lp, K_aug, h0, h_hi=max(hi, guess + tol), tol=0.5 * tol, h_certified=guess,
+        certified_margin=start.margin_achieved, certified_slope=start.slope,
+        h_hi_refuted=hi == margin > guess,
+        h_guess=None if guess > h1 else GUESS_OF_MARGIN * hi)
+    return margin, absc, worst, lag_h
+
+
 def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
                        gain_bound: float | None = None, objective: str = 'decay',
                        lag: float = 0.0, tol: float = 2e-3) -> LatencyDesign:
@@ -358,25 +439,12 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     if bound is not None:
         bound = _number(bound, 'gain bound', positive=True)
     syn_h1 = h1 + T
-    res: InputDelayResult | None
+    res: InputDelayResult
     if objective == 'decay':
         res = max_input_delay_decay_rate(problem, h0, syn_h1, gain_bound=bound)
         decay = res.alpha
     else:
-        try:        # the interval asked for first: an infeasible request fails fast
-            synthesize_input_delay(problem, h0, syn_h1, gain_bound=bound, stop_at_first=True)
-            res = max_certified_input_delay(problem, h0, gain_bound=bound, tol=tol,
-                                            h_hi=max(4 * syn_h1, 1.0))
-        except (InfeasibleError, CertificateError):
-            res = None
-        if res is None or res.h_max < syn_h1:
-            best = ' is' if res is None else f' is {res.h_max:.4g} s (from h_min = {h0:g} s),'
-            raise InfeasibleError(
-                f'the latency certified for problem {problem.name!r}'
-                + (f' with ||K||_2 <= {bound:g}' if bound is not None else '')
-                + f'{best} below the {syn_h1:g} s '
-                'asked for. Loosen the gain bound, reduce the latency (a predictor in the '
-                'tracker removes the known part of it) or shrink the interval.')
+        res = _max_delay_synthesis(problem, h0, syn_h1, bound, tol)
         decay = 0.0
     # the certified h_max of the loop without the lag.  Without a lag: searched, bracketed
     # between the synthesis' own verified interval and the exact margin (a certificate
@@ -397,30 +465,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     if T == 0 and objective != 'decay':
         margin, absc, worst = exact_figures(problem, res.K, h0, h1)
     if T > 0:
-        lp = lagged_problem(problem, T)
-        K_aug = np.hstack([res.K, np.zeros((problem.m, problem.m))])
-        margin, absc, worst = exact_figures(lp, K_aug, h0, h1)
-        hi = min(margin, max(4 * h1, 1.0))
-        guess = GUESS_OF_MARGIN * hi
-        # [h0, guess] certified (monotone in h_max) implies the [h0, h1] asked for: one
-        # solve decides both when the guess holds, the search then starts from there
-        start = certify_input_delay(lp, K_aug, h0, guess) if guess > h1 + tol else None
-        if start is None or not start.certified:
-            start, guess = certify_input_delay(lp, K_aug, h0, h1), h1
-        if not start.certified:
-            raise InfeasibleError(
-                f'the gain designed for problem {problem.name!r} is not certified with the '
-                f'actuator lag {T:g} s on [{h0:g}, {h1:g}] s; try a smaller gain bound, the '
-                "'max-delay' objective, or a shorter latency interval.")
-        # the robot's figure: Newton steps from the guess, the slope of the strictness
-        # read from the dual of the solve just made (certified_input_delay_of_gain's
-        # Notes): on the paper's loops one more solve, landing above the 7-solve bracketed
-        # search's figure (0.1485 / 0.2208 s against 0.1484 / 0.2206 s)
-        lag_h = certified_input_delay_of_gain(
-            lp, K_aug, h0, h_hi=max(hi, guess + tol), tol=0.5 * tol, h_certified=guess,
-            certified_margin=start.margin_achieved, certified_slope=start.slope,
-            h_hi_refuted=hi == margin > guess,
-            h_guess=None if guess > h1 else GUESS_OF_MARGIN * hi)
+        margin, absc, worst, lag_h = _lagged_figures(problem, res.K, h0, h1, T, tol)
     return LatencyDesign(problem=problem.name, objective=objective, K=res.K, gain_bound=bound,
                          h_min=h0, h_max=h1, lag=T, certified_h_max=float(certified),
                          decay_rate=float(decay), lag_certified_h_max=lag_h,
@@ -428,7 +473,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
                          state_delay=res.state_delay, synthesis=res, worst_abscissa=worst)
 
 
-def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
+def latency_figures(problem: Problem, K: Any, *, tol: float = 2e-3, h_hi: float = 2.0
                     ) -> dict[str, float]:
     """Command-latency figures of any gain ``K`` (e.g. a Theorem 1 design).
 
@@ -436,8 +481,24 @@ def latency_figures(problem: Problem, K, *, tol: float = 2e-3, h_hi: float = 2.0
     :func:`.input_delay.certify_input_delay` (non-fragile, state delay included when
     ``A_tau != 0``); ``true_latency_margin``: exact delay margin of the input-delay loop,
     minimum over :func:`perturbation_set` (constant delay and ``D``, ``A_tau`` left out).
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop.
+    K : array_like, shape (m, n)
+        The gain.
+    tol : float, optional
+        Absolute tolerance of ``certified_latency`` (s).
+    h_hi : float, optional
+        Largest latency tried (s).
+
+    Returns
+    -------
+    dict
+        ``certified_latency`` and ``true_latency_margin`` (s).
     """
-    K = np.asarray(K, float)
+    K = problem.gain(K)
     margin = min(delay_margin(problem.A, problem.B @ (K + problem.E @ D @ problem.F))
                  for D in perturbation_set(problem))
     cert = certified_input_delay_of_gain(problem, K, 0.0, tol=tol, h_hi=h_hi)

@@ -20,12 +20,15 @@ from __future__ import annotations
 import contextvars
 import time
 import warnings
-from dataclasses import dataclass, field, replace
-from typing import Any, cast
+from dataclasses import dataclass, replace
+from typing import Any, Sequence, cast
 
 import numpy as np
 
 from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
+from .certificate import (CertifiedGain, eigen_figures, from_certificate, passes,
+                          retry_advice)
+from .certificate import Verification as BaseVerification
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
                   solve)
@@ -38,20 +41,26 @@ __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', '
 
 
 @dataclass(frozen=True)
-class Verification:
-    """Outcome of :func:`verify_certificate`: all eigenvalue checks, worst first."""
+class Verification(BaseVerification):
+    """Outcome of :func:`verify_certificate` (:class:`.certificate.Verification`).
 
-    ok: bool
-    max_eig_V: float         # largest eigenvalue of V (must be < 0)
-    min_eig_P: float         # smallest eigenvalue of P (must be > 0)
-    min_eig_Q: float         # smallest eigenvalue of Q (must be > 0)
-    tolerance: float         # relative slack demanded: max_eig_V < -tolerance * scale
-    scale: float             # spectral norm of V
+    Besides ``ok`` and the keywords ``tolerance`` and ``scale`` of the base:
 
-    @property
-    def worst_eigenvalue(self) -> float:
-        """Largest eigenvalue of ``V`` (verified when below ``-tolerance * scale``)."""
-        return self.max_eig_V
+    Parameters
+    ----------
+    max_eig_V : float
+        Largest eigenvalue of ``V`` (must be ``< -tolerance * scale``).
+    min_eig_P, min_eig_Q : float
+        Smallest eigenvalues of ``P`` and ``Q`` (must be > 0).
+    """
+
+    max_eig_V: float
+    min_eig_P: float
+    min_eig_Q: float
+
+    MATRIX = 'V'
+    WORST = 'max_eig_V'
+    POSITIVE = (('min_eig_P', 'P'), ('min_eig_Q', 'Q'))
 
 
 @dataclass(frozen=True)
@@ -68,35 +77,20 @@ class Certificate:
     verification: Verification
 
 
-@dataclass(frozen=True)
-class SynthesisResult:
-    """A synthesized gain with its verified certificate and solver facts."""
+@dataclass(frozen=True, kw_only=True)
+class SynthesisResult(CertifiedGain):
+    """A synthesized gain with its verified certificate and solver facts.
 
-    K: np.ndarray
+    The fields are those of :class:`.certificate.CertifiedGain` (keywords), ``certificate``
+    a :class:`Certificate`.
+    """
+
     certificate: Certificate
-    margin_required: float
-    margin_achieved: float
-    status: str
-    solver: str
-    solve_time: float        # seconds inside the solver
-    wall_time: float         # seconds for build + solve + verification
-    nominal: bool
-    extra: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def P(self) -> np.ndarray:
-        """Lyapunov-Krasovskii matrix ``P`` of the certificate."""
-        return self.certificate.P
-
-    @property
-    def Q(self) -> np.ndarray:
-        """Lyapunov-Krasovskii matrix ``Q`` of the certificate."""
-        return self.certificate.Q
-
-    @property
-    def eps(self) -> float | None:
-        """Scalar ``eps`` of the certificate (None: the nominal condition, D = 0)."""
-        return self.certificate.eps
+    P = from_certificate('P', 'Lyapunov-Krasovskii matrix ``P`` of the certificate.')
+    Q = from_certificate('Q', 'Lyapunov-Krasovskii matrix ``Q`` of the certificate.')
+    eps = from_certificate('eps', 'Scalar ``eps`` of the certificate (None: the nominal '
+                           'condition, D = 0).')
 
 
 @dataclass(frozen=True)
@@ -109,8 +103,29 @@ class CertifyResult:
     status: str
 
 
-def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
-    """The matrix ``V`` of the module docstring (nominal form when ``eps is None``)."""
+def verification_matrix(A: np.ndarray, B: np.ndarray, A_tau: np.ndarray, E: np.ndarray,
+                        F: np.ndarray, K: np.ndarray, P: np.ndarray, Q: np.ndarray,
+                        eps: float | None) -> np.ndarray:
+    """The matrix ``V`` of Theorem 1 (doc/theory.md #theorem-1), symmetric.
+
+    Parameters
+    ----------
+    A, B, A_tau : numpy.ndarray
+        The plant (``n x n``, ``n x m``, ``n x n``).
+    E, F : numpy.ndarray
+        The perturbation structure (``m x q``, ``p x n``).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    P, Q : numpy.ndarray, shape (n, n)
+        The Lyapunov-Krasovskii matrices.
+    eps : float or None
+        Petersen's scalar; ``None``: the nominal form (``2n x 2n``, no ``E, F`` terms).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(2n + q) x (2n + q)``, or ``2n x 2n`` for the nominal form.
+    """
     A0 = A + B @ K
     top = P @ A0 + A0.T @ P + Q
     n = A.shape[0]
@@ -127,25 +142,46 @@ def verification_matrix(A, B, A_tau, E, F, K, P, Q, eps) -> np.ndarray:
     return _sym(V)
 
 
-def verify_certificate(problem: Problem, K, P, Q, eps, *, tol: float = 1e-9) -> Verification:
+def verify_certificate(problem: Problem, K: Any, P: Any, Q: Any, eps: float | None, *,
+                       tol: float = 1e-9) -> Verification:
     """Check Theorem 1's condition from ``(K, P, Q, eps)`` alone, with eigenvalues.
 
     Passes iff ``P > 0``, ``Q > 0``, ``eps > 0`` (unless nominal) and
-    ``max eig(V) < -tol * ||V||``.  Never raises for a failed check: see ``ok``.
+    ``max eig(V) < -tol * ||V||`` (:func:`.certificate.passes`).  Never raises for a
+    failed check: see ``ok``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain (:meth:`.problem.Problem.gain` checks its shape).
+    P, Q : array_like, shape (n, n)
+        The Lyapunov-Krasovskii matrices (their symmetric parts are used).
+    eps : float or None
+        Petersen's scalar; ``None``: the nominal condition (``D = 0``).
+    tol : float, optional
+        Relative slack demanded of ``V``.
+
+    Returns
+    -------
+    Verification
     """
-    K = np.asarray(K, float)
+    K = problem.gain(K)
     P = _sym(np.asarray(P, float))
     Q = _sym(np.asarray(Q, float))
     V = verification_matrix(problem.A, problem.B, problem.A_tau, problem.E, problem.F,
                             K, P, Q, eps)
-    ev = np.linalg.eigvalsh(V)
-    scale = float(np.max(np.abs(ev)))
-    min_p = float(np.linalg.eigvalsh(P)[0])
-    min_q = float(np.linalg.eigvalsh(Q)[0])
-    ok = (bool(np.all(np.isfinite(V))) and ev[-1] < -tol * scale and min_p > 0 and min_q > 0
-          and (eps is None or eps > 0))
-    return Verification(ok=bool(ok), max_eig_V=float(ev[-1]), min_eig_P=min_p, min_eig_Q=min_q,
+    top, scale, (min_p, min_q) = eigen_figures(V, (P, Q))
+    return Verification(passes(top, scale, (min_p, min_q), eps, tol), top, min_p, min_q,
                         tolerance=tol, scale=scale)
+
+
+def _certificate(problem: Problem, K: np.ndarray, P: np.ndarray, Q: np.ndarray,
+                 eps: float | None, verify_tol: float) -> Certificate:
+    """``(K, P, Q, eps)`` with their :func:`verify_certificate` (``ok`` or not)."""
+    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
+    return Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -194,7 +230,8 @@ class _Theorem1Program:
             extra = [self.eps >= self.t]
         self._maximize_strictness(blocks, size, norm, extra, n, m, gain_bound)
 
-    def _maximize_strictness(self, blocks: list, size: int, norm, extra: list, n: int, m: int,
+    def _maximize_strictness(self, blocks: list[Any], size: int, norm: Any, extra: list[Any],
+                             n: int, m: int,
                              gain_bound: bool, lean: bool = False) -> None:
         """Maximize ``t``: ``LMI <= -t I``, ``X, W >= t I`` and the scale fixed (all forms).
 
@@ -241,7 +278,7 @@ class _Theorem1Program:
         if self.kappa2 is not None:
             self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
-    def point(self, status: str, solve_time: float) -> tuple:
+    def point(self, status: str, solve_time: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` with ``Q = W^-1`` (``None`` if singular)."""
         W = self.W.value
         try:
@@ -260,7 +297,8 @@ class _Theorem1Program:
         self.solves += 1
         return self.cold_first and self.solves == 1
 
-    def solve(self, problem: Problem, solver: str, kappa: float | None = None) -> tuple:
+    def solve(self, problem: Problem, solver: str, kappa: float | None = None
+              ) -> tuple[Any, ...]:
         """Solve for ``problem``: ``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`point`)."""
         self.set_data(problem, kappa)
         out = solve(self.problem, solver, what=f'problem {problem.name!r}',
@@ -276,31 +314,12 @@ def _program(problem: Problem, nominal: bool, gain_bound: bool) -> _Theorem1Prog
 def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float | None = None,
                      solver: str | None = None, gain_bound: float | None = None,
                      verify_tol: float = 1e-9) -> SynthesisResult:
-    """One solve of Theorem 1 (or its nominal form), verified (see :func:`synthesize`).
+    """One solve of Theorem 1 (or its nominal form), verified.
 
-    Parameters
-    ----------
-    problem : Problem
-        The data ``A, B, A_tau, E, F`` (``tau`` does not enter: the condition is
-        delay-independent).
-    nominal : bool
-        Drop the ``E, F`` terms (the paper's "normal state feedback").
-    margin : float
-        Required strictness ``t`` (normalized units); default ``problem.options['margin']``
-        or 1e-6.
-    solver : str
-        cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
-    gain_bound : float, optional
-        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
-
-    Raises
-    ------
-    InfeasibleError
-        No point with ``t >= margin`` exists; nothing is returned.
-    SolverFailure
-        The solver is missing or returned no solution.
-    CertificateError
-        The solver's point failed :func:`verify_certificate`.
+    The arguments are those of :func:`synthesize` (``margin``, ``solver`` default to the
+    problem's options).  Raises ``InfeasibleError`` (no point with ``t >= margin``),
+    ``SolverFailure`` (no solution) or ``CertificateError`` (the point fails
+    :func:`verify_certificate`; ``margin_achieved`` holds the solver's ``t``).
     """
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
@@ -323,19 +342,15 @@ def _synthesize_once(problem: Problem, *, nominal: bool = False, margin: float |
                             f'{problem.name!r}; no gain was produced')
     P = np.linalg.inv(_sym(X))
     K = R @ P
-    eps_val = None if nominal else float(eps)
-    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
+    cert = _certificate(problem, K, P, Q, None if nominal else float(eps), verify_tol)
+    ver = cert.verification
     if not ver.ok:
         err = CertificateError(
             f'{solver} returned a point for {problem.name!r} ({kind}) that fails independent '
-            f'verification: max eig V = {ver.max_eig_V:.3g}, min eig P = {ver.min_eig_P:.3g}, '
-            f'min eig Q = {ver.min_eig_Q:.3g} (||V|| = {ver.scale:.3g}, best margin '
-            f't = {t:.3g}). '
-            + ('Raise the margin (options.margin).' if solver == 'CLARABEL'
-               else 'Use CLARABEL or raise the margin (options.margin).'))
+            f'verification: {ver.describe()} (||V|| = {ver.scale:.3g}, best margin '
+            f't = {t:.3g}). ' + retry_advice(solver))
         err.margin_achieved = float(t)          # the solver's t, for synthesize's retries
         raise err
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
     return SynthesisResult(K=K, certificate=cert, margin_required=margin,
                            margin_achieved=float(t), status=status, solver=solver,
                            solve_time=solve_time, wall_time=time.perf_counter() - t0,
@@ -410,8 +425,8 @@ class _ReducedProgram(_Theorem1Program):
         top = S + S.T
         norm = cp.trace(self.X)
         Z = np.zeros
-        cols: list = []             # blocks right of ``top`` in the first block row
-        diag: list = []             # their diagonal blocks
+        cols: list[Any] = []        # blocks right of ``top`` in the first block row
+        diag: list[Any] = []        # their diagonal blocks
         self.W: Any = None           # cvxpy Variable / Parameter when r > 0
         self.M: Any = None
         if r:
@@ -461,7 +476,7 @@ class _ReducedProgram(_Theorem1Program):
         if self.kappa2 is not None:
             self.kappa2.value = float(cast(float, kappa)) ** 2   # given with gain_bound
 
-    def point(self, status: str, solve_time: float) -> tuple:
+    def point(self, status: str, solve_time: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` in the original coordinates."""
         t, X, R = self.t.value, self.X.value, self.R.value
         eps = None if self.eps is None else self.eps.value
@@ -529,7 +544,7 @@ class _MinNormProgram:
         cons = [c for c in b.problem.constraints] + [b.t >= self.t_req, 0.5 * (G + G.T) >> 0]
         self.problem = cp.Problem(cp.Minimize(self.s), cons)
 
-    def solve(self, problem: Problem, solver: str, t_req: float) -> tuple:
+    def solve(self, problem: Problem, solver: str, t_req: float) -> tuple[Any, ...]:
         """``(status, t, X, Q, R, eps, solve_time)`` (see :meth:`_Theorem1Program.point`)."""
         self.base.set_data(problem)
         self.t_req.value = float(t_req)
@@ -566,11 +581,9 @@ def _min_norm_stage(problem: Problem, nominal: bool, solver: str, t_req: float,
     except np.linalg.LinAlgError:
         return None
     K = R @ P
-    eps_val = None if nominal else float(eps)
-    ver = verify_certificate(problem, K, P, Q, eps_val, tol=verify_tol)
-    if not ver.ok:
+    cert = _certificate(problem, K, P, Q, None if nominal else float(eps), verify_tol)
+    if not cert.verification.ok:
         return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps_val, verification=ver)
     return SynthesisResult(K=K, certificate=cert, margin_required=t_req,
                            margin_achieved=float(t), status=status,
                            solver=solver, solve_time=solve_time,
@@ -597,14 +610,11 @@ def _from_balanced(problem: Problem, res: SynthesisResult, T: np.ndarray,
     K = c.K @ Ti
     P = _sym(Ti.T @ c.P @ Ti)
     Q = _sym(Ti.T @ c.Q @ Ti)
-    ver = verify_certificate(problem, K, P, Q, c.eps, tol=verify_tol)
-    if not ver.ok:
-        return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=c.eps, verification=ver)
-    return replace(res, K=K, certificate=cert)
+    cert = _certificate(problem, K, P, Q, c.eps, verify_tol)
+    return None if not cert.verification.ok else replace(res, K=K, certificate=cert)
 
 
-def _verified(problem: Problem, **kw) -> SynthesisResult:
+def _verified(problem: Problem, **kw: Any) -> SynthesisResult:
     """:func:`_verified_chain`; for ``n >= COMPACT_FROM_N`` the paper's form as a last resort.
 
     When no point of the reduced program verifies, the whole chain is run again with the
@@ -630,7 +640,7 @@ def _verified(problem: Problem, **kw) -> SynthesisResult:
     return res
 
 
-def _verified_chain(problem: Problem, **kw) -> SynthesisResult:
+def _verified_chain(problem: Problem, **kw: Any) -> SynthesisResult:
     """Synthesize once; if the point fails verification, retry before giving up.
 
     The retries are the balanced problem, a 100x higher margin, then the second solver.
@@ -687,7 +697,7 @@ def _verified_chain(problem: Problem, **kw) -> SynthesisResult:
                            + ' | '.join(tried))
 
 
-def gain_trust_message(problem: Problem, K, P) -> str | None:
+def gain_trust_message(problem: Problem, K: np.ndarray, P: np.ndarray) -> str | None:
     """Why a double-precision check cannot vouch for this certified gain, or ``None``.
 
     Rule: ``||K||_2 > 1e3`` or ``cond(P) > 1e8``.  The check is an eigenvalue test of
@@ -696,6 +706,20 @@ def gain_trust_message(problem: Problem, K, P) -> str | None:
     ``V < 0`` lives on directions where ``P`` is small (``~ ||P|| / cond(P)``).  With
     ``cond(P) > 1e8`` or a gain that large the proof rests on digits that round-off
     reaches - and no actuator applies such a gain anyway.
+
+    Parameters
+    ----------
+    problem : Problem
+        For the message (its name).
+    K : numpy.ndarray, shape (m, n)
+        The gain.
+    P : numpy.ndarray, shape (n, n)
+        The certificate's ``P``.
+
+    Returns
+    -------
+    str or None
+        The warning, or ``None`` when the gain is within the rule.
     """
     norm = float(np.linalg.norm(K, 2))
     cond = float(np.linalg.cond(P))
@@ -717,6 +741,16 @@ def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.
     or ``F[r, j]`` joins two of them.  Each connected component with at least one of
     each kind is a block; one block (or a component without inputs or perturbation)
     means no decoupling and returns ``[]``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, A_tau, B, E, F`` (their sparsity pattern).
+
+    Returns
+    -------
+    list of tuple of numpy.ndarray
+        ``(states, inputs, q, p)`` index arrays per block; ``[]``: no decoupling.
     """
     n, m = problem.n, problem.m
     q, p = problem.E.shape[1], problem.F.shape[0]
@@ -761,8 +795,8 @@ def decoupled_blocks(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, np.
     return blocks
 
 
-def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: float,
-                       **kw) -> SynthesisResult | None:
+def _synthesize_blocks(problem: Problem, blocks: Sequence[tuple[np.ndarray, ...]], *,
+                       nominal: bool, verify_tol: float, **kw: Any) -> SynthesisResult | None:
     """Solve each decoupled block, assemble, verify the whole; ``None`` if that fails.
 
     With block-diagonal data and a common ``eps`` the matrix ``V`` of the module
@@ -787,11 +821,9 @@ def _synthesize_blocks(problem: Problem, blocks, *, nominal: bool, verify_tol: f
         P[np.ix_(st, st)] = c * r.P
         Q[np.ix_(st, st)] = c * r.Q
         parts.append(r)
-    eps = None if nominal else 1.0
-    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
-    if not ver.ok:
+    cert = _certificate(problem, K, P, Q, None if nominal else 1.0, verify_tol)
+    if not cert.verification.ok:
         return None
-    cert = Certificate(K=K, P=P, Q=Q, eps=eps, verification=ver)
     first = parts[0]
     extra = dict(first.extra, blocks=[int(b[0].size) for b in blocks])
     for key in ('t_max', 'stage1_norm'):
@@ -950,13 +982,33 @@ class _CertifyProgram:
         return solve(self.problem, solver, what='the certification LMI for K').status
 
 
-def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | None = None,
+def certify_gain(problem: Problem, K: Any, *, nominal: bool = False,
+                 margin: float | None = None,
                  solver: str | None = None, verify_tol: float = 1e-9) -> CertifyResult:
     """Decide whether Theorem 1's condition holds for the fixed gain ``K``.
 
     Solves ``maximize t`` s.t. ``V(P, Q, d) <= -t I``, ``P, Q >= t I``, ``d >= t``,
     ``tr P + tr Q + d <= 1`` where ``d = 1/eps``; certified iff ``t >= margin`` and the
     resulting certificate passes :func:`verify_certificate`.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data ``A, B, A_tau, E, F``.
+    K : array_like, shape (m, n)
+        The gain.
+    nominal : bool, optional
+        Certify ``D = 0`` only.
+    margin : float, optional
+        Required strictness; default ``problem.options['margin']`` or 1e-6.
+    solver : str, optional
+        cvxpy solver; default ``problem.options['solver']`` or ``'CLARABEL'``.
+    verify_tol : float, optional
+        Relative tolerance of :func:`verify_certificate`.
+
+    Returns
+    -------
+    CertifyResult
     """
     margin = float(problem.options.get('margin', DEFAULT_MARGIN) if margin is None else margin)
     solver = str(problem.options.get('solver', DEFAULT_SOLVER) if solver is None else solver)
@@ -971,13 +1023,11 @@ def certify_gain(problem: Problem, K, *, nominal: bool = False, margin: float | 
     if tv < margin:
         return CertifyResult(False, tv, None, status)
     eps = None if prog.d is None else 1.0 / float(prog.d.value)
-    P, Q = np.array(P), np.array(Q)
-    ver = verify_certificate(problem, K, P, Q, eps, tol=verify_tol)
-    cert = Certificate(K=K, P=_sym(P), Q=_sym(Q), eps=eps, verification=ver)
-    return CertifyResult(ver.ok, tv, cert, status)
+    cert = _certificate(problem, K, _sym(np.array(P)), _sym(np.array(Q)), eps, verify_tol)
+    return CertifyResult(cert.verification.ok, tv, cert, status)
 
 
-def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
+def certified_perturbation_scale(problem: Problem, K: Any, *, upper: float = 100.0,
                                  rel_tol: float = 1e-3, solver: str | None = None) -> float:
     """Largest ``s`` such that :func:`certify_gain` certifies ``K`` with ``F -> s F``.
 
@@ -985,10 +1035,28 @@ def certified_perturbation_scale(problem: Problem, K, *, upper: float = 100.0,
     certifies every smaller scale).  Returns 0.0 if even the nominal condition fails
     and ``upper`` if ``upper`` itself is certified.  A solver failure at a trial
     scale (it happens for extreme scales) counts as "not certified" there.
+
+    Parameters
+    ----------
+    problem : Problem
+        The data (``F`` is scaled).
+    K : array_like, shape (m, n)
+        The gain.
+    upper : float, optional
+        Largest scale tried.
+    rel_tol : float, optional
+        Relative width of the final bracket.
+    solver : str, optional
+        cvxpy solver (default as in :func:`certify_gain`).
+
+    Returns
+    -------
+    float
+        The largest certified scale (a lower bound within ``rel_tol``).
     """
     from .search import largest_feasible
 
-    def trial(s: float):
+    def trial(s: float) -> CertifyResult | None:
         try:
             res = certify_gain(problem.replace(F=s * problem.F), K, solver=solver)
         except SolverFailure:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .validate import StateInputShape
 
 __all__ = [
     'SingularSpeedError', 'LinearizedModel', 'double_integrator_model',
@@ -31,22 +32,12 @@ class SingularSpeedError(InputError):
 
 
 @dataclass(frozen=True)
-class LinearizedModel:
+class LinearizedModel(StateInputShape):
     """Matrices of eq. (4): ``xi' = A xi + B u``, ``y = C xi``."""
 
     A: np.ndarray
     B: np.ndarray
     C: np.ndarray
-
-    @property
-    def n(self) -> int:
-        """Number of states."""
-        return int(self.A.shape[0])
-
-    @property
-    def m(self) -> int:
-        """Number of inputs."""
-        return int(self.B.shape[1])
 
 
 def double_integrator_model(axes: int = 2) -> LinearizedModel:

@@ -88,7 +88,7 @@ def is_stabilizable(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> tuple[bo
 
 
 @dataclass(frozen=True)
-class Problem:
+class Problem(validate.StateInputShape):
     """Data of Theorem 1: ``xi' = (A + B(K + E D F)) xi + A_tau xi(t - tau)``."""
 
     A: np.ndarray
@@ -101,15 +101,6 @@ class Problem:
     perturbations: Mapping[str, np.ndarray] = field(default_factory=dict)
     options: Mapping[str, Any] = field(default_factory=dict)
 
-    @property
-    def n(self) -> int:
-        """Number of states."""
-        return int(self.A.shape[0])
-
-    @property
-    def m(self) -> int:
-        """Number of inputs."""
-        return int(self.B.shape[1])
 
     def gain(self, K: Any) -> np.ndarray:
         """``K`` as a float array of this problem's gain shape ``(m, n)``: the one K-shape check.
@@ -248,6 +239,7 @@ def load_problem(path: str | Path) -> Problem:
     Returns
     -------
     Problem
+        The validated problem (:func:`problem_from_mapping`).
 
     Raises
     ------

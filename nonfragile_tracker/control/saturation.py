@@ -1,36 +1,21 @@
 """A region of attraction of the tracking loop with saturating inputs.
 
 The law commands ``u = u_d + K e`` (``e = xi - xi_d``, ``u`` the acceleration of the
-linearized robot, ``u_d`` the reference acceleration).  The base bounds the tangential
-acceleration ``|a| <= max_linear_accel`` (a rate limit on ``v``) and the turn rate
-``|w| = |u_n| / |v| <= max_angular_speed``: with ``|v| >= min_speed`` along the motion
-both hold while ``||u|| <= u_max = min(max_linear_accel, min_speed * max_angular_speed)``,
-in particular while each world-frame component ``|u_i| <= u_max / sqrt(2)``.  The certified
-loop saturates ``u`` to that box:
+linearized robot, ``u_d`` the reference acceleration).  The base's turn-rate and
+acceleration limits hold while each world-frame component of ``u`` stays in a box; the
+certified loop saturates ``u`` to that box::
 
     e' = A e + B (sat(u_d + K e) - u_d) + A_tau e(t - tau),   ||u_d||_inf <= d.
 
-``sat(u_d + K e) - u_d = K e - psi`` where ``psi`` lies between 0 and the dead-zone of
-level ``l = u_max / sqrt(2) - d`` (a shifted saturation), so the **generalized sector
-condition** holds (Tarbouriech, Garcia, Gomes da Silva and Queinnec, *Stability and
-Stabilization of Linear Systems with Saturating Actuators*, Springer 2011, Lemma 1.6):
-``psi' T (psi - G e) <= 0`` for any diagonal ``T > 0`` wherever ``|(K - G)_i e| <= l``.
-With ``V = e' P e + int_{t-tau}^t e' Q e`` (delay-independent Krasovskii) the LMIs in
-``W = P^-1``, ``Z = G W``, ``S = T^-1`` (diagonal), ``R = W Q W``:
+The generalized sector condition (Tarbouriech, Garcia, Gomes da Silva and Queinnec, 2011,
+Lemma 1.6) and a delay-independent Krasovskii functional give two LMIs whose solution
+certifies that every constant initial history in an ellipsoid converges; the program
+maximizes the largest initial *position* error in it, and the radius scales with the
+dead-zone level, which gives the largest reference acceleration for a wanted radius.
 
-    [ (A+BK) W + W (A+BK)' + R    A_tau W    -B S + Z' ]
-    [          *                   -R            0     ]  < 0
-    [          *                    *          -2 S    ]
-
-    [ W               W K_i' - Z_i' ]
-    [ *               l^2           ]  >= 0      (E(P, 1) inside the sector region)
-
-certify that every constant initial history ``e0`` with ``e0' (P + tau Q) e0 <= 1``
-converges to 0 (``V`` decreases, so ``e(t)`` stays in ``E(P, 1)``).  The program
-maximizes the largest initial *position* error ``r`` (zero velocity error) in that set
-(``C W^-1 C' <= beta I``, minimize ``beta``).  The LMIs are homogeneous in ``l``: the
-certified radius is ``r = rho * l`` (``rho``: per unit of level), so the largest
-reference acceleration for a wanted radius is ``d = u_max / sqrt(2) - r / rho``.
+The box model, the LMIs (in ``W = P^-1``, ``Z = G W``, ``S = T^-1``, ``R = W Q W``), the
+radius and the assumptions are in the documentation: doc/theory.md, section "Saturation: a
+certified region of attraction" (#saturation-a-certified-region-of-attraction).
 
 The certificate is checked independently in numpy (:func:`verify_saturation`): the
 eigenvalues of the first LMI in the ``P``-form and the inclusion, from the solver's point.
@@ -39,10 +24,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
 from ..errors import InputError
+from .certificate import eigen_figures, passes
+from .sdp import sym
 
 __all__ = ['SaturationLimits', 'SaturationCertificate', 'saturation_certificate',
            'verify_saturation', 'simulate_saturated', 'format_saturation', 'SimulationCheck',
@@ -71,7 +59,7 @@ class SaturationLimits:
     max_linear_accel: float = 0.0
     max_reference_accel: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ('max_angular_speed', 'min_speed'):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -120,11 +108,32 @@ class SaturationCertificate:
         return self.max_eig < 0 and self.inclusion <= 1 + 1e-9 and self.radius > 0
 
     def max_reference_accel(self, radius: float) -> float:
-        """Largest ``||u_d||_inf`` (m/s^2) for which a position error ``radius`` is certified."""
+        """Largest ``||u_d||_inf`` (m/s^2) for which a position error ``radius`` is certified.
+
+        Parameters
+        ----------
+        radius : float
+            The initial position error to certify (m).
+
+        Returns
+        -------
+        float
+            In m/s^2 (negative: not even with zero reference acceleration).
+        """
         return self.limits.box - radius / self.radius_per_level
 
-    def contains(self, e0) -> bool:
-        """A constant initial history ``e0`` (error state) is inside the certified set."""
+    def contains(self, e0: Any) -> bool:
+        """A constant initial history ``e0`` (error state) is inside the certified set.
+
+        Parameters
+        ----------
+        e0 : array_like, shape (n,)
+            The error state.
+
+        Returns
+        -------
+        bool
+        """
         e0 = np.asarray(e0, float)
         return float(e0 @ (self.P + self.tau * self.Q) @ e0) <= 1.0
 
@@ -137,7 +146,8 @@ def _position_selector(n: int) -> np.ndarray:
     return C
 
 
-def saturation_certificate(A, B, K, A_tau, tau: float, limits: SaturationLimits, *,
+def saturation_certificate(A: Any, B: Any, K: Any, A_tau: Any, tau: float,
+                           limits: SaturationLimits, *,
                            solver: str = 'CLARABEL', margin: float = 1e-7
                            ) -> SaturationCertificate:
     """Largest certified initial position error of the saturated loop (see module text).
@@ -220,7 +230,8 @@ def saturation_certificate(A, B, K, A_tau, tau: float, limits: SaturationLimits,
                              status=out.status)
 
 
-def verify_saturation(A, B, K, A_tau, tau: float, limits: SaturationLimits, P, Q, G, T, *,
+def verify_saturation(A: Any, B: Any, K: Any, A_tau: Any, tau: float, limits: SaturationLimits,
+                      P: Any, Q: Any, G: Any, T: Any, *,
                       status: str = 'given') -> SaturationCertificate:
     """Check a saturation certificate in numpy and compute its radius.
 
@@ -249,7 +260,8 @@ def verify_saturation(A, B, K, A_tau, tau: float, limits: SaturationLimits, P, Q
     L = np.block([[Acl.T @ P + P @ Acl + Q, P @ Ad, -P @ B + G.T @ T],
                   [Ad.T @ P, -Q, np.zeros((n, m))],
                   [(-P @ B + G.T @ T).T, np.zeros((m, n)), -2 * T]])
-    max_eig = float(np.linalg.eigvalsh(0.5 * (L + L.T)).max())
+    # the certificate check of the LMI modules (no relative slack here: tol = 0)
+    max_eig, scale, min_p = eigen_figures(sym(L), (P,))
     lev = limits.level
     Pinv = np.linalg.inv(P)
     H = K - G
@@ -258,20 +270,40 @@ def verify_saturation(A, B, K, A_tau, tau: float, limits: SaturationLimits, P, Q
     Pt = P + tau * Q
     # e0 = C' z (zero velocity error): e0' Pt e0 <= 1 for all ||z|| <= r
     lam = float(np.linalg.eigvalsh(C @ Pt @ C.T).max())
-    ok = max_eig < 0 and incl <= 1 + 1e-9 and np.all(np.linalg.eigvalsh(P) > 0)
+    ok = passes(max_eig, scale, min_p, None, 0.0) and incl <= 1 + 1e-9
     radius = 1.0 / math.sqrt(lam) if ok and lam > 0 else 0.0
     per = radius / lev if lev > 0 else 0.0
     return SaturationCertificate(limits, P, Q, G, T, float(tau), radius, per, max_eig, incl,
                                  status)
 
 
-def simulate_saturated(A, B, K, A_tau, tau: float, limits: SaturationLimits, e0, *,
-                       duration: float = 20.0, dt: float = 5e-3,
-                       u_d=None) -> np.ndarray:
+def simulate_saturated(A: Any, B: Any, K: Any, A_tau: Any, tau: float,
+                       limits: SaturationLimits, e0: Any, *, duration: float = 20.0,
+                       dt: float = 5e-3, u_d: Callable[[float], Any] | None = None
+                       ) -> np.ndarray:
     """The saturated error loop from a constant history ``e0`` (RK-free Euler, small ``dt``).
 
-    ``u_d`` (callable ``t -> (m,)`` or None = 0) is the reference acceleration.  Returns
-    the error trajectory (rows per step).
+    Parameters
+    ----------
+    A, B, K, A_tau : array_like
+        The loop.
+    tau : float
+        The state delay (s).
+    limits : SaturationLimits
+        The input box.
+    e0 : array_like, shape (n,)
+        The constant initial history.
+    duration : float, optional
+        Simulated time (s).
+    dt : float, optional
+        Euler step (s).
+    u_d : callable, optional
+        ``t -> (m,)`` reference acceleration (default 0).
+
+    Returns
+    -------
+    numpy.ndarray, shape (steps + 1, n)
+        The error trajectory, a row per step.
     """
     A, B, K, Ad = (np.asarray(M, float) for M in (A, B, K, A_tau))
     n, m = B.shape
@@ -295,7 +327,17 @@ def simulate_saturated(A, B, K, A_tau, tau: float, limits: SaturationLimits, e0,
 
 
 def format_saturation(cert: SaturationCertificate) -> str:
-    """A few lines: the limits, the certified radius, the largest reference acceleration."""
+    """A few lines: the limits, the certified radius, the largest reference acceleration.
+
+    Parameters
+    ----------
+    cert : SaturationCertificate
+        The certificate.
+
+    Returns
+    -------
+    str
+    """
     lim = cert.limits
     head = (f'saturation (|w| <= {lim.max_angular_speed:g} rad/s at |v| >= {lim.min_speed:g} '
             f'm/s' + (f', |dv/dt| <= {lim.max_linear_accel:g} m/s^2' if lim.max_linear_accel
@@ -324,7 +366,8 @@ class SimulationCheck:
     outside_total: int
 
 
-def check_by_simulation(cert: SaturationCertificate, A, B, K, A_tau, *, directions: int = 8,
+def check_by_simulation(cert: SaturationCertificate, A: Any, B: Any, K: Any, A_tau: Any, *,
+                        directions: int = 8,
                         inside: float = 0.99, outside: float = 1.5, duration: float = 20.0,
                         tolerance: float = 1e-3) -> SimulationCheck:
     """Simulate the saturated loop from position errors at ``inside`` and ``outside`` x radius.
@@ -353,7 +396,7 @@ def check_by_simulation(cert: SaturationCertificate, A, B, K, A_tau, *, directio
     n = np.asarray(A).shape[0]
     d = cert.limits.max_reference_accel
 
-    def u_d(t: float):
+    def u_d(t: float) -> np.ndarray:
         return d * np.array([math.cos(t), math.sin(t)])
 
     counts = []

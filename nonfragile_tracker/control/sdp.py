@@ -33,7 +33,7 @@ from typing import Any, Callable, Hashable, TypeVar, cast
 
 import numpy as np
 
-from ..errors import SolverFailure
+from ..errors import InputError, SolverFailure
 
 __all__ = ['DEFAULT_MARGIN', 'DEFAULT_SOLVER', 'OK_STATUSES', 'INFEASIBLE_STATUSES',
            'CACHE_SIZE', 'SolveOutcome', 'sym', 'solve', 'classify', 'cached_program',
@@ -117,6 +117,130 @@ def solve(problem: Any, solver: str, *, what: str = 'the LMI',
     stats = problem.solver_stats
     st = float(stats.solve_time or 0.0) if stats is not None else 0.0
     return SolveOutcome(status=str(problem.status), solve_time=st)
+
+
+def solve_for_point(problem: Any, solver: str, what: str, t: Any, X: Any
+                    ) -> tuple[SolveOutcome, float | None, bool]:
+    """Solve a strictness-maximizing LMI program and say whether its point is usable.
+
+    The searches over a tuning scalar (delay-dependent and input-delay designs) solve
+    many points: a solver failure at one of them is a status, not an exception.
+
+    Parameters
+    ----------
+    problem : cvxpy.Problem
+        The program (cvxpy's "inaccurate" warning is suppressed: the point is verified).
+    solver : str
+        cvxpy solver name.
+    what : str
+        Description used in the status of a failure.
+    t : cvxpy.Variable
+        The strictness variable.
+    X : cvxpy.Variable
+        A variable that has a value iff the solver returned a point.
+
+    Returns
+    -------
+    outcome : SolveOutcome
+        Status ``'solver_error: ...'`` and 0 s when the solver raised.
+    t : float or None
+        The value of ``t`` (``None``: none).
+    usable : bool
+        The status is in :data:`OK_STATUSES` and the point has values.
+    """
+    try:
+        out = solve(problem, solver, what=what, quiet_inaccurate=True)
+    except SolverFailure as exc:
+        return SolveOutcome(f'solver_error: {exc}', 0.0), None, False
+    tv = t.value
+    return (out, None if tv is None else float(tv),
+            out.status in OK_STATUSES and X.value is not None)
+
+
+class DescriptorParameters:
+    """The data of the descriptor-method programs (delay-dependent and input-delay designs).
+
+    A subclass creates the cvxpy parameters ``A``, ``B``, ``Ad`` (the problem's ``A``,
+    ``B``, ``A_tau``), ``eA``, ``eB``, ``eAd`` (the same times the tuning scalar ``eps``,
+    so that the products stay DPP), ``eps``, and unless ``nominal`` ``BE``, ``eBE``
+    (``B E``, ``eps B E``) and ``F``; :meth:`gain_bound_constraints` adds ``kappa2``.
+    """
+
+    nominal: bool
+    A: Any
+    B: Any
+    Ad: Any
+    eA: Any
+    eB: Any
+    eAd: Any
+    eps: Any
+    BE: Any
+    eBE: Any
+    F: Any
+    kappa2: Any = None
+
+    def set_problem(self, problem: Any, kappa: float | None) -> None:
+        """Put ``problem``'s matrices (and the gain bound ``kappa``) into the parameters.
+
+        Parameters
+        ----------
+        problem : Problem
+            The data ``A, B, A_tau, E, F``.
+        kappa : float or None
+            The ``||K||_2`` bound; required iff the program has one.
+        """
+        self.A.value, self.B.value, self.Ad.value = problem.A, problem.B, problem.A_tau
+        if not self.nominal:
+            self.BE.value = problem.B @ problem.E
+            self.F.value = problem.F
+        if self.kappa2 is not None:
+            if kappa is None:
+                raise InputError('this program has a gain bound: kappa is required')
+            self.kappa2.value = float(kappa) ** 2
+
+    def set_eps(self, problem: Any, eps: float) -> None:
+        """Put the tuning scalar ``eps`` (``P3 = eps P2``) and the scaled data in.
+
+        Parameters
+        ----------
+        problem : Problem
+            The data (as given to :meth:`set_problem`).
+        eps : float
+            The tuning scalar (> 0).
+        """
+        self.eps.value = eps
+        self.eA.value, self.eB.value = eps * problem.A, eps * problem.B
+        self.eAd.value = eps * problem.A_tau
+        if not self.nominal:
+            self.eBE.value = eps * (problem.B @ problem.E)
+
+    def gain_bound_constraints(self, X: Any, Y: Any, t: Any) -> list[Any]:
+        """``||K||_2 <= kappa`` for ``K = Y X^-1`` with a non-symmetric ``X`` (creates ``kappa2``).
+
+        ``He(X) / 2 >= I`` and ``[[kappa^2 (He(X) - I), Y^T], [Y, I]] >= 0`` (doc/theory.md,
+        "Delay-dependent design"), and ``t <= 1`` fixes the scale in place of a trace bound.
+
+        Parameters
+        ----------
+        X : cvxpy.Variable, shape (n, n)
+            The congruence variable (``X = P2^-1``).
+        Y : cvxpy.Variable, shape (m, n)
+            ``Y = K X``.
+        t : cvxpy.Variable
+            The strictness.
+
+        Returns
+        -------
+        list
+            The three constraints.
+        """
+        import cvxpy as cp
+        n, m = X.shape[0], Y.shape[0]
+        In = np.eye(n)
+        self.kappa2 = cp.Parameter(nonneg=True)
+        He = X + X.T
+        Gk = cp.bmat([[self.kappa2 * (He - In), Y.T], [Y, np.eye(m)]])
+        return [0.5 * He >> In, 0.5 * (Gk + Gk.T) >> 0, t <= 1]
 
 
 def classify(status: str, t: float | None, margin: float) -> str:

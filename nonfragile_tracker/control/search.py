@@ -35,7 +35,31 @@ def largest_feasible(trial: Callable[[float], T | None], lo: float, hi: float, *
     ``trial`` must be monotone (feasible at ``x`` implies feasible below ``x``) and
     ``lo`` known feasible (its result ``lo_result``).  ``hi`` doubles while feasible,
     up to ``hi_limit`` (returned as is if feasible there), then the bracket is
-    bisected until ``hi - lo <= rel_tol * hi``.  Returns ``(x, trial(x), trials)``.
+    bisected until ``hi - lo <= rel_tol * hi``.
+
+    Parameters
+    ----------
+    trial : callable
+        ``trial(x)``: a result if ``x`` is feasible, else ``None``.
+    lo : float
+        A feasible value.
+    hi : float
+        The first value tried (doubled while feasible).
+    rel_tol : float, optional
+        Relative width of the final bracket.
+    hi_limit : float, optional
+        Largest value tried.
+    lo_result : object, optional
+        ``trial(lo)``, returned when nothing above ``lo`` is feasible.
+
+    Returns
+    -------
+    x : float
+        The largest feasible value found.
+    result : object
+        ``trial(x)`` (``lo_result`` for ``x = lo``).
+    trials : int
+        Number of calls of ``trial``.
     """
     best, trials = lo_result, 0
     while True:
@@ -80,7 +104,28 @@ def largest_feasible_bracketed(trial: Callable[[float], tuple[float, T | None]],
     the infeasible side, costs at most three times the halving).  Without usable scores
     this is bisection.  Feasibility is decided by ``result`` only, so the returned ``x``
     is always one ``trial`` accepted.
-    Returns ``(x, result, trials)`` with ``hi - x <= tol`` for the final bracket.
+
+    Parameters
+    ----------
+    trial : callable
+        ``trial(x) -> (score, result or None)``.
+    lo, hi : float
+        Known feasible and known infeasible ends.
+    lo_result : object
+        The result at ``lo``.
+    tol : float
+        Absolute width of the final bracket.
+    lo_score, hi_score : float, optional
+        Scores at the ends, if known (``nan``: unknown).
+
+    Returns
+    -------
+    x : float
+        The largest accepted value, ``hi - x <= tol`` for the final bracket.
+    result : object
+        Its result.
+    trials : int
+        Number of calls of ``trial``.
     """
     best, trials, side = lo_result, 0, 0
     ls, hs = float(lo_score), float(hi_score)
@@ -137,6 +182,15 @@ def golden_section_max(f: Callable[[float], float], a: float, b: float, steps: i
     Nothing is returned: callers record the values (and the points they belong to)
     inside ``f``, and may stop early by raising from it.  ``f`` need not be unimodal;
     then this is a heuristic local refinement.
+
+    Parameters
+    ----------
+    f : callable
+        The function to maximize, ``float -> float``.
+    a, b : float
+        The interval.
+    steps : int
+        Number of evaluations of ``f``.
     """
     g = (math.sqrt(5.0) - 1.0) / 2.0
     c, d = b - g * (b - a), a + g * (b - a)
@@ -170,6 +224,19 @@ def eps_search(f: Callable[[float], float], grid: Sequence[float], refine: int, 
     may stop the search by raising.  The warm start trades the global scan for a local
     one: where ``f`` has several local maxima on the grid it may settle on a lower one
     (a bisection using it then returns a smaller, still verified, value).
+
+    Parameters
+    ----------
+    f : callable
+        ``eps -> strictness`` (``-inf``: no point).
+    grid : sequence of float
+        Positive grid of ``eps`` values.
+    refine : int
+        Golden-section steps after the grid (0: none).
+    start : float, optional
+        Warm start (see above).
+    accept : float, optional
+        A value at which ``f`` was expected to stop the search (see above).
     """
     values: dict[float, float] = {}
 

@@ -29,6 +29,7 @@ import math
 import time
 from concurrent.futures import Executor
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -226,6 +227,16 @@ def pareto_front(records: Sequence[dict[str, Any]]) -> list[int]:
     ``||K||_2`` (less).  Designs are compared within the same actuator lag only (a
     design for another lag is not certified for this robot).  Only ``'ok'`` records
     count; ties are kept.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Sweep records (:func:`run_sweep`'s).
+
+    Returns
+    -------
+    list of int
+        Indices into ``records``.
     """
     ok = [i for i, r in enumerate(records) if r.get('status') == 'ok']
     lags = {records[i]['lag'] for i in ok}
@@ -246,7 +257,18 @@ def pareto_front(records: Sequence[dict[str, Any]]) -> list[int]:
 
 
 def sweep_table(records: Sequence[dict[str, Any]]) -> str:
-    """One line per design (fixed columns), the Pareto-front designs marked ``*``."""
+    """One line per design (fixed columns), the Pareto-front designs marked ``*``.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Sweep records; a failed design's line has its status and no figures.
+
+    Returns
+    -------
+    str
+        The table, a header line first.
+    """
     front = set(pareto_front(records))
     head = (f'{"":1} {"latency [s]":>15} {"lag":>6} {"bound":>6} {"objective":>9} '
             f'{"pred":>4} {"interval [s]":>15} {"status":>10} {"||K||":>7} {"decay":>7} '
@@ -267,11 +289,18 @@ def sweep_table(records: Sequence[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
-def plot_sweep(records: Sequence[dict[str, Any]], path) -> None:
+def plot_sweep(records: Sequence[dict[str, Any]], path: str | Path) -> None:
     """PNG: certified command latency against decay rate and against ``||K||_2``.
 
     Every ``'ok'`` design is a marker (circle: without the predictor, square: with it;
     colour: the lag), the Pareto front (:func:`pareto_front`, per lag) is ringed.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Sweep records.
+    path : str or pathlib.Path
+        The PNG file to write.
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -310,7 +339,18 @@ def plot_sweep(records: Sequence[dict[str, Any]], path) -> None:
 
 
 def records_for_json(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The records with the front marked (``pareto``), non-finite numbers as None."""
+    """The records with the front marked (``pareto``), non-finite numbers as None.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Sweep records (not modified).
+
+    Returns
+    -------
+    list of dict
+        JSON-ready copies.
+    """
     front = set(pareto_front(records))
 
     def clean(v: Any) -> Any:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ['as_matrix', 'as_square', 'as_finite_float']
+__all__ = ['as_matrix', 'as_square', 'as_finite_float', 'StateInputShape']
 
 Shape = Sequence['int | None']
 
@@ -155,3 +155,24 @@ def as_finite_float(value: Any, name: str, *, low: float | None = None,
         raise error(f'{name}: expected a number {">=" if low_inclusive else ">"} {low:g}, '
                     f'got {value!r}')
     return x
+
+
+class StateInputShape:
+    """``n`` and ``m`` of a record holding a state matrix ``A`` and an input matrix ``B``.
+
+    A mixin of :class:`.problem.Problem` and :class:`.model.LinearizedModel` (one place
+    for the dimensions they read from ``A`` (``n x n``) and ``B`` (``n x m``)).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """Number of states."""
+        return int(self.A.shape[0])
+
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return int(self.B.shape[1])

@@ -125,6 +125,6 @@ def test_certificate_error_still_raised_when_nothing_verifies(monkeypatch):
     import nonfragile_tracker.control.lmi as lmi
     problem = random_problem(11)                    # n = 2: the SCS retries are quick
     monkeypatch.setattr(lmi, 'verify_certificate', lambda *a, **k: lmi.Verification(
-        False, 1.0, 1.0, 1.0, 1e-9, 1.0))
+        False, 1.0, 1.0, 1.0, tolerance=1e-9, scale=1.0))
     with pytest.raises(CertificateError, match='balanced problem.*margin x100.*solver SCS'):
         synthesize(problem, gain_bound=50.0)
