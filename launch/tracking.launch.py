@@ -46,6 +46,10 @@ def generate_launch_description():
                                  value_type=int)
     lockstep_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
                                            "' == 'lockstep'"])
+    # real time with a recorder: the plant starts stepping once the recorder has announced
+    # that its subscriptions matched (runner.realtime_handshake), so the bag has it all
+    realtime_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
+                                           "' == 'realtime'"])
     # the tracker follows the trajectory message (in lockstep the reference publishes the
     # built-in path as one too); the reference's per-step samples have one subscriber to
     # wait for, the recorder
@@ -66,7 +70,8 @@ def generate_launch_description():
                  parameters=[scenario, common, cmd, {
                      'lockstep_subscribers': ParameterValue(PythonExpression(
                          ["2 if '", record, "' == 'true' else 1"]), value_type=int),
-                     'lockstep_recorder': ParameterValue(record, value_type=bool)}],
+                     'lockstep_recorder': ParameterValue(record, value_type=bool),
+                     'realtime_recorder': ParameterValue(realtime_recording, value_type=bool)}],
                  output='screen')
     recorder = Node(package='nonfragile_tracker', executable='recorder', name='recorder',
                     condition=IfCondition(record),
@@ -74,7 +79,7 @@ def generate_launch_description():
                                                                value_type=str),
                                       'use_sim_time': ParameterValue(lockstep, value_type=bool),
                                       'topics': recorded,
-                                      'lockstep_gate': ParameterValue(lockstep, value_type=bool)}],
+                                      'lockstep_gate': True}],          # in both modes
                     output='screen')
     return LaunchDescription([
         DeclareLaunchArgument('mode', default_value='lockstep', choices=['lockstep', 'realtime'],

@@ -68,6 +68,20 @@ def test_tracking_launch_modes_and_nodes():
     assert all(calls(h, 'Shutdown') for h in handlers)
 
 
+def test_tracking_launch_gates_the_start_on_the_recorder_in_both_modes():
+    """The handshake of runner.lockstep_handshake/realtime_handshake: the recorder announces
+    its matched subscriptions (lockstep_gate, in both modes) and the plant waits for it
+    (lockstep_recorder in lockstep, realtime_recorder in real time) when recording."""
+    from nonfragile_tracker.runner import realtime_handshake
+    text = (LAUNCH / 'tracking.launch.py').read_text()
+    hand = realtime_handshake(True)
+    assert hand['plant']['realtime_recorder'] and hand['recorder']['lockstep_gate']
+    assert "'realtime_recorder': ParameterValue(realtime_recording, value_type=bool)" in text
+    assert "'lockstep_gate': True}" in text
+    assert '''realtime_recording = PythonExpression(["'", record, "' == 'true' and '", mode,
+                                           "' == 'realtime'"])''' in text
+
+
 def test_robot_launch_starts_tracker_and_reference_with_remappable_topics():
     tree, _, _ = arguments(LAUNCH / 'robot.launch.py')
     exes = {kw.value.value for c in calls(tree, 'Node') for kw in c.keywords
