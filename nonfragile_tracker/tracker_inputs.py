@@ -293,14 +293,17 @@ class TrackerInputs:
     def odom(self, msg: Any) -> Step | None:
         """Take an odometry message; the step it makes due, if any.
 
+        :meth:`accept_odom`, then :meth:`compute` if it was accepted.
+
         Parameters
         ----------
         msg : nav_msgs/Odometry
-            rclpy or rosbags message.
+            As for :meth:`accept_odom`.
 
         Returns
         -------
         Step or None
+            The command due at its stamp, None if none is (yet).
         """
         if self.accept_odom(msg) is None:
             return None

@@ -109,9 +109,32 @@ class ReplayResult:
         return max(self.comparison.max_abs_error.values(), default=math.nan)
 
 
-def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
+def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = None
                        ) -> list[ReplayEvent]:
-    """Odometry, reference parts and commands of a bag, in bag (receive) order."""
+    """Odometry, reference parts and commands of a bag, in bag (receive) order.
+
+    Also the trajectory message (``trajectory_multidof``, else ``trajectory``) when the
+    bag has one (kind ``trajectory``; the per-step samples are then not fed) and the
+    tracker's ``tracker/trajectory`` announcements (kind ``followed``).
+
+    Parameters
+    ----------
+    path : path-like
+        The bag.
+    namespace : str, optional
+        The namespace of the run's topics (default: found from the bag).
+
+    Returns
+    -------
+    list of ReplayEvent
+
+    Raises
+    ------
+    MissingTopicsError
+        If the bag lacks odometry or the reference (or trajectory message).
+    BagError
+        If a message cannot be read.
+    """
     reader = open_reader(path)
     try:
         by_topic = {c.topic: c for c in reader.connections}
@@ -151,7 +174,18 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
 
 
 def bag_mode(events: Iterable[ReplayEvent]) -> str:
-    """``lockstep`` when at least half the odometry stamps equal a reference stamp."""
+    """``lockstep`` when at least half the odometry stamps equal a reference stamp.
+
+    Parameters
+    ----------
+    events : iterable of ReplayEvent
+        A bag's events.
+
+    Returns
+    -------
+    str
+        ``lockstep`` or ``realtime``.
+    """
     odom, ref = set(), set()
     for e in events:
         if e.kind == 'odom':
@@ -238,10 +272,11 @@ FOLLOW_SEARCH = 250
 
 def _agrees_twist(a: Any, b: Any, atol: float) -> bool:
     ta, tb = _twist(a), _twist(b)
-    return abs(ta.linear.x - tb.linear.x) <= atol and abs(ta.angular.z - tb.angular.z) <= atol
+    return bool(abs(ta.linear.x - tb.linear.x) <= atol
+                and abs(ta.angular.z - tb.angular.z) <= atol)
 
 
-def _param_section(path: Path) -> dict:
+def _param_section(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(Path(path).read_text()) or {}
     except OSError as exc:
@@ -256,15 +291,32 @@ def _param_section(path: Path) -> dict:
     return {}
 
 
-def load_tracker_parameters(gains: str | os.PathLike | None = None,
-                            params: str | os.PathLike | None = None
-                            ) -> tuple[TrackerConfig, dict]:
+def load_tracker_parameters(gains: str | os.PathLike[str] | None = None,
+                            params: str | os.PathLike[str] | None = None
+                            ) -> tuple[TrackerConfig, dict[str, Any]]:
     """Tracker config and parameter values from a gain file and a parameter file.
 
     Defaults: ``config/tracker_gains.yaml`` and ``config/paper_scenario.yaml``; values
     absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).  The gain file's
     other tracker parameters (the predictor of a ``latency-design`` file) override the
     parameter file's, as ``run --gains`` does.
+
+    Parameters
+    ----------
+    gains : path-like, optional
+        A gain file (``synthesize`` / ``latency-design`` output).
+    params : path-like, optional
+        A ROS 2 parameter file with a tracker section.
+
+    Returns
+    -------
+    (TrackerConfig, dict)
+        The law's configuration and every tracker parameter value by name.
+
+    Raises
+    ------
+    BagError
+        If a file cannot be read; an InputError for a bad gain or value.
     """
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
@@ -280,7 +332,7 @@ def load_tracker_parameters(gains: str | os.PathLike | None = None,
     return tracker_config(values), values
 
 
-def _twist(msg) -> Any:
+def _twist(msg: Any) -> Any:
     return msg.twist if hasattr(msg, 'header') else msg
 
 
@@ -291,6 +343,24 @@ def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, 
 
     By index when both have as many, else by time (receive time of the triggering input
     vs the recorded receive time).
+
+    Parameters
+    ----------
+    commands : list of (int, Twist)
+        Replayed commands with the receive time (ns) of their input.
+    recorded : list of (int, Twist or TwistStamped)
+        Recorded commands with their receive time (ns).
+    atol, rtol : float, optional
+        Tolerance of the comparison.
+    max_differences : int, optional
+        How many differing commands are listed.
+    time_tolerance : float, optional
+        Time alignment: how far apart (s) a pair may be; default half the median
+        interval of the replayed commands.
+
+    Returns
+    -------
+    Comparison
     """
     a = [(t, _twist(m)) for t, m in recorded]
     align = 'index' if len(a) == len(commands) else 'time'
@@ -366,7 +436,7 @@ def _twist_msg(cmd: Command) -> Any:
 
 def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
     tw = _twist(rec)
-    return abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol
+    return bool(abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol)
 
 
 #: How far back (s) before the first recorded command the tracker's first input may lie
@@ -497,8 +567,8 @@ class _RefTimeline:
             else:
                 self.before[id(e)] = n
 
-    def parts(self, s: int) -> list:
-        out: list = [None, None, None]
+    def parts(self, s: int) -> list[Any]:
+        out: list[Any] = [None, None, None]
         i = s - 1
         while i >= 0 and any(p is None for p in out):
             e = self.events[i]
@@ -614,8 +684,9 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
     return None
 
 
-def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
-           params: str | os.PathLike | None = None, expected: str | os.PathLike | None = None,
+def replay(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str] | None = None,
+           params: str | os.PathLike[str] | None = None,
+           expected: str | os.PathLike[str] | None = None,
            atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
            namespace: str | None = None) -> ReplayResult:
     """Feed a bag's odometry and reference to a fresh tracker in process; compare commands.
@@ -630,6 +701,10 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
         Compare with this bag's ``cmd_vel`` instead of the recorded one.
     atol, rtol : float
         Tolerance of the command comparison.
+    max_differences : int, optional
+        How many differing commands the result lists.
+    namespace : str, optional
+        The namespace of the bag's topics.
 
     Returns
     -------
@@ -645,10 +720,39 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
                          max_differences=max_differences)
 
 
-def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, expected=None,
-                  atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+def finish_replay(bag: str | os.PathLike[str], plan: ReplayPlan, commands: list[Timed], *,
+                  expected: str | os.PathLike[str] | None = None, atol: float = 1e-9,
+                  rtol: float = 0.0, max_differences: int = 20,
                   via: str = 'in process') -> ReplayResult:
-    """Compare replayed ``commands`` with the recorded (or ``expected``) ones."""
+    """Compare replayed ``commands`` with the recorded (or ``expected``) ones.
+
+    Parameters
+    ----------
+    bag : path-like
+        The replayed bag (named in the result).
+    plan : ReplayPlan
+        What was fed (:func:`plan_replay`).
+    commands : list of (int, Twist)
+        The replayed commands with the receive time of their input (the plan's, or a
+        tracker node's over DDS).
+    expected : path-like, optional
+        Compare with this bag's ``cmd_vel`` instead of the recorded one.
+    atol, rtol : float, optional
+        Tolerance of the comparison.
+    max_differences : int, optional
+        How many differing commands the result lists.
+    via : str, optional
+        How the commands were replayed (the summary says it).
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    MissingTopicsError
+        If there is no ``cmd_vel`` to compare with.
+    """
     recorded, source = plan.recorded, 'recorded'
     if expected is not None:
         recorded = [(e.receive_ns, e.msg) for e in read_replay_events(expected)
@@ -664,7 +768,17 @@ def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, exp
 
 
 def format_replay(res: ReplayResult) -> str:
-    """Summary of a replay: inputs fed, commands produced and the comparison."""
+    """Summary of a replay: inputs fed, commands produced and the comparison.
+
+    Parameters
+    ----------
+    res : ReplayResult
+        What :func:`replay` returned.
+
+    Returns
+    -------
+    str
+    """
     fed = ', '.join(f'{k} {n}' for k, n in sorted(res.inputs.items()))
     lines = [f'replay of {res.bag} ({res.mode}) {res.via}: fed {fed}',
              f'commands: {len(res.commands)} replayed, {len(res.recorded)} '

@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -66,15 +67,16 @@ from visualization_msgs.msg import Marker
 
 from .. import topics
 from ..control.follow import Follower, path_errors
-from ..control.loop import Tracker, TrackerConfig
+from ..control.loop import Command, Tracker, TrackerConfig
 from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
                                adapted_prediction, certificate_from_parameters, evaluate)
+from ..control.reference import RefSample
 from ..control.trajectory import Trajectory, TrajectoryError
 from ..msgconv import tracker_config
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
-                     fill_pose, ns_to_stamp, run)
+                     fill_pose, ns_to_stamp, require_at_least, run, settings_from)
 from .trajectory_io import followed_to_multidof
 
 #: The input rules' parameters take their defaults from the rules' module (the replay's too).
@@ -214,29 +216,31 @@ class TrackerSettings:
     monitor: MonitorConfig
 
 
-def tracker_settings(values: dict) -> TrackerSettings:
+def tracker_settings(values: dict[str, Any]) -> TrackerSettings:
     """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad.
 
-    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` (shared
-    with bag replay); the rest are the node's own settings.
+    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` and the
+    input rules :func:`nonfragile_tracker.tracker_inputs.input_rules` (both shared with bag
+    replay); the rest are the node's own settings.
+
+    Parameters
+    ----------
+    values : dict
+        The tracker's parameter values by name (:data:`PARAMS`, :data:`MONITOR_PARAMS`).
+
+    Returns
+    -------
+    TrackerSettings
     """
     if values['K'] is None:
         raise StartupError('parameter K is not set; pass a gain file, e.g. '
                            '--ros-args --params-file config/tracker_gains.yaml')
-    if values['lockstep_subscribers'] < 0:
-        raise StartupError(f'lockstep_subscribers must be 0 or more, got '
-                           f'{values["lockstep_subscribers"]}')
-    if values['max_path_poses'] < 1:
-        raise StartupError(f'max_path_poses must be at least 1, got {values["max_path_poses"]}')
-    return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
-                           rules=input_rules(values),
-                           input_timeout=values['input_timeout'],
-                           lockstep_subscribers=values['lockstep_subscribers'],
-                           stamped_cmd_vel=values['enable_stamped_cmd_vel'],
-                           base_frame=values['base_frame'], viz_period=values['viz_period'],
-                           max_path_poses=values['max_path_poses'],
-                           diagnostics_period=values['diagnostics_period'],
-                           monitor=monitor_config(values))
+    require_at_least(values, 'lockstep_subscribers', 0)
+    require_at_least(values, 'max_path_poses', 1)
+    return settings_from(TrackerSettings, values, mode=check_mode(values['mode']),
+                         tracker=tracker_config(values), rules=input_rules(values),
+                         stamped_cmd_vel=values['enable_stamped_cmd_vel'],
+                         monitor=monitor_config(values))
 
 
 @dataclass(frozen=True)
@@ -250,11 +254,20 @@ class MonitorConfig:
     certificate: Certificate | None
 
 
-def monitor_config(values: dict) -> MonitorConfig:
+def monitor_config(values: dict[str, Any]) -> MonitorConfig:
     """Validate the monitor's parameters; InputError (MonitorError) if bad.
 
     The saturation limits are the tracker's; the acceleration limits are its
     ``max_linear_accel`` / ``max_angular_accel`` parameters when it has them (0 = unknown).
+
+    Parameters
+    ----------
+    values : dict
+        Parameter values by name: :data:`MONITOR_PARAMS` and the tracker's limits and ``dt``.
+
+    Returns
+    -------
+    MonitorConfig
     """
     settings = MonitorSettings(
         window=values['monitor_window'], max_latency=values['monitor_max_latency'],
@@ -270,9 +283,20 @@ def monitor_config(values: dict) -> MonitorConfig:
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
-    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`."""
+    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`.
 
-    def __init__(self, node_name: str = 'tracker', **node_kwargs):
+    Its inputs go through the rules of :mod:`nonfragile_tracker.tracker_inputs`
+    (:attr:`inputs`, which holds the law and the input state).
+
+    Parameters
+    ----------
+    node_name : str, optional
+        The node's name (``tracker``).
+    **node_kwargs
+        rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
+    """
+
+    def __init__(self, node_name: str = 'tracker', **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
         self.config = cfg = self.bind_parameters(PARAMS + MONITOR_PARAMS, tracker_settings)
         self.mode = cfg.mode
@@ -443,55 +467,18 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._pool = None
         super().close()
 
-    # ------------------------------------------------------------------ input state
-    # (the rules' state lives in self.inputs: these read it under the node's old names)
-    @property
-    def follower(self) -> Follower | None:
-        """The follower of the adopted trajectory (None: none adopted yet)."""
-        return self.inputs.follower
-
-    @property
-    def origin_ns(self) -> int:
-        """Origin stamp (ns) of the adopted trajectory."""
-        return self.inputs.origin_ns
-
-    @property
-    def rejected(self) -> int:
-        """Inputs refused so far (messages and trajectories)."""
-        return self.inputs.rejected
-
-    @property
-    def jumps(self) -> int:
-        """Odometry stamp jumps (compensator re-initialisations) so far."""
-        return self.inputs.jumps
-
-    @property
-    def last_refusal(self) -> str:
-        """Why the last trajectory was refused ('' if none was)."""
-        return self.inputs.last_refusal
-
-    @property
-    def last_stamp(self) -> int:
-        """The odometry stamp last answered (ns; -1 before the first)."""
-        return self.inputs.last_stamp
-
-    @property
-    def last_odom_stamp(self) -> int:
-        """The odometry stamp last accepted (ns; -1 before the first)."""
-        return self.inputs.last_odom_stamp
-
     # ------------------------------------------------------------------ inputs
     def _on_reject(self, r: Rejection) -> None:
         """Say that the rules refused an input (messages: the first 10, then every 1000th)."""
         if r.kind == 'trajectory':
-            keep = 'the previous trajectory' if self.follower else 'the reference topics'
+            keep = 'the previous trajectory' if self.inputs.follower else 'the reference topics'
             self.log('error', f'refused trajectory: {r.reason}; keeping {keep}')
         elif r.kind == 'start':
             self.log('error', f'refused trajectory: {r.reason}; waiting at rest for a new '
                               'trajectory')
             self._diagnostics()
-        elif self.rejected <= 10 or self.rejected % 1000 == 0:
-            self.log('warn', f'ignored {r} (rejected so far: {self.rejected})')
+        elif self.inputs.rejected <= 10 or self.inputs.rejected % 1000 == 0:
+            self.log('warn', f'ignored {r} (rejected so far: {self.inputs.rejected})')
 
     def _on_jump(self, gap: float) -> None:
         self.log('warn', f'odom stamp jumped {gap:.3f} s ahead: re-initialising the '
@@ -616,7 +603,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         """Publish the command of a step the rules made due, and what goes with it."""
         if step is None:
             return
-        f = self.follower
+        f = self.inputs.follower
         if f is not None:                  # a step on the own trajectory
             announce, self._announce = self._announce, False
             if step.started:
@@ -657,7 +644,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         """
         if not f.trajectory.is_analytic and not f.refused:
             self.pub_followed.publish(followed_to_multidof(
-                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame,
+                f.trajectory, self.inputs.origin_ns + int(round(f.offset * 1e9)), self.frame,
                 header_ns=stamp))
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
@@ -681,7 +668,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._monitor_command(stamp, self._cmd.linear.x, self._cmd.angular.z)
 
     # ------------------------------------------------------------------ outputs
-    def _outputs(self, stamp: int, pose, ref, cmd) -> None:
+    def _outputs(self, stamp: int, pose: tuple[float, float, float], ref: RefSample | None,
+                 cmd: Command) -> None:
         """Tracking error every step, travelled path and reference marker at viz_period."""
         if cmd.saturated:
             self.saturated += 1
@@ -718,7 +706,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _diagnostics(self) -> None:
         """Tracker status on /diagnostics (diagnostic_msgs/DiagnosticArray)."""
         now = self.get_clock().now().nanoseconds
-        f = self.follower
+        f = self.inputs.follower
         if f is None:
             state = 'waiting for a trajectory' if self.wait_for_trajectory else \
                 'following the reference topics'
@@ -741,10 +729,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if self.inputs.stopped:
             level = DiagnosticStatus.WARN
             msgs.append('inputs stale: stopped')
-        if self.rejected > self._rejected_reported:
+        if self.inputs.rejected > self._rejected_reported:
             level = max(level, DiagnosticStatus.WARN)
-            msgs.append(f'{self.rejected - self._rejected_reported} input(s) rejected')
-        self._rejected_reported = self.rejected
+            msgs.append(f'{self.inputs.rejected - self._rejected_reported} input(s) rejected')
+        self._rejected_reported = self.inputs.rejected
         st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
                               message='; '.join(msgs),
                               hardware_id=self.get_fully_qualified_name())
@@ -752,12 +740,12 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'odom age (s)': f'{odom_age:.3f}',
                 'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
                 'commands': self.commands,
-                'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
-                'saturated commands': self.saturated, 'stamp jumps': self.jumps,
+                'rejected inputs': self.inputs.rejected, 'stale stops': self.stale_stops,
+                'saturated commands': self.saturated, 'stamp jumps': self.inputs.jumps,
                 'trajectory': state,
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
                 'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
-                'last refused trajectory': self.last_refusal or 'none',
+                'last refused trajectory': self.inputs.last_refusal or 'none',
                 'last re-timed trajectory': self.last_retime or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
@@ -786,9 +774,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             inputs.stopped = False
 
 
-def main(args=None) -> int:
-    """Console entry point of the tracker node; returns the exit code (see :func:`common.run`)."""
-    return run(TrackerNode, args)
+#: Console entry point of the tracker node: ``main(args)`` is ``run(TrackerNode, args)``
+#: (:func:`~nonfragile_tracker.nodes.common.run`: the exit code).
+main = partial(run, TrackerNode)
 
 
 if __name__ == '__main__':

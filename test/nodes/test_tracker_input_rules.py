@@ -112,7 +112,7 @@ def through_node(context, mode: str, seq):
               'ref_twist': node._on_ref_twist, 'ref_accel': node._on_ref_accel}
         for kind, msg in seq:
             on[kind](msg)
-        return sent, dict(node.inputs.ignored), node.rejected, node.jumps
+        return sent, dict(node.inputs.ignored), node.inputs.rejected, node.inputs.jumps
     finally:
         node.destroy_node()
 
