@@ -144,11 +144,20 @@ def plant_settings(values: dict[str, Any]) -> PlantSettings:
     Parameters
     ----------
     values : dict
-        The plant's parameter values by name.
+        :data:`PARAMS` by name (at start-up, or with a runtime set's proposed values).
 
     Returns
     -------
     PlantSettings
+
+    Raises
+    ------
+    StartupError
+        An ``initial_pose`` that is not [x, y, yaw], a ``lockstep_lead`` beyond half the
+        topics' depth, ``lockstep_subscribers`` below 1, or an odometry latency or period
+        the lockstep handshake cannot wait for.
+    LoopConfigError
+        A bad plant model (``A_tau``, latencies, lags).
     """
     mode = check_mode(values['mode'])
     pose0 = list(values['initial_pose'])
@@ -184,7 +193,7 @@ class PlantNode(AdapterNode[PlantSettings]):
     Parameters
     ----------
     node_name : str, optional
-        The node's name (``plant``).
+        ``plant``; two plants in one graph need their own namespaces.
     **node_kwargs
         rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
     """

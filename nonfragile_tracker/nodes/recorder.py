@@ -198,11 +198,16 @@ def recorder_settings(values: dict[str, Any]) -> RecorderSettings:
     Parameters
     ----------
     values : dict
-        The recorder's parameter values by name.
+        :data:`PARAMS` by name.
 
     Returns
     -------
     RecorderSettings
+
+    Raises
+    ------
+    StartupError
+        A ``chunk_size`` outside 1 byte .. 1 MiB, an unknown or no topic.
     """
     chunk = values['chunk_size']
     if not 1 <= chunk <= 2 ** 20:
@@ -231,7 +236,7 @@ class Recorder(AdapterNode[RecorderSettings]):
     Parameters
     ----------
     node_name : str, optional
-        The node's name (``recorder``).
+        ``recorder``.
     **node_kwargs
         rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
     """

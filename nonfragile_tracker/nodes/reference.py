@@ -119,11 +119,18 @@ def reference_settings(values: dict[str, Any]) -> ReferenceSettings:
     Parameters
     ----------
     values : dict
-        The reference's parameter values by name.
+        :data:`PARAMS` by name; the path's own parameters are checked by
+        :func:`~nonfragile_tracker.control.reference.make_path`.
 
     Returns
     -------
     ReferenceSettings
+
+    Raises
+    ------
+    StartupError
+        A ``center`` that is not [x, y], ``lockstep_subscribers`` below 0 or
+        ``display_points`` below 2.
     """
     mode = check_mode(values['mode'])
     center = list(values['center'])
@@ -143,7 +150,8 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
     Parameters
     ----------
     node_name : str, optional
-        The node's name (``reference``).
+        ``reference`` (the launch files' name; a namespace moves the whole system,
+        its topics are relative).
     **node_kwargs
         rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
     """

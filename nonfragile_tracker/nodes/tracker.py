@@ -291,7 +291,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     Parameters
     ----------
     node_name : str, optional
-        The node's name (``tracker``).
+        ``tracker``: parameter files address it as ``/**/tracker`` (``run``, the launch
+        files), so a node of another name needs a section of its own.
     **node_kwargs
         rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
     """
