@@ -244,7 +244,8 @@ def test_an_untimed_path_gets_the_time_law_from_the_rules(config):
     traj_slow, origin = slow.build(path, 'path', 'test')
     traj_fast, _ = fast.build(path, 'path', 'test')
     assert origin == T0                                      # untimed, unstamped: now
-    # 2.5 m: 1 s accelerating at 0.5 m/s^2 to 0.5 m/s... (trapezoid), longer when slower
+    # 2.5 m, trapezoid at 0.5 m/s^2: to 0.5 m/s in 1 s (0.25 m) and back, 2 m cruising 4 s;
+    # to 0.25 m/s in 0.5 s (0.0625 m) and back, 2.375 m cruising 9.5 s
     assert traj_fast.duration == pytest.approx(6.0)
     assert traj_slow.duration == pytest.approx(10.5)
     with pytest.raises(InputError, match='trajectory kind'):
