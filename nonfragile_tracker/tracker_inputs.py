@@ -103,16 +103,16 @@ class InputRules:
     """
 
     mode: str = 'realtime'
-    frame: str = topics.ODOM_FRAME
+    frame: str = INPUT_DEFAULTS['odom_frame']
     max_stamp_jump: float = INPUT_DEFAULTS['max_stamp_jump']
-    wait_for_trajectory: bool = False
+    wait_for_trajectory: bool = INPUT_DEFAULTS['wait_for_trajectory']
     cruise_speed: float = INPUT_DEFAULTS['cruise_speed']
     max_accel: float = INPUT_DEFAULTS['max_accel']
-    retime: bool = True
+    retime: bool = INPUT_DEFAULTS['retime']
     limits: Limits = field(default_factory=Limits)
-    rest_speed: float = REST_SPEED
-    start_tolerance: float = START_TOLERANCE
-    max_start_distance: float = MAX_START_DISTANCE
+    rest_speed: float = INPUT_DEFAULTS['rest_speed']
+    start_tolerance: float = INPUT_DEFAULTS['start_tolerance']
+    max_start_distance: float = INPUT_DEFAULTS['max_start_distance']
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
