@@ -5,7 +5,7 @@ the given gain and parameter files), publishes the recorded odometry and referen
 messages - their recorded CDR bytes, unchanged - in bag order, and collects the
 node's ``cmd_vel``.  It keeps the node's view of the order exactly: after a message
 that makes the tracker compute (predicted by the same input rules,
-:class:`~nonfragile_tracker.bag.replay.TrackerInputs`) it waits for that command
+:class:`~nonfragile_tracker.tracker_inputs.TrackerInputs`) it waits for that command
 before publishing the next; other messages go out in order (one participant's samples
 arrive in publish order and the node's events executor handles them in arrival order).  The
 node's real-time watchdog is disabled (``input_timeout`` huge): replay pacing is
@@ -27,14 +27,15 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 
 from . import topics
-from .bag.replay import (REF_INDEX, ReplayResult, TrackerInputs, finish_replay,
-                          load_tracker_parameters, plan_replay, read_replay_events)
+from .bag.replay import (REF_INDEX, ReplayResult, finish_replay, load_tracker_parameters,
+                          plan_replay, read_replay_events, replay_rules)
 from .bag.errors import BagError
 from .bag.typestore import jazzy_typestore
 from .errors import RunError
 from .resources import config_dir
 from .nodes.common import DATA_QOS
 from .runner import isolated_env, scenario_parameters, write_parameter_file
+from .tracker_inputs import TrackerInputs
 
 __all__ = ['replay_over_dds']
 
@@ -96,10 +97,9 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
         raise BagError(f'{bag} is a lean lockstep recording (a trajectory message, no '
                        'reference samples): replay it in process (without --ros), or record '
                        'with --record-all / record_all:=true to replay it over DDS')
-    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
-                       use_recorded=expected is None)
+    plan = plan_replay(events, config, use_recorded=expected is None, values=values)
     mode = plan.mode
-    predict = TrackerInputs(config, mode, float(values['max_stamp_jump']))
+    predict = TrackerInputs(config, replay_rules(values, mode))
     env = isolated_env(env)
     ts = jazzy_typestore()
     RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']

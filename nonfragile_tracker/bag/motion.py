@@ -126,7 +126,7 @@ def pick_topic(available: dict[str, str], name: str, types: Iterable[str], *, ro
         f'{option}', [name])
 
 
-def read_motion(path: str | os.PathLike, *, cmd_topic: str = topics.CMD_VEL,
+def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL,
                 odom_topic: str = topics.ODOM, cmd_time: str = 'auto') -> MotionData:
     """Read velocity commands and odometry of a bag for :func:`identify_latency`.
 

@@ -1,16 +1,18 @@
 """Replay a recorded run into a fresh tracker and compare its commands with the recorded ones.
 
-The recorded odometry and reference messages are fed, in bag order (the recorder's
-receive order), to :class:`TrackerInputs` - the tracker node's input rules without
-ROS - around the same step function as the node (:class:`control.loop.Tracker`):
+The recorded odometry and reference (or trajectory) messages are fed to
+:class:`~nonfragile_tracker.tracker_inputs.TrackerInputs` - the tracker node's own input
+rules, ROS-free, around the same step functions (:class:`control.loop.Tracker`,
+:class:`control.follow.Follower`) - with the tracker's parameters (:func:`replay_rules`:
+its ``odom_frame``, ``max_stamp_jump``, time law, start rule and limits):
 
-* odometry in another frame than ``odom``, or with a stamp that does not advance, is
-  ignored; a stamp jump above ``max_stamp_jump`` re-initialises the compensator;
 * lockstep bags (most odometry stamps equal a reference stamp): fed in stamp order (the
   reference parts of a stamp before its odometry), a command when the odometry and the
   three reference parts with the same stamp are all in;
-* real-time bags: a command at each odometry message with the latest reference parts
-  (what the tracker had received by then).
+* real-time bags: in bag order (the recorder's receive order), a command at each
+  odometry message with the latest reference parts (what the tracker had received by
+  then; see :func:`plan_replay` for what the recorder cannot tell);
+* bags with a trajectory message: that message and the odometry, in bag order.
 
 Its commands are compared (:func:`compare.compare_messages`) with the recorded
 ``cmd_vel`` (Twist or TwistStamped) or with those of an ``expected`` bag: by index
@@ -19,7 +21,7 @@ real-time watchdog's stop commands after a silence) is not replayed: those recor
 stops show up as unpaired commands.
 
 The DDS variant (through a real tracker node) is
-:func:`nonfragile_tracker.nodes.replayer.replay_over_dds`.  No rclpy here.
+:func:`nonfragile_tracker.replayer.replay_over_dds`.  No rclpy here.
 """
 from __future__ import annotations
 
@@ -27,8 +29,7 @@ import bisect
 import copy
 import math
 import os
-from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,16 +38,13 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
-                              trajectory_time)
 from ..control.gains import read_gain_file
-from ..control.loop import Command, Tracker, TrackerConfig
-from ..control.limits import Limits, within_limits
-from ..control.trajectory import TrajectoryError
+from ..control.loop import Command, TrackerConfig
 from ..files import node_key
-from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
-                       reference_from_msgs, stamp_ns, tracker_config)
+from ..msgconv import stamp_ns, tracker_config
 from ..resources import config_dir
+# the tracker's input rules: one home, shared with the tracker node
+from ..tracker_inputs import INPUT_DEFAULTS, InputRules, Step, TrackerInputs, input_rules
 from .compare import Comparison, compare_messages, format_differences
 from .reader import MissingTopicsError, open_reader, resolve_topics, typestore_for
 from .errors import BagError
@@ -55,18 +53,20 @@ from .typestore import jazzy_typestore
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
            'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
-           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'FollowerInputs']
+           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'replay_rules']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
 TRACKER_DEFAULTS: dict[str, Any] = {
     'K_shape': [2, 4], 'dt': 0.01, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
-    'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0, 'max_stamp_jump': 1.0,
+    'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
     'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
-    'min_turning_radius': 0.0,
+    'min_turning_radius': 0.0, **INPUT_DEFAULTS,
 }
+#: A command as replayed or recorded: (receive ns of its input, Twist or TwistStamped).
+Timed = tuple[int, Any]
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
           topics.REF_ACCEL: 'ref_accel', topics.CMD_VEL: 'cmd'}
 REF_INDEX = {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}
@@ -109,9 +109,32 @@ class ReplayResult:
         return max(self.comparison.max_abs_error.values(), default=math.nan)
 
 
-def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
+def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = None
                        ) -> list[ReplayEvent]:
-    """Odometry, reference parts and commands of a bag, in bag (receive) order."""
+    """Odometry, reference parts and commands of a bag, in bag (receive) order.
+
+    Also the trajectory message (``trajectory_multidof``, else ``trajectory``) when the
+    bag has one (kind ``trajectory``; the per-step samples are then not fed) and the
+    tracker's ``tracker/trajectory`` announcements (kind ``followed``).
+
+    Parameters
+    ----------
+    path : path-like
+        The bag.
+    namespace : str, optional
+        The namespace of the run's topics (default: found from the bag).
+
+    Returns
+    -------
+    list of ReplayEvent
+
+    Raises
+    ------
+    MissingTopicsError
+        If the bag lacks odometry or the reference (or trajectory message).
+    BagError
+        If a message cannot be read.
+    """
     reader = open_reader(path)
     try:
         by_topic = {c.topic: c for c in reader.connections}
@@ -151,7 +174,18 @@ def read_replay_events(path: str | os.PathLike, *, namespace: str | None = None
 
 
 def bag_mode(events: Iterable[ReplayEvent]) -> str:
-    """``lockstep`` when at least half the odometry stamps equal a reference stamp."""
+    """``lockstep`` when at least half the odometry stamps equal a reference stamp.
+
+    Parameters
+    ----------
+    events : iterable of ReplayEvent
+        A bag's events.
+
+    Returns
+    -------
+    str
+        ``lockstep`` or ``realtime``.
+    """
     odom, ref = set(), set()
     for e in events:
         if e.kind == 'odom':
@@ -161,183 +195,8 @@ def bag_mode(events: Iterable[ReplayEvent]) -> str:
     return 'lockstep' if odom and len(odom & ref) >= 0.5 * len(odom) else 'realtime'
 
 
-class _OdomInputs(ABC):
-    """The tracker node's odometry rules, shared by both replays.
-
-    Frame ``odom``, an advancing stamp, a stamp jump above ``max_stamp_jump``
-    re-initialises the compensator; an accepted odometry is offered to ``_compute``
-    (the subclass's trigger).
-    """
-
-    def __init__(self, config: TrackerConfig, max_stamp_jump: float):
-        self.tracker = Tracker(config)
-        self.max_jump_ns = max_stamp_jump * 1e9
-        self._odom: Any = None
-        self.last_stamp = -1
-        self.last_odom_stamp = -1
-        self.ignored: dict[str, int] = {}
-        self.jumps = 0
-
-    def _ignore(self, why: str) -> None:
-        self.ignored[why] = self.ignored.get(why, 0) + 1
-
-    def _pose(self, odom: Any) -> tuple[float, float, float] | None:
-        """The pose of the odometry ``odom``; None (odometry dropped, counted) if it is bad."""
-        pose = pose_from_odom(odom.pose.pose)
-        if isinstance(pose, str):
-            self._odom = None
-            self._ignore(f'odom: {pose}')
-            return None
-        return pose
-
-    def odom(self, msg) -> Command | None:
-        """Take an odometry message; the command it triggers, if any."""
-        if msg.header.frame_id != topics.ODOM_FRAME:
-            self._ignore(f'odom frame {msg.header.frame_id!r} is not {topics.ODOM_FRAME!r}')
-            return None
-        s = stamp_ns(msg.header.stamp)
-        if s <= self.last_odom_stamp:
-            if s < self.last_odom_stamp:
-                self._ignore('odom stamp not advancing')
-            return None
-        if self.last_odom_stamp >= 0 and s - self.last_odom_stamp > self.max_jump_ns:
-            self.jumps += 1
-            self.tracker.reset()
-        self._odom = msg
-        self.last_odom_stamp = s
-        return self._compute()
-
-    @abstractmethod
-    def _compute(self) -> Command | None:
-        """The command the inputs received so far trigger, if any."""
-
-
-class TrackerInputs(_OdomInputs):
-    """The tracker node's input rules (frames, stamps, lockstep/real-time triggering), ROS-free.
-
-    ``odom(msg)`` and ``reference(i, msg)`` take messages (rclpy or rosbags) and return
-    the :class:`Command` the node would publish, or None.  ``ignored`` counts what was
-    ignored and why.
-    """
-
-    def __init__(self, config: TrackerConfig, mode: str = 'realtime',
-                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
-        if mode not in ('lockstep', 'realtime'):
-            raise BagError(f'mode must be lockstep or realtime, got {mode!r}')
-        super().__init__(config, max_stamp_jump)
-        self.mode = mode
-        self._ref: list[Any] = [None, None, None]
-
-    def reference(self, i: int, msg) -> Command | None:
-        """Take reference part ``i`` (pose, twist, accel); the command it triggers, if any."""
-        if msg.header.frame_id != topics.ODOM_FRAME:
-            self._ignore(f'reference frame {msg.header.frame_id!r}')
-            return None
-        self._ref[i] = msg
-        return self._compute() if self.mode == 'lockstep' else None
-
-    def _compute(self) -> Command | None:
-        odom = self._odom
-        if odom is None or any(r is None for r in self._ref):
-            return None
-        s = stamp_ns(odom.header.stamp)
-        if self.mode == 'lockstep' and (s <= self.last_stamp or any(
-                stamp_ns(r.header.stamp) != s for r in self._ref)):
-            return None
-        pose = self._pose(odom)
-        if pose is None:
-            return None
-        ref = reference_from_msgs(stamp_ns(self._ref[0].header.stamp) * 1e-9, *self._ref)
-        if isinstance(ref, str):
-            self._ignore(ref)
-            return None
-        self.last_stamp = s
-        speed = odom.twist.twist.linear.x
-        # the odometry stamp, as the node passes it (the latency predictor's time)
-        return self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                 measured_speed=speed if math.isfinite(speed) else 0.0,
-                                 stamp=s * 1e-9)
-
-
-class FollowerInputs(_OdomInputs):
-    """The lockstep tracker node following a trajectory message, ROS-free.
-
-    As the node: a trajectory message (``trajectory_multidof`` or a timed ``trajectory``
-    Path) starts a run on it, each odometry with an advancing stamp gets
-    :meth:`control.follow.Follower.step` at :func:`control.follow.trajectory_time`; an
-    odometry before any trajectory waits for it.  For lean lockstep bags.
-    """
-
-    def __init__(self, config: TrackerConfig, rest_speed: float = REST_SPEED,
-                 cruise_speed: float | None = None, max_accel: float | None = None,
-                 max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump']):
-        super().__init__(config, max_stamp_jump)
-        self.rest_speed = rest_speed
-        self.start_tolerance, self.max_start_distance = START_TOLERANCE, MAX_START_DISTANCE
-        self.limits: Limits | None = None
-        self.defer = False                 # adopt a trajectory without a command
-        self.built: dict[int, Any] = {}    # message id -> (trajectory, origin) or the error
-        self.cruise_speed, self.max_accel = cruise_speed, max_accel
-        self.follower: Follower | None = None
-        self.origin_ns = 0
-
-    def trajectory(self, e: ReplayEvent) -> Command | None:
-        """Take a trajectory message; the command for a waiting odometry, if any.
-
-        With ``defer`` (a real-time tracker that re-times in a worker thread) the
-        trajectory is adopted without a command: the next odometry gets the first one.
-        """
-        key = id(e.msg)
-        if key not in self.built:
-            self.built[key] = self._build(e)
-        built = self.built[key]
-        if isinstance(built, TrajectoryError):
-            self._ignore(f'trajectory refused: {built}')
-            return None
-        traj, origin = built
-        if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.rest_speed,
-                                     start_tolerance=self.start_tolerance,
-                                     max_start_distance=self.max_start_distance)
-        else:
-            self.follower.set_trajectory(traj)
-        self.origin_ns = origin
-        return None if self.defer else self._compute()
-
-    def _build(self, e: ReplayEvent):
-        try:
-            if e.msgtype == 'nav_msgs/msg/Path':
-                traj, origin = path_to_trajectory(
-                    e.msg, frame=topics.ODOM_FRAME, source=e.topic,
-                    cruise_speed=self.cruise_speed, max_accel=self.max_accel,
-                    now_ns=max(self.last_odom_stamp, 0))
-            else:
-                traj, origin = multidof_to_trajectory(e.msg, frame=topics.ODOM_FRAME,
-                                                      source=e.topic)
-            if self.limits is not None:          # the tracker's retime (default true)
-                traj = within_limits(traj, self.limits)[0]
-        except TrajectoryError as exc:
-            return exc
-        return traj, origin
-
-    def _compute(self) -> Command | None:
-        odom, f = self._odom, self.follower
-        if odom is None or f is None:
-            return None
-        s = stamp_ns(odom.header.stamp)
-        if s <= self.last_stamp:
-            return None
-        pose = self._pose(odom)
-        if pose is None:
-            return None
-        self.last_stamp = s
-        speed = odom.twist.twist.linear.x
-        return f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
-                      measured_speed=speed if math.isfinite(speed) else 0.0)
-
-
-def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed,
-                 values: dict) -> ReplayPlan:
+def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded: list[Timed],
+                 fed: dict[str, int], values: Mapping[str, Any]) -> ReplayPlan:
     """A bag with a trajectory message: the trajectory message(s) and odometry, in bag order.
 
     Real time (one trajectory message, recorded commands): the tracker adopted the
@@ -350,28 +209,21 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
     (searched up to :data:`FOLLOW_SEARCH` odometry messages after the bag's; ambiguous when
     they are the zeros of a wait for a future start stamp), else bag order.
     """
-    built: dict[int, Any] = {}
+    built: dict[int, Any] = {}        # each message built (and re-timed) once
 
-    def make(defer: bool) -> FollowerInputs:
-        inputs = FollowerInputs(config, float(values.get('rest_speed', REST_SPEED)),
-                                values.get('cruise_speed'), values.get('max_accel'),
-                                float(values.get('max_stamp_jump',
-                                                 TRACKER_DEFAULTS['max_stamp_jump'])))
-        inputs.start_tolerance = float(values.get('start_tolerance', START_TOLERANCE))
-        inputs.max_start_distance = float(values.get('max_start_distance',
-                                                     MAX_START_DISTANCE))
-        if values.get('retime', True):
-            inputs.limits = Limits.from_values({**TRACKER_DEFAULTS, **values})
-        inputs.built, inputs.defer = built, defer
-        return inputs
-
-    def run(order: list[ReplayEvent], defer: bool, limit: int | None = None):
-        inputs = make(defer)
-        commands = []
+    def run(order: list[ReplayEvent], defer: bool, limit: int | None = None
+            ) -> tuple[TrackerInputs, list[Timed]]:
+        inputs = TrackerInputs(config, rules)
+        inputs.cache = built
+        commands: list[Timed] = []
         for e in order:
-            cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.trajectory(e)
-            if cmd is not None:
-                commands.append((e.receive_ns, _twist_msg(cmd)))
+            if e.kind == 'odom':
+                step = inputs.odom(e.msg)
+            else:
+                kind = 'path' if e.msgtype == 'nav_msgs/msg/Path' else 'multidof'
+                step = inputs.trajectory(e.msg, kind, e.topic, defer=defer)
+            if step is not None:
+                commands.append((e.receive_ns, _twist_msg(step.command)))
                 if limit is not None and len(commands) >= limit:
                     break
         return inputs, commands
@@ -383,6 +235,7 @@ def _plan_follow(events: list[ReplayEvent], config: TrackerConfig, recorded, fed
     steps = np.diff([stamp_ns(e.msg.header.stamp) for e in data if e.kind == 'odom'])
     mode = 'lockstep' if bag_mode(events) == 'lockstep' or (
         steps.size and int(steps.max() - steps.min()) <= 1000) else 'realtime'
+    rules = replay_rules(values, mode)
     if mode == 'realtime' and len(trajs) == 1 and recorded:
         ti = trajs[0]
         rest = data[:ti] + data[ti + 1:]
@@ -419,10 +272,11 @@ FOLLOW_SEARCH = 250
 
 def _agrees_twist(a: Any, b: Any, atol: float) -> bool:
     ta, tb = _twist(a), _twist(b)
-    return abs(ta.linear.x - tb.linear.x) <= atol and abs(ta.angular.z - tb.angular.z) <= atol
+    return bool(abs(ta.linear.x - tb.linear.x) <= atol
+                and abs(ta.angular.z - tb.angular.z) <= atol)
 
 
-def _param_section(path: Path) -> dict:
+def _param_section(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(Path(path).read_text()) or {}
     except OSError as exc:
@@ -437,15 +291,32 @@ def _param_section(path: Path) -> dict:
     return {}
 
 
-def load_tracker_parameters(gains: str | os.PathLike | None = None,
-                            params: str | os.PathLike | None = None
-                            ) -> tuple[TrackerConfig, dict]:
+def load_tracker_parameters(gains: str | os.PathLike[str] | None = None,
+                            params: str | os.PathLike[str] | None = None
+                            ) -> tuple[TrackerConfig, dict[str, Any]]:
     """Tracker config and parameter values from a gain file and a parameter file.
 
     Defaults: ``config/tracker_gains.yaml`` and ``config/paper_scenario.yaml``; values
     absent from both are the node's defaults (:data:`TRACKER_DEFAULTS`).  The gain file's
     other tracker parameters (the predictor of a ``latency-design`` file) override the
     parameter file's, as ``run --gains`` does.
+
+    Parameters
+    ----------
+    gains : path-like, optional
+        A gain file (``synthesize`` / ``latency-design`` output).
+    params : path-like, optional
+        A ROS 2 parameter file with a tracker section.
+
+    Returns
+    -------
+    (TrackerConfig, dict)
+        The law's configuration and every tracker parameter value by name.
+
+    Raises
+    ------
+    BagError
+        If a file cannot be read; an InputError for a bad gain or value.
     """
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
@@ -461,7 +332,7 @@ def load_tracker_parameters(gains: str | os.PathLike | None = None,
     return tracker_config(values), values
 
 
-def _twist(msg) -> Any:
+def _twist(msg: Any) -> Any:
     return msg.twist if hasattr(msg, 'header') else msg
 
 
@@ -472,6 +343,24 @@ def compare_commands(commands: list[tuple[int, Any]], recorded: list[tuple[int, 
 
     By index when both have as many, else by time (receive time of the triggering input
     vs the recorded receive time).
+
+    Parameters
+    ----------
+    commands : list of (int, Twist)
+        Replayed commands with the receive time (ns) of their input.
+    recorded : list of (int, Twist or TwistStamped)
+        Recorded commands with their receive time (ns).
+    atol, rtol : float, optional
+        Tolerance of the comparison.
+    max_differences : int, optional
+        How many differing commands are listed.
+    time_tolerance : float, optional
+        Time alignment: how far apart (s) a pair may be; default half the median
+        interval of the replayed commands.
+
+    Returns
+    -------
+    Comparison
     """
     a = [(t, _twist(m)) for t, m in recorded]
     align = 'index' if len(a) == len(commands) else 'time'
@@ -526,26 +415,17 @@ def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) ->
     The command speed ``(v + v_next) / 2`` is affine in v (``v_next = v + a dt`` with
     ``a`` affine in v) unless saturated: two trials give the line, a third checks it.
     """
-    def f(v):
-        trial = _snapshot(inputs)
+    def f(v: float) -> float | None:
+        trial = inputs.fork()
         trial.tracker.reset(v)
-        cmd = trial.odom(odom.msg)
-        return None if cmd is None else cmd.v
+        step = trial.odom(odom.msg)
+        return None if step is None else step.command.v
     f0, f1 = f(0.0), f(1.0)
     if f0 is None or f1 is None or f1 == f0:
         return None
     v = (target_v - f0) / (f1 - f0)
     got = f(v)
     return v if got is not None and abs(got - target_v) <= 1e-12 * max(1.0, abs(v)) else None
-
-
-def _snapshot(inputs: TrackerInputs) -> TrackerInputs:
-    """A copy whose tracker state can diverge (messages are shared, never mutated)."""
-    trial = copy.copy(inputs)
-    trial.tracker = copy.deepcopy(inputs.tracker)
-    trial._ref = list(inputs._ref)
-    trial.ignored = dict(inputs.ignored)
-    return trial
 
 
 def _twist_msg(cmd: Command) -> Any:
@@ -556,7 +436,7 @@ def _twist_msg(cmd: Command) -> Any:
 
 def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
     tw = _twist(rec)
-    return abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol
+    return bool(abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol)
 
 
 #: How far back (s) before the first recorded command the tracker's first input may lie
@@ -566,10 +446,34 @@ START_SEARCH = 1.0
 START_CHECK = 10
 
 
+def replay_rules(values: Mapping[str, Any] | None, mode: str) -> InputRules:
+    """The tracker's input rules for a replay: its parameters, the bag's mode.
+
+    The replay applies the rules the tracker ran with: its ``odom_frame`` (the node's
+    configurable frame, from the parameter file; default ``odom``), ``max_stamp_jump``,
+    trajectory time law, start rule and limits.  ``wait_for_trajectory`` is off: a bag
+    with a trajectory message is fed that message (and no samples), one without it was
+    recorded from a tracker following the samples.
+
+    Parameters
+    ----------
+    values : mapping or None
+        The tracker's parameter values (:func:`load_tracker_parameters`); missing names
+        take :data:`TRACKER_DEFAULTS`.
+    mode : str
+        ``lockstep`` or ``realtime`` (:func:`bag_mode`).
+
+    Returns
+    -------
+    InputRules
+    """
+    return input_rules({**TRACKER_DEFAULTS, **(values or {}), 'wait_for_trajectory': False},
+                       mode)
+
+
 def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
-                max_stamp_jump: float = TRACKER_DEFAULTS['max_stamp_jump'],
-                use_recorded: bool = True, atol: float = 1e-9,
-                values: dict | None = None) -> ReplayPlan:
+                max_stamp_jump: float | None = None, use_recorded: bool = True,
+                atol: float = 1e-9, values: Mapping[str, Any] | None = None) -> ReplayPlan:
     """Run the tracker over the events in process and fix what the recorder cannot tell.
 
     Lockstep bags are fed in stamp order, any other bag compared with another bag
@@ -592,22 +496,46 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     comparison shows the difference).
 
     A bag with a trajectory message (``trajectory_multidof`` or ``trajectory``: the tracker
-    follows it whenever it has one; lockstep or real time, lean or full) is fed to
-    :class:`FollowerInputs` in bag order; ``values`` (the tracker's parameter values) give
-    its ``rest_speed``, ``cruise_speed``, ``max_accel``, the start rule and the limits it
-    re-times with.
+    follows it whenever it has one; lockstep or real time, lean or full) is fed that
+    message and the odometry in bag order.
+
+    The rules are the tracker's (:class:`~nonfragile_tracker.tracker_inputs.TrackerInputs`,
+    :func:`replay_rules`).
+
+    Parameters
+    ----------
+    events : list of ReplayEvent
+        A bag's events (:func:`read_replay_events`).
+    config : TrackerConfig
+        The law (:func:`load_tracker_parameters`).
+    max_stamp_jump : float, optional
+        Overrides ``values['max_stamp_jump']``.
+    use_recorded : bool, optional
+        The bag's own commands are the comparison (a real-time bag is then fed as the
+        tracker saw it, see above); False: fed in bag order.
+    atol : float, optional
+        Tolerance with which a recorded command counts as reproduced.
+    values : mapping, optional
+        The tracker's parameter values: the input rules (:func:`replay_rules`).
+
+    Returns
+    -------
+    ReplayPlan
     """
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}
     for e in events:
         if e.kind != 'followed':
             fed[e.kind] = fed.get(e.kind, 0) + 1
+    values = {**(values or {})}
+    if max_stamp_jump is not None:
+        values['max_stamp_jump'] = max_stamp_jump
     if 'trajectory' in fed:
-        return _plan_follow(events, config, recorded, fed, values or {})
+        return _plan_follow(events, config, recorded, fed, values)
     mode = bag_mode(events)
     data = [e for e in events if e.kind not in ('cmd', 'followed')]
     if use_recorded and mode == 'realtime' and recorded:
-        plan = _plan_realtime(events, data, recorded, config, max_stamp_jump, atol)
+        plan = _plan_realtime(data, recorded, config, replay_rules(values, mode), atol)
         if plan is not None:
             plan.fed = fed
             return plan
@@ -616,13 +544,12 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
         # reference publishes its samples off the critical path (the tracker follows the
         # trajectory message), so they may reach the recorder after the next odometry
         data = sorted(data, key=lambda e: (stamp_ns(e.msg.header.stamp), e.kind == 'odom'))
-    inputs = TrackerInputs(config, mode, max_stamp_jump)
-    commands = []
+    inputs = TrackerInputs(config, replay_rules(values, mode))
+    commands: list[Timed] = []
     for e in data:
-        cmd = inputs.odom(e.msg) if e.kind == 'odom' else inputs.reference(
-            REF_INDEX[e.kind], e.msg)
-        if cmd is not None:
-            commands.append((e.receive_ns, _twist_msg(cmd)))
+        step = _feed(inputs, e)
+        if step is not None:
+            commands.append((e.receive_ns, _twist_msg(step.command)))
     return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
 
 
@@ -640,8 +567,8 @@ class _RefTimeline:
             else:
                 self.before[id(e)] = n
 
-    def parts(self, s: int) -> list:
-        out: list = [None, None, None]
+    def parts(self, s: int) -> list[Any]:
+        out: list[Any] = [None, None, None]
         i = s - 1
         while i >= 0 and any(p is None for p in out):
             e = self.events[i]
@@ -654,15 +581,23 @@ class _RefTimeline:
         return bisect.bisect_left(self.times, t_from), bisect.bisect_right(self.times, t_to)
 
 
-def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerInputs,
-         applied: int, atol: float, limit: int | None = None):
+def _feed(inputs: TrackerInputs, e: ReplayEvent) -> Step | None:
+    """Feed an odometry or reference event; the step it makes due, if any."""
+    if e.kind == 'odom':
+        return inputs.odom(e.msg)
+    return inputs.reference(REF_INDEX[e.kind], e.msg)
+
+
+def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded: list[Timed],
+         inputs: TrackerInputs, applied: int, atol: float, limit: int | None = None
+         ) -> tuple[TrackerInputs, list[ReplayEvent], list[Timed], int, bool]:
     """Pair odometry j with recorded command j, choosing the reference state that reproduces it.
 
     Returns (inputs, feed order, commands, swaps, reproduced).
     """
     window = int(ORDER_WINDOW * 1e9)
     order: list[ReplayEvent] = []
-    commands: list[tuple[int, Any]] = []
+    commands: list[Timed] = []
     swaps, matching, k = 0, True, 0
     for od in odoms:
         if limit is not None and k >= limit:
@@ -676,10 +611,11 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerIn
             cands = [default] + list(range(default - 1, lo - 1, -1)) \
                 + list(range(default + 1, max(hi, default) + 1))
             for s in cands[:64]:
-                trial = _snapshot(inputs)
+                trial = inputs.fork()
                 for e in tl.events[applied:s]:
-                    trial.reference(REF_INDEX[e.kind], e.msg)
-                cmd = trial.odom(od.msg)
+                    _feed(trial, e)
+                step = trial.odom(od.msg)
+                cmd = None if step is None else step.command
                 if cmd is None and s == default:
                     chosen = (s, trial, None)        # an input the tracker ignores
                     break
@@ -690,10 +626,11 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerIn
             if chosen is None:
                 matching = False
         if chosen is None:
-            trial = _snapshot(inputs)
+            trial = inputs.fork()
             for e in tl.events[applied:default]:
-                trial.reference(REF_INDEX[e.kind], e.msg)
-            chosen = (default, trial, trial.odom(od.msg))
+                _feed(trial, e)
+            step = trial.odom(od.msg)
+            chosen = (default, trial, None if step is None else step.command)
         s, inputs, cmd = chosen
         order.extend(tl.events[applied:s])
         applied = s
@@ -704,7 +641,8 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded, inputs: TrackerIn
     return inputs, order, commands, swaps, matching
 
 
-def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> ReplayPlan | None:
+def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: TrackerConfig,
+                   rules: InputRules, atol: float) -> ReplayPlan | None:
     tl = _RefTimeline(data)
     odoms = [e for e in data if e.kind == 'odom']
     t_first = recorded[0][0]
@@ -717,21 +655,21 @@ def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> Repl
         lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
         default = tl.before[id(od)]
         for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
-            base = TrackerInputs(config, 'realtime', max_stamp_jump)
-            base._ref = tl.parts(s)
-            if any(p is None for p in base._ref):
+            base = TrackerInputs(config, rules)
+            base.latest = tl.parts(s)
+            if any(p is None for p in base.latest):
                 continue
             v0 = _recover_speed(base, od, v_target)
             if v0 is None:
                 continue
             start = _with_speed(od, v0)
             tl.before[id(start)] = tl.before[id(od)]
-            check = _run(tl, [start] + odoms[j + 1:], recorded, _snapshot(base), s, atol,
+            check = _run(tl, [start] + odoms[j + 1:], recorded, base.fork(), s, atol,
                          limit=START_CHECK)
             if not check[4]:
                 continue
             inputs, order, commands, swaps, _ = _run(tl, [start] + odoms[j + 1:], recorded,
-                                                     _snapshot(base), s, atol)
+                                                     base.fork(), s, atol)
             head: list[ReplayEvent] = []
             seen: set[str] = set()
             for e in reversed(tl.events[:s]):
@@ -746,8 +684,9 @@ def _plan_realtime(events, data, recorded, config, max_stamp_jump, atol) -> Repl
     return None
 
 
-def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
-           params: str | os.PathLike | None = None, expected: str | os.PathLike | None = None,
+def replay(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str] | None = None,
+           params: str | os.PathLike[str] | None = None,
+           expected: str | os.PathLike[str] | None = None,
            atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
            namespace: str | None = None) -> ReplayResult:
     """Feed a bag's odometry and reference to a fresh tracker in process; compare commands.
@@ -762,6 +701,10 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
         Compare with this bag's ``cmd_vel`` instead of the recorded one.
     atol, rtol : float
         Tolerance of the command comparison.
+    max_differences : int, optional
+        How many differing commands the result lists.
+    namespace : str, optional
+        The namespace of the bag's topics.
 
     Returns
     -------
@@ -771,16 +714,45 @@ def replay(bag: str | os.PathLike, *, gains: str | os.PathLike | None = None,
     """
     config, values = load_tracker_parameters(gains, params)
     events = read_replay_events(bag, namespace=namespace)
-    plan = plan_replay(events, config, max_stamp_jump=float(values['max_stamp_jump']),
-                       use_recorded=expected is None, atol=max(atol, 1e-9), values=values)
+    plan = plan_replay(events, config, use_recorded=expected is None, atol=max(atol, 1e-9),
+                       values=values)
     return finish_replay(bag, plan, plan.commands, expected=expected, atol=atol, rtol=rtol,
                          max_differences=max_differences)
 
 
-def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, expected=None,
-                  atol: float = 1e-9, rtol: float = 0.0, max_differences: int = 20,
+def finish_replay(bag: str | os.PathLike[str], plan: ReplayPlan, commands: list[Timed], *,
+                  expected: str | os.PathLike[str] | None = None, atol: float = 1e-9,
+                  rtol: float = 0.0, max_differences: int = 20,
                   via: str = 'in process') -> ReplayResult:
-    """Compare replayed ``commands`` with the recorded (or ``expected``) ones."""
+    """Compare replayed ``commands`` with the recorded (or ``expected``) ones.
+
+    Parameters
+    ----------
+    bag : path-like
+        The replayed bag (named in the result).
+    plan : ReplayPlan
+        What was fed (:func:`plan_replay`).
+    commands : list of (int, Twist)
+        The replayed commands with the receive time of their input (the plan's, or a
+        tracker node's over DDS).
+    expected : path-like, optional
+        Compare with this bag's ``cmd_vel`` instead of the recorded one.
+    atol, rtol : float, optional
+        Tolerance of the comparison.
+    max_differences : int, optional
+        How many differing commands the result lists.
+    via : str, optional
+        How the commands were replayed (the summary says it).
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    MissingTopicsError
+        If there is no ``cmd_vel`` to compare with.
+    """
     recorded, source = plan.recorded, 'recorded'
     if expected is not None:
         recorded = [(e.receive_ns, e.msg) for e in read_replay_events(expected)
@@ -796,7 +768,17 @@ def finish_replay(bag, plan: ReplayPlan, commands: list[tuple[int, Any]], *, exp
 
 
 def format_replay(res: ReplayResult) -> str:
-    """Summary of a replay: inputs fed, commands produced and the comparison."""
+    """Summary of a replay: inputs fed, commands produced and the comparison.
+
+    Parameters
+    ----------
+    res : ReplayResult
+        What :func:`replay` returned.
+
+    Returns
+    -------
+    str
+    """
     fed = ', '.join(f'{k} {n}' for k, n in sorted(res.inputs.items()))
     lines = [f'replay of {res.bag} ({res.mode}) {res.via}: fed {fed}',
              f'commands: {len(res.commands)} replayed, {len(res.recorded)} '

@@ -12,29 +12,35 @@ import os
 import sys
 import time
 import traceback
-from dataclasses import dataclass
-from typing import Any, Callable, Generic, Iterable, Sequence, TypeVar
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.context import Context
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 
 from .. import topics
-from ..errors import InputError
+from ..tracker_inputs import MODES as TRACKER_MODES
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
 from .entry import arm_exit_deadline, catch_stop_signals, ignore_stop_signals, stop_requested
+# the nodes' errors (nodes/errors.py, ROS-free), where the nodes have always imported them
+from .errors import StartupError
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
            'pose_from_odom', 'fill_pose', 'reference_from_msgs', 'fill_reference',
            'make_executor', 'freeze_startup_objects', 'run', 'StartupError', 'AdapterNode',
-           'overrides', 'check_mode']
+           'overrides', 'check_mode', 'settings_from', 'require_at_least']
 
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
@@ -43,11 +49,13 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-MODES = ('lockstep', 'realtime')
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
-
-class StartupError(InputError):
-    """A node cannot start with its parameters; the message says which and why."""
+#: The nodes' modes (the tracker's input rules define them).
+MODES = TRACKER_MODES
+#: A settings dataclass (:func:`settings_from`).
+S = TypeVar('S', bound='DataclassInstance')
 
 
 @dataclass(frozen=True)
@@ -71,7 +79,15 @@ _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEG
 
 
 def declare(node: Node, params: Iterable[Param]) -> None:
-    """Declare parameters with descriptors (type, description, range, read-only)."""
+    """Declare parameters with descriptors (type, description, range, read-only).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node that declares them.
+    params : iterable of Param
+        The declarations.
+    """
     for p in params:
         ptype = p.type
         if ptype is None:
@@ -93,19 +109,94 @@ def declare(node: Node, params: Iterable[Param]) -> None:
 
 
 def get(node: Node, name: str) -> Any:
+    """The value of parameter ``name`` of ``node``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        A node that declared it.
+    name : str
+        The parameter.
+
+    Returns
+    -------
+    object
+    """
     return node.get_parameter(name).value
 
 
+def settings_from(settings_class: type[S], values: Mapping[str, Any], /, **given: Any) -> S:
+    """A node's settings dataclass from its parameter values.
+
+    Each field named in ``given`` takes that value (a validated or derived one, or a
+    parameter of another name); every other field the value of the parameter of its name
+    (a field with a default keeps it when ``values`` lacks the name).
+
+    Parameters
+    ----------
+    settings_class : dataclass type
+        The settings class (e.g. ``TrackerSettings``).
+    values : mapping
+        The node's parameter values by name.
+    **given
+        Fields set here rather than from the parameter of the same name.
+
+    Returns
+    -------
+    settings_class
+    """
+    names = {f.name for f in fields(settings_class)} - given.keys()
+    return settings_class(**given, **{n: values[n] for n in names if n in values})
+
+
+def require_at_least(values: Mapping[str, Any], name: str, low: int) -> None:
+    """Refuse (:class:`StartupError`) an integer parameter below ``low``.
+
+    Parameters
+    ----------
+    values : mapping
+        The node's parameter values by name.
+    name : str
+        The parameter.
+    low : int
+        Its smallest allowed value.
+    """
+    if values[name] < low:
+        raise StartupError(f'{name} must be at least {low}, got {values[name]}')
+
+
 def check_mode(value: str, node_name: str | None = None) -> str:
-    """``value`` if it is one of :data:`MODES`, else :class:`StartupError`."""
+    """``value`` if it is one of :data:`MODES`, else :class:`StartupError`.
+
+    Parameters
+    ----------
+    value : str
+        The ``mode`` parameter.
+    node_name : str, optional
+        Prefixed to the error message.
+
+    Returns
+    -------
+    str
+    """
     if value not in MODES:
         prefix = f'{node_name}: ' if node_name else ''
         raise StartupError(f'{prefix}parameter mode is {value!r}; use one of {MODES}')
     return value
 
 
-def make_executor(context=None):
-    """EventsExecutor (about 2x faster here) unless NONFRAGILE_EXECUTOR=single."""
+def make_executor(context: Context | None = None) -> Executor:
+    """EventsExecutor (about 2x faster here) unless NONFRAGILE_EXECUTOR=single.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+        Default: rclpy's default context.
+
+    Returns
+    -------
+    rclpy.executors.Executor
+    """
     if os.environ.get('NONFRAGILE_EXECUTOR', 'events') == 'single':
         return rclpy.executors.SingleThreadedExecutor(context=context)
     from rclpy.experimental import EventsExecutor
@@ -125,14 +216,34 @@ def freeze_startup_objects() -> None:
     gc.freeze()
 
 
-def spin_until(executor, done: Callable[[], bool], period: float = 0.1) -> None:
-    """Spin with a finite timeout (the EventsExecutor needs one) until ``done()``."""
+def spin_until(executor: Executor, done: Callable[[], bool], period: float = 0.1) -> None:
+    """Spin with a finite timeout (the EventsExecutor needs one) until ``done()``.
+
+    Parameters
+    ----------
+    executor : rclpy.executors.Executor
+        With the nodes added.
+    done : callable
+        Ends the spin when it returns True (checked between spins).
+    period : float, optional
+        Timeout (s) of each spin.
+    """
     while executor.context.ok() and not done():
         executor.spin_once(timeout_sec=period)
 
 
 def overrides(**values: Any) -> list[Parameter]:
-    """Parameter overrides from values: ``XNode(parameter_overrides=overrides(dt=0.02))``."""
+    """Parameter overrides from values: ``XNode(parameter_overrides=overrides(dt=0.02))``.
+
+    Parameters
+    ----------
+    **values
+        Parameter values by name.
+
+    Returns
+    -------
+    list of rclpy.parameter.Parameter
+    """
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
@@ -172,18 +283,41 @@ class AdapterNode(Node, Generic[C]):
     config: C        #: the validated configuration (replaced when a runtime change is applied)
 
     def __init__(self, node_name: str, **node_kwargs: Any):
+        """Make the rclpy node.
+
+        Parameters
+        ----------
+        node_name : str
+            The node's name.
+        **node_kwargs
+            rclpy ``Node`` keyword arguments (``context``, ``parameter_overrides`` ...).
+        """
         super().__init__(node_name, **node_kwargs)
         self.finished = False
         self.exit_code = 0
 
     # ------------------------------------------------------------------ parameters
-    def bind_parameters(self, params: Sequence[Param], configure: Callable[[dict], C]) -> C:
+    def bind_parameters(self, params: Sequence[Param],
+                        configure: Callable[[dict[str, Any]], C]) -> C:
         """Declare ``params``, build the node's configuration, validate/apply runtime sets.
 
         Returns ``configure(values)``; raises :class:`StartupError` (``'<node>: why'``) if
         the values are refused.  Afterwards a set of a writable parameter is validated by
         ``configure`` with the proposed values (on-set callback) and applied (post-set
         callback: ``self.config = configure(values)``, then :meth:`apply_config`).
+
+        Parameters
+        ----------
+        params : sequence of Param
+            The node's parameters.
+        configure : callable
+            ``configure(values) -> config``: validates the values (by name), raises
+            :class:`~nonfragile_tracker.errors.InputError` if they are bad.
+
+        Returns
+        -------
+        C
+            The configuration at start-up.
         """
         params = list(params)
         declare(self, params)
@@ -197,8 +331,18 @@ class AdapterNode(Node, Generic[C]):
         self.add_post_set_parameters_callback(self._apply_parameters)
         return config
 
-    def parameter_values(self, changes: dict | None = None) -> dict:
-        """Current values of the bound parameters (``None`` if unset), updated by ``changes``."""
+    def parameter_values(self, changes: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Current values of the bound parameters (``None`` if unset), updated by ``changes``.
+
+        Parameters
+        ----------
+        changes : mapping, optional
+            Proposed values by name.
+
+        Returns
+        -------
+        dict
+        """
         values = {n: self.get_parameter_or(n).value for n in self._bound}
         values.update(changes or {})
         return values
@@ -223,8 +367,14 @@ class AdapterNode(Node, Generic[C]):
         self.apply_config(old, self.config)
         self.log('info', f'accepted parameter set: {changed}')
 
-    def apply_config(self, old: Any, new: Any) -> None:
-        """Hook: make derived state follow an accepted runtime change (default: nothing)."""
+    def apply_config(self, old: C, new: C) -> None:
+        """Hook: make derived state follow an accepted runtime change (default: nothing).
+
+        Parameters
+        ----------
+        old, new : C
+            The configuration before and after the change.
+        """
 
     # ------------------------------------------------------------------ guarded callbacks
     def _guarded(self, callback: Callable[..., Any]) -> Callable[..., Any]:
@@ -239,11 +389,45 @@ class AdapterNode(Node, Generic[C]):
                 return None           # the context was shut down under this callback: done
         return guarded
 
-    def create_subscription(self, msg_type, topic, callback, *args, **kwargs):  # noqa: D102
+    def create_subscription(self, msg_type: Any, topic: str, callback: Callable[..., Any],
+                            *args: Any, **kwargs: Any) -> Subscription:
+        """rclpy's, with the callback guarded against a shutdown under it.
+
+        Parameters
+        ----------
+        msg_type : type
+            The message class.
+        topic : str
+            The topic name.
+        callback : callable
+            Called with each message.
+        *args, **kwargs
+            Passed on to :meth:`rclpy.node.Node.create_subscription` (QoS ...).
+
+        Returns
+        -------
+        rclpy.subscription.Subscription
+        """
         return super().create_subscription(msg_type, topic, self._guarded(callback),
                                            *args, **kwargs)
 
-    def create_timer(self, timer_period_sec, callback, *args, **kwargs):  # noqa: D102
+    def create_timer(self, timer_period_sec: float, callback: Callable[..., Any],
+                     *args: Any, **kwargs: Any) -> Timer:
+        """rclpy's, with the callback guarded against a shutdown under it.
+
+        Parameters
+        ----------
+        timer_period_sec : float
+            The period (s).
+        callback : callable
+            Called at each period.
+        *args, **kwargs
+            Passed on to :meth:`rclpy.node.Node.create_timer` (clock ...).
+
+        Returns
+        -------
+        rclpy.timer.Timer
+        """
         return super().create_timer(timer_period_sec, self._guarded(callback), *args, **kwargs)
 
     # ------------------------------------------------------------------ logging
@@ -261,9 +445,16 @@ class AdapterNode(Node, Generic[C]):
         message to rosout: publisher's context is invalid'.  Callbacks, the start-up line
         and the nodes' ``close`` all log here, so only a signal landing during the log call
         itself (microseconds) is left.
+
+        Parameters
+        ----------
+        level : str
+            ``info``, ``warn`` or ``error`` (anything else: error).
+        text : str
+            The message.
         """
         if not self.stopping:
-            logger = self.get_logger()
+            logger = Node.get_logger(self)          # (rclpy's, untyped)
             # one call site per severity: rclpy refuses a severity change at one site
             if level == 'info':
                 logger.info(text)
@@ -286,10 +477,11 @@ class AdapterNode(Node, Generic[C]):
     def destroy_node(self) -> None:
         """Close (:meth:`close`), then destroy the rclpy node."""
         self.close()
-        super().destroy_node()
+        Node.destroy_node(self)                     # (rclpy's, untyped)
 
 
-def _tear_down(context: Any, node: AdapterNode | None, executor: Any) -> None:
+def _tear_down(context: Context, node: AdapterNode[Any] | None,
+               executor: Executor | None) -> None:
     """Executor, node and rclpy shut down (after the node's own clean-up)."""
     if executor is not None:
         # unregister the node's callbacks while the executor lives (idempotent after a
@@ -318,7 +510,7 @@ def _fatal(text: str) -> int:
     return 2
 
 
-_ENDED_EXECUTORS: list = []
+_ENDED_EXECUTORS: list[Executor] = []
 
 
 class _MissedStop:
@@ -335,7 +527,7 @@ class _MissedStop:
 
     GRACE = 0.5
 
-    def __init__(self, context: Any):
+    def __init__(self, context: Context):
         self.context = context
         self.since: float | None = None
 
@@ -351,7 +543,7 @@ class _MissedStop:
         return True
 
 
-def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) -> int:
+def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = None) -> int:
     """Process main of a node: the Jazzy pattern (init, spin, destroy, try_shutdown).
 
     Exit code: 0 after SIGINT/SIGTERM or a normal end, the node's ``exit_code`` if it set
@@ -374,6 +566,18 @@ def run(node_class: Callable[[], AdapterNode], args: list[str] | None = None) ->
     after the node is built, instead of being lost.
     Exceptions that are only the consequence of the shutdown racing the main thread
     (rclpy 7.1: ros2/rclpy#1352, fixed upstream after Jazzy) are not reported.
+
+    Parameters
+    ----------
+    node_class : callable
+        Makes the node (an :class:`AdapterNode`), e.g. ``TrackerNode``.
+    args : list of str, optional
+        Command-line arguments for ``rclpy.init`` (``--ros-args ...``).
+
+    Returns
+    -------
+    int
+        The exit code.
     """
     catch_stop_signals()
     if stop_requested():

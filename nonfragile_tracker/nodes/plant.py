@@ -29,6 +29,8 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
@@ -39,11 +41,12 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
 from .. import topics
+from ..errors import EXIT_RUN
 from ..control.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
                             odometry_period_steps, step_time_ns)
 from ..control.validate import as_matrix
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
-                     fill_pose, ns_to_stamp, run)
+                     fill_pose, ns_to_stamp, require_at_least, run, settings_from)
 
 LATENCY_PARAMS = ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
                   'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed')
@@ -135,8 +138,27 @@ class PlantSettings:
     realtime_recorder: bool = False
 
 
-def plant_settings(values: dict) -> PlantSettings:
-    """Validate the plant's parameter values (start-up and runtime sets); InputError if bad."""
+def plant_settings(values: dict[str, Any]) -> PlantSettings:
+    """Validate the plant's parameter values (start-up and runtime sets); InputError if bad.
+
+    Parameters
+    ----------
+    values : dict
+        :data:`PARAMS` by name (at start-up, or with a runtime set's proposed values).
+
+    Returns
+    -------
+    PlantSettings
+
+    Raises
+    ------
+    StartupError
+        An ``initial_pose`` that is not [x, y, yaw], a ``lockstep_lead`` beyond half the
+        topics' depth, ``lockstep_subscribers`` below 1, or an odometry latency or period
+        the lockstep handshake cannot wait for.
+    LoopConfigError
+        A bad plant model (``A_tau``, latencies, lags).
+    """
     mode = check_mode(values['mode'])
     pose0 = list(values['initial_pose'])
     if len(pose0) != 3:
@@ -145,9 +167,7 @@ def plant_settings(values: dict) -> PlantSettings:
         raise StartupError(f'lockstep_lead must be 0 .. {topics.DEPTH // 2} steps (the topics '
                            f'keep the last {topics.DEPTH} messages), got '
                            f'{values["lockstep_lead"]}')
-    if values['lockstep_subscribers'] < 1:
-        raise StartupError(f'lockstep_subscribers must be at least 1, got '
-                           f'{values["lockstep_subscribers"]}')
+    require_at_least(values, 'lockstep_subscribers', 1)
     cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
                       A_tau=tuple(map(tuple, as_matrix(values['A_tau'], 'A_tau', (4, 4),
                                                        flat=True, error=LoopConfigError))),
@@ -162,24 +182,23 @@ def plant_settings(values: dict) -> PlantSettings:
             'in lockstep (the plant steps on without waiting in between and the topics '
             'keep the last 100 messages); use a larger dt, a smaller odom_latency or a higher '
             'odom_rate')
-    return PlantSettings(mode=mode, plant=cfg,
+    return settings_from(PlantSettings, values, mode=mode, plant=cfg,
                          final_step=int(round(values['duration'] / cfg.dt)),
-                         lockstep_timeout=values['lockstep_timeout'],
-                         startup_timeout=values['startup_timeout'],
-                         lockstep_retry=values['lockstep_retry'],
-                         lockstep_subscribers=values['lockstep_subscribers'],
-                         lockstep_recorder=values['lockstep_recorder'],
-                         lockstep_lead=values['lockstep_lead'],
-                         cmd_timeout=values['cmd_timeout'],
-                         stamped=values['enable_stamped_cmd_vel'],
-                         odom_frame=values['odom_frame'], base_frame=values['base_frame'],
-                         realtime_recorder=values['realtime_recorder'])
+                         stamped=values['enable_stamped_cmd_vel'])
 
 
 class PlantNode(AdapterNode[PlantSettings]):
-    """ROS adapter around :class:`UnicyclePlant`."""
+    """ROS adapter around :class:`UnicyclePlant`.
 
-    def __init__(self, node_name: str = 'plant', **node_kwargs):
+    Parameters
+    ----------
+    node_name : str, optional
+        ``plant``; two plants in one graph need their own namespaces.
+    **node_kwargs
+        rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
+    """
+
+    def __init__(self, node_name: str = 'plant', **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
         self.config = self.bind_parameters(PARAMS, plant_settings)
         self.mode = self.config.mode
@@ -353,7 +372,7 @@ class PlantNode(AdapterNode[PlantSettings]):
         self.log('error', f'lockstep run aborted at step {self.plant.k}: {why} within '
                           f'{getattr(self.config, limit)} s ({limit}); is the tracker '
                           'running on the same ROS_DOMAIN_ID and namespace?')
-        self.exit_code = 5
+        self.exit_code = EXIT_RUN               # RunError's code
         self._finish()
 
     def _finish(self) -> None:
@@ -427,9 +446,9 @@ class PlantNode(AdapterNode[PlantSettings]):
             self._finish()
 
 
-def main(args=None) -> int:
-    """Console entry point of the plant node; returns the exit code (see :func:`common.run`)."""
-    return run(PlantNode, args)
+#: Console entry point of the plant node: ``main(args)`` is ``run(PlantNode, args)``
+#: (:func:`~nonfragile_tracker.nodes.common.run`: the exit code).
+main = partial(run, PlantNode)
 
 
 if __name__ == '__main__':

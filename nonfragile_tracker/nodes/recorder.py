@@ -51,19 +51,27 @@ import importlib
 import struct
 import sys
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from rclpy.clock import Clock, ClockType
+from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
+from rclpy.timer import Timer
 from std_msgs.msg import UInt64
 
 from .. import topics
-from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagError, BagWriter,
-                          default_qos, make_qos, new_run_dir)
-from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run
+from ..bag.errors import BagError
+from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagWriter, default_qos,
+                          make_qos, new_run_dir)
+from .common import DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, run, settings_from
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Qos
 
 __all__ = ['Recorder', 'main', 'LOCKSTEP_TOPICS', 'import_message', 'qos_from_rclpy']
 
@@ -113,19 +121,44 @@ _DATA_QOS, _LATCHED_QOS = DATA_QOS, LATCHED_QOS        # the same profiles as th
 
 
 def import_message(msgtype: str) -> type:
-    """The rclpy message class of ``'pkg/msg/Name'`` (``importlib`` on ``pkg.msg``)."""
+    """The rclpy message class of ``'pkg/msg/Name'`` (``importlib`` on ``pkg.msg``).
+
+    Parameters
+    ----------
+    msgtype : str
+        E.g. ``nav_msgs/msg/Odometry``.
+
+    Returns
+    -------
+    type
+
+    Raises
+    ------
+    StartupError
+        If the name is malformed or the package is not installed.
+    """
     parts = msgtype.split('/')
     if len(parts) != 3 or parts[1] != 'msg' or not all(parts):
         raise StartupError(f'message type {msgtype!r} is not of the form pkg/msg/Name')
     try:
-        return getattr(importlib.import_module(f'{parts[0]}.msg'), parts[2])
+        return cast(type, getattr(importlib.import_module(f'{parts[0]}.msg'), parts[2]))
     except (ImportError, AttributeError):
         raise StartupError(f'message type {msgtype} is not installed (cannot import '
                            f'{parts[0]}.msg.{parts[2]}); source the ROS environment') from None
 
 
-def qos_from_rclpy(profile: Any):
-    """An offered rclpy ``QoSProfile`` as the rosbags ``Qos`` stored in the bag (v9)."""
+def qos_from_rclpy(profile: Any) -> Qos:
+    """An offered rclpy ``QoSProfile`` as the rosbags ``Qos`` stored in the bag (v9).
+
+    Parameters
+    ----------
+    profile : rclpy.qos.QoSProfile
+        As offered by a publisher (``get_publishers_info_by_topic``).
+
+    Returns
+    -------
+    rosbags Qos
+    """
     return make_qos(history=profile.history, depth=int(profile.depth),
                     reliability=profile.reliability, durability=profile.durability,
                     deadline_ns=int(profile.deadline.nanoseconds),
@@ -142,7 +175,7 @@ def _header_stamp_ns(raw: bytes) -> int | None:
         return None
     fmt = '<iI' if raw[1] & 1 else '>iI'          # encapsulation: 0x0001 = CDR little endian
     sec, nsec = struct.unpack_from(fmt, raw, 4)
-    return sec * 1_000_000_000 + nsec
+    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 @dataclass(frozen=True)
@@ -159,20 +192,31 @@ class RecorderSettings:
     stamped_cmd_vel: bool
 
 
-def recorder_settings(values: dict) -> RecorderSettings:
-    """Validate the recorder's parameter values; InputError if bad."""
+def recorder_settings(values: dict[str, Any]) -> RecorderSettings:
+    """Validate the recorder's parameter values; InputError if bad.
+
+    Parameters
+    ----------
+    values : dict
+        :data:`PARAMS` by name.
+
+    Returns
+    -------
+    RecorderSettings
+
+    Raises
+    ------
+    StartupError
+        A ``chunk_size`` outside 1 byte .. 1 MiB, an unknown or no topic.
+    """
     chunk = values['chunk_size']
     if not 1 <= chunk <= 2 ** 20:
         raise StartupError(f'chunk_size must be 1 .. 1048576 bytes, got {chunk}')
-    return RecorderSettings(topics=tuple(_topic_list(values['topics'])), output=values['output'],
-                            chunk_size=chunk, flush_period=values['flush_period'],
-                            drain_timeout=values['drain_timeout'],
-                            lockstep_gate=values['lockstep_gate'],
-                            gate_timeout=values['gate_timeout'],
-                            stamped_cmd_vel=values['enable_stamped_cmd_vel'])
+    return settings_from(RecorderSettings, values, topics=tuple(_topic_list(values['topics'])),
+                         stamped_cmd_vel=values['enable_stamped_cmd_vel'])
 
 
-def _topic_list(values) -> list[str]:
+def _topic_list(values: Iterable[str]) -> list[str]:
     names: list[str] = []
     for raw in values:
         name = raw if raw in topics.TYPES else raw.lstrip('/')
@@ -187,12 +231,21 @@ def _topic_list(values) -> list[str]:
 
 
 class Recorder(AdapterNode[RecorderSettings]):
-    """Raw-CDR recorder node; ``done`` completes after a ``run_done`` drain (or on close)."""
+    """Raw-CDR recorder node; ``done`` completes after a ``run_done`` drain (or on close).
+
+    Parameters
+    ----------
+    node_name : str, optional
+        ``recorder``.
+    **node_kwargs
+        rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
+    """
 
     def __init__(self, node_name: str = 'recorder', **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
         self.writer: BagWriter | None = None
-        self._flush_timer = self._drain_timer = None
+        self._flush_timer: Timer | None = None
+        self._drain_timer: Timer | None = None
         self.done: Future = Future()
         try:
             self.config = self.bind_parameters(PARAMS, recorder_settings)
@@ -238,7 +291,9 @@ class Recorder(AdapterNode[RecorderSettings]):
             if name in _STAMPED:
                 self.stamps[name] = set()
             self._subscribe(name)
-        self._gate_timer = self.pub_ready = self.pub_progress = None
+        self._gate_timer: Timer | None = None
+        self.pub_ready: Publisher | None = None
+        self.pub_progress: Publisher | None = None
         self.ready = not cfg.lockstep_gate
         if cfg.lockstep_gate:
             self.pub_ready = self.create_publisher(UInt64, topics.RECORDER_READY, _LATCHED_QOS)
@@ -307,7 +362,7 @@ class Recorder(AdapterNode[RecorderSettings]):
         return new_run_dir(_RUNS_ROOT) / 'bag'
 
     # ------------------------------------------------------------------ recording
-    def _make_callback(self, name: str):
+    def _make_callback(self, name: str) -> Callable[[bytes], None]:
         topic_stamps = self.stamps.get(name)
         is_done = name == topics.RUN_DONE
         skip_repeats = self.config.lockstep_gate and topic_stamps is not None
@@ -341,7 +396,7 @@ class Recorder(AdapterNode[RecorderSettings]):
                 self._finish()
         return callback
 
-    def _offered_qos(self, name: str) -> list:
+    def _offered_qos(self, name: str) -> list[Qos]:
         try:
             infos = self.get_publishers_info_by_topic(self._resolved[name])
             profiles = [qos_from_rclpy(i.qos_profile) for i in infos]
@@ -455,9 +510,9 @@ class Recorder(AdapterNode[RecorderSettings]):
                 self.done.set_result(dict(self.counts))
 
 
-def main(args: list[str] | None = None) -> int:
-    """Console entry point; returns the exit code (0 also after SIGINT/SIGTERM)."""
-    return run(Recorder, args)
+#: Console entry point of the recorder node: ``main(args)`` is ``run(Recorder, args)``
+#: (:func:`~nonfragile_tracker.nodes.common.run`: the exit code).
+main = partial(run, Recorder)
 
 
 if __name__ == '__main__':

@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
@@ -44,7 +46,8 @@ from .. import topics
 from ..control.reference import Path, make_path
 from ..control.trajectory import Trajectory, TrajectoryError, load_waypoints
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
-                     fill_reference, ns_to_stamp, run, stamp_ns)
+                     fill_reference, ns_to_stamp, require_at_least, run, settings_from,
+                     stamp_ns)
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from ..control.trajectory import analytic_knots
@@ -110,36 +113,50 @@ class ReferenceSettings:
     start_delay: float = 1.0
 
 
-def reference_settings(values: dict) -> ReferenceSettings:
-    """Validate the reference's parameter values; InputError (e.g. PathError) if bad."""
+def reference_settings(values: dict[str, Any]) -> ReferenceSettings:
+    """Validate the reference's parameter values; InputError (e.g. PathError) if bad.
+
+    Parameters
+    ----------
+    values : dict
+        :data:`PARAMS` by name; the path's own parameters are checked by
+        :func:`~nonfragile_tracker.control.reference.make_path`.
+
+    Returns
+    -------
+    ReferenceSettings
+
+    Raises
+    ------
+    StartupError
+        A ``center`` that is not [x, y], ``lockstep_subscribers`` below 0 or
+        ``display_points`` below 2.
+    """
     mode = check_mode(values['mode'])
     center = list(values['center'])
     if len(center) != 2:
         raise StartupError(f'center needs [x, y], got {center}')
     path = make_path(values['path'], radius=values['radius'], rate=values['rate'],
                      center_x=center[0], center_y=center[1], phase=values['phase'])
-    if values['lockstep_subscribers'] < 0:
-        raise StartupError(f'lockstep_subscribers must be 0 or more, got '
-                           f'{values["lockstep_subscribers"]}')
-    if values['display_points'] < 2:
-        raise StartupError(f'display_points must be at least 2, got {values["display_points"]}')
-    return ReferenceSettings(mode=mode, path=path, publish_rate=values['publish_rate'],
-                             lockstep_subscribers=values['lockstep_subscribers'],
-                             publish_samples=values['publish_samples'],
-                             horizon=values['horizon'],
-                             trajectory_file=values['trajectory_file'],
-                             trajectory_topic=values['trajectory_topic'],
-                             smoothing=values['smoothing'],
-                             cruise_speed=values['cruise_speed'],
-                             max_accel=values['max_accel'], frame=values['odom_frame'],
-                             display_points=values['display_points'],
-                             start_delay=values['start_delay'])
+    require_at_least(values, 'lockstep_subscribers', 0)
+    require_at_least(values, 'display_points', 2)
+    return settings_from(ReferenceSettings, values, mode=mode, path=path,
+                         frame=values['odom_frame'])
 
 
 class ReferenceNode(AdapterNode[ReferenceSettings]):
-    """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`."""
+    """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`.
 
-    def __init__(self, node_name: str = 'reference', **node_kwargs):
+    Parameters
+    ----------
+    node_name : str, optional
+        ``reference`` (the launch files' name; a namespace moves the whole system,
+        its topics are relative).
+    **node_kwargs
+        rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
+    """
+
+    def __init__(self, node_name: str = 'reference', **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
         self.config = cfg = self.bind_parameters(PARAMS, reference_settings)
         self.mode = cfg.mode
@@ -192,7 +209,13 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
             self.create_subscription(PathMsg, relay, self._on_relay, 10)
 
     def apply_config(self, old: ReferenceSettings, new: ReferenceSettings) -> None:
-        """An accepted runtime set (post-set callback): show the path with the new points."""
+        """An accepted runtime set (post-set callback): show the path with the new points.
+
+        Parameters
+        ----------
+        old, new : ReferenceSettings
+            The settings before and after the change.
+        """
         if new.display_points != old.display_points:
             self._display(self.traj, self._display_origin)
 
@@ -254,6 +277,13 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
         """Publish the sample at path time ``t`` (s) with header stamp ``t_ns``.
 
         Only to topics with a subscriber (nobody needs them per step: no work then).
+
+        Parameters
+        ----------
+        t_ns : int
+            Header stamp (ns).
+        t : float
+            Path time (s).
         """
         pubs = self._sample_pubs
         wanted = [p.get_subscription_count() > 0 for p in pubs]
@@ -289,9 +319,9 @@ class ReferenceNode(AdapterNode[ReferenceSettings]):
         self.publish_sample(now, (now - self.origin_ns) * 1e-9)
 
 
-def main(args=None) -> int:
-    """Console entry point of the reference node; returns the exit code (see :func:`common.run`)."""
-    return run(ReferenceNode, args)
+#: Console entry point of the reference node: ``main(args)`` is ``run(ReferenceNode, args)``
+#: (:func:`~nonfragile_tracker.nodes.common.run`: the exit code).
+main = partial(run, ReferenceNode)
 
 
 if __name__ == '__main__':

@@ -52,7 +52,9 @@ ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``)
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -64,18 +66,21 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
-                              path_errors, trajectory_time)
-from ..control.limits import Limits, within_limits
-from ..control.loop import Tracker, TrackerConfig
+from ..control.follow import Follower, path_errors
+from ..control.loop import Command, Tracker, TrackerConfig
 from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
                                adapted_prediction, certificate_from_parameters, evaluate)
-from ..control.trajectory import TrajectoryError
+from ..control.reference import RefSample
+from ..control.trajectory import Trajectory, TrajectoryError
 from ..msgconv import tracker_config
+from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
+                              input_rules, stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
-                     fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)
-from .trajectory_io import followed_to_multidof, multidof_to_trajectory, path_to_trajectory
+                     fill_pose, ns_to_stamp, require_at_least, run, settings_from)
+from .trajectory_io import followed_to_multidof
 
+#: The input rules' parameters take their defaults from the rules' module (the replay's too).
+_RULES = INPUT_DEFAULTS
 PARAMS = [
     Param('K', None, 'gain K, row-major doubles (see K_shape); from a gain file written by '
           '`nonfragile_tracker synthesize`', type=ParameterType.PARAMETER_DOUBLE_ARRAY),
@@ -97,7 +102,7 @@ PARAMS = [
     Param('min_turning_radius', 0.0, 'smallest radius the base can turn on (m; car-like '
           'bases: wheelbase / tan(max steering angle)); a trajectory tighter than it is '
           'refused; 0 = none', low=0.0, high=1e3),
-    Param('retime', True, 'check each trajectory against max_linear_speed, '
+    Param('retime', _RULES['retime'], 'check each trajectory against max_linear_speed, '
           'max_linear_accel, max_angular_speed, max_angular_accel and min_turning_radius and '
           're-time one that exceeds them along its path (logged); false: follow as sent',
           read_only=True),
@@ -128,19 +133,22 @@ PARAMS = [
           'for the plant to republish; real time: adopt a trajectory re-timed in the '
           'background only then (a recorder gets its first command); 0 = at once',
           read_only=True),
-    Param('max_stamp_jump', 1.0, 'an odom stamp further ahead than this (s) is a jump: the '
-          'compensator is re-initialised from the measured speed', low=1e-6, high=1e9),
-    Param('odom_frame', topics.ODOM_FRAME, 'frame of odometry and trajectories (REP-105)',
+    Param('max_stamp_jump', _RULES['max_stamp_jump'], 'an odom stamp further ahead than this '
+          '(s) is a jump: the compensator is re-initialised from the measured speed',
+          low=1e-6, high=1e9),
+    Param('odom_frame', _RULES['odom_frame'], 'frame of odometry, reference samples and '
+          'trajectories (REP-105); inputs in another frame are refused',
           read_only=True),
-    Param('cruise_speed', 0.5, 'time law for a Path with zero stamps: cruise speed (m/s)',
-          low=1e-6, high=1e3),
-    Param('max_accel', 0.5, 'time law for a Path with zero stamps: acceleration limit '
-          '(m/s^2)', low=1e-6, high=1e3),
-    Param('wait_for_trajectory', False, 'command only from a trajectory received on the '
-          'trajectory topics and do not subscribe the per-step samples reference/pose|twist|'
-          'accel; set it when the reference publishes a file or relayed trajectory, and in '
-          'lockstep (the reference publishes the built-in paths as a trajectory there; '
-          '`nonfragile_tracker run` and tracking.launch.py set it)', read_only=True),
+    Param('cruise_speed', _RULES['cruise_speed'], 'time law for a Path with zero stamps: '
+          'cruise speed (m/s)', low=1e-6, high=1e3),
+    Param('max_accel', _RULES['max_accel'], 'time law for a Path with zero stamps: '
+          'acceleration limit (m/s^2)', low=1e-6, high=1e3),
+    Param('wait_for_trajectory', _RULES['wait_for_trajectory'], 'command only from a '
+          'trajectory received on the trajectory topics and do not subscribe the per-step '
+          'samples reference/pose|twist|accel; set it when the reference publishes a file or '
+          'relayed trajectory, and in lockstep (the reference publishes the built-in paths as '
+          'a trajectory there; `nonfragile_tracker run` and tracking.launch.py set it)',
+          read_only=True),
     Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
           '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
           'instead of Twist', read_only=True),
@@ -152,14 +160,14 @@ PARAMS = [
     Param('diagnostics_period', 1.0, 'period (s; lockstep: stamp time, real time: node clock) '
           'of the status on /diagnostics',
           low=1e-3, high=1e6, read_only=True),
-    Param('rest_speed', REST_SPEED, 'after the trajectory end, |v| below this (m/s) is at '
-          'rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
-    Param('start_tolerance', START_TOLERANCE, 'a trajectory that starts at rest and is first '
-          'followed more than this (s) after its start stamp is re-based to start at that '
-          'step (no chase after a reference or planner that started earlier); a start stamp '
-          'in the future is waited for at rest', low=0.0, high=1e9, read_only=True),
-    Param('max_start_distance', MAX_START_DISTANCE, 'refuse a trajectory whose reference is '
-          'further than this (m) from the robot when it starts; 0 = no check', low=0.0,
+    Param('rest_speed', _RULES['rest_speed'], 'after the trajectory end, |v| below this (m/s) '
+          'is at rest: the tracker commands zero', low=1e-9, high=1e3, read_only=True),
+    Param('start_tolerance', _RULES['start_tolerance'], 'a trajectory that starts at rest '
+          'and is first followed more than this (s) after its start stamp is re-based to start '
+          'at that step (no chase after a reference or planner that started earlier); a start '
+          'stamp in the future is waited for at rest', low=0.0, high=1e9, read_only=True),
+    Param('max_start_distance', _RULES['max_start_distance'], 'refuse a trajectory whose '
+          'reference is further than this (m) from the robot when it starts; 0 = no check', low=0.0,
           high=1e9, read_only=True),
 ]
 #: The certificate monitor's parameters (:mod:`control.monitor`; README "Certificate monitor").
@@ -191,66 +199,48 @@ MONITOR_PARAMS = [
           '[lo, hi] (s) the predictor latency may be adapted within',
           type=ParameterType.PARAMETER_DOUBLE_ARRAY),
 ]
-#: Lockstep: reference samples kept by stamp while waiting for the odometry of that time.
-REF_BUFFER = 1000
-
-
 @dataclass(frozen=True)
 class TrackerSettings:
     """The tracker node's validated parameters (see :data:`PARAMS`)."""
 
     mode: str
     tracker: TrackerConfig
+    rules: InputRules              #: the input rules (:mod:`nonfragile_tracker.tracker_inputs`)
     input_timeout: float
-    max_stamp_jump: float
     lockstep_subscribers: int
-    frame: str
-    cruise_speed: float
-    max_accel: float
-    wait_for_trajectory: bool
     stamped_cmd_vel: bool
     base_frame: str
     viz_period: float
     max_path_poses: int
     diagnostics_period: float
-    rest_speed: float
     monitor: MonitorConfig
-    start_tolerance: float = START_TOLERANCE
-    max_start_distance: float = MAX_START_DISTANCE
-    limits: Limits = Limits()
-    retime: bool = True
 
 
-def tracker_settings(values: dict) -> TrackerSettings:
+def tracker_settings(values: dict[str, Any]) -> TrackerSettings:
     """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad.
 
-    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` (shared
-    with bag replay); the rest are the node's own settings.
+    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` and the
+    input rules :func:`nonfragile_tracker.tracker_inputs.input_rules` (both shared with bag
+    replay); the rest are the node's own settings.
+
+    Parameters
+    ----------
+    values : dict
+        The tracker's parameter values by name (:data:`PARAMS`, :data:`MONITOR_PARAMS`).
+
+    Returns
+    -------
+    TrackerSettings
     """
     if values['K'] is None:
         raise StartupError('parameter K is not set; pass a gain file, e.g. '
                            '--ros-args --params-file config/tracker_gains.yaml')
-    if values['lockstep_subscribers'] < 0:
-        raise StartupError(f'lockstep_subscribers must be 0 or more, got '
-                           f'{values["lockstep_subscribers"]}')
-    if values['max_path_poses'] < 1:
-        raise StartupError(f'max_path_poses must be at least 1, got {values["max_path_poses"]}')
-    return TrackerSettings(mode=check_mode(values['mode']), tracker=tracker_config(values),
-                           input_timeout=values['input_timeout'],
-                           max_stamp_jump=values['max_stamp_jump'],
-                           lockstep_subscribers=values['lockstep_subscribers'],
-                           frame=values['odom_frame'],
-                           cruise_speed=values['cruise_speed'], max_accel=values['max_accel'],
-                           wait_for_trajectory=values['wait_for_trajectory'],
-                           stamped_cmd_vel=values['enable_stamped_cmd_vel'],
-                           base_frame=values['base_frame'], viz_period=values['viz_period'],
-                           max_path_poses=values['max_path_poses'],
-                           diagnostics_period=values['diagnostics_period'],
-                           rest_speed=values['rest_speed'],
-                           monitor=monitor_config(values),
-                           start_tolerance=values['start_tolerance'],
-                           max_start_distance=values['max_start_distance'],
-                           limits=Limits.from_values(values), retime=values['retime'])
+    require_at_least(values, 'lockstep_subscribers', 0)
+    require_at_least(values, 'max_path_poses', 1)
+    return settings_from(TrackerSettings, values, mode=check_mode(values['mode']),
+                         tracker=tracker_config(values), rules=input_rules(values),
+                         stamped_cmd_vel=values['enable_stamped_cmd_vel'],
+                         monitor=monitor_config(values))
 
 
 @dataclass(frozen=True)
@@ -264,11 +254,20 @@ class MonitorConfig:
     certificate: Certificate | None
 
 
-def monitor_config(values: dict) -> MonitorConfig:
+def monitor_config(values: dict[str, Any]) -> MonitorConfig:
     """Validate the monitor's parameters; InputError (MonitorError) if bad.
 
     The saturation limits are the tracker's; the acceleration limits are its
     ``max_linear_accel`` / ``max_angular_accel`` parameters when it has them (0 = unknown).
+
+    Parameters
+    ----------
+    values : dict
+        Parameter values by name: :data:`MONITOR_PARAMS` and the tracker's limits and ``dt``.
+
+    Returns
+    -------
+    MonitorConfig
     """
     settings = MonitorSettings(
         window=values['monitor_window'], max_latency=values['monitor_max_latency'],
@@ -284,28 +283,41 @@ def monitor_config(values: dict) -> MonitorConfig:
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
-    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`."""
+    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`.
 
-    def __init__(self, node_name: str = 'tracker', **node_kwargs):
+    Its inputs go through the rules of :mod:`nonfragile_tracker.tracker_inputs`
+    (:attr:`inputs`, which holds the law and the input state).
+
+    Parameters
+    ----------
+    node_name : str, optional
+        ``tracker``: parameter files address it as ``/**/tracker`` (``run``, the launch
+        files), so a node of another name needs a section of its own.
+    **node_kwargs
+        rclpy ``Node`` keyword arguments (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).
+    """
+
+    def __init__(self, node_name: str = 'tracker', **node_kwargs: Any):
         super().__init__(node_name, **node_kwargs)
         self.config = cfg = self.bind_parameters(PARAMS + MONITOR_PARAMS, tracker_settings)
         self.mode = cfg.mode
-        self.tracker = Tracker(cfg.tracker)
+        # the input rules and the law: one ROS-free object, shared with bag replay
+        self.inputs = TrackerInputs(cfg.tracker, cfg.rules, on_reject=self._on_reject,
+                                    on_jump=self._on_jump)
+        self.tracker: Tracker = self.inputs.tracker
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
-        self.frame = cfg.frame
-        self.wait_for_trajectory = cfg.wait_for_trajectory
+        self.frame = cfg.rules.frame
+        self.wait_for_trajectory = cfg.rules.wait_for_trajectory
         if not self.wait_for_trajectory:     # only then are the per-step samples read
             self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
             self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist,
                                      DATA_QOS)
             self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel,
                                      DATA_QOS)
-        self.follower: Follower | None = None
-        self.last_refusal = ''
         self.last_retime = ''              # what re-timing the last trajectory changed
-        self._pool: Any = None             # real time: the re-timing worker thread
-        self._retimed: list = []           # (future, origin, source) ready to adopt
-        self.origin_ns = 0
+        self._pool: ThreadPoolExecutor | None = None    # real time: the re-timing thread
+        # (future, origin, source) ready to adopt
+        self._retimed: list[tuple[Future[tuple[Trajectory, str]], int, str]] = []
         self._announce = False             # tracker/trajectory due at the next step
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
@@ -314,15 +326,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                                  self._on_multidof, LATCHED_QOS)
         # lockstep needs no clock: a command answers an odom stamp, and the time law of an
         # untimed Path starts at the latest odom stamp (no /clock subscription per step)
-        self._odom: Odometry | None = None
-        self._ref = [None, None, None]
-        self._refs: dict[int, list] = {}      # lockstep: stamp -> [pose, twist, accel]
-        self.last_stamp = -1
-        self.last_odom_stamp = -1
-        self.rejected = 0
-        self.jumps = 0
         self.commands = 0
-        self._stopped = False
         self.saturated = self.stale_stops = self.deadline_misses = 0
         self._rejected_reported = 0
         self._odom_intervals, self._odom_interval_sum = 0, 0.0
@@ -364,8 +368,15 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._monitor_start()
 
     def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
-        """An accepted runtime set (post-set callback): the law uses the new gains/limits."""
+        """An accepted runtime set (post-set callback): the new gains, limits and rules.
+
+        Parameters
+        ----------
+        old, new : TrackerSettings
+            The settings before and after the change.
+        """
         self.tracker.config = new.tracker
+        self.inputs.rules = new.rules
         self.max_path_poses = new.max_path_poses
         if self.monitor is not None:
             self.monitor.settings = new.monitor.settings
@@ -423,7 +434,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 self.log('info', f'certificate monitor: predict_latency {P:.4f} -> {new_p:.4f} s '
                                  f'(latency estimate {est.latency:.4f} s)')
                 pred.cmd_latency = P = new_p
-        if self._stopped:
+        if self.inputs.stopped:
             est = LatencyEstimate(False, 'inputs stale: the tracker has stopped the robot')
         verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
@@ -458,42 +469,48 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         super().close()
 
     # ------------------------------------------------------------------ inputs
-    def _reject(self, what: str) -> None:
-        self.rejected += 1
-        if self.rejected <= 10 or self.rejected % 1000 == 0:
-            self.log('warn', f'ignored {what} (rejected so far: {self.rejected})')
+    def _on_reject(self, r: Rejection) -> None:
+        """Say that the rules refused an input (messages: the first 10, then every 1000th)."""
+        if r.kind == 'trajectory':
+            keep = 'the previous trajectory' if self.inputs.follower else 'the reference topics'
+            self.log('error', f'refused trajectory: {r.reason}; keeping {keep}')
+        elif r.kind == 'start':
+            self.log('error', f'refused trajectory: {r.reason}; waiting at rest for a new '
+                              'trajectory')
+            self._diagnostics()
+        elif self.inputs.rejected <= 10 or self.inputs.rejected % 1000 == 0:
+            self.log('warn', f'ignored {r} (rejected so far: {self.inputs.rejected})')
 
-    def _new_trajectory(self, build, source: str) -> None:
+    def _on_jump(self, gap: float) -> None:
+        self.log('warn', f'odom stamp jumped {gap:.3f} s ahead: re-initialising the '
+                         'compensator from odom')
+
+    def _new_trajectory(self, msg: Any, kind: str, topic: str) -> None:
+        """A trajectory message: built, re-timed (real time: in a worker thread), adopted."""
+        source = f'topic {self.resolve_topic_name(topic)}'
+        inputs = self.inputs
         try:
-            traj, origin = build()
-            if self.config.retime and self.mode == 'realtime' and not traj.is_analytic:
+            traj, origin = inputs.build(msg, kind, source, now_ns=self._now_ns())
+            if inputs.rules.retime and self.mode == 'realtime' and not traj.is_analytic:
                 # real time: check and re-time in a worker thread (a second or two for a
                 # lap); odometry keeps being answered meanwhile, and the new trajectory
                 # starts at the first odometry after it is ready (re-based if late)
                 if self._pool is None:
-                    from concurrent.futures import ThreadPoolExecutor
                     self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
-                fut = self._pool.submit(within_limits, traj, self.config.limits)
+                fut = self._pool.submit(inputs.retime, traj)
                 fut.add_done_callback(lambda f: self._retimed.append((f, origin, source)))
                 return
-            if self.config.retime:
-                traj, note = within_limits(traj, self.config.limits)
-                self._note_retime(note, source)
+            traj, note = inputs.retime(traj)
+            self._note_retime(note, source)
         except TrajectoryError as exc:
-            return self._refuse(exc)
+            return inputs.refuse(str(exc))
         self._adopt(traj, origin, source)
-        self._try_compute()                # a pose not yet answered gets its command now
+        self._answer(inputs.compute())     # a pose not yet answered gets its command now
 
     def _note_retime(self, note: str, source: str) -> None:
         if note:
             self.last_retime = note
             self.log('warn', f'trajectory from {source}: {note}')
-
-    def _refuse(self, exc: Exception) -> None:
-        self.rejected += 1
-        self.last_refusal = str(exc)
-        keep = 'the previous trajectory' if self.follower else 'the reference topics'
-        self.log('error', f'refused trajectory: {exc}; keeping {keep}')
 
     def _take_retimed(self) -> None:
         """Adopt a trajectory re-timed in the background (real time), or refuse it."""
@@ -502,73 +519,53 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             try:
                 traj, note = fut.result()
             except TrajectoryError as exc:
-                self._refuse(exc)
+                self.inputs.refuse(str(exc))
                 continue
             self._note_retime(note, source)
             self._adopt(traj, origin, source)
 
-    def _adopt(self, traj, origin: int, source: str) -> None:
-        if self.follower is None:
-            self.follower = Follower(self.tracker, traj, self.config.rest_speed,
-                                     start_tolerance=self.config.start_tolerance,
-                                     max_start_distance=self.config.max_start_distance)
-        else:
-            self.follower.set_trajectory(traj)
-        self.origin_ns = origin
+    def _adopt(self, traj: Trajectory, origin: int, source: str) -> None:
+        self.inputs.adopt(traj, origin)
         self._announce = True                 # at the step that first follows it
         self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
                          f'({traj.kind}), {traj.duration:.3f} s from stamp '
                          f'{origin * 1e-9:.3f} s: starting a new run')
 
     def _on_path(self, msg: PathMsg) -> None:
-        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY)}'
-        self._new_trajectory(lambda: path_to_trajectory(
-            msg, frame=self.frame, source=source, cruise_speed=self.config.cruise_speed,
-            max_accel=self.config.max_accel, now_ns=self._now_ns()),
-            source)
+        self._new_trajectory(msg, 'path', topics.TRAJECTORY)
 
-    def _now_ns(self) -> int:
-        """Now (ns) for an untimed Path: the latest odom stamp in lockstep, else the clock."""
+    def _now_ns(self) -> int | None:
+        """Now (ns) for an untimed Path: the clock in real time, None in lockstep.
+
+        None: the rules' default, the latest odom stamp (lockstep needs no clock).
+        """
         if self.mode == 'lockstep':
-            return max(self.last_odom_stamp, 0)
-        return self.get_clock().now().nanoseconds
+            return None
+        return int(self.get_clock().now().nanoseconds)
 
     def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
-        source = f'topic {self.resolve_topic_name(topics.TRAJECTORY_MULTIDOF)}'
-        self._new_trajectory(lambda: multidof_to_trajectory(msg, frame=self.frame,
-                                                            source=source), source)
+        self._new_trajectory(msg, 'multidof', topics.TRAJECTORY_MULTIDOF)
 
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id != self.frame:
-            return self._reject(f'odom in frame {msg.header.frame_id!r} (expected '
-                                f'{self.frame!r})')
         if self.mode == 'lockstep' and \
                 self.pub_cmd.get_subscription_count() < self.config.lockstep_subscribers:
             return                         # not every cmd_vel subscriber matched: the plant
                                            # republishes the step (its lockstep_retry)
-        s = stamp_ns(msg.header.stamp)
-        if s <= self.last_odom_stamp:
-            if s < self.last_odom_stamp:
-                self._reject(f'odom stamp going backwards ({s} < {self.last_odom_stamp} ns)')
-            return                         # repeat of the current step: already handled
-        jump = s - self.last_odom_stamp
-        if self.last_odom_stamp >= 0 and jump > self.config.max_stamp_jump * 1e9:
-            self.jumps += 1
-            self.log('warn', f'odom stamp jumped {jump * 1e-9:.3f} s '
-                             'ahead: re-initialising the compensator from odom')
-            self.tracker.reset()
-        if self.last_odom_stamp >= 0:
-            gap = (s - self.last_odom_stamp) * 1e-9
+        inputs = self.inputs
+        last = inputs.last_odom_stamp
+        s = inputs.accept_odom(msg)
+        if s is None:
+            return                         # refused (said), or a repeat of the current step
+        if last >= 0:
+            gap = (s - last) * 1e-9
             self._odom_intervals += 1
             self._odom_interval_sum += gap
             if gap > 1.5 * self.tracker.config.dt:
                 self.deadline_misses += 1
-        self._odom = msg
-        self.last_odom_stamp = s
         if self._retimed and self.pub_cmd.get_subscription_count() >= \
                 self.config.lockstep_subscribers:
             self._take_retimed()           # real time: a trajectory re-timed meanwhile
-        self._try_compute()                # cmd_vel first: the clock read is bookkeeping
+        self._answer(inputs.compute())     # cmd_vel first: the clock read is bookkeeping
         self._odom_received()
         self._monitor_odom(s, msg)
 
@@ -584,117 +581,56 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if self.mode == 'realtime':
             self._last_odom_wall = now
 
-    def _on_ref(self, i: int, msg) -> None:
-        if msg.header.frame_id != self.frame:
-            return self._reject(f'reference in frame {msg.header.frame_id!r}')
-        self._ref[i] = msg
+    def _on_ref(self, i: int, msg: Any) -> None:
+        if not self.inputs.accept_reference(i, msg):
+            return
         self._last_ref_rx = now = self.get_clock().now().nanoseconds
         if self.mode == 'realtime':
             self._last_ref_wall = now       # one clock read: it delays an odom arriving now
-        elif self.follower is None and not self.wait_for_trajectory:
-            s = stamp_ns(msg.header.stamp)
-            if s < self.last_stamp:
-                return                     # older than the last odometry used: never needed
-            parts = self._refs.get(s)
-            if parts is None:
-                if len(self._refs) >= REF_BUFFER:
-                    del self._refs[min(self._refs)]
-                parts = self._refs[s] = [None, None, None]
-            parts[i] = msg
-            self._try_compute()
+        elif self.inputs.samples_stepped:
+            self._answer(self.inputs.compute())
 
-    def _on_ref_pose(self, msg):
+    def _on_ref_pose(self, msg: PoseStamped) -> None:
         self._on_ref(0, msg)
 
-    def _on_ref_twist(self, msg):
+    def _on_ref_twist(self, msg: TwistStamped) -> None:
         self._on_ref(1, msg)
 
-    def _on_ref_accel(self, msg):
+    def _on_ref_accel(self, msg: AccelStamped) -> None:
         self._on_ref(2, msg)
 
-    # ------------------------------------------------------------------ law
-    def _try_compute(self) -> None:
-        if self.follower is not None:
-            return self._follow()
-        if self.wait_for_trajectory:
+    # ------------------------------------------------------------------ the law's answers
+    def _answer(self, step: Step | None) -> None:
+        """Publish the command of a step the rules made due, and what goes with it."""
+        if step is None:
             return
-        odom = self._odom
-        r_pose, r_twist, r_accel = self._ref
-        if odom is None or r_pose is None or r_twist is None or r_accel is None:
-            return
-        if self.mode == 'realtime' and self._stopped:
-            return                         # the watchdog publishes the stop
-        s = stamp_ns(odom.header.stamp)
-        parts = self._ref
-        if self.mode == 'lockstep':
-            parts = self._refs.get(s)
-            if s <= self.last_stamp or parts is None or any(r is None for r in parts):
-                return
-        pose = pose_from_odom(odom.pose.pose)
-        if isinstance(pose, str):
-            self._odom = None
-            return self._reject(f'odom: {pose}')
-        t_ref = stamp_ns(parts[0].header.stamp) * 1e-9
-        ref = reference_from_msgs(t_ref, *parts)
-        if isinstance(ref, str):
-            return self._reject(ref)
-        self.last_stamp = s
-        if self.mode == 'lockstep':
-            for old in [k for k in self._refs if k <= s]:
-                del self._refs[old]
-        speed = odom.twist.twist.linear.x
-        cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
-                                measured_speed=speed if math.isfinite(speed) else 0.0,
-                                stamp=s * 1e-9)
-        self._publish(cmd.v, cmd.w, s)
-        self._outputs(s, pose, ref, cmd)
-
-    def _follow(self) -> None:
-        """One command from the own trajectory, sampled at the odometry stamp."""
-        odom, f = self._odom, self.follower
-        if odom is None or f is None or (self.mode == 'realtime' and self._stopped):
-            return
-        s = stamp_ns(odom.header.stamp)
-        if s <= self.last_stamp:
-            return
-        pose = pose_from_odom(odom.pose.pose)
-        if isinstance(pose, str):
-            self._odom = None
-            return self._reject(f'odom: {pose}')
-        self.last_stamp = s
-        speed = odom.twist.twist.linear.x
-        was_finished, was_started = f.finished, f.started
-        cmd = f.step(pose[0], pose[1], pose[2], trajectory_time(s, self.origin_ns),
-                     measured_speed=speed if math.isfinite(speed) else 0.0)
-        announce, self._announce = self._announce, False
-        if f.started and not was_started:
-            self._started(f, s, announce)
-        elif announce:
-            self._announce_followed(f, s)
-        if f.finished and not was_finished:
-            e = math.hypot(cmd.error[0], cmd.error[2])
-            self.log('info',
-                f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
-                f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
-                'a new trajectory')
-            self._diagnostics()
-        self._publish(cmd.v, cmd.w, s)
-        self._outputs(s, pose, f.last_ref, cmd)
+        f = self.inputs.follower
+        if f is not None:                  # a step on the own trajectory
+            announce, self._announce = self._announce, False
+            if step.started:
+                self._started(f, step.stamp, announce)
+            elif announce:
+                self._announce_followed(f, step.stamp)
+            if step.finished:
+                e = math.hypot(step.command.error[0], step.command.error[2])
+                self.log('info',
+                    f'trajectory finished: at rest at t = {f.finished_at:.3f} s (trajectory '
+                    f'end {f.trajectory.t_end:.3f} s), position error {e:.4f} m; waiting for '
+                    'a new trajectory')
+                self._diagnostics()
+        self._publish(step.command.v, step.command.w, step.stamp)
+        self._outputs(step.stamp, step.pose, step.ref, step.command)
 
     def _started(self, f: Follower, stamp: int, announce: bool) -> None:
-        """Say how the trajectory started: re-based, on its stamps, or refused.
+        """Say how the trajectory started: re-based or on its stamps.
 
-        ``stamp`` is the odometry stamp of this step; ``announce``: the trajectory was
-        adopted at it (:meth:`_announce_followed`).
+        A refusal at its start is said by :meth:`_on_reject`.  ``stamp`` is the odometry
+        stamp of this step; ``announce``: the trajectory was adopted at it
+        (:meth:`_announce_followed`).
         """
         if f.refused:
-            self.rejected += 1
-            self.last_refusal = f.refused
-            self.log('error', f'refused trajectory: {f.refused}; waiting at rest for a new '
-                              'trajectory')
-            self._diagnostics()
             return
-        elif f.offset:
+        if f.offset:
             self.log('info', f'trajectory started {f.offset:.3f} s after its start stamp: '
                              're-based to start now (its own speed profile, no chase)')
         if announce or f.offset:              # re-based after its adoption: again
@@ -709,7 +645,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         """
         if not f.trajectory.is_analytic and not f.refused:
             self.pub_followed.publish(followed_to_multidof(
-                f.trajectory, self.origin_ns + int(round(f.offset * 1e9)), self.frame,
+                f.trajectory, self.inputs.origin_ns + int(round(f.offset * 1e9)), self.frame,
                 header_ns=stamp))
 
     def _publish(self, v: float, w: float, stamp: int | None = None) -> None:
@@ -733,7 +669,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._monitor_command(stamp, self._cmd.linear.x, self._cmd.angular.z)
 
     # ------------------------------------------------------------------ outputs
-    def _outputs(self, stamp: int, pose, ref, cmd) -> None:
+    def _outputs(self, stamp: int, pose: tuple[float, float, float], ref: RefSample | None,
+                 cmd: Command) -> None:
         """Tracking error every step, travelled path and reference marker at viz_period."""
         if cmd.saturated:
             self.saturated += 1
@@ -770,7 +707,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _diagnostics(self) -> None:
         """Tracker status on /diagnostics (diagnostic_msgs/DiagnosticArray)."""
         now = self.get_clock().now().nanoseconds
-        f = self.follower
+        f = self.inputs.follower
         if f is None:
             state = 'waiting for a trajectory' if self.wait_for_trajectory else \
                 'following the reference topics'
@@ -790,13 +727,13 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         ref_age = (now - self._last_ref_rx) * 1e-9 if self._last_ref_rx else math.inf
         level = DiagnosticStatus.OK
         msgs = [state]
-        if self._stopped:
+        if self.inputs.stopped:
             level = DiagnosticStatus.WARN
             msgs.append('inputs stale: stopped')
-        if self.rejected > self._rejected_reported:
+        if self.inputs.rejected > self._rejected_reported:
             level = max(level, DiagnosticStatus.WARN)
-            msgs.append(f'{self.rejected - self._rejected_reported} input(s) rejected')
-        self._rejected_reported = self.rejected
+            msgs.append(f'{self.inputs.rejected - self._rejected_reported} input(s) rejected')
+        self._rejected_reported = self.inputs.rejected
         st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
                               message='; '.join(msgs),
                               hardware_id=self.get_fully_qualified_name())
@@ -804,12 +741,12 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'odom age (s)': f'{odom_age:.3f}',
                 'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
                 'commands': self.commands,
-                'rejected inputs': self.rejected, 'stale stops': self.stale_stops,
-                'saturated commands': self.saturated, 'stamp jumps': self.jumps,
+                'rejected inputs': self.inputs.rejected, 'stale stops': self.stale_stops,
+                'saturated commands': self.saturated, 'stamp jumps': self.inputs.jumps,
                 'trajectory': state,
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
                 'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
-                'last refused trajectory': self.last_refusal or 'none',
+                'last refused trajectory': self.inputs.last_refusal or 'none',
                 'last re-timed trajectory': self.last_retime or 'none'}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
@@ -818,32 +755,29 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.pub_diag.publish(arr)
 
     def _watchdog(self) -> None:
-        own = self.follower is not None      # own trajectory: reference samples not needed
-        odom_t, ref_t = self._last_odom_wall, self._last_ref_wall
-        if odom_t is None or (ref_t is None and not own):
+        """Real time: stop while an input is stale (:func:`tracker_inputs.stale_inputs`)."""
+        inputs = self.inputs
+        stale = stale_inputs(int(self.get_clock().now().nanoseconds), self._last_odom_wall,
+                             self._last_ref_wall, self.config.input_timeout,
+                             own_trajectory=inputs.follower is not None)
+        if stale is None:
             return                          # not started yet: nothing has been commanded
-        now = self.get_clock().now().nanoseconds
-        limit = self.config.input_timeout * 1e9
-        inputs = [('odom', odom_t)]
-        if not own and ref_t is not None:
-            inputs.append(('reference', ref_t))
-        stale = [name for name, t in inputs if now - t > limit]
         if stale:
-            if not self._stopped:
+            if not inputs.stopped:
                 self.log('warn', f'no {" or ".join(stale)} for more than '
                                  f'{self.config.input_timeout} s: publishing stop')
-                self._stopped = True
+                inputs.stopped = True
                 self.stale_stops += 1
                 self.tracker.reset()
             self._publish(0.0, 0.0)
-        elif not stale and self._stopped:
+        elif inputs.stopped:
             self.log('info', 'inputs fresh again: resuming')
-            self._stopped = False
+            inputs.stopped = False
 
 
-def main(args=None) -> int:
-    """Console entry point of the tracker node; returns the exit code (see :func:`common.run`)."""
-    return run(TrackerNode, args)
+#: Console entry point of the tracker node: ``main(args)`` is ``run(TrackerNode, args)``
+#: (:func:`~nonfragile_tracker.nodes.common.run`: the exit code).
+main = partial(run, TrackerNode)
 
 
 if __name__ == '__main__':

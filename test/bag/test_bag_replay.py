@@ -10,11 +10,11 @@ import pytest
 
 from conftest import ROOT
 from nonfragile_tracker import cli, golden
-from nonfragile_tracker.bag.replay import (TRACKER_DEFAULTS, TrackerInputs,
-                                           load_tracker_parameters, replay)
+from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, load_tracker_parameters, replay
 from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
 from nonfragile_tracker.control.loop import PlantConfig, UnicyclePlant
 from nonfragile_tracker.control.reference import make_path
+from nonfragile_tracker.tracker_inputs import InputRules, TrackerInputs
 
 GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'
 GAINS = ['--gains', str(golden.golden_gains())]      # the gain the golden bags were made with
@@ -50,7 +50,7 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None)
     tracker's parameter file (default: the paper scenario's).
     """
     config, _ = load_tracker_parameters(params=params)
-    tracker = TrackerInputs(config, 'realtime')
+    tracker = TrackerInputs(config, InputRules('realtime'))
     plant = UnicyclePlant(PlantConfig())
     ref_path = make_path('circle', radius=0.5, rate=0.01)
     cov = np.zeros(36)
@@ -90,7 +90,7 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None)
         for _, kind, m in true_order[-4:]:
             out = tracker.odom(m) if kind == 'odom' else tracker.reference(
                 {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}[kind], m)
-            cmd = out if out is not None else cmd
+            cmd = out.command if out is not None else cmd
         plant.step(cmd.v, cmd.w)
         if k >= late:
             bag.append((recv + 2 * MS, 'cmd', T['geometry_msgs/msg/Twist'](

@@ -66,7 +66,7 @@ def test_latency_step_turns_the_certificate_status_to_error(ros_context):  # noq
 
     def estimate_on_sim_time():
         # one estimate (and its status published) each time the odometry passes a mark
-        while marks and tracker.last_odom_stamp * 1e-9 >= marks[0] - 1e-9:
+        while marks and tracker.inputs.last_odom_stamp * 1e-9 >= marks[0] - 1e-9:
             marks.pop(0)
             tracker.monitor.update()
             tracker._diagnostics()

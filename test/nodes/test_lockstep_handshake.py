@@ -91,11 +91,11 @@ def test_tracker_leaves_a_step_unanswered_until_cmd_vel_has_its_subscribers(ctx)
     try:
         spin(ex, 0.5)
         tracker._on_odom(msg)          # one cmd_vel subscriber of two: not consumed
-        assert tracker.last_odom_stamp == -1
+        assert tracker.inputs.last_odom_stamp == -1
         peer.create_subscription(Twist, topics.CMD_VEL, lambda m: None, DATA_QOS)
         assert spin(ex, 5.0, lambda: tracker.pub_cmd.get_subscription_count() >= 2)
         tracker._on_odom(msg)          # the plant's republished step: consumed now
-        assert tracker.last_odom_stamp == 0
+        assert tracker.inputs.last_odom_stamp == 0
     finally:
         tracker.destroy_node()
         peer.destroy_node()

@@ -67,7 +67,7 @@ def test_fuzz_commands_finite_and_within_limits(node):
     rng = np.random.default_rng(12345)
     bad_values = [math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0]
     node.sent.clear()
-    rejected0 = node.rejected
+    rejected0 = node.inputs.rejected
     n_bad = 0
     for k in range(1, 4001):
         vals = list(rng.normal(scale=rng.choice([0.1, 1.0, 100.0]), size=11))
@@ -89,7 +89,7 @@ def test_fuzz_commands_finite_and_within_limits(node):
     for v, w in node.sent:
         assert math.isfinite(v) and math.isfinite(w)
         assert abs(v) <= VMAX and abs(w) <= WMAX
-    assert node.rejected - rejected0 > 0.5 * n_bad * 0.5   # malformed ones were counted
+    assert node.inputs.rejected - rejected0 > 0.5 * n_bad * 0.5   # malformed ones were counted
 
 
 def test_stamps_backwards_and_duplicates_are_ignored(node):
@@ -99,15 +99,15 @@ def test_stamps_backwards_and_duplicates_are_ignored(node):
     for k in (base, base + 1):
         feed(node, *messages(k, 0.5, 0.0, 1.57, 0.05, ref))
     assert len(node.sent) == 2
-    j0 = node.jumps
-    before = node.rejected
+    j0 = node.inputs.jumps
+    before = node.inputs.rejected
     feed(node, *messages(base + 1, 0.5, 0.0, 1.57, 0.05, ref))      # duplicate: ignored silently
-    assert len(node.sent) == 2 and node.rejected == before
+    assert len(node.sent) == 2 and node.inputs.rejected == before
     feed(node, *messages(base - 5, 0.5, 0.0, 1.57, 0.05, ref))      # backwards: rejected
-    assert len(node.sent) == 2 and node.rejected == before + 1
+    assert len(node.sent) == 2 and node.inputs.rejected == before + 1
     node.tracker.v = 0.9                                              # a stale compensator
     feed(node, *messages(base + 500, 0.5, 0.0, 1.57, 0.05, ref))    # 4.99 s jump ahead
-    assert node.jumps == j0 + 1 and len(node.sent) == 3
+    assert node.inputs.jumps == j0 + 1 and len(node.sent) == 3
     assert node.tracker.v == pytest.approx(0.05, abs=0.05)           # re-initialised from odom
 
 

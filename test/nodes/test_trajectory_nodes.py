@@ -162,8 +162,8 @@ def test_path_from_a_topic_is_tracked_and_bad_ones_are_refused(ros_context):
     # the test's publisher is the trajectory source (no reference node: it would publish
     # its built-in path as a second trajectory)
     tracker = TrackerNode(context=ctx, parameter_overrides=param_list(params, 'tracker'))
-    spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx)
-    assert tracker.follower is not None and tracker.origin_ns == origin
+    spin_nodes([test, tracker], lambda: tracker.inputs.follower is not None, ctx)
+    assert tracker.inputs.follower is not None and tracker.inputs.origin_ns == origin
     plant = PlantNode(context=ctx, parameter_overrides=param_list(
         params, 'plant', lockstep_subscribers=2))
     nodes = [test, tracker, plant]
@@ -191,11 +191,11 @@ def test_path_from_a_topic_is_tracked_and_bad_ones_are_refused(ros_context):
         np.testing.assert_allclose(y, sim.y, rtol=0, atol=1e-9)
         np.testing.assert_allclose([c[0] for c in cmds], sim.cmd_v, rtol=0, atol=1e-9)
         np.testing.assert_allclose([c[1] for c in cmds], sim.cmd_w, rtol=0, atol=1e-9)
-        assert tracker.rejected >= 1                 # the wrong-frame Path was refused
-        assert tracker.follower.trajectory is not None and tracker.follower.finished
+        assert tracker.inputs.rejected >= 1                 # the wrong-frame Path was refused
+        assert tracker.inputs.follower.trajectory is not None and tracker.inputs.follower.finished
         # at rest after the end: zero commands from the step it stopped (the paper's
         # A_tau xi(t - tau) term then lets the plant drift; no command can hold it there)
-        f = tracker.follower
+        f = tracker.inputs.follower
         k_end = int(round(f.finished_at / 0.01)) + origin // 10_000_000
         end = traj.sample(traj.t_end)
         assert f.finished_at - traj.t_end < 0.5
@@ -352,16 +352,16 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
                                                                      retime=False))
     try:
         pub.publish(good)
-        spin_nodes([test, tracker], lambda: tracker.follower is not None, ctx, timeout=20)
-        kept = tracker.follower.trajectory
+        spin_nodes([test, tracker], lambda: tracker.inputs.follower is not None, ctx, timeout=20)
+        kept = tracker.inputs.follower.trajectory
         for msg, needle in bad_paths(good):
-            before = tracker.rejected
+            before = tracker.inputs.rejected
             pub.publish(msg)
-            spin_nodes([test, tracker], lambda: tracker.rejected > before, ctx, timeout=10)
-            assert tracker.rejected == before + 1, needle
-            assert tracker.last_refusal.startswith('topic /trajectory: ')
-            assert needle in tracker.last_refusal
-            assert tracker.follower.trajectory is kept
+            spin_nodes([test, tracker], lambda: tracker.inputs.rejected > before, ctx, timeout=10)
+            assert tracker.inputs.rejected == before + 1, needle
+            assert tracker.inputs.last_refusal.startswith('topic /trajectory: ')
+            assert needle in tracker.inputs.last_refusal
+            assert tracker.inputs.follower.trajectory is kept
         m = MultiDOFJointTrajectory()
         m.header.frame_id = 'odom'
         m.joint_names = ['base_link']
@@ -375,18 +375,18 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
             p.time_from_start.sec = int(tk)
             m.points.append(p)
         pub_m.publish(m)
-        spin_nodes([test, tracker], lambda: tracker.follower.trajectory is not kept, ctx,
+        spin_nodes([test, tracker], lambda: tracker.inputs.follower.trajectory is not kept, ctx,
                    timeout=10)
-        new = tracker.follower.trajectory
+        new = tracker.inputs.follower.trajectory
         assert new.kind == 'quintic Hermite'
         s = new.sample(1.5)                          # x = t^2 / 2 exactly
         assert (s.x, s.vx, s.ax) == pytest.approx((1.125, 1.5, 1.0), abs=1e-12)
         m.points[2].transforms[0].translation.y = math.inf
-        before = tracker.rejected
+        before = tracker.inputs.rejected
         pub_m.publish(m)
-        spin_nodes([test, tracker], lambda: tracker.rejected > before, ctx, timeout=10)
-        assert 'topic /trajectory_multidof: point 2: y = inf' in tracker.last_refusal
-        assert tracker.follower.trajectory is new
+        spin_nodes([test, tracker], lambda: tracker.inputs.rejected > before, ctx, timeout=10)
+        assert 'topic /trajectory_multidof: point 2: y = inf' in tracker.inputs.last_refusal
+        assert tracker.inputs.follower.trajectory is new
     finally:
         tracker.destroy_node()
         test.destroy_node()
@@ -424,14 +424,14 @@ def test_path_tracked_in_real_time(ros_context):
     nodes = [test, tracker, plant]
     try:
         # the robot is up and its odometry reaches the tracker: start in 0.5 s (wall clock)
-        spin_nodes(nodes, lambda: tracker.last_odom_stamp >= 0 and len(odoms) > 5, ctx,
+        spin_nodes(nodes, lambda: tracker.inputs.last_odom_stamp >= 0 and len(odoms) > 5, ctx,
                    timeout=30)
         origin = time.time_ns() + 500_000_000
         traj, msg = as_sent(traj0, origin)
         pub.publish(msg)
-        spin_nodes(nodes, lambda: tracker.follower is not None and tracker.follower.finished
+        spin_nodes(nodes, lambda: tracker.inputs.follower is not None and tracker.inputs.follower.finished
                    and time.time_ns() > origin + 5_500_000_000, ctx, timeout=30)
-        assert tracker.follower.finished
+        assert tracker.inputs.follower.finished
         st = np.array([o[0] for o in odoms], dtype=np.int64)
         tt = (st - origin) * 1e-9
         ref = traj.evaluate(tt)
@@ -492,10 +492,10 @@ def test_reference_relays_an_untimed_plan(ros_context):
             ps.pose.position.x, ps.pose.position.y, ps.pose.orientation.w = x, y, 1.0
             plan.poses.append(ps)
         pub.publish(plan)
-        spin_nodes(nodes, lambda: tracker.follower is not None, ctx, timeout=20)
-        traj = tracker.follower.trajectory
+        spin_nodes(nodes, lambda: tracker.inputs.follower is not None, ctx, timeout=20)
+        traj = tracker.inputs.follower.trajectory
         assert traj.t_end == pytest.approx(time_law(xs, ys, 0.4, 0.2)[-1], abs=1e-9)
-        assert tracker.origin_ns == reference.origin_ns
+        assert tracker.inputs.origin_ns == reference.origin_ns
         s = traj.sample(traj.t_end / 2)
         assert 0.2 < math.hypot(s.vx, s.vy) < 0.5
         bad = PathMsg()
@@ -509,7 +509,7 @@ def test_reference_relays_an_untimed_plan(ros_context):
         assert reference.last_refusal == 'topic plan: point 1: x = nan is not finite; every ' \
             'value must be a finite number'
         spin_nodes(nodes, lambda: False, ctx, timeout=0.3)
-        assert tracker.follower.trajectory is traj and tracker.rejected == 0
+        assert tracker.inputs.follower.trajectory is traj and tracker.inputs.rejected == 0
     finally:
         for n in nodes:
             n.destroy_node()
@@ -548,7 +548,7 @@ def test_reference_started_5_s_before_the_tracker_does_not_make_it_chase(ros_con
                                                      if c[1] != 0.0 or moving)
                                        or (moving and moving[-1][0] - moving[0][0] > 1.5)),
                    ctx, timeout=30)
-        f = tracker.follower
+        f = tracker.inputs.follower
         assert f is not None and f.started and f.refused is None
         assert f.offset > 4.0                   # re-based: the lap was 5 s old
         t0 = moving[0][0]
@@ -586,16 +586,16 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
         tracker = TrackerNode(context=ctx, parameter_overrides=param_list(
             params, 'tracker', **{name: value}))
         try:
-            spin_nodes([test, tracker], lambda: tracker.follower is not None
-                       or tracker.last_refusal, ctx, timeout=30)
+            spin_nodes([test, tracker], lambda: tracker.inputs.follower is not None
+                       or tracker.inputs.last_refusal, ctx, timeout=30)
             v = check(lap, Limits(**{name: value}))[name]
             if name == 'min_turning_radius':
-                assert tracker.follower is None
-                note = tracker.last_refusal
+                assert tracker.inputs.follower is None
+                note = tracker.inputs.last_refusal
                 assert 'min_turning_radius = 0.5 m' in note and 'curvature' in note
             else:
                 note = tracker.last_retime
-                assert tracker.follower.trajectory.t_end > lap.t_end + 0.1   # re-timed
+                assert tracker.inputs.follower.trajectory.t_end > lap.t_end + 0.1   # re-timed
                 assert f'{v.violated_value:.4g}' in note
             assert f'VIOLATES {name} = {value:g}' in note or name == 'min_turning_radius'
             assert f'{v.violated_at:.3f} s' in note
