@@ -39,7 +39,7 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from nonfragile_tracker.control.identify import (CommandSamples, OdometrySamples,  # noqa: E402
+from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,  # noqa: E402
                                                  identify_latency)
 
 DT = 0.01
@@ -58,11 +58,11 @@ def plant_parameters(latency: float, seed: int, duration: float, mode: str) -> d
 
 def record_sim(latency: float, seed: int, duration: float = 20.0):
     """Commands and odometry of the in-process loop, as the plant publishes them."""
-    from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                 UnicyclePlant, quaternion_to_yaw, step_time,
-                                                 yaw_to_quaternion)
-    from nonfragile_tracker.control.reference import make_path
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
+                                                            UnicyclePlant, quaternion_to_yaw,
+                                                            step_time, yaw_to_quaternion)
+    from nonfragile_tracker.control.simulation.reference import make_path
     plant = UnicyclePlant(PlantConfig(dt=DT, cmd_latency=latency, lag_v=LAG, lag_w=LAG,
                                       odom_rate=50.0, odom_noise=(1e-3, 1e-3, 1e-3),
                                       noise_seed=seed))

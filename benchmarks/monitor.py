@@ -42,20 +42,20 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from nonfragile_tracker.control.gains import read_gain_design, read_gain_file  # noqa: E402
-from nonfragile_tracker.control.identify import (CommandSamples, OdometrySamples,  # noqa: E402
+from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file  # noqa: E402
+from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,  # noqa: E402
                                                  identify_latency)
-from nonfragile_tracker.control.latency_design import (design_for_latency,  # noqa: E402
+from nonfragile_tracker.control.synthesis.latency_design import (design_for_latency,  # noqa: E402
                                                        plan_from_identification)
-from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,  # noqa: E402
+from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,  # noqa: E402
                                              step_time)
-from nonfragile_tracker.control.monitor import (ERROR, LEVEL_NAMES, Certificate,  # noqa: E402
+from nonfragile_tracker.control.identification.monitor import (ERROR, LEVEL_NAMES, Certificate,  # noqa: E402
                                                 MonitorSettings, MonitorWorker,
                                                 adapted_prediction, certificate_from_design,
                                                 evaluate)
-from nonfragile_tracker.control.problem import load_problem  # noqa: E402
-from nonfragile_tracker.control.reference import figure_eight  # noqa: E402
-from nonfragile_tracker.control.simulate import run_loop  # noqa: E402
+from nonfragile_tracker.control.synthesis.problem import load_problem  # noqa: E402
+from nonfragile_tracker.control.simulation.reference import figure_eight  # noqa: E402
+from nonfragile_tracker.control.simulation.simulate import run_loop  # noqa: E402
 
 CONFIG = ROOT / 'config'
 DT, TRACKER_DT = 0.01, 0.02
@@ -198,7 +198,7 @@ def main_nodes(args) -> int:
     """Bring-up in process, then the step through the nodes in real time."""
     import tempfile
 
-    from nonfragile_tracker.control.gains import write_gain_file
+    from nonfragile_tracker.control.simulation.gains import write_gain_file
     K, predict, cert, text = bring_up(seed=11)
     print('bring-up:', text)
     tmp = Path(tempfile.mkdtemp(prefix='monitor_bench_'))

@@ -120,7 +120,7 @@ def unique_domain_id(salt: str = '') -> int:
 
 @pytest.fixture(scope='session')
 def paper_problem():
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     return load_problem(CONFIG / 'paper_problem.yaml')
 
 
@@ -166,7 +166,7 @@ SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objectiv
 def _design_shipped_gain(path: Path) -> SimpleNamespace:
     """``design ... -o path`` through ``cli.main`` with a spy on ``design.at_gain_norm``."""
     from nonfragile_tracker.cli import main
-    from nonfragile_tracker.control import design
+    from nonfragile_tracker.control.synthesis import design
 
     real, calls = design.at_gain_norm, []
 

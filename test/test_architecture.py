@@ -123,13 +123,14 @@ def test_layers_hold():
 
 
 @pytest.mark.parametrize('module, line, words', [
-    ('nonfragile_tracker.control.model', 'import rclpy', 'imports rclpy (not allowed in control)'),
-    ('nonfragile_tracker.control.model', 'from ..bag import reader',
+    ('nonfragile_tracker.control.simulation.model', 'import rclpy',
+     'imports rclpy (not allowed in control)'),
+    ('nonfragile_tracker.control.simulation.model', 'from ...bag import reader',
      'imports nonfragile_tracker.bag.reader (bag, above control)'),
     ('nonfragile_tracker.bag.motion', 'from rclpy.node import Node', 'imports rclpy'),
     ('nonfragile_tracker.bag.report', 'from .. import runner', 'nonfragile_tracker.runner'),
     ('nonfragile_tracker.nodes.tracker', 'from ..runner import merge', '(orchestration, above nodes)'),
-    ('nonfragile_tracker.control.loop', 'def f():\n    import rosbags', 'imports rosbags'),
+    ('nonfragile_tracker.control.simulation.loop', 'def f():\n    import rosbags', 'imports rosbags'),
 ])
 def test_the_layer_check_fails_on_a_planted_import(module, line, words):
     source = MODULES[module].read_text() + '\n' + line + '\n'

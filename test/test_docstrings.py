@@ -29,9 +29,11 @@ from conftest import ROOT
 
 #: The modules whose public functions must document every parameter (dotted names).
 CHECKED = tuple(
-    [f'nonfragile_tracker.control.{m}' for m in (
-        'delay', 'analysis', 'design', 'problem', 'validate', 'model', 'reference',
-        'metrics', 'sensors', 'actuator', 'simulate', 'sdp')]
+    ['nonfragile_tracker.control.validate']
+    + [f'nonfragile_tracker.control.synthesis.{m}' for m in (
+        'delay', 'analysis', 'design', 'problem', 'sdp')]
+    + [f'nonfragile_tracker.control.simulation.{m}' for m in (
+        'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
         'errors', 'topics')]

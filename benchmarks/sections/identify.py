@@ -38,7 +38,7 @@ def _old_identify() -> types.ModuleType | None:
     """control/identify.py as of the session start (git show), or None without git."""
     try:
         src = subprocess.run(['git', '-C', str(ROOT), 'show',
-                              f'{BASELINE}:nonfragile_tracker/control/identify.py'],
+                              f'{BASELINE}:nonfragile_tracker/control/identification/identify.py'],
                              capture_output=True, text=True, check=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
         return None
@@ -92,8 +92,8 @@ def _fmt(r: dict, jitter: float) -> str:
 def bench_identify(cfg, table: Table, raw: dict) -> None:
     """Rows 7.x: each case of config/identify_cases.yaml, today's identify and the new."""
     import numpy as np
-    from nonfragile_tracker.control.identify import identify_latency
-    from nonfragile_tracker.control.recording import load_cases, record_case
+    from nonfragile_tracker.control.identification.identify import identify_latency
+    from nonfragile_tracker.control.identification.recording import load_cases, record_case
     cases = load_cases(ROOT / 'config' / 'identify_cases.yaml')
     old = _old_identify()
     if old is None:

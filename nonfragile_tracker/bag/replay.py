@@ -37,12 +37,12 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
-                              trajectory_time)
-from ..control.gains import read_gain_file
-from ..control.loop import Command, Tracker, TrackerConfig
-from ..control.limits import Limits, within_limits
-from ..control.trajectory import TrajectoryError
+from ..control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                                         trajectory_time)
+from ..control.simulation.gains import read_gain_file
+from ..control.simulation.loop import Command, Tracker, TrackerConfig
+from ..control.simulation.limits import Limits, within_limits
+from ..control.simulation.trajectory import TrajectoryError
 from ..files import node_key
 from ..msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
                        reference_from_msgs, stamp_ns, tracker_config)

@@ -2,7 +2,7 @@
 
 :func:`bag_report` reads a bag (:func:`~nonfragile_tracker.bag.reader.read_bag`),
 matches the robot pose (``odom``, else ``pose``) with the reference by header
-stamp and computes :func:`nonfragile_tracker.control.metrics.tracking_metrics`
+stamp and computes :func:`nonfragile_tracker.control.simulation.metrics.tracking_metrics`
 on the matched samples (peak ``|v|``, ``|w|`` from ``cmd_vel``).  Times are
 seconds since the first pose or reference stamp, so a simulated (sim time)
 run keeps its own time axis.  It finds stamp gaps on the pose topic and
@@ -29,7 +29,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .. import topics
-from ..control.metrics import TrackingMetrics, tracking_metrics
+from ..control.simulation.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
 from .errors import BagError
 
@@ -583,8 +583,9 @@ def certificate_source(bag: str | os.PathLike, gains: str | os.PathLike | None =
     directory's ``params.yaml`` (the tracker parameters recorded with the run:
     ``certified_residual`` etc.).  None when neither gives one.
     """
-    from ..control.gains import read_gain_design
-    from ..control.monitor import certificate_from_design, certificate_from_parameters
+    from ..control.simulation.gains import read_gain_design
+    from ..control.identification.monitor import (certificate_from_design,
+                                                  certificate_from_parameters)
     if gains is not None:
         params = _tracker_section(Path(gains))
         hold = float(params.get('dt', 0.01))
@@ -628,7 +629,8 @@ def certificate_check(bag: str | os.PathLike, certificate: Any, params: dict, *,
     settings : control.monitor.MonitorSettings, optional
         Default: from ``params`` as the tracker node builds them.
     """
-    from ..control.monitor import ERROR, STALE, MonitorSettings, estimate_latency, evaluate
+    from ..control.identification.monitor import (ERROR, STALE, MonitorSettings, estimate_latency,
+                                                  evaluate)
     from .motion import read_motion
     if settings is None:
         settings = MonitorSettings(

@@ -14,8 +14,8 @@ def _fmt_interval(lo: float, hi: float) -> str:
 def cmd_identify(args: argparse.Namespace) -> int:
     """Read the bag, identify, print the estimates and the next step, optionally write -o."""
     from ..bag.motion import read_motion
-    from ..control.identify import (identify_latency, measurement_to_command_delay,
-                                    with_source, write_identification)
+    from ..control.identification.identify import (identify_latency, measurement_to_command_delay,
+                                                   with_source, write_identification)
     from ..errors import InputError
     if args.output and Path(args.output).exists() and not args.force:
         raise InputError(f'{args.output} exists; pass --force to overwrite it')
@@ -74,7 +74,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.output:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
-    from ..control.latency_design import plan_from_identification
+    from ..control.synthesis.latency_design import plan_from_identification
     if math.isfinite(res.command_period_s):
         plan = plan_from_identification(res)
         bare = plan_from_identification(res, predictor=False)
@@ -110,7 +110,7 @@ def _cross_check(args: argparse.Namespace, data, res) -> list[str]:
     A base whose twist echoes the command, or is stamped differently from the pose,
     shows here: the poses are what the robot actually did.
     """
-    from ..control.identify import IdentificationError, identify_latency
+    from ..control.identification.identify import IdentificationError, identify_latency
     try:
         pose = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
                                 max_tau_s=args.max_tau, source='pose', bootstrap=50,

@@ -11,10 +11,10 @@ __all__ = ['register', 'run']
 
 def run(args: argparse.Namespace) -> int:
     """Design, print the figures, write the gain file (with its design record) if asked."""
-    from ..control.gains import write_gain_file
-    from ..control.latency_design import design_for_latency, plan_from_identification
-    from ..control.monitor import certificate_from_design
-    from ..control.problem import load_problem
+    from ..control.simulation.gains import write_gain_file
+    from ..control.synthesis.latency_design import design_for_latency, plan_from_identification
+    from ..control.identification.monitor import certificate_from_design
+    from ..control.synthesis.problem import load_problem
     from ..errors import InputError
     if args.output and Path(args.output).exists() and not args.force:
         raise FileExistsError(f'{args.output} exists; pass --force to overwrite it')
@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     record: dict = {}
     lag = 0.0 if args.lag is None else args.lag
     if args.identification is not None:
-        from ..control.identify import read_identification
+        from ..control.identification.identify import read_identification
         plan = plan_from_identification(read_identification(args.identification),
                                         predictor=not args.no_predictor,
                                         command_period=args.command_period)

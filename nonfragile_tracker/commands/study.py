@@ -19,11 +19,11 @@ def _fmt(v, unit: str = '', prec: str = '.4g') -> str:
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Sample, run the batch, print the summary; write JSON and the plot if asked."""
-    from ..control.batch import PathBatch
-    from ..control.gains import read_gain_design, read_gain_file
-    from ..control.loop import TrackerConfig
-    from ..control.problem import load_problem
-    from ..control.study import StudySpec, case_records, plot_study, run_study, summarize
+    from ..control.simulation.batch import PathBatch
+    from ..control.simulation.gains import read_gain_design, read_gain_file
+    from ..control.simulation.loop import TrackerConfig
+    from ..control.synthesis.problem import load_problem
+    from ..control.simulation.study import StudySpec, case_records, plot_study, run_study, summarize
     from ..errors import InputError
     from ..resources import config_dir
     from ..scenario import node_parameters, plant_config

@@ -13,9 +13,9 @@ __all__ = ['register', 'run']
 
 def run(args: argparse.Namespace) -> int:
     """Make the grid, design every point, print the table; JSON and plot if asked."""
-    from ..control.problem import load_problem
-    from ..control.sweep import (plot_sweep, records_for_json, run_sweep, sweep_points,
-                                 sweep_table)
+    from ..control.synthesis.problem import load_problem
+    from ..control.synthesis.sweep import (plot_sweep, records_for_json, run_sweep, sweep_points,
+                                           sweep_table)
     from ..errors import InputError
     for out in (args.json, args.plot):
         if out and Path(out).exists() and not args.force:

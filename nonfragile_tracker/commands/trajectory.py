@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..control.limits import LIMIT_NAMES, Limits, check, retime
-from ..control.trajectory import TrajectoryError, describe, load_waypoints
+from ..control.simulation.limits import LIMIT_NAMES, Limits, check, retime
+from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 
 

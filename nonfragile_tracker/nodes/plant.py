@@ -39,8 +39,8 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
 from .. import topics
-from ..control.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
-                            odometry_period_steps, step_time_ns)
+from ..control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
+                                       odometry_period_steps, step_time_ns)
 from ..control.validate import as_matrix
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, run)

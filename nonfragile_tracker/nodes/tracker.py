@@ -64,13 +64,14 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
-                              path_errors, trajectory_time)
-from ..control.limits import Limits, within_limits
-from ..control.loop import Tracker, TrackerConfig
-from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
-                               adapted_prediction, certificate_from_parameters, evaluate)
-from ..control.trajectory import TrajectoryError
+from ..control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+                                         path_errors, trajectory_time)
+from ..control.simulation.limits import Limits, within_limits
+from ..control.simulation.loop import Tracker, TrackerConfig
+from ..control.identification.monitor import (Certificate, LatencyEstimate, MonitorSettings,
+                                              MonitorWorker, adapted_prediction,
+                                              certificate_from_parameters, evaluate)
+from ..control.simulation.trajectory import TrajectoryError
 from ..msgconv import tracker_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs, run, stamp_ns)

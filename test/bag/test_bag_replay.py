@@ -13,8 +13,8 @@ from nonfragile_tracker import cli, golden
 from nonfragile_tracker.bag.replay import (TRACKER_DEFAULTS, TrackerInputs,
                                            load_tracker_parameters, replay)
 from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
-from nonfragile_tracker.control.loop import PlantConfig, UnicyclePlant
-from nonfragile_tracker.control.reference import make_path
+from nonfragile_tracker.control.simulation.loop import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.reference import make_path
 
 GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'
 GAINS = ['--gains', str(golden.golden_gains())]      # the gain the golden bags were made with

@@ -7,14 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.loop import (LoopConfigError, PlantConfig, UnicyclePlant,
-                                             step_time)
-from nonfragile_tracker.control.monitor import (ERROR, OK, STALE, WARN, Certificate,
-                                                LatencyEstimate, MonitorError, MonitorSettings,
-                                                MonitorWorker, adapted_prediction,
-                                                certificate_from_design,
-                                                certificate_from_parameters, estimate_latency,
-                                                evaluate)
+from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant,
+                                                        step_time)
+from nonfragile_tracker.control.identification.monitor import (ERROR, OK, STALE, WARN, Certificate,
+                                                               LatencyEstimate, MonitorError,
+                                                               MonitorSettings, MonitorWorker,
+                                                               adapted_prediction,
+                                                               certificate_from_design,
+                                                               certificate_from_parameters,
+                                                               estimate_latency, evaluate)
 
 DT = 0.01            # plant step: the precision asked for
 

@@ -25,10 +25,10 @@ from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from ...errors import CertificateError, InfeasibleError, InputError, SolverFailure
 from .problem import Problem
-from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
-                  cached_program, solve, sym)
+from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES, cached_program,
+                  solve, sym)
 from .search import eps_search, largest_feasible_bracketed
 
 __all__ = ['DEFAULT_EPS_GRID', 'InputDelayVerification', 'InputDelayCertificate',

@@ -25,10 +25,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
+from ...errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .problem import Problem
-from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
-                  solve)
+from .sdp import DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify, solve
 from .sdp import sym as _sym
 
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',

@@ -118,7 +118,7 @@ from typing import Any, cast
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
            'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',

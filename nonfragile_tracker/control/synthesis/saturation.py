@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ['SaturationLimits', 'SaturationCertificate', 'saturation_certificate',
            'verify_saturation', 'simulate_saturated', 'format_saturation', 'SimulationCheck',

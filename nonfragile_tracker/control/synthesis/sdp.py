@@ -33,7 +33,7 @@ from typing import Any, Callable, Hashable, TypeVar, cast
 
 import numpy as np
 
-from ..errors import SolverFailure
+from ...errors import SolverFailure
 
 __all__ = ['DEFAULT_MARGIN', 'DEFAULT_SOLVER', 'OK_STATUSES', 'INFEASIBLE_STATUSES',
            'CACHE_SIZE', 'SolveOutcome', 'sym', 'solve', 'classify', 'cached_program',

@@ -28,8 +28,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError
-from ..parallel import EXECUTORS, default_workers, map_tasks
+from ...errors import InputError
+from ...parallel import EXECUTORS, default_workers, map_tasks
 from .batch import (BatchCases, BatchError, BatchRun, PathBatch, perturbation_schedule,
                     sample_deltas, simulate_batch)
 from .loop import PlantConfig, TrackerConfig

@@ -45,9 +45,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps,
-                   step_time_ns)
+from ...errors import InputError
+from .loop import PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time_ns
 from .reference import Path, circle, figure_eight
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',

@@ -23,9 +23,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError
-from ..files import read_yaml
-from . import validate
+from ...errors import InputError
+from ...files import read_yaml
+from .. import validate
 
 __all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from_mapping',
            'is_stabilizable']

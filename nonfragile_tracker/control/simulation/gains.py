@@ -32,7 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
-from ..files import read_yaml
+from ...files import read_yaml
 from .loop import LoopConfigError, validate_gain
 
 __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',

@@ -55,7 +55,7 @@ from typing import cast
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 from .reference import Path, RefSample
 
 __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',

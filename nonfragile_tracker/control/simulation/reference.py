@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, NamedTuple
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ['RefSample', 'Path', 'circle', 'figure_eight', 'make_path', 'PATHS', 'PathError']
 
