@@ -12,3 +12,36 @@ drives the simulated loop) and the shared :mod:`nonfragile_tracker.control.valid
 never :mod:`nonfragile_tracker.control.synthesis`; the synthesis imports it (a latency
 design starts from an identification).
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .. import lazy_exports
+
+__all__ = [
+    # identify
+    'commands_follow_odometry', 'CommandSamples', 'Identification', 'IdentificationError',
+    'IdentificationFileError', 'identify_latency', 'InsufficientExcitationError',
+    'measurement_to_command_delay', 'NotEnoughDataError', 'OdometrySamples', 'PoorFitError',
+    'read_identification', 'write_identification',
+    # recording
+    'joystick_steps', 'load_cases', 'record_case', 'record_open_loop', 'record_tracking',
+    # monitor
+    'adapted_prediction', 'Certificate', 'certificate_from_design', 'certificate_from_parameters',
+    'estimate_latency', 'evaluate', 'LatencyEstimate', 'LEVEL_NAMES', 'MonitorError',
+    'MonitorSettings', 'MonitorWorker',
+]
+
+if TYPE_CHECKING:
+    from .identify import (commands_follow_odometry, CommandSamples, Identification,
+                           IdentificationError, IdentificationFileError, identify_latency,
+                           InsufficientExcitationError, measurement_to_command_delay,
+                           NotEnoughDataError, OdometrySamples, PoorFitError, read_identification,
+                           write_identification)
+    from .recording import (joystick_steps, load_cases, record_case, record_open_loop,
+                            record_tracking)
+    from .monitor import (adapted_prediction, Certificate, certificate_from_design,
+                          certificate_from_parameters, estimate_latency, evaluate, LatencyEstimate,
+                          LEVEL_NAMES, MonitorError, MonitorSettings, MonitorWorker)
+else:
+    __getattr__, __dir__ = lazy_exports(__name__)
