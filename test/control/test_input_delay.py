@@ -12,7 +12,8 @@ from nonfragile_tracker.control.synthesis.input_delay import (certified_input_de
                                                               max_input_delay_decay_rate,
                                                               synthesize_input_delay,
                                                               verify_input_delay)
-from nonfragile_tracker.errors import InfeasibleError, InputError
+from nonfragile_tracker.errors import InputError
+from nonfragile_tracker.control.synthesis.errors import InfeasibleError
 from nonfragile_tracker.control.synthesis.problem import Problem
 
 BOUND = 8.67

@@ -87,3 +87,70 @@ def test_the_public_names_users_import_are_exported():
             'Trajectory', 'load_waypoints', 'simulate_batch', 'run_study'} <= set(simulation.__all__)
     assert {'identify_latency', 'read_identification', 'MonitorWorker', 'record_tracking',
             'IdentificationError'} <= set(identification.__all__)
+
+
+#: Each part's errors: class -> (builtin it derives from, exit code, modules that import it
+#: for their own use and so keep it importable from there, as before the move).
+ERRORS = {
+    'synthesis': {'ProblemError': (ValueError, 2, ['problem']),
+                  'LmiError': (RuntimeError, 4, ['lmi', 'design', 'sweep']),
+                  'InfeasibleError': (RuntimeError, 3, ['lmi', 'design', 'delay_dependent',
+                                                        'input_delay', 'latency_design']),
+                  'SolverFailure': (RuntimeError, 4, ['lmi', 'sdp']),
+                  'CertificateError': (RuntimeError, 4, ['lmi', 'delay_dependent'])},
+    'simulation': {'SingularSpeedError': (ValueError, 2, ['model']),
+                   'PathError': (ValueError, 2, ['reference']),
+                   'TrajectoryError': (ValueError, 2, ['trajectory', 'limits']),
+                   'LoopConfigError': (ValueError, 2, ['loop', 'gains']),
+                   'GainFileError': (ValueError, 2, ['gains']),
+                   'BatchError': (ValueError, 2, ['batch', 'study'])},
+    'identification': {'IdentificationError': (ValueError, 2, ['identify']),
+                       'NotEnoughDataError': (ValueError, 2, ['identify']),
+                       'InsufficientExcitationError': (ValueError, 2, ['identify']),
+                       'PoorFitError': (ValueError, 2, ['identify']),
+                       'IdentificationFileError': (ValueError, 2, ['identify']),
+                       'MonitorError': (ValueError, 2, ['monitor'])},
+}
+
+
+@pytest.mark.parametrize('part', PARTS)
+def test_each_part_has_its_errors_under_the_root_error(part):
+    from nonfragile_tracker.errors import NonfragileError, exit_code
+    errors = importlib.import_module(f'nonfragile_tracker.control.{part}.errors')
+    package = importlib.import_module(f'nonfragile_tracker.control.{part}')
+    assert sorted(errors.__all__) == sorted(ERRORS[part])
+    for name, (builtin, code, modules) in ERRORS[part].items():
+        cls = getattr(errors, name)
+        assert cls.__module__ == errors.__name__
+        assert issubclass(cls, NonfragileError) and issubclass(cls, builtin), name
+        assert exit_code(cls('message')) == code, name
+        assert getattr(package, name) is cls
+        for module in modules:
+            where = importlib.import_module(f'nonfragile_tracker.control.{part}.{module}')
+            assert getattr(where, name) is cls, (module, name)
+
+
+def test_the_subclass_order_of_the_errors():
+    from nonfragile_tracker.control.identification.errors import (IdentificationError,
+                                                                  PoorFitError)
+    from nonfragile_tracker.control.simulation.errors import GainFileError, LoopConfigError
+    from nonfragile_tracker.control.synthesis.errors import (CertificateError, InfeasibleError,
+                                                             LmiError, SolverFailure)
+    assert all(issubclass(c, LmiError) for c in (InfeasibleError, SolverFailure,
+                                                 CertificateError))
+    assert issubclass(GainFileError, LoopConfigError)
+    assert issubclass(PoorFitError, IdentificationError)
+
+
+def test_the_root_errors_name_the_new_home_of_the_lmi_errors():
+    """errors.py is the package's foundation and may not import the control core: asking it
+    for a moved class says where the class is now."""
+    import nonfragile_tracker.errors as errors
+    for name in ('LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError'):
+        with pytest.raises(ImportError, match=f'{name} moved to '
+                                              r'nonfragile_tracker\.control\.synthesis\.errors'):
+            exec(f'from nonfragile_tracker.errors import {name}', {})
+        assert name not in errors.__all__
+    with pytest.raises(AttributeError, match='no attribute'):
+        getattr(errors, 'NoSuchError')
+    assert not hasattr(errors, 'NoSuchError')

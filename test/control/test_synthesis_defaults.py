@@ -13,7 +13,7 @@ from nonfragile_tracker.control.synthesis.lmi import (TRUST_GAIN_NORM, Untrusted
                                                       gain_trust_message, synthesize,
                                                       verify_certificate)
 from nonfragile_tracker.control.synthesis.problem import Problem
-from nonfragile_tracker.errors import CertificateError, InfeasibleError
+from nonfragile_tracker.control.synthesis.errors import CertificateError, InfeasibleError
 
 
 def random_problem(seed: int) -> Problem:

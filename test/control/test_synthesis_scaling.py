@@ -96,7 +96,7 @@ def test_compact_form_matches_the_paper_form(monkeypatch):
 def test_compact_form_reports_infeasibility():
     """An unreachable extra state z' = -z + 2 z(t - tau) in each of two coupled copies."""
     import pytest
-    from nonfragile_tracker.errors import InfeasibleError
+    from nonfragile_tracker.control.synthesis.errors import InfeasibleError
     base = coupled(2)
     n = base.n + 2
     A = np.zeros((n, n)); A[:-2, :-2] = base.A; A[-2, -2] = A[-1, -1] = -1.0

@@ -19,29 +19,31 @@ from typing import TYPE_CHECKING
 from .. import lazy_exports
 
 __all__ = [
+    # errors
+    'IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError', 'PoorFitError',
+    'IdentificationFileError', 'MonitorError',
     # identify
-    'commands_follow_odometry', 'CommandSamples', 'Identification', 'IdentificationError',
-    'IdentificationFileError', 'identify_latency', 'InsufficientExcitationError',
-    'measurement_to_command_delay', 'NotEnoughDataError', 'OdometrySamples', 'PoorFitError',
-    'read_identification', 'write_identification',
+    'commands_follow_odometry', 'CommandSamples', 'Identification', 'identify_latency',
+    'measurement_to_command_delay', 'OdometrySamples', 'read_identification',
+    'write_identification',
     # recording
     'joystick_steps', 'load_cases', 'record_case', 'record_open_loop', 'record_tracking',
     # monitor
     'adapted_prediction', 'Certificate', 'certificate_from_design', 'certificate_from_parameters',
-    'estimate_latency', 'evaluate', 'LatencyEstimate', 'LEVEL_NAMES', 'MonitorError',
-    'MonitorSettings', 'MonitorWorker',
+    'estimate_latency', 'evaluate', 'LatencyEstimate', 'LEVEL_NAMES', 'MonitorSettings',
+    'MonitorWorker',
 ]
 
 if TYPE_CHECKING:
+    from .errors import (IdentificationError, NotEnoughDataError, InsufficientExcitationError,
+                         PoorFitError, IdentificationFileError, MonitorError)
     from .identify import (commands_follow_odometry, CommandSamples, Identification,
-                           IdentificationError, IdentificationFileError, identify_latency,
-                           InsufficientExcitationError, measurement_to_command_delay,
-                           NotEnoughDataError, OdometrySamples, PoorFitError, read_identification,
-                           write_identification)
+                           identify_latency, measurement_to_command_delay, OdometrySamples,
+                           read_identification, write_identification)
     from .recording import (joystick_steps, load_cases, record_case, record_open_loop,
                             record_tracking)
     from .monitor import (adapted_prediction, Certificate, certificate_from_design,
                           certificate_from_parameters, estimate_latency, evaluate, LatencyEstimate,
-                          LEVEL_NAMES, MonitorError, MonitorSettings, MonitorWorker)
+                          LEVEL_NAMES, MonitorSettings, MonitorWorker)
 else:
     __getattr__, __dir__ = lazy_exports(__name__)

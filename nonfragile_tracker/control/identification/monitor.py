@@ -57,7 +57,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ...errors import InputError
+from .errors import MonitorError
 
 __all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'LEVEL_NAMES', 'MonitorSettings', 'LatencyEstimate',
            'Certificate', 'MonitorStatus', 'estimate_latency', 'certificate_from_design',
@@ -72,10 +72,6 @@ BRING_UP = ('record a run (nonfragile_tracker run ... or ros2 bag record odom cm
             'nonfragile_tracker identify BAG -o latency.yaml, nonfragile_tracker '
             'latency-design PROBLEM --identification latency.yaml -o gains.yaml')
 _TAUS = (0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.065, 0.08, 0.1, 0.13, 0.16, 0.2, 0.25, 0.3)
-
-
-class MonitorError(InputError):
-    """A monitor setting or certificate record is invalid; the message names it."""
 
 
 def _pos(name: str, value: Any, *, zero: bool = False) -> float:

@@ -22,62 +22,63 @@ from typing import TYPE_CHECKING
 from .. import lazy_exports
 
 __all__ = [
+    # errors
+    'SingularSpeedError', 'PathError', 'TrajectoryError', 'LoopConfigError', 'GainFileError',
+    'BatchError',
     # model
-    'double_integrator_model', 'inputs_from_u', 'SingularSpeedError', 'u_from_inputs',
-    'xi_from_state',
+    'double_integrator_model', 'inputs_from_u', 'u_from_inputs', 'xi_from_state',
     # actuator
     'ActuatorModel',
     # predictor
     'invert_lag', 'LatencyPredictor',
     # reference
-    'circle', 'figure_eight', 'make_path', 'Path', 'PathError', 'RefSample',
+    'circle', 'figure_eight', 'make_path', 'Path', 'RefSample',
     # trajectory
     'analytic_knots', 'from_poses', 'from_states', 'from_waypoints', 'load_waypoints',
-    'read_waypoint_file', 'time_law', 'Trajectory', 'TrajectoryError', 'TrajectorySamples',
+    'read_waypoint_file', 'time_law', 'Trajectory', 'TrajectorySamples',
     # limits
     'LIMIT_NAMES', 'Limits', 'retime',
     # follow
     'Follower', 'MAX_START_DISTANCE', 'path_errors', 'REST_SPEED', 'simulate_following',
     'start_offset', 'START_TOLERANCE', 'trajectory_time',
     # loop
-    'Command', 'delay_steps', 'LoopConfigError', 'odometry_period_steps', 'PlantConfig',
-    'quaternion_to_yaw', 'Tracker', 'TrackerConfig', 'UnicyclePlant', 'validate_gain',
-    'yaw_to_quaternion',
+    'Command', 'delay_steps', 'odometry_period_steps', 'PlantConfig', 'quaternion_to_yaw',
+    'Tracker', 'TrackerConfig', 'UnicyclePlant', 'validate_gain', 'yaw_to_quaternion',
     # simulate
     'run_loop', 'simulate_delay_loop', 'simulate_tracking',
     # batch
-    'BatchCases', 'BatchError', 'PathBatch', 'perturbation_schedule', 'sample_deltas',
-    'simulate_batch', 'simulate_delay_loop_batch',
+    'BatchCases', 'PathBatch', 'perturbation_schedule', 'sample_deltas', 'simulate_batch',
+    'simulate_delay_loop_batch',
     # study
     'plot_study', 'run_study', 'StudySpec',
     # metrics
     'tracking_metrics', 'TrackingMetrics',
     # gains
-    'DESIGN_SECTION', 'gain_from_parameters', 'GainFileError', 'read_gain_design', 'read_gain_file',
+    'DESIGN_SECTION', 'gain_from_parameters', 'read_gain_design', 'read_gain_file',
     'write_gain_file',
 ]
 
 if TYPE_CHECKING:
-    from .model import (double_integrator_model, inputs_from_u, SingularSpeedError, u_from_inputs,
-                        xi_from_state)
+    from .errors import (SingularSpeedError, PathError, TrajectoryError, LoopConfigError,
+                         GainFileError, BatchError)
+    from .model import double_integrator_model, inputs_from_u, u_from_inputs, xi_from_state
     from .actuator import ActuatorModel
     from .predictor import invert_lag, LatencyPredictor
-    from .reference import circle, figure_eight, make_path, Path, PathError, RefSample
+    from .reference import circle, figure_eight, make_path, Path, RefSample
     from .trajectory import (analytic_knots, from_poses, from_states, from_waypoints,
                              load_waypoints, read_waypoint_file, time_law, Trajectory,
-                             TrajectoryError, TrajectorySamples)
+                             TrajectorySamples)
     from .limits import LIMIT_NAMES, Limits, retime
     from .follow import (Follower, MAX_START_DISTANCE, path_errors, REST_SPEED, simulate_following,
                          start_offset, START_TOLERANCE, trajectory_time)
-    from .loop import (Command, delay_steps, LoopConfigError, odometry_period_steps, PlantConfig,
-                       quaternion_to_yaw, Tracker, TrackerConfig, UnicyclePlant, validate_gain,
-                       yaw_to_quaternion)
+    from .loop import (Command, delay_steps, odometry_period_steps, PlantConfig, quaternion_to_yaw,
+                       Tracker, TrackerConfig, UnicyclePlant, validate_gain, yaw_to_quaternion)
     from .simulate import run_loop, simulate_delay_loop, simulate_tracking
-    from .batch import (BatchCases, BatchError, PathBatch, perturbation_schedule, sample_deltas,
-                        simulate_batch, simulate_delay_loop_batch)
+    from .batch import (BatchCases, PathBatch, perturbation_schedule, sample_deltas, simulate_batch,
+                        simulate_delay_loop_batch)
     from .study import plot_study, run_study, StudySpec
     from .metrics import tracking_metrics, TrackingMetrics
-    from .gains import (DESIGN_SECTION, gain_from_parameters, GainFileError, read_gain_design,
-                        read_gain_file, write_gain_file)
+    from .gains import (DESIGN_SECTION, gain_from_parameters, read_gain_design, read_gain_file,
+                        write_gain_file)
 else:
     __getattr__, __dir__ = lazy_exports(__name__)

@@ -18,16 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import InputError
+from .errors import SingularSpeedError
 
 __all__ = [
     'SingularSpeedError', 'LinearizedModel', 'double_integrator_model',
     'xi_from_state', 'u_from_inputs', 'inputs_from_u',
 ]
-
-
-class SingularSpeedError(InputError):
-    """Raised when the linearizing map is evaluated at (or too near) ``v = 0``."""
 
 
 @dataclass(frozen=True)

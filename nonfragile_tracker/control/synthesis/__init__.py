@@ -21,14 +21,15 @@ from typing import TYPE_CHECKING
 from .. import lazy_exports
 
 __all__ = [
+    # errors
+    'ProblemError', 'LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError',
     # problem
-    'is_stabilizable', 'load_problem', 'Problem', 'problem_from_mapping', 'ProblemError',
+    'is_stabilizable', 'load_problem', 'Problem', 'problem_from_mapping',
     # search
     'largest_feasible',
     # lmi
-    'CertificateError', 'certified_perturbation_scale', 'certify_gain', 'CertifyResult',
-    'InfeasibleError', 'LmiError', 'SolverFailure', 'SynthesisResult', 'synthesize',
-    'UntrustedGainWarning', 'verify_certificate',
+    'certified_perturbation_scale', 'certify_gain', 'CertifyResult', 'SynthesisResult',
+    'synthesize', 'UntrustedGainWarning', 'verify_certificate',
     # design
     'at_gain_norm', 'max_decay_rate', 'max_perturbation_scale', 'min_gain_norm', 'shifted_problem',
     # delay_dependent
@@ -53,11 +54,11 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from .problem import is_stabilizable, load_problem, Problem, problem_from_mapping, ProblemError
+    from .errors import ProblemError, LmiError, InfeasibleError, SolverFailure, CertificateError
+    from .problem import is_stabilizable, load_problem, Problem, problem_from_mapping
     from .search import largest_feasible
-    from .lmi import (CertificateError, certified_perturbation_scale, certify_gain, CertifyResult,
-                      InfeasibleError, LmiError, SolverFailure, SynthesisResult, synthesize,
-                      UntrustedGainWarning, verify_certificate)
+    from .lmi import (certified_perturbation_scale, certify_gain, CertifyResult, SynthesisResult,
+                      synthesize, UntrustedGainWarning, verify_certificate)
     from .design import (at_gain_norm, max_decay_rate, max_perturbation_scale, min_gain_norm,
                          shifted_problem)
     from .delay_dependent import (max_certified_delay, synthesize_delay_dependent,

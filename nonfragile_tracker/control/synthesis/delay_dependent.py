@@ -25,7 +25,7 @@ from typing import Any, Sequence, cast
 
 import numpy as np
 
-from ...errors import CertificateError, InfeasibleError, SolverFailure
+from .errors import CertificateError, InfeasibleError, SolverFailure
 from .problem import Problem
 from .search import eps_search
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES, cached_program,

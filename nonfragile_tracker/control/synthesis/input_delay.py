@@ -25,7 +25,8 @@ from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
-from ...errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from ...errors import InputError
+from .errors import CertificateError, InfeasibleError, SolverFailure
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES, cached_program,
                   solve, sym)

@@ -43,7 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import CertificateError, InfeasibleError, InputError
+from ...errors import InputError
+from .errors import CertificateError, InfeasibleError
 from .delay import chebyshev_differentiation, delay_margin
 from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
                           max_certified_input_delay, max_input_delay_decay_rate,

@@ -25,7 +25,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from ...errors import CertificateError, InfeasibleError, LmiError, SolverFailure
+from .errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .problem import Problem
 from .sdp import DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify, solve
 from .sdp import sym as _sym
