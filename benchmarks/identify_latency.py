@@ -7,7 +7,7 @@ For command latencies of 100, 200 and 300 ms, a 50 ms first-order lag on v and w
 odometry at 50 Hz with 1 mm / 1 mrad noise, the figure eight (radius 1 m, 0.2 rad/s)
 with the shipped gain and no predictor, it records runs and identifies them:
 
-* ``sim``       the in-process loop (control.loop step functions, as a lockstep run);
+* ``sim``       the in-process loop (control.simulation.loop step functions, as a lockstep run);
 * ``lockstep``  (``--ros``) the nodes composed in one process, lockstep, recorded bag;
 * ``realtime``  (``--realtime``) the nodes composed, real time (20 s), recorded bag.
 

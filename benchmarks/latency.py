@@ -3,7 +3,7 @@
 
     .venv/bin/python benchmarks/latency.py [--duration 40] [--seeds 3] [--json PATH]
 
-In-process simulation (:func:`control.simulate.simulate_tracking`, the step functions of
+In-process simulation (:func:`control.simulation.simulate.simulate_tracking`, the step functions of
 the nodes; a lockstep run gives the same numbers to 1e-9): figure eight radius 1 m,
 rate 0.2 rad/s (``a = 0.2 t``: one lap in 31.4 s, peak speed 0.28 m/s), plant step
 10 ms, first-order actuator lag 50 ms on v and w, odometry at 50 Hz with Gaussian

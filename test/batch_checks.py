@@ -1,6 +1,6 @@
 """Shared checks of the batch simulation against single runs (``test/control/test_batch*``).
 
-A case of a batch must be the single run (``control.simulate.simulate_tracking``) with
+A case of a batch must be the single run (``control.simulation.simulate.simulate_tracking``) with
 that case's configuration: these helpers run the single runs, measure the largest
 difference of the logged fields and compare the metrics.
 """

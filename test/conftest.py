@@ -191,7 +191,7 @@ def shipped_design(request, tmp_path_factory):
     """The max-decay gain's command run once per test run (its max-decay design costs seconds).
 
     ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
-    ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records
+    ``cli.main``, with a pass-through spy on ``control.synthesis.design.at_gain_norm`` that records
     each call and its :class:`DesignResult`.  Returns a namespace with ``code`` (exit
     code), ``path`` (the gain file), ``stdout`` and ``calls`` (``(args, kwargs, result)``).
     Shared by the CLI test, the shipped-gain test and the design tests (same computation);

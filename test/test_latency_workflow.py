@@ -1,10 +1,10 @@
 """Bring-up workflow of issue 11: record -> identify -> latency-design -> run (ROS-free).
 
-The recorded run is the in-process loop of the nodes (:func:`control.simulate.run_loop`,
+The recorded run is the in-process loop of the nodes (:func:`control.simulation.simulate.run_loop`,
 the plant and tracker step functions) on the latency scenario's robot: figure eight
 r = 1 m at 0.2 rad/s, 100 ms command latency, 50 ms lag on v and w, odometry 50 Hz
 with 1 mm noise, the tracker's predictor on.  The identification, the derived interval
-(one rule: :func:`control.latency_design.plan_from_identification`), the gain file of
+(one rule: :func:`control.synthesis.latency_design.plan_from_identification`), the gain file of
 ``latency-design --identification`` and a run with that file are checked with numbers.
 """
 import math
@@ -213,7 +213,7 @@ def test_full_chain_with_the_paper_design(recorded, tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------------------------------
-# Predictor while following a trajectory (control.follow.Follower)
+# Predictor while following a trajectory (control.simulation.follow.Follower)
 
 def follow_lap(predict: dict, latency: float = 0.2):
     from nonfragile_tracker.control.simulation.follow import simulate_following

@@ -6,7 +6,7 @@ Run through ``benchmarks/run.py --only design``; helpers come from ``harness``.
       plain ``synthesize`` of the same problem, both as the user runs them (CLI
       subprocesses, imports included), alternated in one run; today's code (the branch's
       base commit, ``BENCH_BASELINE_REF``, extracted with ``git archive``) side by side.
-12.2  a sweep of 200 designs (quick: 40) of the double integrator (``control.sweep``):
+12.2  a sweep of 200 designs (quick: 40) of the double integrator (``control.synthesis.sweep``):
       serial, two local worker processes, and a Dask LocalCluster of two single-threaded
       workers - wall time ratio to the serial run and the records compared design by design.
 """
@@ -78,7 +78,8 @@ IMPORTS = {
                   'nonfragile_tracker.control.synthesis.lmi, cvxpy',
     'latency-design': 'import nonfragile_tracker.cli, nonfragile_tracker.commands.latency_design, '
                       'nonfragile_tracker.control.synthesis.latency_design, '
-                      'nonfragile_tracker.control.identification.monitor, nonfragile_tracker.control.simulation.gains, cvxpy',
+                      'nonfragile_tracker.control.identification.monitor, '
+                      'nonfragile_tracker.control.simulation.gains, cvxpy',
 }
 
 

@@ -2,7 +2,7 @@
 
 Run through ``benchmarks/run.py --only identify`` (or standalone:
 ``.venv/bin/python benchmarks/sections/identify.py [--quick]``).  For each case of
-``config/identify_cases.yaml`` (recorded in process by ``control.recording``, 30 s,
+``config/identify_cases.yaml`` (recorded in process by ``control.identification.recording``, 30 s,
 seeds 1..3; quick: seed 1) the truth, today's ``identify`` (the code of the session
 start, commit d11fc49, loaded from git) and the new one side by side: latency (for the
 jitter case: the range), lags, and MET/MISSED for the issue's target - latency within one
@@ -35,10 +35,11 @@ STEP = 0.01
 
 
 def _old_identify() -> types.ModuleType | None:
-    """control/identify.py as of the session start (git show), or None without git."""
+    """control/identify.py (today control/identification/identify.py) as of the session start
+    (git show of its path then), or None without git."""
     try:
         src = subprocess.run(['git', '-C', str(ROOT), 'show',
-                              f'{BASELINE}:nonfragile_tracker/control/identification/identify.py'],
+                              f'{BASELINE}:nonfragile_tracker/control/identify.py'],
                              capture_output=True, text=True, check=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
         return None

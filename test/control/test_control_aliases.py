@@ -82,9 +82,9 @@ def test_a_users_script_sees_the_warning_by_default(tmp_path):
                           text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == '(2, 4)'
-    assert proc.stderr.startswith(f'{script}:1: DeprecationWarning: '
-                                  'nonfragile_tracker.control.gains is deprecated: the module '
-                                  'moved to nonfragile_tracker.control.simulation.gains'), proc.stderr
+    assert proc.stderr.startswith(
+        f'{script}:1: DeprecationWarning: nonfragile_tracker.control.gains is deprecated: the '
+        'module moved to nonfragile_tracker.control.simulation.gains'), proc.stderr
 
 
 def test_the_finder_is_installed_once():

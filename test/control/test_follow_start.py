@@ -1,4 +1,4 @@
-"""A trajectory starts when the robot can follow it (control.follow.Follower's start rule).
+"""A trajectory starts when the robot can follow it (control.simulation.follow.Follower's start rule).
 
 The tracker that starts following a trajectory after its start stamp (a reference node or
 planner that started earlier) re-bases it: the robot drives the trajectory's own speed

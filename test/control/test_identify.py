@@ -1,4 +1,4 @@
-"""Latency identification (control/identify.py, bag/motion.py, ``identify`` CLI).
+"""Latency identification (control/identification/identify.py, bag/motion.py, ``identify`` CLI).
 
 The synthetic runs come from an independent generator (``fopdt_unicycle``): a unicycle
 integrated at 0.5 ms whose speeds follow the held, delayed commands through exact
@@ -400,7 +400,7 @@ def test_cli_identify(run20, tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------------------------------
-# Our plant (control.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
+# Our plant (control.simulation.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
 
 def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: float = 0.01,
                      odom_rate: float = 50.0, noise: float = 1e-3):

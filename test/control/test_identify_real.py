@@ -1,6 +1,6 @@
 """Identification on what real bases give (issue 22, item 4), ROS-free.
 
-The recordings are the plant's (control.loop.UnicyclePlant through control.recording):
+The recordings are the plant's (control.simulation.loop.UnicyclePlant through control.identification.recording):
 cases of config/identify_cases.yaml - the default tracker on a base with acceleration
 limits (100 ms, and 180 ms where it is in its limit cycle), joystick steps with the
 limits binding 35-40 % of the time, a teleop drive with a 0.33 s stall, latency jitter

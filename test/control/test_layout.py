@@ -84,7 +84,8 @@ def test_the_public_names_users_import_are_exported():
     assert {'load_problem', 'synthesize', 'certify_gain', 'design_for_latency', 'analyse_gain',
             'InfeasibleError', 'ProblemError'} <= set(synthesis.__all__)
     assert {'Tracker', 'TrackerConfig', 'PlantConfig', 'simulate_tracking', 'read_gain_file',
-            'Trajectory', 'load_waypoints', 'simulate_batch', 'run_study'} <= set(simulation.__all__)
+            'Trajectory', 'load_waypoints', 'simulate_batch',
+            'run_study'} <= set(simulation.__all__)
     assert {'identify_latency', 'read_identification', 'MonitorWorker', 'record_tracking',
             'IdentificationError'} <= set(identification.__all__)
 

@@ -1,4 +1,4 @@
-"""Trajectories within a base's limits (control.limits): check, margins, re-timing.
+"""Trajectories within a base's limits (control.simulation.limits): check, margins, re-timing.
 
 The line-arc lap (straights joined by 0.4 m arcs, 0.4 m/s) exceeds each limit when the
 limit is set below its peak; the check names the limit, the time and the value, the

@@ -1,4 +1,4 @@
-"""The certificate monitor (control.monitor): the estimator recovers the latency within one
+"""The certificate monitor (control.identification.monitor): the estimator recovers the latency within one
 plant step, its gates reject saturated, limit-binding and gap segments, the status moves
 OK -> WARN -> ERROR at the thresholds, the certificate comes from the gain file's record,
 adaptation clamps; and the plant's latency schedule that the tests and benchmark use."""

@@ -1,4 +1,4 @@
-"""The saturation certificate (control.saturation): a region of attraction of the tracking
+"""The saturation certificate (control.synthesis.saturation): a region of attraction of the tracking
 loop whose input saturates (|w| and |dv/dt| limits), by the generalized sector condition;
 checked in numpy and against simulations of the saturated loop."""
 import math

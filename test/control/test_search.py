@@ -1,4 +1,4 @@
-"""control.search: the bisection and the eps line search (plain functions, no solver)."""
+"""control.synthesis.search: the bisection and the eps line search (plain functions, no solver)."""
 import math
 
 import numpy as np

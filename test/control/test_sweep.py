@@ -1,4 +1,4 @@
-"""control.sweep and parallel: the grid, one design's record, the front, executors (local, Dask)."""
+"""control.synthesis.sweep and parallel: the grid, one design's record, the front, executors (local, Dask)."""
 import json
 import sys
 from concurrent.futures import Executor, Future

@@ -1,4 +1,4 @@
-"""Timed trajectories (control/trajectory.py): analytic, splines, Hermite, time law, files."""
+"""Timed trajectories (control/simulation/trajectory.py): analytic, splines, Hermite, time law, files."""
 import math
 
 import numpy as np
