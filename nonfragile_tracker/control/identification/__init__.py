@@ -4,6 +4,7 @@ Offline identification from a recording and its file (:mod:`.identify`), in-proc
 recordings of a simulated base to identify (:mod:`.recording`), and the tracker's runtime
 certificate monitor, which estimates the same quantities over a sliding window and
 compares them with the gain's certificate (:mod:`.monitor`).
+Its errors are in :mod:`.errors`, under the package's root error.
 
 Notes
 -----

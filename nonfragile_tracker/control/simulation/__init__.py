@@ -7,6 +7,7 @@ plant and tracker step functions (:mod:`.loop`, :mod:`.follow`) and the gain fil
 read (:mod:`.gains`), and the loops that run them in process, one case or many at once
 (:mod:`.simulate`, :mod:`.batch`, :mod:`.study`, :mod:`.metrics`).  A lockstep ROS run of
 the nodes equals these loops to 1e-9.
+Its errors are in :mod:`.errors`, under the package's root error.
 
 Notes
 -----

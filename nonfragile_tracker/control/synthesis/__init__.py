@@ -6,6 +6,7 @@ The math of the paper and its extensions, as plain numpy/scipy/cvxpy: problem fi
 (:mod:`.input_delay`, :mod:`.latency_design`) designs, design searches (:mod:`.design`,
 :mod:`.search`, :mod:`.sweep`), the exact delay analysis of one gain (:mod:`.delay`,
 :mod:`.analysis`) and the region of attraction under saturation (:mod:`.saturation`).
+Its errors are in :mod:`.errors`, under the package's root error.
 
 Notes
 -----
