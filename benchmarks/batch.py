@@ -48,15 +48,15 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from nonfragile_tracker.control.batch import (BatchCases, PathBatch,  # noqa: E402
+from nonfragile_tracker.control.simulation.batch import (BatchCases, PathBatch,  # noqa: E402
                                               perturbation_schedule, sample_deltas,
                                               simulate_batch)
-from nonfragile_tracker.control.gains import read_gain_design, read_gain_file  # noqa: E402
-from nonfragile_tracker.control.loop import TrackerConfig  # noqa: E402
-from nonfragile_tracker.control.problem import load_problem  # noqa: E402
-from nonfragile_tracker.control.reference import circle  # noqa: E402
-from nonfragile_tracker.control.simulate import simulate_tracking  # noqa: E402
-from nonfragile_tracker.control.study import StudySpec, default_jobs, run_study  # noqa: E402
+from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file  # noqa: E402
+from nonfragile_tracker.control.simulation.loop import TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.synthesis.problem import load_problem  # noqa: E402
+from nonfragile_tracker.control.simulation.reference import circle  # noqa: E402
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
+from nonfragile_tracker.control.simulation.study import StudySpec, default_jobs, run_study  # noqa: E402
 from nonfragile_tracker.scenario import paper_plant_config  # noqa: E402
 
 CONFIG = ROOT / 'config'

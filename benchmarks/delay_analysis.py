@@ -61,8 +61,8 @@ print(json.dumps(out))
 
 def cases() -> dict:
     import yaml
-    from nonfragile_tracker.control import delay
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import delay
+    from nonfragile_tracker.control.synthesis.problem import load_problem
 
     p = load_problem(ROOT / 'config' / 'paper_problem.yaml')
     K = np.array(yaml.safe_load((ROOT / 'config' / 'paper_gains.yaml').read_text())['K_nf'],
@@ -164,7 +164,7 @@ def measure(reps: int, tdcpy_python: str) -> tuple[list[tuple], str]:
     """Every case: ``(name, n, tau, N, ours warm s, ours cold s, ours error, tdcpy
     [abscissa, s] or None, reference abscissa, warm times, cold times)`` and the tdcpy note
     (also the rows of ``benchmarks/run.py``'s tdcpy section)."""
-    from nonfragile_tracker.control import delay
+    from nonfragile_tracker.control.synthesis import delay
     data = cases()
     tdc, note = run_tdcpy(tdcpy_python, data, reps)
     rows = []

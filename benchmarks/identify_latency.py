@@ -7,7 +7,7 @@ For command latencies of 100, 200 and 300 ms, a 50 ms first-order lag on v and w
 odometry at 50 Hz with 1 mm / 1 mrad noise, the figure eight (radius 1 m, 0.2 rad/s)
 with the shipped gain and no predictor, it records runs and identifies them:
 
-* ``sim``       the in-process loop (control.loop step functions, as a lockstep run);
+* ``sim``       the in-process loop (control.simulation.loop step functions, as a lockstep run);
 * ``lockstep``  (``--ros``) the nodes composed in one process, lockstep, recorded bag;
 * ``realtime``  (``--realtime``) the nodes composed, real time (20 s), recorded bag.
 
@@ -39,7 +39,7 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from nonfragile_tracker.control.identify import (CommandSamples, OdometrySamples,  # noqa: E402
+from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,  # noqa: E402
                                                  identify_latency)
 
 DT = 0.01
@@ -58,11 +58,11 @@ def plant_parameters(latency: float, seed: int, duration: float, mode: str) -> d
 
 def record_sim(latency: float, seed: int, duration: float = 20.0):
     """Commands and odometry of the in-process loop, as the plant publishes them."""
-    from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                 UnicyclePlant, quaternion_to_yaw, step_time,
-                                                 yaw_to_quaternion)
-    from nonfragile_tracker.control.reference import make_path
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
+                                                            UnicyclePlant, quaternion_to_yaw,
+                                                            step_time, yaw_to_quaternion)
+    from nonfragile_tracker.control.simulation.reference import make_path
     plant = UnicyclePlant(PlantConfig(dt=DT, cmd_latency=latency, lag_v=LAG, lag_w=LAG,
                                       odom_rate=50.0, odom_noise=(1e-3, 1e-3, 1e-3),
                                       noise_seed=seed))

@@ -3,7 +3,7 @@
 
     .venv/bin/python benchmarks/latency.py [--duration 40] [--seeds 3] [--json PATH]
 
-In-process simulation (:func:`control.simulate.simulate_tracking`, the step functions of
+In-process simulation (:func:`control.simulation.simulate.simulate_tracking`, the step functions of
 the nodes; a lockstep run gives the same numbers to 1e-9): figure eight radius 1 m,
 rate 0.2 rad/s (``a = 0.2 t``: one lap in 31.4 s, peak speed 0.28 m/s), plant step
 10 ms, first-order actuator lag 50 ms on v and w, odometry at 50 Hz with Gaussian
@@ -68,10 +68,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from nonfragile_tracker.control.gains import read_gain_file  # noqa: E402
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig  # noqa: E402
-from nonfragile_tracker.control.reference import figure_eight  # noqa: E402
-from nonfragile_tracker.control.simulate import simulate_tracking  # noqa: E402
+from nonfragile_tracker.control.simulation.gains import read_gain_file  # noqa: E402
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.simulation.reference import figure_eight  # noqa: E402
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
 
 CONFIG = ROOT / 'config'
 LATENCIES = (0.1, 0.2, 0.3)
@@ -131,7 +131,7 @@ def bag_rms_after(bag: Path, duration: float, after: float = 10.0) -> float:
 def bag_latency(bag: Path) -> float:
     """The command-to-motion latency ``identify`` finds in ``bag`` (s)."""
     from nonfragile_tracker.bag.motion import read_motion
-    from nonfragile_tracker.control.identify import identify_latency
+    from nonfragile_tracker.control.identification.identify import identify_latency
     data = read_motion(bag)
     return identify_latency(data.commands, data.odometry, bootstrap=50).latency_s
 
@@ -282,9 +282,9 @@ def tracker_section(gains: Path) -> dict:
 def base_sim(gains: Path, latency: float, seed: int, start: str, duration: float,
              tracker: dict | None = None, record: bool = False):
     """In process on the real base; (RMS after 10 s in m, run[, commands, odometry])."""
-    from nonfragile_tracker.control.identify import CommandSamples, OdometrySamples
-    from nonfragile_tracker.control.loop import Tracker, step_time
-    from nonfragile_tracker.control.simulate import run_loop
+    from nonfragile_tracker.control.identification.identify import CommandSamples, OdometrySamples
+    from nonfragile_tracker.control.simulation.loop import Tracker, step_time
+    from nonfragile_tracker.control.simulation.simulate import run_loop
     x0, y0, th0, v0 = STARTS[start]
     pc = PlantConfig(dt=DT, tau=0.0, A_tau=np.zeros((4, 4)), x0=x0, y0=y0, th0=th0, v0=v0,
                      cmd_latency=latency, noise_seed=seed, **REAL_BASE)
@@ -328,8 +328,8 @@ def design_from(ident_file: Path, out: Path) -> tuple[Path, str]:
 
 
 def identify_file(commands, odometry, out: Path, source: str) -> Path:
-    from nonfragile_tracker.control.identify import (identify_latency, with_source,
-                                                     write_identification)
+    from nonfragile_tracker.control.identification.identify import (identify_latency, with_source,
+                                                                    write_identification)
     res = with_source(identify_latency(commands, odometry, bootstrap=50), source)
     return write_identification(out, res, overwrite=True)
 
@@ -348,7 +348,7 @@ def identify_bag(bag: Path, out: Path) -> Path:
 
 
 def ident_summary(path: Path) -> str:
-    from nonfragile_tracker.control.identify import read_identification
+    from nonfragile_tracker.control.identification.identify import read_identification
     r = read_identification(path)
     return f'L {r.latency_s * 1e3:.1f} ms, tau {r.tau_v_s * 1e3:.0f}/{r.tau_w_s * 1e3:.0f} ms'
 

@@ -133,7 +133,7 @@ def realtime_run(out: Path, gains: Path, lap: str, variant: str, seed: int) -> d
 import sys
 from pathlib import Path
 from nonfragile_tracker import runner
-from nonfragile_tracker.control.trajectory import load_waypoints
+from nonfragile_tracker.control.simulation.trajectory import load_waypoints
 traj = load_waypoints({str(LAPS[lap])!r})
 s = traj.sample(traj.t_start)
 ov = runner.realtime_overrides()
@@ -163,10 +163,10 @@ def in_process(gains: Path, seeds: int) -> dict:
 
     import numpy as np
 
-    from nonfragile_tracker.control.follow import simulate_following
-    from nonfragile_tracker.control.limits import Limits
-    from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-    from nonfragile_tracker.control.trajectory import load_waypoints
+    from nonfragile_tracker.control.simulation.follow import simulate_following
+    from nonfragile_tracker.control.simulation.limits import Limits
+    from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.simulation.trajectory import load_waypoints
     g = yaml.safe_load(gains.read_text())['/**/tracker']['ros__parameters']
     t = yaml.safe_load(SCENARIO.read_text())['/**/tracker']['ros__parameters']
     pl = yaml.safe_load(SCENARIO.read_text())['/**/plant']['ros__parameters']
@@ -188,7 +188,7 @@ def in_process(gains: Path, seeds: int) -> dict:
                 tc = TrackerConfig(K=K, dt=t['dt'], max_linear_speed=t['max_linear_speed'],
                                    max_angular_speed=t['max_angular_speed'], **pred)
                 lim = Limits.from_values(t) if variant == 'new' else None
-                from nonfragile_tracker.control.limits import within_limits
+                from nonfragile_tracker.control.simulation.limits import within_limits
                 followed = within_limits(traj, lim)[0] if lim else traj
                 run = simulate_following(pc, tc, followed,
                                          int(round((followed.t_end + 3.0) / pc.dt)))

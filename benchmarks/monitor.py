@@ -3,7 +3,7 @@
 
     .venv/bin/python benchmarks/monitor.py [--seeds 3] [--duration 60] [--json PATH]
 
-In-process simulation through the step functions of the nodes (:func:`control.simulate.run_loop`;
+In-process simulation through the step functions of the nodes (:func:`control.simulation.simulate.run_loop`;
 a lockstep run gives the same commands) of issue 22's base: plant step 10 ms, 50 ms
 first-order lag on v and w, acceleration limits 1 m/s^2 and 3 rad/s^2, odometry at 50 Hz
 with 1 mm / 1 mrad noise, figure eight r = 1 m at 0.2 rad/s, tracker command period
@@ -11,14 +11,14 @@ with 1 mm / 1 mrad noise, figure eight r = 1 m at 0.2 rad/s, tracker command per
 (``cmd_latency_schedule``).
 
 Bring-up first (nothing hard-coded): a 30 s recording at 100 ms with the paper's ``K_nf``
-and no predictor -> :func:`control.identify.identify_latency` -> the plan rule
-(:func:`control.latency_design.plan_from_identification`) -> :func:`design_for_latency`
+and no predictor -> :func:`control.identification.identify.identify_latency` -> the plan rule
+(:func:`control.synthesis.latency_design.plan_from_identification`) -> :func:`design_for_latency`
 (the gain file ``latency-design --identification`` writes) -> its certificate
-(:func:`control.monitor.certificate_from_design`, the tracker's ``certified_*``).
+(:func:`control.identification.monitor.certificate_from_design`, the tracker's ``certified_*``).
 
 Then per seed the step run with the monitor as the tracker node runs it (an estimate every
-``--period`` s of simulated time over a 4 s window, :class:`control.monitor.MonitorWorker`,
-:func:`control.monitor.evaluate`), with adaptation off, on (clamped to the identified
+``--period`` s of simulated time over a 4 s window, :class:`control.identification.monitor.MonitorWorker`,
+:func:`control.identification.monitor.evaluate`), with adaptation off, on (clamped to the identified
 interval: the default) and on with the adaptation range widened to [0, 0.3] s (beyond what
 was identified: shown for comparison).  Columns: status before the step, time from the
 step to the first ERROR, the latency estimate at the end, the predictor's latency at the
@@ -42,20 +42,20 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from nonfragile_tracker.control.gains import read_gain_design, read_gain_file  # noqa: E402
-from nonfragile_tracker.control.identify import (CommandSamples, OdometrySamples,  # noqa: E402
+from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file  # noqa: E402
+from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,  # noqa: E402
                                                  identify_latency)
-from nonfragile_tracker.control.latency_design import (design_for_latency,  # noqa: E402
+from nonfragile_tracker.control.synthesis.latency_design import (design_for_latency,  # noqa: E402
                                                        plan_from_identification)
-from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,  # noqa: E402
+from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,  # noqa: E402
                                              step_time)
-from nonfragile_tracker.control.monitor import (ERROR, LEVEL_NAMES, Certificate,  # noqa: E402
+from nonfragile_tracker.control.identification.monitor import (ERROR, LEVEL_NAMES, Certificate,  # noqa: E402
                                                 MonitorSettings, MonitorWorker,
                                                 adapted_prediction, certificate_from_design,
                                                 evaluate)
-from nonfragile_tracker.control.problem import load_problem  # noqa: E402
-from nonfragile_tracker.control.reference import figure_eight  # noqa: E402
-from nonfragile_tracker.control.simulate import run_loop  # noqa: E402
+from nonfragile_tracker.control.synthesis.problem import load_problem  # noqa: E402
+from nonfragile_tracker.control.simulation.reference import figure_eight  # noqa: E402
+from nonfragile_tracker.control.simulation.simulate import run_loop  # noqa: E402
 
 CONFIG = ROOT / 'config'
 DT, TRACKER_DT = 0.01, 0.02
@@ -198,7 +198,7 @@ def main_nodes(args) -> int:
     """Bring-up in process, then the step through the nodes in real time."""
     import tempfile
 
-    from nonfragile_tracker.control.gains import write_gain_file
+    from nonfragile_tracker.control.simulation.gains import write_gain_file
     K, predict, cert, text = bring_up(seed=11)
     print('bring-up:', text)
     tmp = Path(tempfile.mkdtemp(prefix='monitor_bench_'))

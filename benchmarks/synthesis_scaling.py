@@ -37,8 +37,8 @@ import json, sys, time, warnings
 sys.path.insert(0, sys.argv[1])
 warnings.simplefilter('ignore')
 import numpy as np, scipy.linalg as sla
-from nonfragile_tracker.control import lmi
-from nonfragile_tracker.control.problem import load_problem
+from nonfragile_tracker.control.synthesis import lmi
+from nonfragile_tracker.control.synthesis.problem import load_problem
 n, kind, path = int(sys.argv[2]), sys.argv[3], sys.argv[4]
 p0 = load_problem(sys.argv[1] + '/config/paper_problem.yaml')
 lmi.synthesize(p0, gain_bound=8.67)                 # warm process

@@ -1,4 +1,4 @@
-"""The package's one exception hierarchy and the exit code each kind maps to.
+"""The package's root error, its input and run errors, and the exit code each kind maps to.
 
 Every error the package raises on purpose derives from :class:`NonfragileError`
 and from the builtin that matches its meaning (as python-control does), so a
@@ -6,20 +6,26 @@ caller can catch ``ValueError`` for bad input without knowing this module::
 
     NonfragileError                      exit 1
     +-- InputError (ValueError)          exit 2  bad file, parameter, number or message
-    +-- LmiError (RuntimeError)
+    +-- LmiError (RuntimeError)                  control.synthesis.errors
     |   +-- InfeasibleError              exit 3  no certified gain exists (as posed)
     |   +-- SolverFailure                exit 4  solver missing or no usable status
     |   +-- CertificateError             exit 4  a solver point failed independent verification
     +-- RunError (RuntimeError)          exit 5  a run (nodes, lockstep) failed
 
-Domain modules subclass these (``ProblemError(InputError)``, ``BagError(InputError)``
-...); :func:`exit_code` is the one place that maps an exception to a process exit
-code.  No ROS import here.
+Each part of the package keeps its own errors in its ``errors`` module, under these
+(``ProblemError(InputError)`` and the LMI errors in ``control/synthesis/errors.py``,
+``LoopConfigError(InputError)`` ... in ``control/simulation/errors.py``,
+``IdentificationError(InputError)`` ... in ``control/identification/errors.py``,
+``BagError(InputError)`` in ``bag/errors.py``); :func:`exit_code` is the one place that
+maps an exception to a process exit code.  The LMI errors were defined here: this module is
+the package's foundation and may not import the control core, so importing them from here
+raises an ``ImportError`` naming their new module.  No ROS import here.
 """
 from __future__ import annotations
 
-__all__ = ['NonfragileError', 'InputError', 'LmiError', 'InfeasibleError', 'SolverFailure',
-           'CertificateError', 'RunError', 'exit_code', 'EXIT_OK', 'EXIT_DIFFERENT',
+from typing import TYPE_CHECKING
+
+__all__ = ['NonfragileError', 'InputError', 'RunError', 'exit_code', 'EXIT_OK', 'EXIT_DIFFERENT',
            'EXIT_BAD_INPUT', 'EXIT_INFEASIBLE', 'EXIT_SOLVER', 'EXIT_RUN', 'EXIT_INTERRUPTED']
 
 EXIT_OK = 0
@@ -43,34 +49,6 @@ class InputError(NonfragileError, ValueError):
     """Bad input: a file, parameter, number or message; the text says what and what to do."""
 
     exit_code = EXIT_BAD_INPUT
-
-
-class LmiError(NonfragileError, RuntimeError):
-    """Base class of LMI synthesis failures."""
-
-    exit_code = EXIT_SOLVER
-
-
-class InfeasibleError(LmiError):
-    """The LMI has no strictly feasible point with the requested margin."""
-
-    exit_code = EXIT_INFEASIBLE
-    #: the best strictness t found (set by the input-delay synthesis; not always present)
-    margin_achieved: float
-
-
-class SolverFailure(LmiError):
-    """The solver is missing or returned no usable status."""
-
-    exit_code = EXIT_SOLVER
-
-
-class CertificateError(LmiError):
-    """A solver result failed the independent numpy verification."""
-
-    exit_code = EXIT_SOLVER
-    #: the solver's strictness t, set by the Theorem 1 synthesis (not always present)
-    margin_achieved: float
 
 
 class RunError(NonfragileError, RuntimeError):
@@ -103,3 +81,31 @@ def exit_code(exc: BaseException) -> int:
                         NotADirectoryError, PermissionError)):
         return EXIT_BAD_INPUT
     return 1
+
+
+#: Error classes that moved to a part of the control core -> their module now.
+MOVED = {name: 'nonfragile_tracker.control.synthesis.errors'
+         for name in ('LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError')}
+
+
+if not TYPE_CHECKING:        # for type checkers the moved names are simply not here
+    def __getattr__(name: str) -> object:
+        """A moved error class: an ``ImportError`` naming its module (PEP 562).
+
+        Parameters
+        ----------
+        name : str
+            The attribute asked for.
+
+        Raises
+        ------
+        ImportError
+            For a name of :data:`MOVED` (``from nonfragile_tracker.errors import
+            InfeasibleError`` shows where to import it from).
+        AttributeError
+            For any other name.
+        """
+        if name in MOVED:
+            raise ImportError(f'{name} moved to {MOVED[name]}: import it from there '
+                              f'(or from {MOVED[name].rpartition(".")[0]})', name=__name__)
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

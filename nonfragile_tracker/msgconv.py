@@ -3,7 +3,7 @@
 Duck-typed: the functions read attributes, so they take rclpy messages (nodes) and
 rosbags' deserialized messages (bag replay) alike - one meaning, one place.
 :func:`tracker_config` maps the tracker node's parameter values to
-:class:`~nonfragile_tracker.control.loop.TrackerConfig` for the node and for replay.
+:class:`~nonfragile_tracker.control.simulation.loop.TrackerConfig` for the node and for replay.
 """
 from __future__ import annotations
 
@@ -13,11 +13,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .control.gains import gain_from_parameters
-from .control.loop import LoopConfigError, TrackerConfig, quaternion_to_yaw, yaw_to_quaternion
-from .control.reference import RefSample
-from .control.trajectory import (Trajectory, TrajectoryError, check_frame, from_poses,
-                                 from_states, from_waypoints)
+from .control.simulation.gains import gain_from_parameters
+from .control.simulation.loop import (LoopConfigError, TrackerConfig, quaternion_to_yaw,
+                                      yaw_to_quaternion)
+from .control.simulation.reference import RefSample
+from .control.simulation.trajectory import (Trajectory, TrajectoryError, check_frame, from_poses,
+                                            from_states, from_waypoints)
 from .control.validate import as_matrix
 
 __all__ = ['stamp_ns', 'ns_to_stamp', 'fill_pose', 'pose_from_odom', 'fill_reference',

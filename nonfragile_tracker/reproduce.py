@@ -19,13 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from .control.analysis import analyse_gain
-from .control.design import at_gain_norm, max_decay_rate, max_perturbation_scale, min_gain_norm
-from .control.lmi import synthesize
-from .control.loop import TrackerConfig
-from .control.problem import Problem, load_problem
-from .control.reference import circle
-from .control.simulate import simulate_delay_loop, simulate_tracking
+from .control.synthesis.analysis import analyse_gain
+from .control.synthesis.design import (at_gain_norm, max_decay_rate, max_perturbation_scale,
+                                       min_gain_norm)
+from .control.synthesis.lmi import synthesize
+from .control.simulation.loop import TrackerConfig
+from .control.synthesis.problem import Problem, load_problem
+from .control.simulation.reference import circle
+from .control.simulation.simulate import simulate_delay_loop, simulate_tracking
 from .errors import RunError
 from .scenario import paper_plant_config
 
@@ -83,9 +84,9 @@ def paper_circle_tracking(K: np.ndarray, compensation: bool) -> dict[str, Any]:
 
 def _harder(problem: Problem) -> dict[str, Any]:
     """Theorem 1 vs the delay-dependent design on the harder delay (velocity rows)."""
-    from .control import delay
-    from .control.delay_dependent import max_certified_delay
-    from .control.lmi import InfeasibleError
+    from .control.synthesis import delay
+    from .control.synthesis.delay_dependent import max_certified_delay
+    from .control.synthesis.lmi import InfeasibleError
     bound = float(problem.options['gain_bound'])
     try:
         synthesize(problem, gain_bound=bound)
@@ -141,7 +142,7 @@ def _figures(problem: Problem, paper: dict[str, Any], out: Path) -> list[str]:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from .control.delay import closed_loop_matrix
+    from .control.synthesis.delay import closed_loop_matrix
     names = []
     cases = [('fig2_normal_delta1.png', 'K_normal', 'Delta_1', 2),
              ('fig3_nonfragile_delta1.png', 'K_nf', 'Delta_1', 3),
@@ -172,7 +173,7 @@ def _fig6(out: Path, paper_knf: np.ndarray, duration: float) -> dict[str, Any]:
     import tempfile
 
     from .bag.report import bag_report
-    from .control.gains import write_gain_file
+    from .control.simulation.gains import write_gain_file
     from .resources import config_dir
     from .runner import run_processes, scenario_parameters
     with tempfile.TemporaryDirectory() as tmp:

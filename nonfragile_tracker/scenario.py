@@ -13,7 +13,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, cast
 
-from .control.loop import PlantConfig
+from .control.simulation.loop import PlantConfig
 from .control.validate import as_matrix
 from .errors import InputError
 from .files import read_yaml

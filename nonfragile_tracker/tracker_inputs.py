@@ -48,12 +48,12 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 from . import topics
-from .control.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
+from .control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
                              trajectory_time)
-from .control.limits import Limits, within_limits
-from .control.loop import Command, Tracker, TrackerConfig
-from .control.reference import RefSample
-from .control.trajectory import Trajectory, TrajectoryError
+from .control.simulation.limits import Limits, within_limits
+from .control.simulation.loop import Command, Tracker, TrackerConfig
+from .control.simulation.reference import RefSample
+from .control.simulation.trajectory import Trajectory, TrajectoryError
 from .errors import InputError
 from .msgconv import (multidof_to_trajectory, path_to_trajectory, pose_from_odom,
                       reference_from_msgs, stamp_ns)

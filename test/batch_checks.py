@@ -1,6 +1,6 @@
 """Shared checks of the batch simulation against single runs (``test/control/test_batch*``).
 
-A case of a batch must be the single run (``control.simulate.simulate_tracking``) with
+A case of a batch must be the single run (``control.simulation.simulate.simulate_tracking``) with
 that case's configuration: these helpers run the single runs, measure the largest
 difference of the logged fields and compare the metrics.
 """
@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.batch import PathBatch, perturbation_schedule, sample_deltas
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.batch import (PathBatch, perturbation_schedule,
+                                                         sample_deltas)
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 
 #: The per-step fields a batch trace logs, as the single run's attributes.
 FIELDS = ('x', 'y', 'th', 'speed', 'cmd_v', 'cmd_w', 'commanded')

@@ -160,7 +160,7 @@ if os.environ.get('PYTEST_XDIST_WORKER'):
 
 @pytest.fixture(scope='session')
 def paper_problem():
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     return load_problem(CONFIG / 'paper_problem.yaml')
 
 
@@ -206,7 +206,7 @@ SHIPPED_DESIGN_ARGV = ['design', str(CONFIG / 'paper_problem.yaml'), '--objectiv
 def _design_shipped_gain(path: Path) -> SimpleNamespace:
     """``design ... -o path`` through ``cli.main`` with a spy on ``design.at_gain_norm``."""
     from nonfragile_tracker.cli import main
-    from nonfragile_tracker.control import design
+    from nonfragile_tracker.control.synthesis import design
 
     real, calls = design.at_gain_norm, []
 
@@ -231,7 +231,7 @@ def shipped_design(request, tmp_path_factory):
     """The max-decay gain's command run once per test run (its max-decay design costs seconds).
 
     ``design config/paper_problem.yaml --objective decay --norm 8.67 -o FILE`` through
-    ``cli.main``, with a pass-through spy on ``control.design.at_gain_norm`` that records
+    ``cli.main``, with a pass-through spy on ``control.synthesis.design.at_gain_norm`` that records
     each call and its :class:`DesignResult`.  Returns a namespace with ``code`` (exit
     code), ``path`` (the gain file), ``stdout`` and ``calls`` (``(args, kwargs, result)``).
     Shared by the CLI test, the shipped-gain test and the design tests (same computation);

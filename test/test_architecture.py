@@ -3,6 +3,7 @@ cycles, no private name across modules."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -123,18 +124,118 @@ def test_layers_hold():
 
 
 @pytest.mark.parametrize('module, line, words', [
-    ('nonfragile_tracker.control.model', 'import rclpy', 'imports rclpy (not allowed in control)'),
-    ('nonfragile_tracker.control.model', 'from ..bag import reader',
+    ('nonfragile_tracker.control.simulation.model', 'import rclpy',
+     'imports rclpy (not allowed in control)'),
+    ('nonfragile_tracker.control.simulation.model', 'from ...bag import reader',
      'imports nonfragile_tracker.bag.reader (bag, above control)'),
     ('nonfragile_tracker.bag.motion', 'from rclpy.node import Node', 'imports rclpy'),
     ('nonfragile_tracker.bag.report', 'from .. import runner', 'nonfragile_tracker.runner'),
     ('nonfragile_tracker.nodes.tracker', 'from ..runner import merge', '(orchestration, above nodes)'),
-    ('nonfragile_tracker.control.loop', 'def f():\n    import rosbags', 'imports rosbags'),
+    ('nonfragile_tracker.control.simulation.loop', 'def f():\n    import rosbags',
+     'imports rosbags'),
 ])
 def test_the_layer_check_fails_on_a_planted_import(module, line, words):
     source = MODULES[module].read_text() + '\n' + line + '\n'
     bad = layer_violations({module: source})
     assert len(bad) == 1 and words in bad[0], bad
+
+
+#: The control core's parts and the parts each may import.  What lies at control's root
+#: (``validate``, the package ``__init__``) is shared by the three and imports none of them.
+CONTROL_PARTS = {
+    'simulation': set(),                  # the step functions the nodes run: numpy, no cvxpy
+    'identification': {'simulation'},     # a recording drives the simulated loop
+    'synthesis': {'identification'},      # a latency design starts from an identification
+}
+
+
+def control_part(name: str) -> str | None:
+    """The part of ``control`` module ``name`` is in; '' for control's shared root, None
+    outside control."""
+    parts = name.split('.')
+    if parts[1:2] != ['control']:
+        return None
+    return parts[2] if len(parts) > 2 and parts[2] in CONTROL_PARTS else ''
+
+
+def part_violations(sources: dict[str, str] | None = None) -> list[str]:
+    """Every import inside ``control`` that breaks :data:`CONTROL_PARTS`, as readable lines
+    (lazy imports too; ``sources`` as in :func:`layer_violations`)."""
+    sources = sources or {}
+    bad = []
+    for name, path in MODULES.items():
+        part = control_part(name)
+        if part is None:
+            continue
+        allowed = CONTROL_PARTS.get(part, set())
+        for mod, _, line in _imports(name, path, False, sources.get(name)):
+            target = control_part(mod)
+            if target and target != part and target not in allowed:
+                bad.append(f'{name}:{line} imports {mod} (control.{target}: '
+                           f'control.{part or "root"} may import '
+                           f'{", ".join(sorted(allowed)) or "no other part"})')
+    return bad
+
+
+def test_control_parts_hold():
+    assert part_violations() == []
+    assert {control_part(m) for m in MODULES} >= {'synthesis', 'simulation', 'identification',
+                                                   ''}
+
+
+@pytest.mark.parametrize('module, line, words', [
+    ('nonfragile_tracker.control.simulation.loop', 'from ..synthesis import lmi',
+     'imports nonfragile_tracker.control.synthesis.lmi (control.synthesis: '
+     'control.simulation may import no other part)'),
+    ('nonfragile_tracker.control.simulation.model',
+     'def f():\n    from ..synthesis.problem import Problem',
+     'imports nonfragile_tracker.control.synthesis.problem'),
+    ('nonfragile_tracker.control.simulation.loop', 'from ..identification import monitor',
+     'control.simulation may import no other part'),
+    ('nonfragile_tracker.control.synthesis.lmi', 'from ..simulation.loop import Tracker',
+     'control.synthesis may import identification'),
+    ('nonfragile_tracker.control.identification.monitor', 'from ..synthesis import sdp',
+     'control.identification may import simulation'),
+    ('nonfragile_tracker.control.validate', 'from .simulation import loop',
+     'control.root may import no other part'),
+])
+def test_the_part_check_fails_on_a_planted_import(module, line, words):
+    source = MODULES[module].read_text() + '\n' + line + '\n'
+    bad = part_violations({module: source})
+    assert len(bad) == 1 and words in bad[0], bad
+
+
+def test_every_internal_import_names_an_existing_module():
+    """No module imports a path that is no module of today's tree (for example an old flat
+    ``control.loop``, now ``control.simulation.loop``: it resolves only through the
+    deprecation alias, which is for users' scripts)."""
+    bad = [(name, mod, line) for name, path in MODULES.items()
+           for mod, _, line in _imports(name, path, False)
+           if mod not in MODULES and mod.rpartition('.')[0] not in MODULES]
+    assert bad == []
+    flat = [name for name, path in MODULES.items()
+            if control_part(name) and path.name != '__init__.py']
+    old = {'nonfragile_tracker.control.' + name.rpartition('.')[2] for name in flat}
+    assert not old & set(MODULES)
+
+
+def test_tests_and_benchmarks_use_the_new_control_paths():
+    """test/ and benchmarks/ name ``control``'s modules by their part (but
+    :data:`OLD_PATHS_ON_PURPOSE`)."""
+    stems = '|'.join(sorted({n.rpartition('.')[2] for n, p in MODULES.items()
+                             if control_part(n) and p.name != '__init__.py'}))
+    old = re.compile(rf'nonfragile_tracker[./]control[./]({stems})\b')
+    root = PKG.parent
+    bad = [f'{path.relative_to(root)}:{text[:m.start()].count(chr(10)) + 1}: {m[0]}'
+           for folder in ('test', 'benchmarks') for path in sorted((root / folder).rglob('*.py'))
+           if path.relative_to(root).as_posix() not in OLD_PATHS_ON_PURPOSE
+           for text in [path.read_text()] for m in old.finditer(text)]
+    assert bad == []
+
+
+#: Files that name the old flat paths on purpose: the test of the aliases, and the benchmark
+#: that reads identify.py of an old commit (git show of its path then).
+OLD_PATHS_ON_PURPOSE = {'test/control/test_control_aliases.py', 'benchmarks/sections/identify.py'}
 
 
 def test_every_module_is_seen():

@@ -12,7 +12,7 @@ from rclpy.parameter import Parameter
 from nonfragile_tracker import golden
 from nonfragile_tracker.bag.compare import compare_bags, format_differences
 from nonfragile_tracker.bag.reader import read_messages
-from nonfragile_tracker.control.gains import read_gain_file
+from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.nodes.common import DATA_QOS
 from nonfragile_tracker.nodes.tracker import TrackerNode
 from nonfragile_tracker.scenario import node_parameters

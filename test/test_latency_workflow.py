@@ -1,10 +1,10 @@
 """Bring-up workflow of issue 11: record -> identify -> latency-design -> run (ROS-free).
 
-The recorded run is the in-process loop of the nodes (:func:`control.simulate.run_loop`,
+The recorded run is the in-process loop of the nodes (:func:`control.simulation.simulate.run_loop`,
 the plant and tracker step functions) on the latency scenario's robot: figure eight
 r = 1 m at 0.2 rad/s, 100 ms command latency, 50 ms lag on v and w, odometry 50 Hz
 with 1 mm noise, the tracker's predictor on.  The identification, the derived interval
-(one rule: :func:`control.latency_design.plan_from_identification`), the gain file of
+(one rule: :func:`control.synthesis.latency_design.plan_from_identification`), the gain file of
 ``latency-design --identification`` and a run with that file are checked with numbers.
 """
 import math
@@ -14,17 +14,20 @@ import pytest
 import yaml
 
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.gains import (DESIGN_SECTION, read_gain_design, read_gain_file)
-from nonfragile_tracker.control.identify import (CommandSamples, Identification,
-                                                 OdometrySamples, identify_latency,
-                                                 read_identification, with_source,
-                                                 write_identification)
-from nonfragile_tracker.control.input_delay import certify_input_delay
-from nonfragile_tracker.control.latency_design import lagged_problem, plan_from_identification
-from nonfragile_tracker.control.loop import PlantConfig, Tracker, TrackerConfig, step_time
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.control.reference import figure_eight
-from nonfragile_tracker.control.simulate import run_loop
+from nonfragile_tracker.control.simulation.gains import (DESIGN_SECTION, read_gain_design,
+                                                         read_gain_file)
+from nonfragile_tracker.control.identification.identify import (CommandSamples, Identification,
+                                                                OdometrySamples, identify_latency,
+                                                                read_identification, with_source,
+                                                                write_identification)
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
+from nonfragile_tracker.control.synthesis.latency_design import (lagged_problem,
+                                                                 plan_from_identification)
+from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
+                                                        step_time)
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.simulation.reference import figure_eight
+from nonfragile_tracker.control.simulation.simulate import run_loop
 from nonfragile_tracker.errors import InputError
 
 from conftest import CONFIG, DI_PROBLEM
@@ -210,11 +213,11 @@ def test_full_chain_with_the_paper_design(recorded, tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------------------------------
-# Predictor while following a trajectory (control.follow.Follower)
+# Predictor while following a trajectory (control.simulation.follow.Follower)
 
 def follow_lap(predict: dict, latency: float = 0.2):
-    from nonfragile_tracker.control.follow import simulate_following
-    from nonfragile_tracker.control.trajectory import load_waypoints
+    from nonfragile_tracker.control.simulation.follow import simulate_following
+    from nonfragile_tracker.control.simulation.trajectory import load_waypoints
     traj = load_waypoints(CONFIG / 'trajectories' / 'lap.csv')
     pc = PlantConfig(dt=DT, tau=0.0, A_tau=np.zeros((4, 4)), x0=0.0, y0=-0.02, th0=0.0, v0=0.0,
                      cmd_latency=latency, lag_v=LAG, lag_w=LAG, odom_rate=50.0)
@@ -240,8 +243,8 @@ def test_follower_with_predictor_tracks_the_lap_and_stops():
 
 def test_follower_without_predictor_is_unchanged():
     """No predictor: the follower passes no stamp, the law is today's (same as latency 0)."""
-    from nonfragile_tracker.control.follow import Follower
-    from nonfragile_tracker.control.trajectory import load_waypoints
+    from nonfragile_tracker.control.simulation.follow import Follower
+    from nonfragile_tracker.control.simulation.trajectory import load_waypoints
     traj = load_waypoints(CONFIG / 'trajectories' / 'lap.csv')
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     a = Follower(Tracker(TrackerConfig(K=K)), traj)

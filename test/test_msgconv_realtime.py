@@ -6,8 +6,8 @@ from types import SimpleNamespace as NS
 
 import pytest
 
-from nonfragile_tracker.control.loop import quaternion_to_yaw, yaw_to_quaternion
-from nonfragile_tracker.control.reference import RefSample
+from nonfragile_tracker.control.simulation.loop import quaternion_to_yaw, yaw_to_quaternion
+from nonfragile_tracker.control.simulation.reference import RefSample
 from nonfragile_tracker.msgconv import pose_from_odom, reference_from_msgs
 
 

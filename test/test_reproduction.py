@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker import reproduce
-from nonfragile_tracker.control.loop import TrackerConfig
-from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
@@ -33,7 +33,7 @@ def fresh(tmp_path_factory, shipped_design):
     the identical call the shipped gain's command made this session (conftest
     ``shipped_design``), every other number is computed here, Fig. 6 from a ROS run of 60 s
     (the command's default)."""
-    from nonfragile_tracker.control.design import max_decay_rate
+    from nonfragile_tracker.control.synthesis.design import max_decay_rate
     (fn, problem, norm), kw, result = shipped_design.calls[0]
     assert fn is max_decay_rate and kw == {'nominal': False}
     reused = []

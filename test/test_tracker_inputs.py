@@ -11,9 +11,9 @@ from types import SimpleNamespace as NS
 
 import pytest
 
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import Tracker, TrackerConfig
-from nonfragile_tracker.control.reference import circle
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.tracker_inputs import (INPUT_DEFAULTS, REF_BUFFER, InputRules,
                                                Rejection, TrackerInputs, input_rules,

@@ -22,8 +22,8 @@ def worker_roots(reps: int) -> None:
     """Child: rightmost_roots timing (run with OPENBLAS_NUM_THREADS=1 for the comparison)."""
     import numpy as np
     import yaml
-    from nonfragile_tracker.control import delay
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import delay
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     p = load_problem(CONFIG / 'paper_problem.yaml')
     K = np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'], float)
     A0 = delay.closed_loop_matrix(p.A, p.B, K)
@@ -82,8 +82,8 @@ def reference_roots(A0, A1, tau: float, N: int = 160, keep: int = 12):
 def bench_delay(cfg, table: Table, raw: dict) -> None:
     import numpy as np
     import yaml
-    from nonfragile_tracker.control import delay
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import delay
+    from nonfragile_tracker.control.synthesis.problem import load_problem
 
     p = load_problem(CONFIG / 'paper_problem.yaml')
     gains = yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())

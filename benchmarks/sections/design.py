@@ -6,7 +6,7 @@ Run through ``benchmarks/run.py --only design``; helpers come from ``harness``.
       plain ``synthesize`` of the same problem, both as the user runs them (CLI
       subprocesses, imports included), alternated in one run; today's code (the branch's
       base commit, ``BENCH_BASELINE_REF``, extracted with ``git archive``) side by side.
-12.2  a sweep of 200 designs (quick: 40) of the double integrator (``control.sweep``):
+12.2  a sweep of 200 designs (quick: 40) of the double integrator (``control.synthesis.sweep``):
       serial, two local worker processes, and a Dask LocalCluster of two single-threaded
       workers - wall time ratio to the serial run and the records compared design by design.
 """
@@ -75,10 +75,11 @@ def _figures(text: str) -> str:
 #: What each command imports before its first solve (the start-up share of 12.1).
 IMPORTS = {
     'synthesize': 'import nonfragile_tracker.cli, nonfragile_tracker.commands.synthesis, '
-                  'nonfragile_tracker.control.lmi, cvxpy',
+                  'nonfragile_tracker.control.synthesis.lmi, cvxpy',
     'latency-design': 'import nonfragile_tracker.cli, nonfragile_tracker.commands.latency_design, '
-                      'nonfragile_tracker.control.latency_design, '
-                      'nonfragile_tracker.control.monitor, nonfragile_tracker.control.gains, cvxpy',
+                      'nonfragile_tracker.control.synthesis.latency_design, '
+                      'nonfragile_tracker.control.identification.monitor, '
+                      'nonfragile_tracker.control.simulation.gains, cvxpy',
 }
 
 
@@ -138,7 +139,7 @@ def bench_latency_design(cfg, table: Table, raw: dict) -> None:
 
 
 def _sweep_points(count: int):
-    from nonfragile_tracker.control.sweep import sweep_points
+    from nonfragile_tracker.control.synthesis.sweep import sweep_points
     lats = [(0.0, 0.03), (0.0, 0.08), (0.05, 0.1), (0.1, 0.15), (0.0, 0.15)]
     lags = [0.0, 0.02, 0.05, 0.08, 0.1]
     bounds = [2.0, 2.5, 3.0, 4.0]
@@ -149,8 +150,8 @@ def _sweep_points(count: int):
 def worker_sweep(mode: str, count: int) -> None:
     """Child of 12.2: one sweep, in a fresh process; prints wall time and the records."""
     import numpy as np
-    from nonfragile_tracker.control.problem import Problem
-    from nonfragile_tracker.control.sweep import run_sweep
+    from nonfragile_tracker.control.synthesis.problem import Problem
+    from nonfragile_tracker.control.synthesis.sweep import run_sweep
     p = Problem(**{k: (np.array(v, float) if k != 'tau' else v) for k, v in DI.items()},
                 name='di', perturbations={'minus': -np.eye(1), 'plus': np.eye(1)})
     pts = _sweep_points(count)

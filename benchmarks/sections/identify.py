@@ -2,7 +2,7 @@
 
 Run through ``benchmarks/run.py --only identify`` (or standalone:
 ``.venv/bin/python benchmarks/sections/identify.py [--quick]``).  For each case of
-``config/identify_cases.yaml`` (recorded in process by ``control.recording``, 30 s,
+``config/identify_cases.yaml`` (recorded in process by ``control.identification.recording``, 30 s,
 seeds 1..3; quick: seed 1) the truth, today's ``identify`` (the code of the session
 start, commit d11fc49, loaded from git) and the new one side by side: latency (for the
 jitter case: the range), lags, and MET/MISSED for the issue's target - latency within one
@@ -35,7 +35,8 @@ STEP = 0.01
 
 
 def _old_identify() -> types.ModuleType | None:
-    """control/identify.py as of the session start (git show), or None without git."""
+    """control/identify.py (today control/identification/identify.py) as of the session start
+    (git show of its path then), or None without git."""
     try:
         src = subprocess.run(['git', '-C', str(ROOT), 'show',
                               f'{BASELINE}:nonfragile_tracker/control/identify.py'],
@@ -92,8 +93,8 @@ def _fmt(r: dict, jitter: float) -> str:
 def bench_identify(cfg, table: Table, raw: dict) -> None:
     """Rows 7.x: each case of config/identify_cases.yaml, today's identify and the new."""
     import numpy as np
-    from nonfragile_tracker.control.identify import identify_latency
-    from nonfragile_tracker.control.recording import load_cases, record_case
+    from nonfragile_tracker.control.identification.identify import identify_latency
+    from nonfragile_tracker.control.identification.recording import load_cases, record_case
     cases = load_cases(ROOT / 'config' / 'identify_cases.yaml')
     old = _old_identify()
     if old is None:

@@ -19,9 +19,9 @@ from harness import (
 
 def _quality_job(job: dict) -> dict:
     """One simulation (runs in a worker process)."""
-    from nonfragile_tracker.control.loop import TrackerConfig
-    from nonfragile_tracker.control.reference import circle, figure_eight
-    from nonfragile_tracker.control.simulate import simulate_tracking
+    from nonfragile_tracker.control.simulation.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.reference import circle, figure_eight
+    from nonfragile_tracker.control.simulation.simulate import simulate_tracking
     from nonfragile_tracker.scenario import paper_plant_config
     pc = paper_plant_config()
     kw = {}
@@ -40,8 +40,8 @@ def _quality_job(job: dict) -> dict:
 
 def _analysis_job(job: dict) -> dict:
     import numpy as np
-    from nonfragile_tracker.control.analysis import analyse_gain
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis.analysis import analyse_gain
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     p = load_problem(CONFIG / 'paper_problem.yaml')
     t = time.perf_counter()
     a = analyse_gain(p, np.asarray(job['K']), name=job['name'])
@@ -54,9 +54,9 @@ def bench_quality(cfg, table: Table, raw: dict) -> None:
 
     import numpy as np
     import yaml
-    from nonfragile_tracker.control import design
-    from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import design
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.synthesis.problem import load_problem
 
     p = load_problem(CONFIG / 'paper_problem.yaml')
     paper = yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())

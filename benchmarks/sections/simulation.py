@@ -17,10 +17,10 @@ from harness import (
 # ============================================================================ 3. simulation
 
 def bench_simulation(cfg, table: Table, raw: dict) -> None:
-    from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import TrackerConfig
-    from nonfragile_tracker.control.reference import circle
-    from nonfragile_tracker.control.simulate import simulate_tracking
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.reference import circle
+    from nonfragile_tracker.control.simulation.simulate import simulate_tracking
     from nonfragile_tracker.scenario import paper_plant_config
 
     log(f'simulation: {cfg.sim_steps} steps x {cfg.sim_reps}')

@@ -24,8 +24,8 @@ from harness import (
 def worker_cold() -> None:
     """Child of the cold measurement: import, load, solve once, report."""
     t0 = time.perf_counter()
-    from nonfragile_tracker.control.lmi import synthesize
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis.lmi import synthesize
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     t1 = time.perf_counter()
     p = load_problem(CONFIG / 'paper_problem.yaml')
     r = synthesize(p, gain_bound=p.options.get('gain_bound'))
@@ -37,7 +37,7 @@ def worker_cold() -> None:
 def stacked_problem(k: int):
     """k copies of the paper's robot, block-diagonal (n = 4 k)."""
     import scipy.linalg as sla
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     p = load_problem(CONFIG / 'paper_problem.yaml')
     bd = lambda M: sla.block_diag(*([M] * k))  # noqa: E731
     return p.replace(A=bd(p.A), B=bd(p.B), A_tau=bd(p.A_tau), E=bd(p.E), F=bd(p.F),
@@ -48,8 +48,8 @@ def worker_growth(n: int, solver: str, reps: int) -> None:
     """Child of the growth measurement: after a warm-up solve of the paper's problem (cvxpy's
     first-use cost), build + solve the stacked problem once, then warm re-solves."""
     import numpy as np
-    from nonfragile_tracker.control import lmi, sdp
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import lmi, sdp
+    from nonfragile_tracker.control.synthesis.problem import load_problem
     p0 = load_problem(CONFIG / 'paper_problem.yaml')
     lmi.synthesize(p0, gain_bound=p0.options.get('gain_bound'), solver=solver)
     sdp.clear_cache()
@@ -74,8 +74,8 @@ def worker_growth(n: int, solver: str, reps: int) -> None:
 
 def bench_synthesis(cfg, table: Table, raw: dict) -> None:
     import numpy as np
-    from nonfragile_tracker.control import delay, lmi, sdp
-    from nonfragile_tracker.control.problem import load_problem
+    from nonfragile_tracker.control.synthesis import delay, lmi, sdp
+    from nonfragile_tracker.control.synthesis.problem import load_problem
 
     p = load_problem(CONFIG / 'paper_problem.yaml')
     gb = p.options.get('gain_bound')

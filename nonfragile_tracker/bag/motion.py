@@ -1,7 +1,8 @@
 """Velocity commands and odometry of any rosbag2 bag, for latency identification.
 
-:func:`read_motion` returns the series :func:`nonfragile_tracker.control.identify.identify_latency`
-needs, from a bag of this package or of any robot:
+:func:`read_motion` returns the series
+:func:`nonfragile_tracker.control.identification.identify.identify_latency` needs, from a
+bag of this package or of any robot:
 
 * commands: ``geometry_msgs/msg/Twist`` timed by the bag's receive (log) time, or
   ``geometry_msgs/msg/TwistStamped`` timed by its header stamp (receive time if
@@ -30,8 +31,8 @@ from rosbags.rosbag2 import ReaderError
 
 from .. import topics
 from ..errors import InputError
-from ..control.identify import CommandSamples, OdometrySamples
-from ..control.loop import quaternion_to_yaw
+from ..control.identification.identify import CommandSamples, OdometrySamples
+from ..control.simulation.loop import quaternion_to_yaw
 from .reader import MissingTopicsError, NotABagError, open_reader
 from .typestore import jazzy_typestore
 

@@ -32,9 +32,9 @@ from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.typesys.store import Typestore
 
 from .. import topics
-from ..control.follow import REST_SPEED, START_TOLERANCE, start_offset, trajectory_time
-from ..control.loop import quaternion_to_yaw
-from ..control.trajectory import TrajectoryError
+from ..control.simulation.follow import REST_SPEED, START_TOLERANCE, start_offset, trajectory_time
+from ..control.simulation.loop import quaternion_to_yaw
+from ..control.simulation.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
 from .errors import (BagError, BagNotFoundError, BagTruncatedError, MissingTopicsError,
                      NotABagError)

@@ -38,8 +38,8 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.gains import read_gain_file
-from ..control.loop import Command, TrackerConfig
+from ..control.simulation.gains import read_gain_file
+from ..control.simulation.loop import Command, TrackerConfig
 from ..files import node_key
 from ..msgconv import stamp_ns, tracker_config
 from ..resources import config_dir

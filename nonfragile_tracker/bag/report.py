@@ -2,7 +2,7 @@
 
 :func:`bag_report` reads a bag (:func:`~nonfragile_tracker.bag.reader.read_bag`),
 matches the robot pose (``odom``, else ``pose``) with the reference by header
-stamp and computes :func:`nonfragile_tracker.control.metrics.tracking_metrics`
+stamp and computes :func:`nonfragile_tracker.control.simulation.metrics.tracking_metrics`
 on the matched samples (peak ``|v|``, ``|w|`` from ``cmd_vel``).  Times are
 seconds since the first pose or reference stamp, so a simulated (sim time)
 run keeps its own time axis.  It finds stamp gaps on the pose topic and
@@ -30,12 +30,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .. import topics
-from ..control.metrics import TrackingMetrics, tracking_metrics
+from ..control.simulation.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
 from .errors import BagError
 
 if TYPE_CHECKING:
-    from ..control.monitor import Certificate, MonitorSettings
+    from ..control.identification.monitor import Certificate, MonitorSettings
 
 __all__ = ['Gap', 'PhaseErrors', 'Report', 'TimingMetrics', 'bag_report', 'format_report',
            'find_gaps', 'timing_metrics', 'PLOTS', 'GAP_FACTOR', 'LOCKSTEP_MATCH',
@@ -664,8 +664,9 @@ def certificate_source(bag: str | os.PathLike[str],
         ``(certificate, tracker parameters, source)``; the certificate is None when
         ``gains`` records none.
     """
-    from ..control.gains import read_gain_design
-    from ..control.monitor import certificate_from_design, certificate_from_parameters
+    from ..control.simulation.gains import read_gain_design
+    from ..control.identification.monitor import (certificate_from_design,
+                                                  certificate_from_parameters)
     if gains is not None:
         params = _tracker_section(Path(gains))
         hold = float(params.get('dt', 0.01))
@@ -709,7 +710,8 @@ def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | No
     settings : control.monitor.MonitorSettings, optional
         Default: from ``params`` as the tracker node builds them.
     """
-    from ..control.monitor import ERROR, STALE, MonitorSettings, estimate_latency, evaluate
+    from ..control.identification.monitor import (ERROR, STALE, MonitorSettings, estimate_latency,
+                                                  evaluate)
     from .motion import read_motion
     if settings is None:
         settings = MonitorSettings(

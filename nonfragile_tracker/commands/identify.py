@@ -9,7 +9,7 @@ from .common import Subparsers, check_outputs
 
 if TYPE_CHECKING:
     from ..bag.motion import MotionData
-    from ..control.identify import Identification
+    from ..control.identification.identify import Identification
 
 __all__ = ['register', 'cmd_identify']
 
@@ -27,7 +27,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         The parsed command line of ``identify``.
     """
     from ..bag.motion import read_motion
-    from ..control.identify import (identify_latency, measurement_to_command_delay,
+    from ..control.identification.identify import (identify_latency, measurement_to_command_delay,
                                     with_source, write_identification)
     check_outputs(args.force, args.output)
     data = read_motion(args.bag, cmd_topic=args.cmd_topic, odom_topic=args.odom_topic,
@@ -85,7 +85,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.output:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
-    from ..control.latency_design import plan_from_identification
+    from ..control.synthesis.latency_design import plan_from_identification
     if math.isfinite(res.command_period_s):
         plan = plan_from_identification(res)
         bare = plan_from_identification(res, predictor=False)
@@ -122,7 +122,7 @@ def _cross_check(args: argparse.Namespace, data: MotionData, res: Identification
     A base whose twist echoes the command, or is stamped differently from the pose,
     shows here: the poses are what the robot actually did.
     """
-    from ..control.identify import IdentificationError, identify_latency
+    from ..control.identification.identify import IdentificationError, identify_latency
     try:
         pose = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
                                 max_tau_s=args.max_tau, source='pose', bootstrap=50,

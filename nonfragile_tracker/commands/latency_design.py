@@ -20,10 +20,10 @@ def run(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``latency-design``.
     """
-    from ..control.gains import write_gain_file
-    from ..control.latency_design import design_for_latency, plan_from_identification
-    from ..control.monitor import certificate_from_design
-    from ..control.problem import load_problem
+    from ..control.simulation.gains import write_gain_file
+    from ..control.synthesis.latency_design import design_for_latency, plan_from_identification
+    from ..control.identification.monitor import certificate_from_design
+    from ..control.synthesis.problem import load_problem
     from ..errors import InputError
     check_outputs(args.force, args.output)
     if (args.delay_interval is None) == (args.identification is None):
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     record: dict[str, Any] = {}
     lag = 0.0 if args.lag is None else args.lag
     if args.identification is not None:
-        from ..control.identify import read_identification
+        from ..control.identification.identify import read_identification
         plan = plan_from_identification(read_identification(args.identification),
                                         predictor=not args.no_predictor,
                                         command_period=args.command_period)

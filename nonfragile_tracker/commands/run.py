@@ -34,7 +34,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         The parsed command line of ``run``.
     """
     from .. import runner
-    from ..control.gains import read_gain_file
+    from ..control.simulation.gains import read_gain_file
     from ..resources import config_dir
     if args.paper and (args.gains or args.delay_compensation):
         raise InputError('--paper is the paper\'s configuration (its K_nf, no delay '
@@ -63,7 +63,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             ov.setdefault(node, {'ros__parameters': {}})['ros__parameters'][
                 'enable_stamped_cmd_vel'] = True
     if args.trajectory:
-        from ..control.trajectory import load_waypoints
+        from ..control.simulation.trajectory import load_waypoints
         traj = load_waypoints(args.trajectory)      # refuse a bad file before starting (2)
         start = traj.sample(traj.t_start)
         ov['reference']['ros__parameters']['trajectory_file'] = str(Path(args.trajectory)

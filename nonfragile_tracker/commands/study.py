@@ -26,11 +26,11 @@ def cmd_study(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``study``.
     """
-    from ..control.batch import PathBatch
-    from ..control.gains import read_gain_design, read_gain_file
-    from ..control.loop import TrackerConfig
-    from ..control.problem import load_problem
-    from ..control.study import StudySpec, case_records, plot_study, run_study, summarize
+    from ..control.simulation.batch import PathBatch
+    from ..control.simulation.gains import read_gain_design, read_gain_file
+    from ..control.simulation.loop import TrackerConfig
+    from ..control.synthesis.problem import load_problem
+    from ..control.simulation.study import StudySpec, case_records, plot_study, run_study, summarize
     from ..errors import InputError
     from ..resources import config_dir
     from ..scenario import node_parameters, plant_config

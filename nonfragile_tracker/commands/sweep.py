@@ -20,8 +20,8 @@ def run(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``sweep``.
     """
-    from ..control.problem import load_problem
-    from ..control.sweep import (plot_sweep, records_for_json, run_sweep, sweep_points,
+    from ..control.synthesis.problem import load_problem
+    from ..control.synthesis.sweep import (plot_sweep, records_for_json, run_sweep, sweep_points,
                                  sweep_table)
     check_outputs(args.force, args.json, args.plot)
     problem = load_problem(args.problem)

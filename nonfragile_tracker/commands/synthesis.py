@@ -17,14 +17,14 @@ from .common import Subparsers
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from ..control.problem import Problem
+    from ..control.synthesis.problem import Problem
 
 __all__ = ['register', 'cmd_synthesize', 'cmd_design', 'cmd_delay_dependent', 'cmd_analyse']
 
 
 def _gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
     """The gains named by ``--gains FILE`` (repeatable) and ``--paper``, by display name."""
-    from ..control.gains import read_gain_file
+    from ..control.simulation.gains import read_gain_file
     from ..resources import load_paper_gains
     gains: dict[str, np.ndarray] = {}
     if args.paper:
@@ -44,9 +44,9 @@ def cmd_synthesize(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``synthesize``.
     """
-    from ..control.gains import write_gain_file
-    from ..control.lmi import UntrustedGainWarning, synthesize
-    from ..control.problem import load_problem
+    from ..control.simulation.gains import write_gain_file
+    from ..control.synthesis.lmi import UntrustedGainWarning, synthesize
+    from ..control.synthesis.problem import load_problem
     problem = load_problem(args.problem)
     bound = args.gain_bound if args.gain_bound is not None else problem.options.get('gain_bound')
     with warnings.catch_warnings():             # printed once below as a CLI message
@@ -93,7 +93,7 @@ def cmd_synthesize(args: argparse.Namespace) -> int:
 
 def _write_gains(args: argparse.Namespace, K: np.ndarray, summary: str,
                  design: dict[str, Any] | None = None) -> None:
-    from ..control.gains import write_gain_file
+    from ..control.simulation.gains import write_gain_file
     print(summary)
     if args.output:
         argv = ' '.join(sys.argv[1:]) if sys.argv else args.command
@@ -110,8 +110,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``design``.
     """
-    from ..control import design
-    from ..control.problem import load_problem
+    from ..control.synthesis import design
+    from ..control.synthesis.problem import load_problem
     problem = load_problem(args.problem)
     fn = {'decay': design.max_decay_rate, 'scale': design.max_perturbation_scale}
     bound: float | None = None                   # the norm bound; None for min-norm
@@ -136,7 +136,7 @@ def cmd_design(args: argparse.Namespace) -> int:
                f'{ver.max_eig_V:.4g} -> {"OK" if ver.ok else "FAILED"}; {res.solves} LMI solves')
     record = None
     if args.output:
-        from ..control.latency_design import latency_figures
+        from ..control.synthesis.latency_design import latency_figures
         lat = latency_figures(problem, res.K)
         summary += (f'\ncommand latency: certified up to {lat["certified_latency"]:.4g} s '
                     f'(input-delay LMI), exact margin {lat["true_latency_margin"]:.4g} s')
@@ -172,8 +172,8 @@ def _saturation_text(args: argparse.Namespace, problem: Problem, K: ArrayLike) -
     """The saturation certificate of ``K`` when --min-speed is given ('' otherwise)."""
     if getattr(args, 'min_speed', None) is None:
         return ''
-    from ..control.saturation import (SaturationLimits, check_by_simulation,
-                                      format_saturation, saturation_certificate)
+    from ..control.synthesis.saturation import (SaturationLimits, check_by_simulation,
+                                                format_saturation, saturation_certificate)
     lim = SaturationLimits(args.max_angular_speed, args.min_speed, args.max_linear_accel,
                            args.reference_accel)
     K = np.asarray(K, float)
@@ -196,9 +196,9 @@ def cmd_delay_dependent(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``delay-dependent``.
     """
-    from ..control import delay
-    from ..control.delay_dependent import max_certified_delay, synthesize_delay_dependent
-    from ..control.problem import load_problem
+    from ..control.synthesis import delay
+    from ..control.synthesis.delay_dependent import max_certified_delay, synthesize_delay_dependent
+    from ..control.synthesis.problem import load_problem
     problem = load_problem(args.problem)
     bound = args.gain_bound if args.gain_bound is not None else problem.options.get('gain_bound')
     if args.max_delay:
@@ -230,8 +230,8 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
     margins_only : bool, optional
         ``margins``: print only the measured and certified fragility margins.
     """
-    from ..control.analysis import analyse_gain, format_analysis
-    from ..control.problem import load_problem
+    from ..control.synthesis.analysis import analyse_gain, format_analysis
+    from ..control.synthesis.problem import load_problem
     problem = load_problem(args.problem)
     rows = [analyse_gain(problem, K, name=name, margins=not args.no_margins)
             for name, K in _gains_from_args(args).items()]

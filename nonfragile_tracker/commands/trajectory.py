@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import argparse
 
-from ..control.limits import LIMIT_NAMES, Limits, check, retime
-from ..control.trajectory import TrajectoryError, describe, load_waypoints
+from ..control.simulation.limits import LIMIT_NAMES, Limits, check, retime
+from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 from .common import Subparsers
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from ..control.trajectory import Trajectory
+    from ..control.simulation.trajectory import Trajectory
 
 __all__ = ['register', 'cmd_check']
 

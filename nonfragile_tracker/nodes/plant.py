@@ -42,7 +42,7 @@ from std_msgs.msg import UInt64
 
 from .. import topics
 from ..errors import EXIT_RUN
-from ..control.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
+from ..control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
                             odometry_period_steps, step_time_ns)
 from ..control.validate import as_matrix
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,

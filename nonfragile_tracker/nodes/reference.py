@@ -43,14 +43,14 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from .. import topics
-from ..control.reference import Path, make_path
-from ..control.trajectory import Trajectory, TrajectoryError, load_waypoints
+from ..control.simulation.reference import Path, make_path
+from ..control.simulation.trajectory import Trajectory, TrajectoryError, load_waypoints
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_reference, ns_to_stamp, require_at_least, run, settings_from,
                      stamp_ns)
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-from ..control.trajectory import analytic_knots
+from ..control.simulation.trajectory import analytic_knots
 from .trajectory_io import (multidof_to_trajectory, path_to_trajectory, states_to_multidof,
                             trajectory_to_path)
 

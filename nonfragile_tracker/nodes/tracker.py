@@ -66,12 +66,13 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..control.follow import Follower, path_errors
-from ..control.loop import Command, Tracker, TrackerConfig
-from ..control.monitor import (Certificate, LatencyEstimate, MonitorSettings, MonitorWorker,
-                               adapted_prediction, certificate_from_parameters, evaluate)
-from ..control.reference import RefSample
-from ..control.trajectory import Trajectory, TrajectoryError
+from ..control.simulation.follow import Follower, path_errors
+from ..control.simulation.loop import Command, Tracker, TrackerConfig
+from ..control.identification.monitor import (Certificate, LatencyEstimate, MonitorSettings,
+                                              MonitorWorker, adapted_prediction,
+                                              certificate_from_parameters, evaluate)
+from ..control.simulation.reference import RefSample
+from ..control.simulation.trajectory import Trajectory, TrajectoryError
 from ..msgconv import tracker_config
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)

@@ -24,8 +24,8 @@ import numpy as np
 from nav_msgs.msg import Path as PathMsg
 from numpy.typing import ArrayLike
 
-from ..control.loop import yaw_to_quaternion
-from ..control.trajectory import Trajectory, TrajectorySamples
+from ..control.simulation.loop import yaw_to_quaternion
+from ..control.simulation.trajectory import Trajectory, TrajectorySamples
 # the message -> trajectory conversions are ROS-free (bag/ reconstructs references with them)
 from ..msgconv import multidof_to_trajectory, path_to_trajectory, stamp_ns
 

@@ -15,9 +15,9 @@ from nonfragile_tracker.bag.report import (certificate_check, certificate_source
                                            format_certificate)
 from nonfragile_tracker.bag.writer import BagWriter
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.gains import write_gain_file
-from nonfragile_tracker.control.loop import (PlantConfig, UnicyclePlant, step_time_ns,
-                                             yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.gains import write_gain_file
+from nonfragile_tracker.control.simulation.loop import (PlantConfig, UnicyclePlant, step_time_ns,
+                                                        yaw_to_quaternion)
 
 DT, STEP, DURATION = 0.01, 10.0, 20.0
 K = [[-1.0, -1.5, 0.0, 0.0], [0.0, 0.0, -1.0, -1.5]]

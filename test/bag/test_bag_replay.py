@@ -12,8 +12,8 @@ from conftest import ROOT
 from nonfragile_tracker import cli, golden
 from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, load_tracker_parameters, replay
 from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
-from nonfragile_tracker.control.loop import PlantConfig, UnicyclePlant
-from nonfragile_tracker.control.reference import make_path
+from nonfragile_tracker.control.simulation.loop import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.tracker_inputs import InputRules, TrackerInputs
 
 GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'

@@ -10,7 +10,7 @@ from test_bag_writer_reader import RUN, simulated_run, write_run_bag
 
 from nonfragile_tracker.bag.reader import MissingTopicsError
 from nonfragile_tracker.bag.report import PLOTS, bag_report, format_report
-from nonfragile_tracker.control.metrics import tracking_metrics
+from nonfragile_tracker.control.simulation.metrics import tracking_metrics
 
 
 @pytest.fixture(scope='module')

@@ -21,7 +21,7 @@ def test_example_without_ros_passes_and_fails_on_another_gain(tmp_path):
     ex.test_new_gain_keeps_the_recorded_behaviour()
     ex.test_recorded_run_meets_the_tracking_requirements()
     # a different gain must make the replay test fail, with the diff in the message
-    from nonfragile_tracker.control.gains import read_gain_file, write_gain_file
+    from nonfragile_tracker.control.simulation.gains import read_gain_file, write_gain_file
     write_gain_file(tmp_path / 'k11.yaml', read_gain_file(ex.MY_GAINS) * 1.1)
     ex.MY_GAINS = tmp_path / 'k11.yaml'
     with pytest.raises(AssertionError, match=r'(?s)commands differ:.*cmd_vel\[0\] linear.x'):

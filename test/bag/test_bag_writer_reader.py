@@ -26,9 +26,10 @@ from nonfragile_tracker.bag.repair import scan_mcap
 from nonfragile_tracker.bag.writer import (BagError, BagExistsError, BagWriter,
                                            InvalidRunNameError, make_qos, new_run_dir,
                                            qos_to_dicts)
-from nonfragile_tracker.control.loop import TrackerConfig, step_time_ns, yaw_to_quaternion
-from nonfragile_tracker.control.reference import make_path
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.loop import (TrackerConfig, step_time_ns,
+                                                        yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.reference import make_path
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
 DT = 0.01

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.gains import read_gain_file
+from nonfragile_tracker.control.simulation.gains import read_gain_file
 
 from conftest import CONFIG, ROOT
 
@@ -79,7 +79,7 @@ def test_design_and_delay_dependent(tmp_path, capsys, monkeypatch, shipped_desig
     assert 'largest certified decay rate' in shipped_design.stdout
     # without --norm the design runs at options.gain_bound (8.67): the same call, so its
     # computed result stands in for a second identical design
-    from nonfragile_tracker.control import design
+    from nonfragile_tracker.control.synthesis import design
     (fn, _, norm), kw, res = shipped_design.calls[0]
     seen = []
 

@@ -3,9 +3,9 @@ rebuilds from them is the exact path to round-off (analytic_knots)."""
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.reference import make_path
-from nonfragile_tracker.control.trajectory import (KNOT_ANGLE, TrajectoryError, analytic_knots,
-                                                   from_states)
+from nonfragile_tracker.control.simulation.reference import make_path
+from nonfragile_tracker.control.simulation.trajectory import (KNOT_ANGLE, TrajectoryError,
+                                                              analytic_knots, from_states)
 
 
 def rebuilt(path, horizon):

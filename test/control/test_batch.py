@@ -10,17 +10,17 @@ import pytest
 from batch_checks import single_runs, trace_deviation
 from conftest import ROOT
 from nonfragile_tracker import cli
-from nonfragile_tracker.control import study as study_mod
-from nonfragile_tracker.control.batch import (BatchCases, BatchError, PathBatch,
-                                              perturbation_schedule, sample_deltas,
-                                              segment_index, simulate_batch,
-                                              simulate_delay_loop_batch)
-from nonfragile_tracker.control.gains import read_gain_design, read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_delay_loop, simulate_tracking
-from nonfragile_tracker.control.study import StudySpec, run_study, summarize
+from nonfragile_tracker.control.simulation import study as study_mod
+from nonfragile_tracker.control.simulation.batch import (BatchCases, BatchError, PathBatch,
+                                                         perturbation_schedule, sample_deltas,
+                                                         segment_index, simulate_batch,
+                                                         simulate_delay_loop_batch)
+from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.simulation.reference import circle
+from nonfragile_tracker.control.simulation.simulate import simulate_delay_loop, simulate_tracking
+from nonfragile_tracker.control.simulation.study import StudySpec, run_study, summarize
 from nonfragile_tracker.scenario import paper_plant_config
 
 CONFIG = ROOT / 'config'
@@ -97,7 +97,7 @@ def test_latency_lag_and_decimated_noisy_odometry_cases_equal_single_runs(exact)
 def test_a_shared_waypoint_trajectory_to_rest_equals_single_runs():
     """The lap of config/trajectories/lap.csv, started at rest and tracked to its end (where
     the speed returns to 0 and w = ../v amplifies round-off): the default exact mode."""
-    from nonfragile_tracker.control.trajectory import load_waypoints
+    from nonfragile_tracker.control.simulation.trajectory import load_waypoints
     traj = load_waypoints(CONFIG / 'trajectories' / 'lap.csv')
     s0 = traj.sample(traj.t_start)
     pc = PlantConfig(x0=s0.x, y0=s0.y, th0=s0.heading)

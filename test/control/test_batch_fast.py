@@ -8,11 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from batch_checks import (assert_metrics_equal, gain, perturbations, single_runs,
-                          trace_deviation)
-from nonfragile_tracker.control.batch import BatchCases, simulate_batch
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.reference import circle, figure_eight
+from batch_checks import assert_metrics_equal, gain, perturbations, single_runs, trace_deviation
+from nonfragile_tracker.control.simulation.batch import BatchCases, simulate_batch
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle, figure_eight
 from nonfragile_tracker.scenario import paper_plant_config
 
 

@@ -11,10 +11,10 @@ import pytest
 
 from batch_checks import (FIELDS, assert_metrics_equal, gain, perturbations, single_runs,
                           trace_deviation)
-from nonfragile_tracker.control import batch as batch_mod
-from nonfragile_tracker.control.batch import BatchCases, PathBatch, simulate_batch
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.reference import circle
+from nonfragile_tracker.control.simulation import batch as batch_mod
+from nonfragile_tracker.control.simulation.batch import BatchCases, PathBatch, simulate_batch
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.scenario import paper_plant_config
 
 

@@ -1,4 +1,4 @@
-"""The certificate base shared by the LMI modules (control/certificate.py): one numpy check,
+"""The certificate base shared by the LMI modules (control/synthesis/certificate.py): one numpy check,
 one record shape, one K-shape check; no solver involved (fast)."""
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.certificate import eigen_figures, passes, signs_hold
-from nonfragile_tracker.control.delay_dependent import DelayDependentVerification
-from nonfragile_tracker.control.input_delay import InputDelayVerification
-from nonfragile_tracker.control.lmi import Verification, verify_certificate
-from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.control.synthesis.certificate import eigen_figures, passes, signs_hold
+from nonfragile_tracker.control.synthesis.delay_dependent import DelayDependentVerification
+from nonfragile_tracker.control.synthesis.input_delay import InputDelayVerification
+from nonfragile_tracker.control.synthesis.lmi import Verification, verify_certificate
+from nonfragile_tracker.control.synthesis.problem import Problem
 from nonfragile_tracker.errors import InputError
 
 

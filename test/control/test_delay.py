@@ -1,4 +1,4 @@
-"""Tests of nonfragile_tracker.control.delay (characteristic roots, margins).
+"""Tests of nonfragile_tracker.control.synthesis.delay (characteristic roots, margins).
 
 Reference values come from closed forms (eig, Lambert W, x' = -b x(t - tau),
 scalar fragility) or from checks that do not use the module's discretization:
@@ -15,9 +15,11 @@ import pytest
 from scipy.optimize import brentq, minimize_scalar
 from scipy.special import lambertw
 
-from nonfragile_tracker.control.delay import (
-    FragilityResult, RootsResult, closed_loop_matrix, delay_margin, fragility_margin,
-    is_stable, rightmost_roots, spectral_abscissa, worst_case_abscissa)
+from nonfragile_tracker.control.synthesis.delay import (FragilityResult, RootsResult,
+                                                        closed_loop_matrix, delay_margin,
+                                                        fragility_margin, is_stable,
+                                                        rightmost_roots, spectral_abscissa,
+                                                        worst_case_abscissa)
 
 # ----------------------------------------------------------------------------- paper data
 A = np.array([[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]], dtype=float)

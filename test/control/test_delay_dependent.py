@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control import delay_dependent as dd
-from nonfragile_tracker.control.delay import (closed_loop_matrix, delay_margin, spectral_abscissa,
-                                              worst_case_abscissa)
-from nonfragile_tracker.control.delay_dependent import (max_certified_delay,
-                                                        synthesize_delay_dependent,
-                                                        verify_delay_dependent)
-from nonfragile_tracker.control.lmi import CertificateError, InfeasibleError, synthesize
-from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.control.synthesis import delay_dependent as dd
+from nonfragile_tracker.control.synthesis.delay import (closed_loop_matrix, delay_margin,
+                                                        spectral_abscissa, worst_case_abscissa)
+from nonfragile_tracker.control.synthesis.delay_dependent import (max_certified_delay,
+                                                                  synthesize_delay_dependent,
+                                                                  verify_delay_dependent)
+from nonfragile_tracker.control.synthesis.lmi import CertificateError, InfeasibleError, synthesize
+from nonfragile_tracker.control.synthesis.problem import Problem
 
 # Harder delay term on the paper's data: delayed velocity damping, v_i' = u_i - C v_i(t - h).
 # For a scalar loop v' = k v - C v(t - h) delay-independent stability needs k < -C, so with

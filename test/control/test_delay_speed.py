@@ -14,9 +14,9 @@ import yaml
 from scipy.sparse.linalg import eigs
 
 from conftest import CONFIG
-from nonfragile_tracker.control.delay import (closed_loop_matrix, rightmost_roots,
-                                              spectral_abscissa)
-from nonfragile_tracker.control.problem import load_problem
+from nonfragile_tracker.control.synthesis.delay import (closed_loop_matrix, rightmost_roots,
+                                                        spectral_abscissa)
+from nonfragile_tracker.control.synthesis.problem import load_problem
 
 
 

@@ -2,14 +2,13 @@
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control import delay
-from nonfragile_tracker.control.design import (max_decay_rate,
-                                               max_perturbation_scale, min_gain_norm,
-                                               shifted_problem)
-from nonfragile_tracker.control.lmi import InfeasibleError, certify_gain
-from nonfragile_tracker.control.loop import TrackerConfig
-from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.synthesis import delay
+from nonfragile_tracker.control.synthesis.design import (max_decay_rate, max_perturbation_scale,
+                                                         min_gain_norm, shifted_problem)
+from nonfragile_tracker.control.synthesis.lmi import InfeasibleError, certify_gain
+from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
 PAPER_NORM = 8.67
@@ -64,7 +63,7 @@ def test_min_gain_norm(paper_problem):
     res = min_gain_norm(paper_problem)
     assert 1.0 < res.value < 3.0 and np.linalg.norm(res.K, 2) <= res.value * (1 + 1e-6)
     with pytest.raises(InfeasibleError):
-        from nonfragile_tracker.control.lmi import synthesize
+        from nonfragile_tracker.control.synthesis.lmi import synthesize
         synthesize(paper_problem, gain_bound=0.9 * res.value)
 
 

@@ -23,8 +23,8 @@ import pytest
 
 from conftest import ROOT
 from nonfragile_tracker.control import input_delay
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.input_delay import certify_input_delay
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
 
 #: offsets of the fitted points (in units of the step) and the cubic fitted through them
 OFFSETS = np.arange(-2, 3)

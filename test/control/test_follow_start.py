@@ -1,4 +1,4 @@
-"""A trajectory starts when the robot can follow it (control.follow.Follower's start rule).
+"""A trajectory starts when the robot can follow it (control.simulation.follow.Follower's start rule).
 
 The tracker that starts following a trajectory after its start stamp (a reference node or
 planner that started earlier) re-bases it: the robot drives the trajectory's own speed
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.follow import (Follower, simulate_following, start_offset)
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import Tracker, TrackerConfig
-from nonfragile_tracker.control.trajectory import from_waypoints, load_waypoints
+from nonfragile_tracker.control.simulation.follow import Follower, simulate_following, start_offset
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.trajectory import from_waypoints, load_waypoints
 from nonfragile_tracker.scenario import paper_plant_config
 
 LAP = CONFIG / 'trajectories' / 'lap.csv'

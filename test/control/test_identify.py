@@ -1,4 +1,4 @@
-"""Latency identification (control/identify.py, bag/motion.py, ``identify`` CLI).
+"""Latency identification (control/identification/identify.py, bag/motion.py, ``identify`` CLI).
 
 The synthetic runs come from an independent generator (``fopdt_unicycle``): a unicycle
 integrated at 0.5 ms whose speeds follow the held, delayed commands through exact
@@ -21,12 +21,14 @@ from nonfragile_tracker.bag.motion import read_motion
 from nonfragile_tracker.bag.reader import MissingTopicsError
 from nonfragile_tracker.bag.writer import BagWriter
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.identify import (CommandSamples, IdentificationFileError,
-                                                 InsufficientExcitationError,
-                                                 NotEnoughDataError, OdometrySamples,
-                                                 PoorFitError, identify_latency,
-                                                 read_identification, write_identification)
-from nonfragile_tracker.control.loop import yaw_to_quaternion
+from nonfragile_tracker.control.identification.identify import (CommandSamples,
+                                                                IdentificationFileError,
+                                                                InsufficientExcitationError,
+                                                                NotEnoughDataError, OdometrySamples,
+                                                                PoorFitError, identify_latency,
+                                                                read_identification,
+                                                                write_identification)
+from nonfragile_tracker.control.simulation.loop import yaw_to_quaternion
 from nonfragile_tracker.errors import InputError
 
 STEP = 0.01     # command period = one plant step of the generator
@@ -398,7 +400,7 @@ def test_cli_identify(run20, tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------------------------------
-# Our plant (control.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
+# Our plant (control.simulation.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
 
 def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: float = 0.01,
                      odom_rate: float = 50.0, noise: float = 1e-3):
@@ -410,9 +412,10 @@ def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: 
     """
     import yaml
 
-    from nonfragile_tracker.control.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                 UnicyclePlant, quaternion_to_yaw, step_time)
-    from nonfragile_tracker.control.reference import make_path
+    from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
+                                                            UnicyclePlant, quaternion_to_yaw,
+                                                            step_time)
+    from nonfragile_tracker.control.simulation.reference import make_path
     params = yaml.safe_load((CONFIG / 'tracker_gains.yaml').read_text())
     K = np.array(params['/**/tracker']['ros__parameters']['K'], float).reshape(2, 4)
     plant = UnicyclePlant(PlantConfig(dt=dt, cmd_latency=latency, lag_v=lag, lag_w=lag,
@@ -505,7 +508,7 @@ def test_cli_cross_check_flags_a_twist_that_echoes_the_command(run20, tmp_path, 
 def test_measurement_to_command_delay():
     """Age of the newest odometry when each command is sent: 3 ms after a 50 Hz odometry
     sample for an odometry-triggered tracker; commands before any odometry skipped."""
-    from nonfragile_tracker.control.identify import measurement_to_command_delay
+    from nonfragile_tracker.control.identification.identify import measurement_to_command_delay
     to = np.arange(0.0, 10.0, 0.02)
     odom = OdometrySamples(to, to, to, to)
     cmd = CommandSamples(np.concatenate([[-1.0], to + 0.003]), np.zeros(to.size + 1),

@@ -1,6 +1,6 @@
 """Identification on what real bases give (issue 22, item 4), ROS-free.
 
-The recordings are the plant's (control.loop.UnicyclePlant through control.recording):
+The recordings are the plant's (control.simulation.loop.UnicyclePlant through control.identification.recording):
 cases of config/identify_cases.yaml - the default tracker on a base with acceleration
 limits (100 ms, and 180 ms where it is in its limit cycle), joystick steps with the
 limits binding 35-40 % of the time, a teleop drive with a 0.33 s stall, latency jitter
@@ -18,17 +18,22 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.identify import (CommandSamples, OdometrySamples, PoorFitError,
-                                                 commands_follow_odometry, identify_latency,
-                                                 read_identification, write_identification)
-from nonfragile_tracker.control.input_delay import certify_input_delay
-from nonfragile_tracker.control.latency_design import lagged_problem, plan_from_identification
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.control.recording import (joystick_steps, load_cases, record_case,
-                                                  record_open_loop, record_tracking)
-from nonfragile_tracker.control.reference import figure_eight
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,
+                                                                PoorFitError,
+                                                                commands_follow_odometry,
+                                                                identify_latency,
+                                                                read_identification,
+                                                                write_identification)
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
+from nonfragile_tracker.control.synthesis.latency_design import (lagged_problem,
+                                                                 plan_from_identification)
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.identification.recording import (joystick_steps, load_cases,
+                                                                 record_case, record_open_loop,
+                                                                 record_tracking)
+from nonfragile_tracker.control.simulation.reference import figure_eight
 
 DT = 0.01                   # plant step: the accuracy asked for the latency
 CASES = load_cases(CONFIG / 'identify_cases.yaml')
@@ -262,8 +267,8 @@ def test_refusal_of_unrelated_odometry_names_it_without_harmful_advice():
 def test_plant_jitter_and_stalls():
     """The plant's latency jitter (whole steps in [L, L + J], commands in order) and stalls
     (commands ignored, braking at the limits); the batch simulation refuses both."""
-    from nonfragile_tracker.control.batch import BatchError, simulate_batch
-    from nonfragile_tracker.control.loop import LoopConfigError
+    from nonfragile_tracker.control.simulation.batch import BatchError, simulate_batch
+    from nonfragile_tracker.control.simulation.loop import LoopConfigError
     rec = record_case(CASES['iv'], seed=4, duration=10.0)
     lat = np.round(rec.latencies / DT).astype(int)
     assert set(lat) == {12, 13, 14, 15}

@@ -5,14 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.delay import delay_margin, spectral_abscissa
-from nonfragile_tracker.control.input_delay import (certified_input_delay_of_gain,
-                                                    certify_input_delay,
-                                                    max_certified_input_delay,
-                                                    max_input_delay_decay_rate,
-                                                    synthesize_input_delay, verify_input_delay)
-from nonfragile_tracker.errors import InfeasibleError, InputError
-from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.control.synthesis.delay import delay_margin, spectral_abscissa
+from nonfragile_tracker.control.synthesis.input_delay import (certified_input_delay_of_gain,
+                                                              certify_input_delay,
+                                                              max_certified_input_delay,
+                                                              max_input_delay_decay_rate,
+                                                              synthesize_input_delay,
+                                                              verify_input_delay)
+from nonfragile_tracker.errors import InputError
+from nonfragile_tracker.control.synthesis.errors import InfeasibleError
+from nonfragile_tracker.control.synthesis.problem import Problem
 
 BOUND = 8.67
 GRID = tuple(float(e) for e in np.logspace(-2, 1, 7))   # a short eps grid keeps tests fast

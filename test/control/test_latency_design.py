@@ -7,13 +7,13 @@ import pytest
 import yaml
 
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.delay import delay_margin
-from nonfragile_tracker.control.gains import (DESIGN_SECTION, read_gain_design, read_gain_file,
-                                              write_gain_file)
-from nonfragile_tracker.control.input_delay import certify_input_delay
-from nonfragile_tracker.control.latency_design import (design_for_latency, lagged_problem,
-                                                       perturbation_set)
-from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.control.synthesis.delay import delay_margin
+from nonfragile_tracker.control.simulation.gains import (DESIGN_SECTION, read_gain_design,
+                                                         read_gain_file, write_gain_file)
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
+from nonfragile_tracker.control.synthesis.latency_design import (design_for_latency, lagged_problem,
+                                                                 perturbation_set)
+from nonfragile_tracker.control.synthesis.problem import Problem
 from nonfragile_tracker.errors import InputError
 
 from conftest import CONFIG, ROOT, DI_PROBLEM
@@ -142,8 +142,8 @@ def delayed_problem():
 
 
 def test_exact_abscissa_matches_the_one_delay_analysis_and_converges_with_a_state_delay():
-    from nonfragile_tracker.control.delay import spectral_abscissa
-    from nonfragile_tracker.control.latency_design import exact_abscissa
+    from nonfragile_tracker.control.synthesis.delay import spectral_abscissa
+    from nonfragile_tracker.control.synthesis.latency_design import exact_abscissa
     p = delayed_problem()
     K = np.array([[-2.0, -2.5]])
     A1 = p.B @ K
@@ -160,7 +160,7 @@ def test_exact_abscissa_matches_the_one_delay_analysis_and_converges_with_a_stat
 
 
 def test_exact_figures_include_the_state_delay_and_cover_the_interval():
-    from nonfragile_tracker.control.latency_design import exact_abscissa, exact_figures
+    from nonfragile_tracker.control.synthesis.latency_design import exact_abscissa, exact_figures
     p = delayed_problem()
     K = np.array([[-2.0, -2.5]])
     margin, at_max, worst = exact_figures(p, K, 0.05, 0.2, samples=5)
@@ -185,7 +185,7 @@ def test_a_design_with_a_lag_prints_only_the_lagged_loops_figures():
     text = r.summary()
     lp = lagged_problem(p, 0.05)
     K_aug = np.hstack([r.K, np.zeros((1, 1))])
-    from nonfragile_tracker.control.latency_design import exact_figures
+    from nonfragile_tracker.control.synthesis.latency_design import exact_figures
     margin, _, worst = exact_figures(lp, K_aug, 0.0, 0.05)
     assert r.true_delay_margin == pytest.approx(margin) and r.worst_abscissa == worst < 0
     assert f'{r.lag_certified_h_max:.4g}' in text and 'lagged loop' in text
@@ -202,7 +202,7 @@ def test_a_design_with_a_lag_prints_only_the_lagged_loops_figures():
 def test_congruent_verification_accepts_a_strict_point_the_relative_test_refuses(paper_problem):
     """[0, 0.2] s at alpha 0.71: t = 0.01 in the solver's coordinates, max eig Psi = -1.5e-7
     against 1e-9 ||Psi|| = 1.05e-6 in the original ones (cond(X) about 50)."""
-    from nonfragile_tracker.control import input_delay as idm
+    from nonfragile_tracker.control.synthesis import input_delay as idm
     p = paper_problem
     r = idm.synthesize_input_delay(p, 0.0, 0.2, alpha=0.71, eps=0.31622776601683794,
                                    gain_bound=8.67)

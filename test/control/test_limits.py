@@ -1,4 +1,4 @@
-"""Trajectories within a base's limits (control.limits): check, margins, re-timing.
+"""Trajectories within a base's limits (control.simulation.limits): check, margins, re-timing.
 
 The line-arc lap (straights joined by 0.4 m arcs, 0.4 m/s) exceeds each limit when the
 limit is set below its peak; the check names the limit, the time and the value, the
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.limits import (LIMIT_NAMES, Limits, check, retime,
-                                               within_limits)
-from nonfragile_tracker.control.trajectory import TrajectoryError, load_waypoints
+from nonfragile_tracker.control.simulation.limits import (LIMIT_NAMES, Limits, check, retime,
+                                                          within_limits)
+from nonfragile_tracker.control.simulation.trajectory import TrajectoryError, load_waypoints
 
 LINE_ARC = CONFIG / 'trajectories' / 'line_arc_lap.csv'
 #: One limit below the lap's peak at a time (peaks: 0.403 m/s, 0.45 m/s^2, 1.14 rad/s,

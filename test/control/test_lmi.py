@@ -2,12 +2,12 @@
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control import lmi
-from nonfragile_tracker.control.delay import closed_loop_matrix, spectral_abscissa
-from nonfragile_tracker.control.lmi import (CertificateError, InfeasibleError, certify_gain,
-                                            certified_perturbation_scale, synthesize,
-                                            verify_certificate)
-from nonfragile_tracker.control.problem import problem_from_mapping
+from nonfragile_tracker.control.synthesis import lmi
+from nonfragile_tracker.control.synthesis.delay import closed_loop_matrix, spectral_abscissa
+from nonfragile_tracker.control.synthesis.lmi import (CertificateError, InfeasibleError,
+                                                      certify_gain, certified_perturbation_scale,
+                                                      synthesize, verify_certificate)
+from nonfragile_tracker.control.synthesis.problem import problem_from_mapping
 
 
 def lk_matrix(p, K, P, Q, Delta):

@@ -4,8 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.model import (SingularSpeedError, double_integrator_model,
-                                              inputs_from_u, u_from_inputs, xi_from_state)
+from nonfragile_tracker.control.simulation.model import (SingularSpeedError,
+                                                         double_integrator_model, inputs_from_u,
+                                                         u_from_inputs, xi_from_state)
 
 
 def test_matrices_of_eq4():

@@ -1,4 +1,4 @@
-"""The certificate monitor (control.monitor): the estimator recovers the latency within one
+"""The certificate monitor (control.identification.monitor): the estimator recovers the latency within one
 plant step, its gates reject saturated, limit-binding and gap segments, the status moves
 OK -> WARN -> ERROR at the thresholds, the certificate comes from the gain file's record,
 adaptation clamps; and the plant's latency schedule that the tests and benchmark use."""
@@ -7,14 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.loop import (LoopConfigError, PlantConfig, UnicyclePlant,
-                                             step_time)
-from nonfragile_tracker.control.monitor import (ERROR, OK, STALE, WARN, Certificate,
-                                                LatencyEstimate, MonitorError, MonitorSettings,
-                                                MonitorWorker, adapted_prediction,
-                                                certificate_from_design,
-                                                certificate_from_parameters, estimate_latency,
-                                                evaluate)
+from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant,
+                                                        step_time)
+from nonfragile_tracker.control.identification.monitor import (ERROR, OK, STALE, WARN, Certificate,
+                                                               LatencyEstimate, MonitorError,
+                                                               MonitorSettings, MonitorWorker,
+                                                               adapted_prediction,
+                                                               certificate_from_design,
+                                                               certificate_from_parameters,
+                                                               estimate_latency, evaluate)
 
 DT = 0.01            # plant step: the precision asked for
 

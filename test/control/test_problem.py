@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import yaml
 
-from nonfragile_tracker.control.problem import (ProblemError, is_stabilizable, load_problem,
-                                                problem_from_mapping)
+from nonfragile_tracker.control.synthesis.problem import (ProblemError, is_stabilizable,
+                                                          load_problem, problem_from_mapping)
 
 
 def test_paper_problem_loads(paper_problem):

@@ -1,4 +1,4 @@
-"""The saturation certificate (control.saturation): a region of attraction of the tracking
+"""The saturation certificate (control.synthesis.saturation): a region of attraction of the tracking
 loop whose input saturates (|w| and |dv/dt| limits), by the generalized sector condition;
 checked in numpy and against simulations of the saturated loop."""
 import math
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.control.saturation import (SaturationLimits, check_by_simulation,
-                                                   saturation_certificate,
-                                                   simulate_saturated, verify_saturation)
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.synthesis.saturation import (SaturationLimits, check_by_simulation,
+                                                             saturation_certificate,
+                                                             simulate_saturated, verify_saturation)
 from nonfragile_tracker.errors import InputError
 
 #: The paper scenario's circle: r = 0.5 m at 0.01 rad/s -> |v| = 0.005 m/s, |u_d| = r w^2

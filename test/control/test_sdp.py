@@ -1,9 +1,9 @@
 """Shared SDP plumbing: status classification, the one bounded program cache."""
 import numpy as np
 
-from nonfragile_tracker.control import sdp
-from nonfragile_tracker.control.lmi import synthesize
-from nonfragile_tracker.control.problem import Problem
+from nonfragile_tracker.control.synthesis import sdp
+from nonfragile_tracker.control.synthesis.lmi import synthesize
+from nonfragile_tracker.control.synthesis.problem import Problem
 
 
 def test_classify_statuses():

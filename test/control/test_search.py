@@ -1,10 +1,11 @@
-"""control.search: the bisection and the eps line search (plain functions, no solver)."""
+"""control.synthesis.search: the bisection and the eps line search (plain functions, no solver)."""
 import math
 
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.search import eps_search, golden_section_max, largest_feasible
+from nonfragile_tracker.control.synthesis.search import (eps_search, golden_section_max,
+                                                         largest_feasible)
 
 GRID = [float(e) for e in np.logspace(-3, 2, 21)]
 
@@ -125,7 +126,7 @@ def bracketed_trial(root: float, calls: list, score=lambda x, r: r - x):
 
 
 def test_bracketed_search_closes_a_smooth_score_in_fewer_trials_than_halving():
-    from nonfragile_tracker.control.search import largest_feasible_bracketed
+    from nonfragile_tracker.control.synthesis.search import largest_feasible_bracketed
     calls: list = []
     root, tol = 0.7312, 1e-4
     x, res, n = largest_feasible_bracketed(bracketed_trial(root, calls), 0.0, 2.0, 0.0,
@@ -137,7 +138,7 @@ def test_bracketed_search_closes_a_smooth_score_in_fewer_trials_than_halving():
 
 
 def test_bracketed_search_without_scores_is_bisection_and_never_worse_than_thrice():
-    from nonfragile_tracker.control.search import largest_feasible_bracketed
+    from nonfragile_tracker.control.synthesis.search import largest_feasible_bracketed
     calls: list = []
     root, tol = 0.3, 1e-3
     x, _, n = largest_feasible_bracketed(

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import yaml
 
-from nonfragile_tracker.control.delay import worst_case_abscissa
-from nonfragile_tracker.control.gains import read_gain_design, read_gain_file
-from nonfragile_tracker.control.input_delay import certify_input_delay
-from nonfragile_tracker.control.latency_design import lagged_problem
-from nonfragile_tracker.control.lmi import certify_gain
+from nonfragile_tracker.control.synthesis.delay import worst_case_abscissa
+from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
+from nonfragile_tracker.control.synthesis.latency_design import lagged_problem
+from nonfragile_tracker.control.synthesis.lmi import certify_gain
 
 from conftest import CONFIG, SHIPPED_DESIGN_ARGV, SHIPPED_NORM
 

@@ -1,4 +1,4 @@
-"""control.sweep and parallel: the grid, one design's record, the front, executors (local, Dask)."""
+"""control.synthesis.sweep and parallel: the grid, one design's record, the front, executors (local, Dask)."""
 import json
 import sys
 from concurrent.futures import Executor, Future
@@ -9,11 +9,11 @@ import pytest
 from conftest import DI_PROBLEM
 
 from nonfragile_tracker.cli import main
-from nonfragile_tracker.control.input_delay import certify_input_delay
-from nonfragile_tracker.control.latency_design import lagged_problem
-from nonfragile_tracker.control.problem import Problem
-from nonfragile_tracker.control.sweep import (SweepPoint, design_point, pareto_front, run_sweep,
-                                              sweep_points, sweep_table)
+from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
+from nonfragile_tracker.control.synthesis.latency_design import lagged_problem
+from nonfragile_tracker.control.synthesis.problem import Problem
+from nonfragile_tracker.control.synthesis.sweep import (SweepPoint, design_point, pareto_front,
+                                                        run_sweep, sweep_points, sweep_table)
 from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.parallel import map_tasks, open_executor
 

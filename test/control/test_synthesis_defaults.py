@@ -8,12 +8,12 @@ import warnings
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.delay import closed_loop_matrix, spectral_abscissa
-from nonfragile_tracker.control.lmi import (TRUST_GAIN_NORM, UntrustedGainWarning,
-                                            gain_trust_message, synthesize,
-                                            verify_certificate)
-from nonfragile_tracker.control.problem import Problem
-from nonfragile_tracker.errors import CertificateError, InfeasibleError
+from nonfragile_tracker.control.synthesis.delay import closed_loop_matrix, spectral_abscissa
+from nonfragile_tracker.control.synthesis.lmi import (TRUST_GAIN_NORM, UntrustedGainWarning,
+                                                      gain_trust_message, synthesize,
+                                                      verify_certificate)
+from nonfragile_tracker.control.synthesis.problem import Problem
+from nonfragile_tracker.control.synthesis.errors import CertificateError, InfeasibleError
 
 
 def random_problem(seed: int) -> Problem:
@@ -122,7 +122,7 @@ def test_failed_verification_at_the_edge_is_a_verdict(seed, nominal):
 
 def test_certificate_error_still_raised_when_nothing_verifies(monkeypatch):
     """Every retry broken (the verification always fails): CertificateError listing them."""
-    import nonfragile_tracker.control.lmi as lmi
+    import nonfragile_tracker.control.synthesis.lmi as lmi
     problem = random_problem(11)                    # n = 2: the SCS retries are quick
     monkeypatch.setattr(lmi, 'verify_certificate', lambda *a, **k: lmi.Verification(
         False, 1.0, 1.0, 1.0, tolerance=1e-9, scale=1.0))

@@ -10,10 +10,10 @@ import pytest
 import scipy.linalg as sla
 
 from conftest import CONFIG
-from nonfragile_tracker.control import lmi
-from nonfragile_tracker.control.lmi import synthesize, verify_certificate
-from nonfragile_tracker.control.problem import load_problem
-from nonfragile_tracker.errors import InfeasibleError
+from nonfragile_tracker.control.synthesis import lmi
+from nonfragile_tracker.control.synthesis.lmi import synthesize, verify_certificate
+from nonfragile_tracker.control.synthesis.problem import load_problem
+from nonfragile_tracker.control.synthesis.errors import InfeasibleError
 
 PAPER = load_problem(CONFIG / 'paper_problem.yaml')
 

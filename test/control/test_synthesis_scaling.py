@@ -9,9 +9,10 @@ import numpy as np
 import scipy.linalg as sla
 
 from conftest import CONFIG
-from nonfragile_tracker.control.delay import closed_loop_matrix, spectral_abscissa
-from nonfragile_tracker.control.lmi import decoupled_blocks, synthesize, verify_certificate
-from nonfragile_tracker.control.problem import load_problem
+from nonfragile_tracker.control.synthesis.delay import closed_loop_matrix, spectral_abscissa
+from nonfragile_tracker.control.synthesis.lmi import (decoupled_blocks, synthesize,
+                                                      verify_certificate)
+from nonfragile_tracker.control.synthesis.problem import load_problem
 
 PAPER = load_problem(CONFIG / 'paper_problem.yaml')
 
@@ -76,7 +77,7 @@ def coupled(k: int, seed: int = 0):
 
 def test_compact_form_matches_the_paper_form(monkeypatch):
     """n >= 8 uses the reduced LMI (size n + rank A_tau + rank F): same verdict, verified."""
-    import nonfragile_tracker.control.lmi as lmi
+    import nonfragile_tracker.control.synthesis.lmi as lmi
     p = coupled(2)
     assert decoupled_blocks(p) == [] and p.n >= lmi.COMPACT_FROM_N
     for nominal in (False, True):
@@ -95,7 +96,7 @@ def test_compact_form_matches_the_paper_form(monkeypatch):
 def test_compact_form_reports_infeasibility():
     """An unreachable extra state z' = -z + 2 z(t - tau) in each of two coupled copies."""
     import pytest
-    from nonfragile_tracker.errors import InfeasibleError
+    from nonfragile_tracker.control.synthesis.errors import InfeasibleError
     base = coupled(2)
     n = base.n + 2
     A = np.zeros((n, n)); A[:-2, :-2] = base.A; A[-2, -2] = A[-1, -1] = -1.0

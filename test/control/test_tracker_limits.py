@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.actuator import ActuatorModel
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import (LoopConfigError, PlantConfig, Tracker,
-                                             TrackerConfig, UnicyclePlant)
-from nonfragile_tracker.control.predictor import LatencyPredictor
-from nonfragile_tracker.control.reference import figure_eight
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.actuator import ActuatorModel
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, Tracker,
+                                                        TrackerConfig, UnicyclePlant)
+from nonfragile_tracker.control.simulation.predictor import LatencyPredictor
+from nonfragile_tracker.control.simulation.reference import figure_eight
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 
 from conftest import CONFIG
 

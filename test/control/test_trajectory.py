@@ -1,17 +1,17 @@
-"""Timed trajectories (control/trajectory.py): analytic, splines, Hermite, time law, files."""
+"""Timed trajectories (control/simulation/trajectory.py): analytic, splines, Hermite, time law, files."""
 import math
 
 import numpy as np
 import pytest
 
 from conftest import ROOT
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.reference import circle, figure_eight
-from nonfragile_tracker.control.simulate import simulate_tracking
-from nonfragile_tracker.control.trajectory import (Trajectory, TrajectoryError, check_frame,
-                                                   from_poses, from_states, from_waypoints,
-                                                   load_waypoints, read_waypoint_file,
-                                                   time_law)
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle, figure_eight
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.trajectory import (Trajectory, TrajectoryError,
+                                                              check_frame, from_poses, from_states,
+                                                              from_waypoints, load_waypoints,
+                                                              read_waypoint_file, time_law)
 from nonfragile_tracker.errors import InputError, exit_code
 
 LAP = ROOT / 'config' / 'trajectories' / 'lap.csv'

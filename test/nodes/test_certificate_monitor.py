@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import PlantConfig, TrackerConfig
-from nonfragile_tracker.control.follow import simulate_following
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.follow import simulate_following
 
 from conftest import CONFIG
 import test_trajectory_nodes

@@ -120,11 +120,11 @@ def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
     b = threading.Thread(target=run, args=('b', two, [1.0, 0.0, 0.0, 1.0]))
     a.start(); b.start(); a.join(); b.join()
     bags = {k: read_bag(v.bag) for k, v in results.items()}
-    from nonfragile_tracker.control.gains import read_gain_file
-    from nonfragile_tracker.control.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.loop import TrackerConfig
     from nonfragile_tracker.scenario import paper_plant_config
-    from nonfragile_tracker.control.reference import circle
-    from nonfragile_tracker.control.simulate import simulate_tracking
+    from nonfragile_tracker.control.simulation.reference import circle
+    from nonfragile_tracker.control.simulation.simulate import simulate_tracking
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     F = np.full((2, 4), 0.5)
     for name, pert in (('a', None), ('b', F)):

@@ -9,11 +9,11 @@ import rclpy
 from rclpy.parameter import Parameter
 
 from nonfragile_tracker.bag.reader import read_messages
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import TrackerConfig
-from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.follow import simulate_following
-from nonfragile_tracker.control.trajectory import Trajectory
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
+from nonfragile_tracker.control.simulation.follow import simulate_following
+from nonfragile_tracker.control.simulation.trajectory import Trajectory
 from nonfragile_tracker.nodes.common import StartupError
 from nonfragile_tracker.nodes.plant import PlantNode
 from nonfragile_tracker.nodes.tracker import TrackerNode

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import TrackerConfig
-from nonfragile_tracker.control.reference import circle
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.reference import circle
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.runner import run_composed, run_processes, scenario_parameters
 from nonfragile_tracker.scenario import paper_plant_config
 

@@ -14,8 +14,8 @@ from rclpy.serialization import serialize_message
 
 from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, ReplayEvent, plan_replay
 from nonfragile_tracker.bag.typestore import jazzy_typestore
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.reference import circle
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.msgconv import fill_pose, fill_reference, ns_to_stamp, tracker_config
 from nonfragile_tracker.nodes.common import overrides
 from nonfragile_tracker.nodes.tracker import TrackerNode

@@ -12,7 +12,7 @@ from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
 from nonfragile_tracker import runner, topics
-from nonfragile_tracker.control.loop import Tracker
+from nonfragile_tracker.control.simulation.loop import Tracker
 from nonfragile_tracker.msgconv import fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs
 from nonfragile_tracker.nodes.tracker import TrackerNode
 

@@ -9,10 +9,10 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import Tracker, TrackerConfig
-from nonfragile_tracker.control.reference import RefSample, circle
-from nonfragile_tracker.control.simulate import simulate_tracking
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.reference import RefSample, circle
+from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.nodes.common import fill_pose, fill_reference, ns_to_stamp
 from nonfragile_tracker.nodes.tracker import TrackerNode
 from nonfragile_tracker.scenario import paper_plant_config

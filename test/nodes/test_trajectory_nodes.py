@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.follow import simulate_following
-from nonfragile_tracker.control.gains import read_gain_file
-from nonfragile_tracker.control.loop import TrackerConfig
-from nonfragile_tracker.control.trajectory import load_waypoints
+from nonfragile_tracker.control.simulation.follow import simulate_following
+from nonfragile_tracker.control.simulation.gains import read_gain_file
+from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.trajectory import load_waypoints
 from nonfragile_tracker.scenario import paper_plant_config
 from nonfragile_tracker.msgconv import stamp_ns
 
@@ -139,7 +139,7 @@ def test_path_from_a_topic_is_tracked_and_bad_ones_are_refused(ros_context):
     from nonfragile_tracker.nodes.common import DATA_QOS, LATCHED_QOS
     from nonfragile_tracker.nodes.plant import PlantNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
-    from nonfragile_tracker.control.trajectory import from_waypoints
+    from nonfragile_tracker.control.simulation.trajectory import from_waypoints
 
     ctx = ros_context
     # an S-curve with stamps from 1.0 s (origin): 4 s of motion, rest at both ends
@@ -231,9 +231,9 @@ def test_twist_and_twist_stamped_both_move_the_plant(ros_context, stamped):
     from nav_msgs.msg import Odometry, Path as PathMsg
     from rclpy.node import Node
     from visualization_msgs.msg import Marker
-    from nonfragile_tracker.control.follow import path_errors
-    from nonfragile_tracker.control.reference import circle
-    from nonfragile_tracker.control.simulate import simulate_tracking
+    from nonfragile_tracker.control.simulation.follow import path_errors
+    from nonfragile_tracker.control.simulation.reference import circle
+    from nonfragile_tracker.control.simulation.simulate import simulate_tracking
     from nonfragile_tracker.nodes.common import DATA_QOS
     from nonfragile_tracker.nodes.plant import PlantNode
     from nonfragile_tracker.nodes.reference import ReferenceNode
@@ -334,7 +334,7 @@ def test_bad_paths_and_multidof_through_the_tracker(ros_context):
     from nav_msgs.msg import Path as PathMsg
     from rclpy.node import Node
     from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
-    from nonfragile_tracker.control.trajectory import from_waypoints
+    from nonfragile_tracker.control.simulation.trajectory import from_waypoints
     from nonfragile_tracker.nodes.common import LATCHED_QOS
     from nonfragile_tracker.nodes.tracker import TrackerNode
 
@@ -400,7 +400,7 @@ def test_path_tracked_in_real_time(ros_context):
     import time
     from nav_msgs.msg import Odometry, Path as PathMsg
     from rclpy.node import Node
-    from nonfragile_tracker.control.trajectory import from_waypoints
+    from nonfragile_tracker.control.simulation.trajectory import from_waypoints
     from nonfragile_tracker.nodes.common import DATA_QOS, LATCHED_QOS
     from nonfragile_tracker.nodes.plant import PlantNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
@@ -470,7 +470,7 @@ def test_reference_relays_an_untimed_plan(ros_context):
     from nav_msgs.msg import Path as PathMsg
     from geometry_msgs.msg import PoseStamped
     from rclpy.node import Node
-    from nonfragile_tracker.control.trajectory import time_law
+    from nonfragile_tracker.control.simulation.trajectory import time_law
     from nonfragile_tracker.nodes.reference import ReferenceNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
 
@@ -569,7 +569,7 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
     a minimum turning radius above the lap's is a refusal naming place and curvature."""
     from nav_msgs.msg import Path as PathMsg
     from rclpy.node import Node
-    from nonfragile_tracker.control.limits import Limits, check
+    from nonfragile_tracker.control.simulation.limits import Limits, check
     from nonfragile_tracker.nodes.common import LATCHED_QOS
     from nonfragile_tracker.nodes.tracker import TrackerNode
 

@@ -58,7 +58,17 @@ def test_every_listed_path_exists(path):
     assert (ROOT / path).exists(), f'{LAYOUT_PAGE.name} Layout lists {path}, which does not exist'
 
 
-@pytest.mark.parametrize('sub', ['control', 'nodes', 'bag', 'commands'])
+#: Every subpackage, nested ones too (``control/synthesis``), as a path under the package.
+SUBPACKAGES = sorted(str(p.parent.relative_to(PKG)) for p in PKG.rglob('__init__.py')
+                     if p.parent != PKG)
+
+
+def test_the_subpackages_are_found():
+    assert {'control', 'control/synthesis', 'control/simulation', 'control/identification',
+            'nodes', 'bag', 'commands'} <= set(SUBPACKAGES)
+
+
+@pytest.mark.parametrize('sub', SUBPACKAGES)
 def test_every_module_of_a_subpackage_is_listed(sub):
     modules = {p.stem for p in (PKG / sub).glob('*.py') if p.stem != '__init__'}
     missing = modules - _names_in(f'nonfragile_tracker/{sub}/')

@@ -34,7 +34,7 @@ from typing import Any, Callable, cast
 import numpy as np
 import scipy.linalg as sla
 
-from .validate import as_matrix, as_square
+from ..validate import as_matrix, as_square
 
 __all__ = ['RootsResult', 'FragilityResult', 'closed_loop_matrix', 'rightmost_roots',
            'spectral_abscissa', 'is_stable', 'delay_margin', 'worst_case_abscissa',

@@ -18,8 +18,7 @@ import math
 
 
 from .limits import Limits, within_limits
-from .loop import (Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps,
-                   step_time_ns)
+from .loop import Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps, step_time_ns
 from .reference import RefSample
 from .simulate import TrackingRun, run_loop
 from .trajectory import Trajectory

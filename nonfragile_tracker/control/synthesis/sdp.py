@@ -6,12 +6,12 @@ One place for what every synthesis module needs around cvxpy:
 * the solver defaults :data:`DEFAULT_SOLVER` and :data:`DEFAULT_MARGIN` and the
   accepted status sets :data:`OK_STATUSES` / :data:`INFEASIBLE_STATUSES`;
 * :func:`solve` - solve a cvxpy problem, map a solver exception to
-  :class:`~nonfragile_tracker.errors.SolverFailure`, return the status and the time
-  spent inside the solver;
+  :class:`~nonfragile_tracker.control.synthesis.errors.SolverFailure`, return the status and
+  the time spent inside the solver;
 * :func:`classify` - decide from ``(status, t, margin)`` whether a point is usable,
   an infeasibility or a solver failure (the synthesis modules turn that into
-  :class:`~nonfragile_tracker.errors.InfeasibleError` / ``SolverFailure`` with their
-  own message);
+  :class:`~nonfragile_tracker.control.synthesis.errors.InfeasibleError` / ``SolverFailure``
+  with their own message);
 * ONE bounded program cache: parametrized (DPP) cvxpy problems are expensive to build
   and cheap to re-solve with new parameter values, so each module builds a program
   once per shape/option key through :func:`cached_program`.  The cache is an LRU of
@@ -33,7 +33,8 @@ from typing import Any, Callable, Hashable, TypeVar, cast
 
 import numpy as np
 
-from ..errors import InputError, SolverFailure
+from ...errors import InputError
+from .errors import SolverFailure
 
 __all__ = ['DEFAULT_MARGIN', 'DEFAULT_SOLVER', 'OK_STATUSES', 'INFEASIBLE_STATUSES',
            'CACHE_SIZE', 'SolveOutcome', 'sym', 'solve', 'classify', 'cached_program',

@@ -13,7 +13,7 @@ reports odometry late, decimated and noisy (:mod:`control.sensors`); the tracker
 predict the state at the time its command will act (:mod:`control.predictor`).
 
 The ROS nodes call exactly these methods, in the same order as
-:func:`nonfragile_tracker.control.simulate.simulate_tracking`, so a lockstep ROS
+:func:`nonfragile_tracker.control.simulation.simulate.simulate_tracking`, so a lockstep ROS
 run and an in-process run agree to round-off.  Everything is plain floats for
 speed; nothing here imports ROS.
 """
@@ -26,21 +26,17 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from ..errors import InputError
 from .actuator import ActuatorModel, actuate
 from .model import xi_from_state
 from .predictor import LatencyPredictor, invert_lag
 from .reference import RefSample
 from .sensors import Odometer, OdometryModel, OdometrySample
-from .validate import as_finite_float, as_matrix
+from ..validate import as_finite_float, as_matrix
+from .errors import LoopConfigError
 
 __all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', 'Tracker',
            'Command', 'delay_steps', 'step_time', 'step_time_ns', 'yaw_to_quaternion',
            'quaternion_to_yaw', 'validate_gain', 'odometry_period_steps']
-
-
-class LoopConfigError(InputError):
-    """A plant or tracker setting is invalid; the message names the setting."""
 
 
 def step_time_ns(k: int, dt: float) -> int:

@@ -44,7 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .trajectory import Trajectory, TrajectoryError, from_states
+from .trajectory import Trajectory, from_states
+from .errors import TrajectoryError
 
 __all__ = ['Limits', 'LimitReport', 'LimitCheck', 'Retimed', 'check', 'retime',
            'LIMIT_NAMES', 'MOVING_SPEED', 'WINDOW', 'refuse_tight_turns']

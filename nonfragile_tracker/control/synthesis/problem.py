@@ -23,16 +23,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError
-from ..files import read_yaml
-from . import validate
+from ...errors import InputError
+from ...files import read_yaml
+from .. import validate
+from .errors import ProblemError
 
 __all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from_mapping',
            'is_stabilizable']
-
-
-class ProblemError(InputError):
-    """A synthesis problem (or a matrix in it) is malformed; the message names the field."""
 
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None = None

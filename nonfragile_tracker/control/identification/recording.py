@@ -27,11 +27,11 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ...errors import InputError
 from .identify import CommandSamples, OdometrySamples
-from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
-                   quaternion_to_yaw, step_time, yaw_to_quaternion)
-from .reference import Path
+from ..simulation.loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
+                               quaternion_to_yaw, step_time, yaw_to_quaternion)
+from ..simulation.reference import Path
 
 __all__ = ['Recording', 'record_tracking', 'record_open_loop', 'joystick_steps', 'load_cases',
            'record_case']
@@ -246,8 +246,8 @@ def record_case(spec: dict[str, Any], *, seed: int = 1, duration: float = 30.0) 
     duration : float
         Seconds recorded.
     """
-    from .gains import read_gain_file
-    from .reference import make_path
+    from ..simulation.gains import read_gain_file
+    from ..simulation.reference import make_path
     plant_kw = dict(spec['plant'])
     plant_kw['stalls'] = tuple(tuple(s) for s in plant_kw.get('stalls', ()))
     if 'odom_noise' in plant_kw:

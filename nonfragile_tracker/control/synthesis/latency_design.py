@@ -43,12 +43,13 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, InputError
+from ...errors import InputError
+from .errors import CertificateError, InfeasibleError
 from .delay import chebyshev_differentiation, delay_margin
 from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
                           max_certified_input_delay, max_input_delay_decay_rate,
                           synthesize_input_delay)
-from .identify import Identification
+from ..identification.identify import Identification
 from .problem import Problem
 from .search import largest_feasible_bracketed
 

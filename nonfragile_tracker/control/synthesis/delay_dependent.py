@@ -25,7 +25,7 @@ from typing import Any, Sequence, cast
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, SolverFailure
+from .errors import CertificateError, InfeasibleError, SolverFailure
 from .certificate import (CertifiedGain, Verification, eigen_figures, from_certificate,
                           passes, retry_advice)
 from .problem import Problem

@@ -21,7 +21,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .lmi import InfeasibleError, LmiError, SynthesisResult, synthesize
+from .lmi import SynthesisResult, synthesize
+from .errors import InfeasibleError, LmiError
 from .problem import Problem
 from .search import largest_feasible
 

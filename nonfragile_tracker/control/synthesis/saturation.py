@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 from .certificate import eigen_figures, passes
 from .sdp import sym
 

@@ -25,13 +25,12 @@ from typing import Any, Sequence, cast
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, LmiError, SolverFailure
+from .errors import CertificateError, InfeasibleError, LmiError, SolverFailure
 from .certificate import (CertifiedGain, eigen_figures, from_certificate, passes,
                           retry_advice)
 from .certificate import Verification as BaseVerification
 from .problem import Problem
-from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify,
-                  solve)
+from .sdp import DEFAULT_MARGIN, DEFAULT_SOLVER, OK_STATUSES, cached_program, classify, solve
 from .sdp import sym as _sym
 
 __all__ = ['LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError', 'Certificate',

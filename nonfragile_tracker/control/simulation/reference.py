@@ -11,13 +11,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, NamedTuple
 
-from ..errors import InputError
+from .errors import PathError
 
 __all__ = ['RefSample', 'Path', 'circle', 'figure_eight', 'make_path', 'PATHS', 'PathError']
-
-
-class PathError(InputError):
-    """Unknown path name or invalid path parameter."""
 
 
 class RefSample(NamedTuple):

@@ -28,10 +28,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError
-from ..parallel import EXECUTORS, default_workers, map_tasks
-from .batch import (BatchCases, BatchError, BatchRun, PathBatch, perturbation_schedule,
-                    sample_deltas, simulate_batch)
+from ...errors import InputError
+from ...parallel import EXECUTORS, default_workers, map_tasks
+from .batch import (BatchCases, BatchRun, PathBatch, perturbation_schedule, sample_deltas,
+                    simulate_batch)
+from .errors import BatchError
 from .loop import PlantConfig, TrackerConfig
 from .simulate import steps_for_duration
 

@@ -55,8 +55,8 @@ from typing import cast
 
 import numpy as np
 
-from ..errors import InputError
 from .reference import Path, RefSample
+from .errors import TrajectoryError
 
 __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
            'from_waypoints', 'from_states', 'from_poses', 'load_waypoints',
@@ -65,13 +65,6 @@ __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
 
 #: Points a curve needs: the spline's order and clamped ends need at least 2 distinct times.
 MIN_POINTS = 2
-
-
-class TrajectoryError(InputError):
-    """A trajectory cannot be built from the given points.
-
-    The message names the source, the index and the value.
-    """
 
 
 @dataclass(frozen=True)

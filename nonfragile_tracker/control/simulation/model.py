@@ -18,17 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from .validate import StateInputShape
+from .errors import SingularSpeedError
+from ..validate import StateInputShape
 
 __all__ = [
     'SingularSpeedError', 'LinearizedModel', 'double_integrator_model',
     'xi_from_state', 'u_from_inputs', 'inputs_from_u',
 ]
-
-
-class SingularSpeedError(InputError):
-    """Raised when the linearizing map is evaluated at (or too near) ``v = 0``."""
 
 
 @dataclass(frozen=True)

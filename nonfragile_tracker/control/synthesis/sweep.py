@@ -34,8 +34,9 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ..errors import InfeasibleError, InputError, LmiError
-from ..parallel import map_tasks
+from ...errors import InputError
+from .errors import InfeasibleError, LmiError
+from ...parallel import map_tasks
 from .latency_design import OBJECTIVES, delay_interval, design_for_latency
 from .problem import Problem
 

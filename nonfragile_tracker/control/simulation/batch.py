@@ -45,10 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps,
-                   step_time_ns)
+from .loop import PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time_ns
 from .reference import Path, circle, figure_eight
+from .errors import BatchError
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
            'perturbation_schedule', 'sample_deltas', 'simulate_delay_loop_batch',
@@ -57,10 +56,6 @@ __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch'
 _PI = math.pi
 _ATAN2 = np.frompyfunc(math.atan2, 2, 1)
 _TAU = math.tau
-
-
-class BatchError(InputError):
-    """A batch setting is invalid or not supported; the message names it."""
 
 
 # ---------------------------------------------------------------------------------------------

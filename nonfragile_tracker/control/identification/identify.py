@@ -118,7 +118,9 @@ from typing import Any, cast
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ...errors import InputError
+from .errors import (IdentificationError, NotEnoughDataError, InsufficientExcitationError,
+                     PoorFitError, IdentificationFileError)
 
 __all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
            'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',
@@ -149,26 +151,6 @@ _CHANNELS = ('v', 'w')
 _UNITS = {'v': 'm/s', 'w': 'rad/s'}
 _NAMES = {'v': 'linear speed v', 'w': 'yaw rate w'}
 _ACCEL_UNITS = {'v': 'm/s^2', 'w': 'rad/s^2'}
-
-
-class IdentificationError(InputError):
-    """The run cannot give a latency estimate; the message says what is missing."""
-
-
-class NotEnoughDataError(IdentificationError):
-    """Too few samples, or commands and odometry overlap too briefly."""
-
-
-class InsufficientExcitationError(IdentificationError):
-    """A channel's command hardly varies, so its lag and the latency are not observable."""
-
-
-class PoorFitError(IdentificationError):
-    """The FOPDT model does not explain the measured motion, or hits a search limit."""
-
-
-class IdentificationFileError(IdentificationError):
-    """An identification file is malformed; the message names the field."""
 
 
 # ---------------------------------------------------------------------------------------------

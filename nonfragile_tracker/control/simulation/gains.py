@@ -32,8 +32,9 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
-from ..files import read_yaml
-from .loop import LoopConfigError, validate_gain
+from ...files import read_yaml
+from .loop import validate_gain
+from .errors import GainFileError, LoopConfigError
 
 __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
            'read_gain_file', 'read_gain_design', 'TRACKER_NODE', 'DESIGN_SECTION']
@@ -41,15 +42,6 @@ __all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_ga
 TRACKER_NODE = 'tracker'
 #: Section of a gain file holding the design record (no node of that name exists).
 DESIGN_SECTION = 'gain_design'
-
-
-class GainFileError(LoopConfigError):
-    """A gain file or gain parameter is malformed; the message says which and why.
-
-    A bad gain is a bad tracker configuration: :func:`validate_gain`'s
-    ``LoopConfigError`` passes through :func:`gain_from_parameters` unchanged and the
-    tracker node catches ``LoopConfigError`` for both.
-    """
 
 
 def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> np.ndarray:

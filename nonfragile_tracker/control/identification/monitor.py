@@ -8,8 +8,8 @@ module estimates it from the tracker's own command history and the odometry twis
 sliding window and compares it with the certificate.
 
 Estimator (:func:`estimate_latency`; first order plus dead time per channel, the model of
-:mod:`nonfragile_tracker.control.identify`, fitted by a small self-contained grid search
-so that it costs a few milliseconds): on a fine grid (``resolution``) the response of a
+:mod:`nonfragile_tracker.control.identification.identify`, fitted by a small self-contained grid
+search so that it costs a few milliseconds): on a fine grid (``resolution``) the response of a
 first-order lag to the zero-order-held commands is computed for a set of time constants; a
 latency is a shift of that response; per channel the static gain is fitted by least
 squares and the residual is evaluated for every latency on the grid. The latency minimises
@@ -57,7 +57,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import InputError
+from .errors import MonitorError
 
 __all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'LEVEL_NAMES', 'MonitorSettings', 'LatencyEstimate',
            'Certificate', 'MonitorStatus', 'estimate_latency', 'certificate_from_design',
@@ -72,10 +72,6 @@ BRING_UP = ('record a run (nonfragile_tracker run ... or ros2 bag record odom cm
             'nonfragile_tracker identify BAG -o latency.yaml, nonfragile_tracker '
             'latency-design PROBLEM --identification latency.yaml -o gains.yaml')
 _TAUS = (0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.065, 0.08, 0.1, 0.13, 0.16, 0.2, 0.25, 0.3)
-
-
-class MonitorError(InputError):
-    """A monitor setting or certificate record is invalid; the message names it."""
 
 
 def _pos(name: str, value: Any, *, zero: bool = False) -> float:

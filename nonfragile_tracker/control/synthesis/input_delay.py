@@ -25,7 +25,8 @@ from typing import Any, Callable, NamedTuple, Sequence, cast
 
 import numpy as np
 
-from ..errors import CertificateError, InfeasibleError, InputError, SolverFailure
+from .errors import CertificateError, InfeasibleError, SolverFailure
+from ...errors import InputError
 from .certificate import CertifiedGain, Verification, eigen_figures, passes, signs_hold
 from .problem import Problem
 from .sdp import (DEFAULT_MARGIN, DEFAULT_SOLVER, INFEASIBLE_STATUSES, OK_STATUSES,
