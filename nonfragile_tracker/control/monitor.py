@@ -251,6 +251,13 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
     -------
     LatencyEstimate
         ``valid`` False with the reason when the window cannot give one.
+
+    Notes
+    -----
+    The stages: the window's samples, the gating (:func:`_gate`), each channel's residual
+    profile over the latency grid (:func:`_channel_profile`), the latency and its interval
+    from the normalised total (:func:`_latency_from`), its identifiability
+    (:func:`_information`) and the verdict (:func:`_verdict`).
     """
     s = settings
     ct = np.asarray(cmd_t, float)
@@ -264,12 +271,54 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
     start = max(end - s.window, float(ct[0]) + s.memory)
     sel = (ot >= start) & (ot <= end) & np.isfinite(oy[0]) & np.isfinite(oy[1])
     t = ot[sel]
-    n = t.size
-    if n < 10 or end - start < 0.5 * s.window:
+    if t.size < 10 or end - start < 0.5 * s.window:
         return LatencyEstimate(False, f'window not filled yet ({max(end - start, 0.0):.1f} of '
                                       f'{s.window:g} s with commands before it)', t_end=end)
     y = (oy[0][sel], oy[1][sel])
-    # --- gating -------------------------------------------------------------------------
+    masks, excluded = _gate(s, t, y, ct, cu)
+    grid = _Grid.of(s, start, end, t, ct)
+    used: list[str] = []
+    costs: list[np.ndarray] = []
+    best_tau: list[list[float]] = []
+    r2s: list[float] = []
+    fracs: list[float] = []
+    reasons = []
+    for c, name in enumerate(('v', 'w')):
+        fitted = _channel_profile(s, grid, cu[c][grid.ci], y[c], masks[c], c, name)
+        if isinstance(fitted, str):
+            reasons.append(fitted)
+            continue
+        used.append(name)
+        costs.append(fitted[0])
+        best_tau.append(fitted[1])
+        r2s.append(fitted[2])
+        fracs.append(fitted[3])
+    if not used:
+        return LatencyEstimate(False, 'no usable channel: ' + '; '.join(reasons), t_end=end,
+                               excluded=excluded)
+    nv = [int(masks[('v', 'w').index(name)].sum()) for name in used]
+    L, i0, lo, hi = _latency_from(s, grid, costs, nv)
+    info = _information(grid, cu, masks, used, best_tau, i0)
+    r2 = min(r2s)
+    lags = {name: float(bt[i0]) for name, bt in zip(used, best_tau)}
+    frac = min(fracs)
+    conf = max(0.0, min(1.0, r2)) * min(1.0, frac / max(s.min_valid_fraction, 1e-9) / 2.0 + 0.5)
+    est = LatencyEstimate(True, '', t_end=end, latency=float(L), interval=(max(0.0, lo), hi),
+                          lag_v=lags.get('v', math.nan), lag_w=lags.get('w', math.nan), r2=r2,
+                          confidence=conf, valid_fraction=frac, excluded=excluded,
+                          channels=tuple(used), information=info)
+    return _verdict(est, s, i0 == grid.nL - 1, reasons)
+
+
+def _gate(s: MonitorSettings, t: np.ndarray, y: tuple[np.ndarray, np.ndarray],
+          ct: np.ndarray, cu: tuple[np.ndarray, np.ndarray]
+          ) -> tuple[list[np.ndarray], dict[str, int]]:
+    """Each channel's valid samples and the count excluded per reason.
+
+    Excluded: odometry gaps (and the lag's reach after them), samples a saturated command
+    can act on, and samples where the measured rate binds an acceleration limit.
+    """
+    n = t.size
     excluded: dict[str, int] = {}
     period = float(np.median(np.diff(t)))
     gap_mask = np.zeros(n, bool)
@@ -305,65 +354,94 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                 excluded[f'{name} acceleration limit'] = int((bind & ~m).sum())
                 m |= bind
         masks.append(~m)
-    # --- model responses on the grid ------------------------------------------------------
-    res = s.resolution
-    g0 = start - s.memory
-    grid_n = int(math.ceil((end - g0) / res)) + 2
-    gt = g0 + res * np.arange(grid_n)
-    ci = np.clip(np.searchsorted(ct, gt, side='right') - 1, 0, ct.size - 1)
-    nL = int(math.floor(s.max_latency / res)) + 1
+    return masks, excluded
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """The model's time grid of a window.
+
+    Step ``res`` from ``g0`` (``n`` cells); ``ci`` the command in force in each cell,
+    ``nL`` latency candidates, ``base_idx`` each sample's cell and ``idx`` (nL, samples)
+    the cells each candidate latency reads.
+    """
+
+    res: float
+    g0: float
+    n: int
+    ci: np.ndarray
+    nL: int
+    base_idx: np.ndarray
+    idx: np.ndarray
+
+    @classmethod
+    def of(cls, s: MonitorSettings, start: float, end: float, t: np.ndarray,
+           ct: np.ndarray) -> _Grid:
+        """The grid of the window ``[start, end]`` (samples ``t``, command times ``ct``)."""
+        res = s.resolution
+        g0 = start - s.memory
+        grid_n = int(math.ceil((end - g0) / res)) + 2
+        gt = g0 + res * np.arange(grid_n)
+        ci = np.clip(np.searchsorted(ct, gt, side='right') - 1, 0, ct.size - 1)
+        nL = int(math.floor(s.max_latency / res)) + 1
+        base_idx = np.floor((t - g0) / res + 1e-9).astype(int)   # grid cell of each sample
+        shift = np.arange(nL)[:, None]
+        return cls(res, g0, grid_n, ci, nL, base_idx, base_idx[None, :] - shift)
+
+
+def _channel_profile(s: MonitorSettings, grid: _Grid, u: np.ndarray, yc: np.ndarray,
+                     ok: np.ndarray, c: int, name: str
+                     ) -> str | tuple[np.ndarray, list[float], float, float]:
+    """One channel's residual over the latency grid (its best lag at each candidate).
+
+    ``u``: the commands on the grid, ``yc`` the measured channel, ``ok`` its valid samples.
+    Returns ``(cost, best lag per candidate, R^2, valid fraction)``, or why the channel
+    is not used.
+    """
+    frac = float(ok.mean())
+    if frac < max(s.min_valid_fraction, 1e-9):
+        return f'{name}: {100 * (1 - frac):.0f} % of the window excluded'
+    # excitation of the commands that act on the valid samples
+    cmd_std = float(np.std(u[grid.base_idx[ok]]))
+    if cmd_std < s.min_excitation[c]:
+        return f'{name}: command varies too little ({cmd_std:.3g} < {s.min_excitation[c]:g})'
+    yo = yc[ok]
+    ss = float(np.sum((yo - yo.mean()) ** 2))
+    if ss <= 0:
+        return f'{name}: no measured motion'
+    res, nL = grid.res, grid.nL
     taus = [tau for tau in _TAUS if tau <= s.max_lag]
-    base_idx = np.floor((t - g0) / res + 1e-9).astype(int)       # grid cell of each sample
-    shift = np.arange(nL)[:, None]
-    idx = base_idx[None, :] - shift                                 # (nL, n)
-    used, costs, best_tau, r2s, fracs = [], [], [], [], []
-    reasons = []
-    for c, name in enumerate(('v', 'w')):
-        ok = masks[c]
-        frac = float(ok.mean())
-        if frac < max(s.min_valid_fraction, 1e-9):
-            reasons.append(f'{name}: {100 * (1 - frac):.0f} % of the window excluded')
-            continue
-        # excitation of the commands that act on the valid samples
-        u = cu[c][ci]
-        cmd_std = float(np.std(u[base_idx[ok]]))
-        if cmd_std < s.min_excitation[c]:
-            reasons.append(f'{name}: command varies too little ({cmd_std:.3g} < '
-                           f'{s.min_excitation[c]:g})')
-            continue
-        yo = y[c][ok]
-        ss = float(np.sum((yo - yo.mean()) ** 2))
-        if ss <= 0:
-            reasons.append(f'{name}: no measured motion')
-            continue
-        J = np.full((len(taus), nL), np.inf)
-        ii = idx[:, ok]
-        up = np.concatenate([u[:1], u[:-1]])     # the command held over (gt[i-1], gt[i]]
-        for k, tau in enumerate(taus):
-            if tau == 0:
-                ym = up
-            else:
-                a = math.exp(-res / tau)
-                ym = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
-            Y = ym[ii]                                            # (nL, n_ok)
-            yy = np.einsum('ij,ij->i', Y, Y)
-            yd = Y @ yo
-            J[k] = float(yo @ yo) - np.where(yy > 0, yd * yd / np.where(yy > 0, yy, 1), 0)
-        k_best = np.argmin(J, axis=0)
-        j = J[k_best, np.arange(nL)]
-        used.append(name)
-        costs.append(np.maximum(j, 1e-30))
-        best_tau.append([taus[k] for k in k_best])
-        r2s.append(1.0 - float(j.min()) / ss)
-        fracs.append(frac)
-    if not used:
-        return LatencyEstimate(False, 'no usable channel: ' + '; '.join(reasons), t_end=end,
-                               excluded=excluded)
-    # normalised total cost: each channel by its own best residual per valid sample
+    J = np.full((len(taus), nL), np.inf)
+    ii = grid.idx[:, ok]
+    up = np.concatenate([u[:1], u[:-1]])     # the command held over (gt[i-1], gt[i]]
+    for k, tau in enumerate(taus):
+        if tau == 0:
+            ym = up
+        else:
+            a = math.exp(-res / tau)
+            ym = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
+        Y = ym[ii]                                            # (nL, n_ok)
+        yy = np.einsum('ij,ij->i', Y, Y)
+        yd = Y @ yo
+        J[k] = float(yo @ yo) - np.where(yy > 0, yd * yd / np.where(yy > 0, yy, 1), 0)
+    k_best = np.argmin(J, axis=0)
+    j = J[k_best, np.arange(nL)]
+    return (np.maximum(j, 1e-30), [taus[k] for k in k_best], 1.0 - float(j.min()) / ss,
+            frac)
+
+
+def _latency_from(s: MonitorSettings, grid: _Grid, costs: list[np.ndarray], nv: list[int]
+                  ) -> tuple[float, int, float, float]:
+    """``(latency, its grid index, interval low, high)`` from the channels' profiles.
+
+    The normalised total cost: each channel by its own best residual per valid sample
+    (``nv`` of them); the minimum refined by a parabola, the interval where the total is
+    within ``chi2_level`` of it (one grid step wider either side).
+    """
+    res, nL = grid.res, grid.nL
     total = np.zeros(nL)
-    for name, j in zip(used, costs):
-        nv = int(masks[('v', 'w').index(name)].sum())
-        total += (j - j.min()) / (j.min() / max(nv - 3, 1))
+    for j, n_valid in zip(costs, nv):
+        total += (j - j.min()) / (j.min() / max(n_valid - 3, 1))
     i0 = int(np.argmin(total))
     L = i0 * res
     if 0 < i0 < nL - 1:
@@ -372,29 +450,41 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
         if den > 0:
             L += 0.5 * res * (a - cc) / den
     inside = np.nonzero(total <= total[i0] + s.chi2_level)[0]
-    lo, hi = inside.min() * res - res, inside.max() * res + res
-    # identifiability: the share of the model's sensitivity to the latency (its slope)
-    # that falls on valid samples; a gate that removed the responses leaves flat data
+    return L, i0, inside.min() * res - res, inside.max() * res + res
+
+
+def _information(grid: _Grid, cu: tuple[np.ndarray, np.ndarray], masks: list[np.ndarray],
+                 used: list[str], best_tau: list[list[float]], i0: int) -> dict[str, float]:
+    """Identifiability per channel used.
+
+    The share of the model's sensitivity to the latency (its slope) that falls on valid
+    samples (a gate that removed the responses leaves flat data).
+    """
+    res = grid.res
     info = {}
     for name, bt in zip(used, best_tau):
         c = ('v', 'w').index(name)
-        u = cu[c][ci]
+        u = cu[c][grid.ci]
         up = np.concatenate([u[:1], u[:-1]])
         tau = bt[i0]
         if tau > 0:
             a = math.exp(-res / tau)
             up = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
-        slope = np.gradient(up)[np.clip(base_idx - i0, 0, grid_n - 1)]
+        slope = np.gradient(up)[np.clip(grid.base_idx - i0, 0, grid.n - 1)]
         e_all = float(slope @ slope)
         info[name] = float(slope[masks[c]] @ slope[masks[c]]) / e_all if e_all > 0 else 0.0
-    r2 = min(r2s)
-    lags = {name: float(bt[i0]) for name, bt in zip(used, best_tau)}
-    frac = min(fracs)
-    conf = max(0.0, min(1.0, r2)) * min(1.0, frac / max(s.min_valid_fraction, 1e-9) / 2.0 + 0.5)
-    est = LatencyEstimate(True, '', t_end=end, latency=float(L), interval=(max(0.0, lo), hi),
-                          lag_v=lags.get('v', math.nan), lag_w=lags.get('w', math.nan), r2=r2,
-                          confidence=conf, valid_fraction=frac, excluded=excluded,
-                          channels=tuple(used), information=info)
+    return info
+
+
+def _verdict(est: LatencyEstimate, s: MonitorSettings, at_limit: bool, reasons: list[str]
+             ) -> LatencyEstimate:
+    """``est``, refused (``valid`` False, with the reason) where it must be.
+
+    Refused when the fit is poor, the latency is not observable or not determined or at
+    the search limit; else the channels left out are named.
+    """
+    r2, info = est.r2, est.information
+    lo, hi = est.interval
     if r2 < s.min_r2:
         return replace(est, valid=False, reason=f'the model explains only {100 * r2:.0f} % of '
                        f'the motion (at least {100 * s.min_r2:.0f} % needed)')
@@ -404,17 +494,17 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                        '(share of the response slope outside the excluded segments: '
                        + ', '.join(weak) + f'; at least {100 * s.min_information:.0f} % '
                        'needed)')
-    if hi - max(0.0, lo) > s.max_interval:
+    if hi - lo > s.max_interval:
         return replace(est, valid=False, reason=f'latency not determined: interval '
-                       f'{1e3 * max(0.0, lo):.0f}-{1e3 * hi:.0f} ms is wider than '
+                       f'{1e3 * lo:.0f}-{1e3 * hi:.0f} ms is wider than '
                        f'{1e3 * s.max_interval:.0f} ms (the latency is changing, or the motion '
                        'hardly constrains it)')
-    if i0 == nL - 1:
+    if at_limit:
         return replace(est, valid=False, reason=f'latency at the search limit '
                        f'{s.max_latency:g} s')
     if reasons:
-        return replace(est, reason='only ' + ', '.join(used) + ' used (' + '; '.join(reasons)
-                       + ')')
+        return replace(est, reason='only ' + ', '.join(est.channels) + ' used ('
+                       + '; '.join(reasons) + ')')
     return est
 
 
