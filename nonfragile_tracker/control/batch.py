@@ -41,14 +41,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from ..errors import InputError
 from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps,
                    step_time_ns)
-from .reference import Path, circle, figure_eight
+from .reference import PATHS, Path
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
            'perturbation_schedule', 'sample_deltas', 'simulate_delay_loop_batch',
@@ -82,21 +82,42 @@ class PathBatch:
     phase: Any = 0.0
 
     def path(self, i: int) -> Path:
-        """The single-run :class:`control.reference.Path` of case ``i``."""
-        factory = {'circle': circle, 'figure_eight': figure_eight}.get(self.kind)
+        """The single-run :class:`control.reference.Path` of case ``i``.
+
+        Parameters
+        ----------
+        i : int
+            Case index.
+
+        Returns
+        -------
+        Path
+        """
+        factory = PATHS.get(self.kind)
         if factory is None:
-            raise BatchError(f'path kind {self.kind!r}: choose circle or figure_eight')
+            raise BatchError(f'path kind {self.kind!r}: choose {_KINDS}')
         return factory(**{name: float(_pick(getattr(self, name), i)) for name in _PATH_FIELDS})
 
-    def take(self, idx) -> 'PathBatch':
-        """The cases ``idx`` (index array) as a new :class:`PathBatch`."""
+    def take(self, idx: Any) -> 'PathBatch':
+        """The cases ``idx`` (index array) as a new :class:`PathBatch`.
+
+        Parameters
+        ----------
+        idx : array_like of int
+            Indices of the cases kept (scalar parameters stay scalars).
+
+        Returns
+        -------
+        PathBatch
+        """
         return replace(self, **{name: _pick(getattr(self, name), idx) for name in _PATH_FIELDS})
 
 
 _PATH_FIELDS = ('radius', 'rate', 'center_x', 'center_y', 'phase')
+_KINDS = ' or '.join(PATHS)
 
 
-def _pick(value, i):
+def _pick(value: Any, i: Any) -> Any:
     """``value[i]`` for a per-case array, ``value`` for a scalar."""
     arr = np.asarray(value, float)
     return arr if arr.ndim == 0 else arr[i]
@@ -129,8 +150,18 @@ class BatchCases:
     odom_noise: Any = None
     noise_seed: Any = None
 
-    def take(self, idx) -> 'BatchCases':
-        """The cases ``idx`` (an index array or slice) as a new :class:`BatchCases`."""
+    def take(self, idx: Any) -> 'BatchCases':
+        """The cases ``idx`` (an index array or slice) as a new :class:`BatchCases`.
+
+        Parameters
+        ----------
+        idx : array_like of int or slice
+            The cases kept, in that order.
+
+        Returns
+        -------
+        BatchCases
+        """
         idx = np.arange(self.n)[idx]
         kw = {}
         for name, ndim in [(nm, 1) for nm in _PER_CASE] + [('K', 3), ('odom_noise', 2)]:
@@ -146,7 +177,22 @@ class BatchCases:
                 ) -> tuple[PlantConfig, TrackerConfig]:
         """The single-run configurations of case ``i`` (constant perturbation only).
 
-        Raises :class:`BatchError` if case ``i`` has a time-varying perturbation.
+        Parameters
+        ----------
+        i : int
+            Case index.
+        plant, tracker : PlantConfig, TrackerConfig
+            The batch's base configuration (the values of the fields left ``None``).
+
+        Returns
+        -------
+        tuple of (PlantConfig, TrackerConfig)
+            What :func:`control.simulate.simulate_tracking` runs for case ``i``.
+
+        Raises
+        ------
+        BatchError
+            If case ``i`` has a time-varying perturbation.
         """
         s = _resolve(self, plant, tracker)
         kw: dict[str, Any] = {name: float(getattr(s, name)[i]) for name in _PER_CASE
@@ -167,7 +213,7 @@ _PER_CASE = ('x0', 'y0', 'th0', 'v0', 'cmd_latency', 'lag_v', 'lag_w', 'max_line
              'max_angular_accel', 'odom_latency', 'odom_rate', 'noise_seed')
 
 
-def _vector(value, name: str, n: int, *, low: float | None = None) -> np.ndarray:
+def _vector(value: Any, name: str, n: int, *, low: float | None = None) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -194,7 +240,7 @@ class _Settings:
     K: np.ndarray          # (N, 2, 4)
     P: np.ndarray          # (N, S, 2, 4)
     hold_ns: int
-    vals: dict
+    vals: dict[str, np.ndarray]
     noise: np.ndarray      # (N, 3)
     seed: np.ndarray       # (N,) int
     cmd_d: np.ndarray      # (N,) int steps
@@ -203,7 +249,7 @@ class _Settings:
     tdt: np.ndarray        # tracker dt per case
     comp_n: np.ndarray     # compensation history length per case
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> np.ndarray:
         try:
             return self.vals[name]
         except KeyError:
@@ -279,21 +325,41 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     return _Settings(n, K, P, hold_ns, vals, noise, seed, cmd_d, odom_d, period, tdt, comp_n)
 
 
-def _per_value(fn, values: np.ndarray, dtype) -> np.ndarray:
+def _per_value(fn: Callable[[float], Any], values: np.ndarray, dtype: Any) -> np.ndarray:
     """``[fn(v) for v in values]`` evaluated once per distinct value (scalar functions)."""
     uniq, inv = np.unique(values, return_inverse=True)
     return np.array([fn(float(v)) for v in uniq], dtype=dtype)[inv.reshape(-1)]
 
 
-def perturbation_schedule(E, F, deltas) -> np.ndarray:
-    """``E Delta F`` for an array of ``Delta`` (``(..., p, q)``): shape ``(..., m, n)``."""
+def perturbation_schedule(E: Any, F: Any, deltas: Any) -> np.ndarray:
+    """``E Delta F`` for an array of ``Delta`` (``(..., p, q)``): shape ``(..., m, n)``.
+
+    Parameters
+    ----------
+    E : array_like, (m, p)
+        Left factor of the perturbation.
+    F : array_like, (q, n)
+        Right factor of the perturbation.
+    deltas : array_like, (..., p, q)
+        The uncertainties ``Delta`` (e.g. from :func:`sample_deltas`).
+
+    Returns
+    -------
+    numpy.ndarray, (..., m, n)
+
+    Raises
+    ------
+    BatchError
+        If the shape of ``Delta`` does not match ``E`` and ``F``.
+    """
     E = np.asarray(E, float)
     F = np.asarray(F, float)
     D = np.asarray(deltas, float)
     if D.shape[-2:] != (E.shape[1], F.shape[0]):
         raise BatchError(f'Delta must be {E.shape[1]}x{F.shape[0]} (E is {E.shape}, F is '
                          f'{F.shape}), got {D.shape[-2:]}')
-    return np.einsum('ip,...pq,qj->...ij', E, D, F)
+    out: np.ndarray = np.einsum('ip,...pq,qj->...ij', E, D, F)
+    return out
 
 
 def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[int, int],
@@ -302,6 +368,28 @@ def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[
 
     Each matrix is a Gaussian matrix scaled to spectral norm ``r``, ``r`` uniform in
     ``radius`` (``(1, 1)``: on the boundary ``||Delta||_2 = 1``).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the draws.
+    n : int
+        Number of cases.
+    segments : int
+        Matrices per case (the segments of a switching schedule; 1: constant).
+    shape : (int, int)
+        ``(p, q)``, the shape of ``Delta``.
+    radius : (float, float)
+        Range ``[lo, hi]`` of the spectral norms, ``0 <= lo <= hi``.
+
+    Returns
+    -------
+    numpy.ndarray, (n, segments, p, q)
+
+    Raises
+    ------
+    BatchError
+        If ``radius`` is not a valid range.
     """
     lo, hi = (float(v) for v in radius)
     if not (0 <= lo <= hi and math.isfinite(hi)):
@@ -309,11 +397,29 @@ def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[
     G = rng.standard_normal((n, segments) + tuple(shape))
     norms = np.linalg.norm(G, ord=2, axis=(-2, -1))
     r = rng.uniform(lo, hi, size=(n, segments))
-    return G * (r / np.maximum(norms, 1e-300))[..., None, None]
+    out: np.ndarray = G * (r / np.maximum(norms, 1e-300))[..., None, None]
+    return out
 
 
-def segment_index(k, dt: float, hold_ns: int, segments: int):
-    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``."""
+def segment_index(k: Any, dt: float, hold_ns: int, segments: int) -> Any:
+    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``.
+
+    Parameters
+    ----------
+    k : int or array_like of int
+        Plant step(s).
+    dt : float
+        Plant step (s).
+    hold_ns : int
+        Segment length (ns).
+    segments : int
+        Number of segments ``S``.
+
+    Returns
+    -------
+    int or numpy.ndarray
+        The segment index(es), in ``0 .. S - 1``.
+    """
     return (step_time_ns(k, dt) // hold_ns) % segments
 
 
@@ -347,7 +453,9 @@ def _wrap(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _first_order(s, c, T, amax, em1, has_lag, has_lim, h):
+def _first_order(s: np.ndarray, c: np.ndarray, T: np.ndarray, amax: np.ndarray,
+                 em1: np.ndarray, has_lag: np.ndarray, has_lim: np.ndarray, h: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`control.actuator.first_order_step` element-wise: ``(end, mean)``."""
     d = c - s
     end = c.copy()
@@ -384,15 +492,15 @@ def _first_order(s, c, T, amax, em1, has_lag, has_lim, h):
 class _Reference:
     """Reference samples at step indices: a shared table or per-case analytic formulas."""
 
-    def __init__(self, path, n: int, steps: int, dt: float):
+    def __init__(self, path: Any, n: int, steps: int, dt: float):
         self.n = n
         self.dt_ns = int(round(dt * 1e9))
         if isinstance(path, PathBatch) and all(np.ndim(getattr(path, f)) == 0
                                                for f in _PATH_FIELDS):
             path = path.path(0)             # the same path for every case: one table
         if isinstance(path, PathBatch):
-            if path.kind not in ('circle', 'figure_eight'):
-                raise BatchError(f'path kind {path.kind!r}: choose circle or figure_eight')
+            if path.kind not in PATHS:
+                raise BatchError(f'path kind {path.kind!r}: choose {_KINDS}')
             self.table = None
             self.kind = path.kind
             self.r = _vector(path.radius, 'radius', n)
@@ -411,14 +519,15 @@ class _Reference:
             self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
             self.rows = list(zip(*self.table))      # (position, velocity, acceleration)
 
-    def at(self, k):
+    def at(self, k: Any) -> tuple[Any, Any, Any]:
         """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
 
         ``k`` is an int or an array of N ints (per-case odometry stamps).
         """
         if self.table is not None:
             if np.ndim(k) == 0:
-                return self.rows[k]
+                row: tuple[Any, Any, Any] = self.rows[k]
+                return row
             return tuple(col[k][:, :, 0].T for col in self.table)
         t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
         r, w, cx, cy = self.r, self.w, self.cx, self.cy
@@ -461,7 +570,7 @@ class BatchRun:
     peak_abs_v: np.ndarray
     peak_abs_w: np.ndarray
     finite: np.ndarray
-    trace: dict | None = None
+    trace: dict[str, np.ndarray] | None = None
 
     @property
     def n(self) -> int:
@@ -1387,7 +1496,7 @@ class _Metrics:
 
     def error(self, j: int, dp: np.ndarray) -> np.ndarray:
         """Row ``j`` of the block: the position error ``|dp|`` (its square without exact)."""
-        err = self.eblk[j]
+        err: np.ndarray = self.eblk[j]
         if self.exact:
             np.hypot(dp[0], dp[1], out=err)
             np.multiply(err, err, out=self.sqblk[j + 1])
@@ -1444,7 +1553,9 @@ class _Metrics:
                         peak_abs_w=self.peak[1].copy(), finite=finite, trace=trace)
 
 
-def _compensated(buf, count, L, terms, qpos, qvel, qacc, due, idx, n):
+def _compensated(buf: np.ndarray, count: np.ndarray, L: np.ndarray,
+                 terms: list[list[tuple[int, float]]], qpos: Any, qvel: Any, qacc: Any,
+                 due: Any, idx: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`control.loop.Tracker._compensated_reference` for every case that is due.
 
     ``buf`` holds per case the last ``L`` pairs ``(xi*, xi*')`` (8 rows) in a ring
@@ -1489,7 +1600,8 @@ _SERIES_MAX = 1e-2
 _ANCHOR = 16
 
 
-def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
+def _arc_series(half: np.ndarray, cs: np.ndarray, mid: np.ndarray, tmp: np.ndarray,
+                buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(sin(h)/h, cos h, sin h)`` of ``h = half`` from their series.
 
     ``mid`` receives ``cos, sin (th + half)`` from ``cs = (cos th, sin th)`` by angle
@@ -1510,7 +1622,8 @@ def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
     return sinc, ch, sh
 
 
-def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
+def _rotate(cs: np.ndarray, ch: np.ndarray, sh: np.ndarray, out: np.ndarray,
+            tmp: np.ndarray) -> None:
     """``out = (c ch - s sh, s ch + c sh)`` for ``cs = (c, s)`` (angle addition)."""
     c, s = cs
     t = tmp[0]
@@ -1522,7 +1635,8 @@ def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
     out[1] += t
 
 
-def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
+def _arc_terms(th: np.ndarray, half: np.ndarray, cs: np.ndarray | None, exact: bool,
+               mid: np.ndarray) -> np.ndarray:
     """``sin(half) / half`` of the exact arc; ``mid`` receives ``cos, sin (th + half)``.
 
     ``exact``: the plant's own operations.  Otherwise, for ``|half| <= 0.01``
@@ -1533,7 +1647,7 @@ def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     """
     if not exact and np.max(np.abs(half)) <= _SERIES_MAX:
         h2 = half * half
-        sinc = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
+        sinc: np.ndarray = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
         if cs is not None:
             sh = half * sinc
             ch = ((h2 * _C3 + _C2) * h2 + _C1) * h2 + 1.0
@@ -1550,12 +1664,12 @@ def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     return sinc
 
 
-def _stack(values, n: int) -> np.ndarray:
+def _stack(values: Any, n: int) -> np.ndarray:
     """Rows of scalars or arrays of ``n`` as one ``(len(values), n)`` array."""
     return np.stack([np.broadcast_to(v, (n,)) for v in values])
 
 
-def _dot_terms(terms, xi, out: np.ndarray) -> None:
+def _dot_terms(terms: list[tuple[int, float]], xi: Any, out: np.ndarray) -> None:
     """``out = sum(a * xi[j])`` over the nonzero terms, left to right (as the plant).
 
     The plant starts from ``0.0``: that changes at most the sign of a zero.  Rows
@@ -1569,7 +1683,7 @@ def _dot_terms(terms, xi, out: np.ndarray) -> None:
         out += a * xi[j]
 
 
-def _dot4(terms, z):
+def _dot4(terms: list[tuple[int, float]], z: Any) -> Any:
     """``sum(A[i][j] * z[j] for j in range(4))`` left to right (Python's ``sum`` from 0)."""
     out = 0
     for j, a in terms:
@@ -1580,8 +1694,8 @@ def _dot4(terms, z):
 # ---------------------------------------------------------------------------------------------
 # Linear delay loop
 
-def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: float = 1e-3
-                              ) -> tuple[np.ndarray, np.ndarray]:
+def simulate_delay_loop_batch(A0: Any, A1: Any, tau: float, xi0: Any, duration: float,
+                              dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """:func:`control.simulate.simulate_delay_loop` for N loops at once (constant history).
 
     Parameters
@@ -1627,7 +1741,7 @@ def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: floa
     out = np.zeros((Nd + steps + 1, N, n))
     out[:Nd + 1] = xi0
 
-    def f(x, xd):
+    def f(x: np.ndarray, xd: np.ndarray) -> Any:
         return np.einsum('kij,kj->ki', A0, x) + np.einsum('kij,kj->ki', A1, xd)
 
     rk4_delay_steps(out, Nd, steps, dt, f)

@@ -1,65 +1,14 @@
 """Command-to-motion latency and actuator lag identified from recorded commands and odometry.
 
-Model (per channel ``c`` in ``v``, ``w``; first order plus dead time, FOPDT)::
-
-    tau_c y_c'(t) + y_c(t) = g_c u_c(t - L),      u_c = zero-order hold of the commands
-
-``u_c`` holds each command from its time stamp (receive time, or the header stamp
-of a TwistStamped) until the next one; ``L`` is the one command-to-motion latency
-shared by both channels, ``tau_v``, ``tau_w`` the actuator time constants and
-``g_c`` a static gain (odometry scale; 1 on an ideal base).  The initial state of
-each actuator is unknown and fitted too (a free-response term).
-
-Measurements (odometry stamped at measurement time, any rate, uneven sampling):
-
-* the odometry twist (``twist.linear.x``, ``twist.angular.z``) when it is present
-  (not all zero): point samples ``y_c(t_i)``;
-* otherwise the poses: over a window ``[t_a, t_b]`` of a few samples the heading
-  change is ``integral of w`` and the arc length (chord / sinc(dth / 2), exact for
-  a constant-curvature arc) is ``integral of v``.  The model is integrated over
-  the same window, so differencing the noisy poses adds no bias and no smoothing
-  lag (the window is a linear functional applied to both sides).
-
-Estimation: on a fine time grid (``resolution_s``, default 1 ms) the response to
-the held commands is computed exactly for a cell-averaged input (one ``lfilter``
-per time constant); a delay is a shift of that response, so the residual of the
-linear least-squares fit of ``(g_c, initial state)`` is evaluated for all delays at
-once.  ``L`` minimizes the sum of the two channels' residuals, each normalized by
-its own noise variance (from the channel's own best fit at the grid resolution; the
-channels have different units), first on a coarse grid (10 ms x 25 time constants),
-then at the grid resolution around it, and finally ``(L, tau_v, tau_w)`` are polished
-together by a bounded Nelder-Mead search (sub-step latency).
-
-Uncertainty: a non-overlapping block bootstrap over time (blocks of
-``clip(T / 20, 0.25 s, 2 s)``, both channels resampled with the same blocks) redoes
-the local grid fit ``bootstrap`` times; the intervals are its percentiles at the
-requested confidence, widened by the grid resolution and always containing the
-point estimate.  It covers noise and serially correlated model error; it does not
-cover a systematic convention offset (e.g. a base that stamps odometry at publish
-time: that transport delay is then part of ``L``).
-
-What real recordings contain, and what is done about it:
-
-* acceleration limits: where a rate-limited FOPDT (``s' = sat((u - s) / tau, a)``,
-  the plant's actuator) explains a channel at least 5 % better than the linear one,
-  its limit ``a`` is fitted with the lag (candidates around the 99th percentile of the
-  measured ``|ds/dt|``, then polished with ``tau``) and reported (``max_linear_accel``,
-  ``max_angular_accel``; 0 when no limit binds) with the fraction of time it binds;
-* stalls, hiccups and glitches: samples whose residual is gross (above 6 robust
-  standard deviations and a quarter of the channel's spread) are excluded with
-  0.2 s + 3 time constants either side, and the fit repeated (at most twice; not when
-  that would exclude more than 30 % - then the model is wrong and the fit figures say so);
-* latency jitter: after the fit, each distinct command step's latency is fitted on its
-  own (:func:`_event_latencies`); their 2.5-97.5 % range, widened by two grid steps and
-  joined with the interval of the mean, is ``latency_range_s``; when the steps spread
-  by more than 5 ms the commands are moved to the times their steps acted and the lags
-  fitted again (kept if that explains the motion clearly better: a single delay would
-  take the smear of the jitter for lag);
-* commands not driven by the odometry (a joystick): detected by
-  :func:`commands_follow_odometry`; their odometry age is then not recorded (it is not
-  the tracker's);
-* odometry stamped at publish time: its transport delay becomes part of ``L``; the sum
-  from the measurement stamp to the motion, which the predictor uses, stays right.
+Model: first order plus dead time (FOPDT) per channel ``v``, ``w``, with one
+command-to-motion latency ``L`` shared by both channels, the actuator time constants
+``tau_v``, ``tau_w`` and static gains, fitted to the odometry twist (or to pose differences
+over windows) on a fine time grid by linear least squares for all delays at once, then
+polished together; the intervals come from a block bootstrap over time.  Speed saturation,
+acceleration limits, stalls and glitches, latency jitter and commands not driven by the
+odometry are detected and modelled or named.  The model, the measurements, the estimation,
+the uncertainty and what is done about real recordings are in the documentation:
+doc/theory.md, section "Latency identification" (#latency-identification).
 
 Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
 too few samples or too short an overlap of commands and odometry
@@ -198,7 +147,7 @@ class CommandSamples:
     v: np.ndarray
     w: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         t = _series('command t', self.t)
         object.__setattr__(self, 't', t)
         object.__setattr__(self, 'v', _series('command v', self.v, t.size))
@@ -223,7 +172,7 @@ class OdometrySamples:
     v: np.ndarray | None = None
     w: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         t = _series('odometry t', self.t)
         object.__setattr__(self, 't', t)
         for name in ('x', 'y', 'yaw', 'v', 'w'):
@@ -332,6 +281,11 @@ class Identification:
 # ---------------------------------------------------------------------------------------------
 # Model on the fine grid
 
+#: One channel's measurements: (index a, index b or None, width or None, z, mid time) into
+#: the odometry (a point sample reads index a; a pose window differences a and b).
+_Measurement = tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]
+
+
 def _check_times(name: str, t: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(t)):
         raise InputError(f'{name}: time stamps must be finite')
@@ -350,7 +304,7 @@ def _held_integral(tc: np.ndarray, u: np.ndarray, s: np.ndarray,
         tc, u = tc[order], u[order]
     cum = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(tc))])
     j = np.clip(np.searchsorted(tc, s, side='right') - 1, 0, tc.size - 1)
-    return cum[j] + u[j] * (s - tc[j])
+    return cast(np.ndarray, cum[j] + u[j] * (s - tc[j]))
 
 
 class _Channel:
@@ -373,7 +327,9 @@ class _Channel:
         self.accel = 0.0            # acceleration limit of the model (0: none, linear)
 
     @classmethod
-    def build(cls, name, source, u_avg, h, z, pos_all, ia, ib, width, t_mid) -> '_Channel':
+    def build(cls, name: str, source: str, u_avg: np.ndarray, h: float, z: np.ndarray,
+              pos_all: np.ndarray, ia: np.ndarray, ib: np.ndarray | None,
+              width: np.ndarray | None, t_mid: np.ndarray) -> '_Channel':
         """Keep only the positions the measurements use."""
         need = ia if ib is None else np.concatenate([ia, ib])
         keep, inv = np.unique(need, return_inverse=True)
@@ -431,7 +387,7 @@ class _Channel:
             return vals[:, ia]
         width = cast(np.ndarray, self.width)     # set whenever ib is
         width = width if n is None else width[:n]
-        return (vals[:, ib] - vals[:, ia]) / width
+        return cast(np.ndarray, (vals[:, ib] - vals[:, ia]) / width)
 
 
 def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
@@ -455,7 +411,7 @@ def _interp_shifted(sig: np.ndarray, pos: np.ndarray, shifts: np.ndarray) -> np.
         i0 = i0.astype(np.int64)
     np.clip(i0, 0, sig.size - 2, out=i0)
     lo = sig[i0]
-    return lo + (sig[i0 + 1] - lo) * f
+    return cast(np.ndarray, lo + (sig[i0 + 1] - lo) * f)
 
 
 def _stats(ch: _Channel, tau: float, shifts: np.ndarray, blocks: np.ndarray | None,
@@ -680,11 +636,12 @@ def _fitted(ch: _Channel, pos: float, tau: float) -> np.ndarray:
     m2 = ch.regressors(free, np.array([pos]))[0]
     a = np.stack([m1, m2], axis=1)
     coef = np.linalg.lstsq(a, ch.z, rcond=None)[0]
-    return a @ coef
+    return cast(np.ndarray, a @ coef)
 
 
 def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float],
-                  meas: dict, keep: dict[str, np.ndarray] | None, t_begin: float,
+                  meas: dict[str, _Measurement], keep: dict[str, np.ndarray] | None,
+                  t_begin: float,
                   t_end: float, tau_max: float
                   ) -> tuple[dict[str, np.ndarray], list[tuple[float, float]]] | None:
     """Spans where the motion does not follow the fitted model at all, and the samples kept.
@@ -715,7 +672,7 @@ def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, flo
     for c in chans:
         ia, ib, wd, z, tm = meas[c]
         ok = np.ones(z.size, dtype=bool) if keep is None else keep[c].copy()
-        half = 0.0 if wd is None else 0.5 * cast(np.ndarray, wd)
+        half = 0.0 if wd is None else 0.5 * wd
         for a, b in spans:
             ok &= ~((tm + half >= a) & (tm - half <= b))
         new_keep[c] = ok
@@ -728,7 +685,8 @@ def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, flo
     return new_keep, excluded
 
 
-def _spans_of(meas: dict, keep: dict[str, np.ndarray]) -> list[tuple[float, float]]:
+def _spans_of(meas: dict[str, _Measurement], keep: dict[str, np.ndarray]
+              ) -> list[tuple[float, float]]:
     """Time spans (between kept samples) that hold excluded samples.
 
     From the first channel (both channels exclude the same spans).
@@ -973,11 +931,6 @@ def _check_options(max_latency_s: Any, max_tau_s: Any, resolution_s: Any, window
         raise InputError(f'command_timeout_s must be > 0 s, got {command_timeout_s!r}')
     if resolution_s > 0.02:
         raise InputError(f'resolution_s must be at most 0.02 s, got {resolution_s!r}')
-
-
-#: One channel's measurements: (index a, index b or None, width or None, z, mid time) into
-#: the odometry (a point sample reads index a; a pose window differences a and b).
-_Measurement = tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]
 
 
 @dataclass
@@ -1669,6 +1622,13 @@ def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySam
     latency ``L`` (from the command) the loop's delay from measurement to motion is
     this plus ``L``, plus up to one command period while a command is held.
 
+    Parameters
+    ----------
+    commands : CommandSamples
+        The commands with the times they were sent.
+    odometry : OdometrySamples
+        The odometry by measurement stamp.
+
     Returns
     -------
     (float, float, float)
@@ -1691,7 +1651,7 @@ def _num(x: float) -> str:
     return f'{float(x):.6g}' if abs(x) >= 1e-4 or x == 0 else f'{float(x):.6e}'
 
 
-def write_identification(path: str | os.PathLike, result: Identification, *,
+def write_identification(path: str | os.PathLike[str], result: Identification, *,
                          overwrite: bool = True) -> Path:
     """Write ``result`` as the identification file the latency-aware design reads.
 
@@ -1770,7 +1730,7 @@ _OPTIONAL = ('command_period_s', 'command_age_s', 'latency_range_s', 'latency_ra
 
 def _yaml_str(text: str) -> str:
     out = yaml.safe_dump(str(text), default_style=None, width=1000).strip()
-    return out[:-3].strip() if out.endswith('...') else out
+    return out[:-3].strip() if out.endswith('...') else str(out)
 
 
 def _accel_from(result: Identification) -> str:
@@ -1813,7 +1773,25 @@ def _pair(where: str, key: str, value: Any, point: float) -> tuple[float, float]
 
 
 def read_identification_text(text: str, where: str = '<text>') -> Identification:
-    """Parse and validate the text of an identification file (see :func:`read_identification`)."""
+    """Parse and validate the text of an identification file (see :func:`read_identification`).
+
+    Parameters
+    ----------
+    text : str
+        The YAML text.
+    where : str
+        What the text is, for the messages (a file name).
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    IdentificationFileError
+        The text is not YAML, has no ``identification`` mapping, or a field is missing or
+        out of range, or unknown (the message names it).
+    """
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -1882,7 +1860,7 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
                           excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)))
 
 
-def read_identification(path: str | os.PathLike) -> Identification:
+def read_identification(path: str | os.PathLike[str]) -> Identification:
     """Read and validate an identification file written by :func:`write_identification`.
 
     Parameters
@@ -1910,6 +1888,18 @@ def read_identification(path: str | os.PathLike) -> Identification:
     return read_identification_text(p.read_text(), str(p))
 
 
-def with_source(result: Identification, source: str | os.PathLike) -> Identification:
-    """``result`` with its ``source`` (the bag path) set."""
+def with_source(result: Identification, source: str | os.PathLike[str]) -> Identification:
+    """``result`` with its ``source`` (the bag path) set.
+
+    Parameters
+    ----------
+    result : Identification
+        An identification.
+    source : str or os.PathLike
+        Where its data came from (written to the file's ``source``).
+
+    Returns
+    -------
+    Identification
+    """
     return replace(result, source=str(source))

@@ -11,36 +11,20 @@ place, the margin and the first violation.  :func:`retime` gives a trajectory al
 same path whose timing satisfies the limits: the time-optimal parameterization ``s(t)``
 along the arc length under the limits and under the planner's own speed at each place
 (it never drives faster than the plan, it only slows down where the plan is too fast for
-the base).  The method is TOPP-RA (Pham and Pham, "A new approach to time-optimal path
-parameterization based on reachability analysis", IEEE T-RO 2018): on a grid
-``s_0 .. s_N`` with ``x = s'^2`` and ``u = s''`` constant per interval
-(``x_{i+1} = x_i + 2 ds u_i``), every limit is linear in ``(x, u)``:
-
-* speed: ``x <= v_max^2``, and ``x <= v_plan(s)^2``;
-* turn rate ``w = kappa s'``: ``x <= (w_max / kappa)^2``;
-* linear acceleration: ``|u| <= a_max``;
-* angular acceleration ``w' = kappa' x + kappa u``: ``|kappa' x + kappa u| <= alpha_max``.
-
-A backward pass computes the controllable sets ``K_i = [lo_i, hi_i]`` of ``x`` (from
-``K_N = {0}``: the trajectory ends at rest) by two 2-variable linear programs per grid
-point (their optimum is a vertex: all pairs of constraints are tried, vectorised); a
-forward pass then takes the largest admissible ``u`` from rest.  The angular-acceleration
-row bounds ``dw/dt``, so the commanded turn rate is continuous: at a curvature jump of a
-line-arc path (``kappa'`` infinite) the path is only passable at rest, which is why
-waypoint files are interpolated by a C2 spline first (continuous curvature between the
-waypoints, :mod:`control.trajectory`) and re-timed here.  The result is sampled every
-``knot_step`` seconds into the quintic Hermite form (position, velocity and acceleration
-at each knot: :func:`control.trajectory.from_states`).
-
-Why not the ``toppra`` package: it builds Cython extensions and wants a joint-space
-spline; the planar base has two path coordinates and six linear rows per grid point, which
-this module solves exactly with numpy in well under a second for a lap.
+the base).  The method is TOPP-RA (Pham and Pham, IEEE T-RO 2018): with ``x = s'^2`` and
+``u = s''`` on an arc-length grid every limit is linear in ``(x, u)``; a backward pass
+computes the controllable sets of ``x``, a forward pass takes the largest admissible
+``u``, and the result is sampled into the quintic Hermite form
+(:func:`control.trajectory.from_states`).  The rows, the passes and why not the
+``toppra`` package are in the documentation: doc/theory.md, section "Re-timing within
+limits" (#topp-ra).
 """
 from __future__ import annotations
 
 import functools
 import math
 from dataclasses import dataclass, field
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -91,7 +75,7 @@ class Limits:
     max_angular_accel: float = 0.0
     min_turning_radius: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in LIMIT_NAMES:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or \
@@ -100,12 +84,32 @@ class Limits:
                                       f'({_UNITS[name]}; 0 = none), got {v!r}')
 
     @classmethod
-    def from_values(cls, values: dict) -> 'Limits':
-        """The limits among a parameter dict (missing names: 0)."""
+    def from_values(cls, values: Mapping[str, Any]) -> 'Limits':
+        """The limits among a parameter dict (missing names: 0).
+
+        Parameters
+        ----------
+        values : mapping
+            Parameters by name (e.g. the tracker's); the names of :data:`LIMIT_NAMES` are read.
+
+        Returns
+        -------
+        Limits
+        """
         return cls(**{n: float(values.get(n, 0.0) or 0.0) for n in LIMIT_NAMES})
 
     def scaled(self, factor: float) -> 'Limits':
-        """Rate limits times ``factor`` (headroom for the feedback); the radius unchanged."""
+        """Rate limits times ``factor`` (headroom for the feedback); the radius unchanged.
+
+        Parameters
+        ----------
+        factor : float
+            Scale of the speed and acceleration limits.
+
+        Returns
+        -------
+        Limits
+        """
         return Limits(self.max_linear_speed * factor, self.max_linear_accel * factor,
                       self.max_angular_speed * factor, self.max_angular_accel * factor,
                       self.min_turning_radius)
@@ -279,6 +283,20 @@ def refuse_tight_turns(traj: Trajectory, limits: Limits, *, step: float = 1e-3) 
     """Raise :class:`TrajectoryError` if the path turns tighter than ``min_turning_radius``.
 
     No timing fixes a curvature: the message names the place, the time and the curvature.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A bounded trajectory.
+    limits : Limits
+        The robot's limits (``min_turning_radius`` 0: nothing to refuse).
+    step : float
+        Sampling step of the check (s).
+
+    Raises
+    ------
+    TrajectoryError
+        If the path's curvature exceeds ``1 / min_turning_radius`` somewhere.
     """
     if limits.min_turning_radius <= 0:
         return
@@ -354,7 +372,8 @@ def _vertices_max_min(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(xs.max()), float(xs.min())
 
 
-def _rows(lim: Limits, kappa: float, dkappa: float, xmax: float) -> tuple[list, list]:
+def _rows(lim: Limits, kappa: float, dkappa: float, xmax: float
+          ) -> tuple[list[list[float]], list[float]]:
     """Constraint rows ``A [x, u] <= b`` of one grid point (x = s'^2, u = s'')."""
     A = [[1.0, 0.0], [-1.0, 0.0]]
     b = [xmax, 0.0]

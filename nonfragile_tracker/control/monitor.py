@@ -7,44 +7,14 @@ spread of the odometry age.  Latency drifts at run time (network, CPU, battery);
 module estimates it from the tracker's own command history and the odometry twist over a
 sliding window and compares it with the certificate.
 
-Estimator (:func:`estimate_latency`; first order plus dead time per channel, the model of
-:mod:`nonfragile_tracker.control.identify`, fitted by a small self-contained grid search
-so that it costs a few milliseconds): on a fine grid (``resolution``) the response of a
-first-order lag to the zero-order-held commands is computed for a set of time constants; a
-latency is a shift of that response; per channel the static gain is fitted by least
-squares and the residual is evaluated for every latency on the grid. The latency minimises
-the sum of the channels' residuals, each normalised by its own best residual (the channels
-have different units), then refined by a parabola through the three grid points around the
-minimum. Interval: the latencies whose normalised cost rises by at most ``chi2_level``
-over the minimum, widened by the grid step.
-
-Validity gating (per channel, per odometry sample), as mature estimators gate:
-
-* *saturation*: a sample is excluded while a command at the tracker's own limit
-  (``max_linear_speed`` / ``max_angular_speed``) can still act on it (within
-  ``max_latency + 3 max_lag``): a base at its limit does not follow a first-order model;
-* *acceleration limits*: where the measured ``|dy/dt|`` between two odometry samples
-  reaches ``accel_fraction`` of a known limit (``max_linear_accel`` /
-  ``max_angular_accel``, 0 = unknown) the sample and the following ``limit_guard`` are
-  excluded (the response is rate limited, not first order);
-* *odometry gaps*: an interval longer than ``gap_factor`` times the median period
-  excludes the samples around it;
-* *excitation*: a channel whose valid commands vary less than ``min_excitation``
-  (standard deviation) is not used; no usable channel, fewer than ``min_valid_fraction``
-  valid samples, a fit that explains less than ``min_r2`` of the motion, or valid
-  samples that hold less than ``min_information`` of the model's slope (the gates removed
-  the responses that place the latency), or an interval wider than ``max_interval`` (a
-  window straddling a latency change) give no estimate (STALE, with the reason).
-
-Status (:func:`evaluate`): with the certificate's residual range ``[r_lo, r_hi]`` and
-the predictor's latency ``P`` the certified latency interval is ``[P + r_lo, P + r_hi]``;
-OK inside, WARN within ``warn_margin`` of its upper end (or a lag above the certified
-one), ERROR outside (below ``P + r_lo - tolerance``: over-prediction; above ``P + r_hi``),
-STALE without a valid estimate or without a certificate.  Adaptation
-(:func:`adapted_prediction`) moves ``P`` to the estimate minus its uncertainty, clamped
-to the range the gain was identified for.
-
-Nothing here imports ROS; numpy and scipy only.
+Estimator (:func:`estimate_latency`): the identification's model (first order plus dead
+time per channel) fitted by a small grid search over the window, the samples it cannot
+explain gated out (saturated commands, binding acceleration limits, odometry gaps); no
+estimate (STALE, with the reason) when too little is left.  Status (:func:`evaluate`): OK,
+WARN, ERROR or STALE against the certified latency interval; adaptation
+(:func:`adapted_prediction`) moves the predictor's latency to the estimate.  The fit, the
+gates and the status are in the documentation: doc/theory.md, section "Latency monitor"
+(#latency-monitor).  Nothing here imports ROS; numpy and scipy only.
 """
 from __future__ import annotations
 
@@ -143,7 +113,7 @@ class MonitorSettings:
     accel_fraction: float = 0.9
     limit_guard: float = 0.2
     gap_factor: float = 3.0
-    min_excitation: tuple = (0.01, 0.02)
+    min_excitation: tuple[float, float] = (0.01, 0.02)
     min_valid_fraction: float = 0.3
     min_r2: float = 0.5
     chi2_level: float = 4.0
@@ -153,7 +123,7 @@ class MonitorSettings:
     tolerance: float = 0.01
     lag_tolerance: float = 1.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ('window', 'max_latency', 'max_lag', 'resolution', 'max_linear_speed',
                      'max_interval',
                      'max_angular_speed', 'accel_fraction', 'gap_factor', 'chi2_level'):
@@ -194,15 +164,15 @@ class LatencyEstimate:
     reason: str
     t_end: float = math.nan                  # last odometry stamp of the window (s)
     latency: float = math.nan                # command-to-motion latency (s)
-    interval: tuple = (math.nan, math.nan)   # its interval (s)
+    interval: tuple[float, float] = (math.nan, math.nan)   # its interval (s)
     lag_v: float = math.nan                  # first-order time constants (s); nan: unused
     lag_w: float = math.nan
     r2: float = math.nan                     # explained fraction of the motion (worst channel)
     confidence: float = 0.0                  # 0..1: r2 times the valid fraction's adequacy
     valid_fraction: float = 0.0
-    excluded: dict = field(default_factory=dict)   # reason -> samples excluded
-    channels: tuple = ()
-    information: dict = field(default_factory=dict)   # channel -> share of slope on valid
+    excluded: dict[str, int] = field(default_factory=dict)   # reason -> samples excluded
+    channels: tuple[str, ...] = ()
+    information: dict[str, float] = field(default_factory=dict)   # channel -> slope share
 
     @property
     def lag(self) -> float:
@@ -231,7 +201,7 @@ def _dilate(mask: np.ndarray, t: np.ndarray, before: float, after: float) -> np.
     return hi > lo
 
 
-def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
+def estimate_latency(cmd_t: Any, cmd_v: Any, cmd_w: Any, odom_t: Any, odom_v: Any, odom_w: Any,
                      settings: MonitorSettings = MonitorSettings(),
                      t_end: float | None = None) -> LatencyEstimate:
     """Latency and lags from commands and odometry twist over the last ``settings.window``.
@@ -527,14 +497,25 @@ class Certificate:
     design records none).
     """
 
-    residual: tuple
+    residual: tuple[float, float]
     lag: float
-    adapt_range: tuple | None
+    adapt_range: tuple[float, float] | None
     hold: float = 0.0
     source: str = ''
 
     def interval(self, predict_latency: float) -> tuple[float, float]:
-        """Certified latency interval ``[P + h_min, P + H - hold]`` for the predictor's ``P``."""
+        """Certified latency interval ``[P + h_min, P + H - hold]`` for the predictor's ``P``.
+
+        Parameters
+        ----------
+        predict_latency : float
+            The predictor's latency ``P`` (s).
+
+        Returns
+        -------
+        (float, float)
+            The interval (s).
+        """
         return (predict_latency + self.residual[0],
                 predict_latency + self.residual[1] - self.hold)
 
@@ -606,7 +587,7 @@ def certificate_from_design(design: Mapping[str, Any] | None, hold: float,
                        hold=_pos('command period', hold, zero=True), source=source)
 
 
-def certificate_from_parameters(residual, lag: float, adapt_range, hold: float = 0.0,
+def certificate_from_parameters(residual: Any, lag: float, adapt_range: Any, hold: float = 0.0,
                                 source: str = 'tracker parameters') -> Certificate | None:
     """The certificate carried by the tracker's ``certified_*`` parameters (None: unset).
 
@@ -644,7 +625,7 @@ class MonitorStatus:
 
     level: int
     message: str
-    values: dict
+    values: dict[str, Any]
     predict_latency: float          # the predictor latency the verdict is for
 
     @property
@@ -744,6 +725,22 @@ def adapted_prediction(est: LatencyEstimate, cert: Certificate, current: float,
     latency is inside the OK band for ``current`` (above ``current + r_lo - tolerance``,
     below the WARN margin: no change while nothing needs one) or the change is below half
     the tolerance (no chatter).
+
+    Parameters
+    ----------
+    est : LatencyEstimate
+        The monitor's latest estimate.
+    cert : Certificate
+        The gain's certificate (residual range, adaptation range).
+    current : float
+        The predictor's latency now (s).
+    settings : MonitorSettings
+        ``tolerance`` and ``warn_margin`` of the status.
+
+    Returns
+    -------
+    float
+        The predictor latency to use (s).
     """
     if not est.valid or cert.adapt_range is None:
         return current
@@ -773,18 +770,34 @@ class SampleWindow:
     def __init__(self, span: float):
         self.span = float(span)
         self._lock = threading.Lock()
-        self._cmd: deque = deque()
-        self._odom: deque = deque()
+        self._cmd: deque[tuple[float, float, float]] = deque()
+        self._odom: deque[tuple[float, float, float]] = deque()
 
     def add_command(self, t: float, v: float, w: float) -> None:
-        """A command sent at ``t`` (s)."""
+        """A command sent at ``t`` (s).
+
+        Parameters
+        ----------
+        t : float
+            Time it was sent (s).
+        v, w : float
+            Commanded speed (m/s) and yaw rate (rad/s).
+        """
         with self._lock:
             self._cmd.append((t, v, w))
             while self._cmd and self._cmd[0][0] < t - self.span:
                 self._cmd.popleft()
 
     def add_odometry(self, t: float, v: float, w: float) -> None:
-        """An odometry twist measured at ``t`` (s)."""
+        """An odometry twist measured at ``t`` (s).
+
+        Parameters
+        ----------
+        t : float
+            Measurement stamp (s).
+        v, w : float
+            Measured speed (m/s) and yaw rate (rad/s).
+        """
         with self._lock:
             self._odom.append((t, v, w))
             while self._odom and self._odom[0][0] < t - self.span:
