@@ -626,10 +626,10 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     Notes
     -----
     The run is set up from parts that each hold one piece of the single run's state for
-    every case (:class:`_Odometry`, :class:`_BatchTracker`, :class:`_CommandLine`,
-    :class:`_BatchPlant`, :class:`_Metrics`) and stepped by :func:`_loop`; the common
+    every case (``_Odometry``, ``_BatchTracker``, ``_CommandLine``,
+    ``_BatchPlant``, ``_Metrics``) and stepped by ``_loop``; the common
     configuration of odometry of the plant's own state, no delay compensation and no
-    actuator dynamics (without ``exact``) takes the specialised :func:`_ideal_loop`.
+    actuator dynamics (without ``exact``) takes the specialised ``_ideal_loop``.
     """
     _check_run(tracker, steps, tolerance)
     steps = int(steps)

@@ -885,13 +885,13 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     Notes
     -----
-    The stages, each its own function: the options checked (:func:`_check_options`),
-    the samples sorted and gated into per-channel measurements (:func:`_gather`), the
-    commands' excitation checked (:func:`_check_excitation`), the model fitted and
-    extended where the recording needs it (:class:`_Fit`: saturation, acceleration
+    The stages, each its own function: the options checked (``_check_options``),
+    the samples sorted and gated into per-channel measurements (``_gather``), the
+    commands' excitation checked (``_check_excitation``), the model fitted and
+    extended where the recording needs it (``_Fit``: saturation, acceleration
     limits, excluded segments, jitter), the fit's quality checked
-    (:func:`_check_quality`), the block bootstrap (:func:`_bootstrap`) and the
-    :class:`Identification` assembled (:func:`_report`).
+    (``_check_quality``), the block bootstrap (``_bootstrap``) and the
+    :class:`Identification` assembled (``_report``).
     """
     _check_options(max_latency_s, max_tau_s, resolution_s, window_s, confidence, bootstrap,
                    source, command_timeout_s)

@@ -224,10 +224,10 @@ def estimate_latency(cmd_t: Any, cmd_v: Any, cmd_w: Any, odom_t: Any, odom_v: An
 
     Notes
     -----
-    The stages: the window's samples, the gating (:func:`_gate`), each channel's residual
-    profile over the latency grid (:func:`_channel_profile`), the latency and its interval
-    from the normalised total (:func:`_latency_from`), its identifiability
-    (:func:`_information`) and the verdict (:func:`_verdict`).
+    The stages: the window's samples, the gating (``_gate``), each channel's residual
+    profile over the latency grid (``_channel_profile``), the latency and its interval
+    from the normalised total (``_latency_from``), its identifiability
+    (``_information``) and the verdict (``_verdict``).
     """
     s = settings
     ct = np.asarray(cmd_t, float)
