@@ -100,9 +100,11 @@ def test_every_launch_file_has_its_generated_argument_table():
 
 @pytest.mark.parametrize('module, section', [
     ('lmi', 'theorem-1'), ('delay_dependent', 'delay-dependent-design'),
-    ('input_delay', 'input-delay-command-latency'), ('predictor', 'latency-predictor')])
+    ('input_delay', 'input-delay-command-latency'), ('predictor', 'latency-predictor'),
+    ('monitor', 'latency-monitor'), ('limits', 'topp-ra')])
 def test_derivations_live_in_theory_and_docstrings_point_there(module, section):
-    sub = 'simulation' if module == 'predictor' else 'synthesis'
+    sub = {'predictor': 'simulation', 'limits': 'simulation',
+           'monitor': 'identification'}.get(module, 'synthesis')
     doc = ast.get_docstring(ast.parse((PKG / 'control' / sub / f'{module}.py').read_text()))
     assert doc is not None
     assert 'doc/theory.md' in doc and section in doc, doc

@@ -1,65 +1,14 @@
 """Command-to-motion latency and actuator lag identified from recorded commands and odometry.
 
-Model (per channel ``c`` in ``v``, ``w``; first order plus dead time, FOPDT)::
-
-    tau_c y_c'(t) + y_c(t) = g_c u_c(t - L),      u_c = zero-order hold of the commands
-
-``u_c`` holds each command from its time stamp (receive time, or the header stamp
-of a TwistStamped) until the next one; ``L`` is the one command-to-motion latency
-shared by both channels, ``tau_v``, ``tau_w`` the actuator time constants and
-``g_c`` a static gain (odometry scale; 1 on an ideal base).  The initial state of
-each actuator is unknown and fitted too (a free-response term).
-
-Measurements (odometry stamped at measurement time, any rate, uneven sampling):
-
-* the odometry twist (``twist.linear.x``, ``twist.angular.z``) when it is present
-  (not all zero): point samples ``y_c(t_i)``;
-* otherwise the poses: over a window ``[t_a, t_b]`` of a few samples the heading
-  change is ``integral of w`` and the arc length (chord / sinc(dth / 2), exact for
-  a constant-curvature arc) is ``integral of v``.  The model is integrated over
-  the same window, so differencing the noisy poses adds no bias and no smoothing
-  lag (the window is a linear functional applied to both sides).
-
-Estimation: on a fine time grid (``resolution_s``, default 1 ms) the response to
-the held commands is computed exactly for a cell-averaged input (one ``lfilter``
-per time constant); a delay is a shift of that response, so the residual of the
-linear least-squares fit of ``(g_c, initial state)`` is evaluated for all delays at
-once.  ``L`` minimizes the sum of the two channels' residuals, each normalized by
-its own noise variance (from the channel's own best fit at the grid resolution; the
-channels have different units), first on a coarse grid (10 ms x 25 time constants),
-then at the grid resolution around it, and finally ``(L, tau_v, tau_w)`` are polished
-together by a bounded Nelder-Mead search (sub-step latency).
-
-Uncertainty: a non-overlapping block bootstrap over time (blocks of
-``clip(T / 20, 0.25 s, 2 s)``, both channels resampled with the same blocks) redoes
-the local grid fit ``bootstrap`` times; the intervals are its percentiles at the
-requested confidence, widened by the grid resolution and always containing the
-point estimate.  It covers noise and serially correlated model error; it does not
-cover a systematic convention offset (e.g. a base that stamps odometry at publish
-time: that transport delay is then part of ``L``).
-
-What real recordings contain, and what is done about it:
-
-* acceleration limits: where a rate-limited FOPDT (``s' = sat((u - s) / tau, a)``,
-  the plant's actuator) explains a channel at least 5 % better than the linear one,
-  its limit ``a`` is fitted with the lag (candidates around the 99th percentile of the
-  measured ``|ds/dt|``, then polished with ``tau``) and reported (``max_linear_accel``,
-  ``max_angular_accel``; 0 when no limit binds) with the fraction of time it binds;
-* stalls, hiccups and glitches: samples whose residual is gross (above 6 robust
-  standard deviations and a quarter of the channel's spread) are excluded with
-  0.2 s + 3 time constants either side, and the fit repeated (at most twice; not when
-  that would exclude more than 30 % - then the model is wrong and the fit figures say so);
-* latency jitter: after the fit, each distinct command step's latency is fitted on its
-  own (:func:`_event_latencies`); their 2.5-97.5 % range, widened by two grid steps and
-  joined with the interval of the mean, is ``latency_range_s``; when the steps spread
-  by more than 5 ms the commands are moved to the times their steps acted and the lags
-  fitted again (kept if that explains the motion clearly better: a single delay would
-  take the smear of the jitter for lag);
-* commands not driven by the odometry (a joystick): detected by
-  :func:`commands_follow_odometry`; their odometry age is then not recorded (it is not
-  the tracker's);
-* odometry stamped at publish time: its transport delay becomes part of ``L``; the sum
-  from the measurement stamp to the motion, which the predictor uses, stays right.
+Model: first order plus dead time (FOPDT) per channel ``v``, ``w``, with one
+command-to-motion latency ``L`` shared by both channels, the actuator time constants
+``tau_v``, ``tau_w`` and static gains, fitted to the odometry twist (or to pose differences
+over windows) on a fine time grid by linear least squares for all delays at once, then
+polished together; the intervals come from a block bootstrap over time.  Speed saturation,
+acceleration limits, stalls and glitches, latency jitter and commands not driven by the
+odometry are detected and modelled or named.  The model, the measurements, the estimation,
+the uncertainty and what is done about real recordings are in the documentation:
+doc/theory.md, section "Latency identification" (#latency-identification).
 
 Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
 too few samples or too short an overlap of commands and odometry
@@ -180,7 +129,7 @@ class CommandSamples:
     v: np.ndarray
     w: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         t = _series('command t', self.t)
         object.__setattr__(self, 't', t)
         object.__setattr__(self, 'v', _series('command v', self.v, t.size))
@@ -205,7 +154,7 @@ class OdometrySamples:
     v: np.ndarray | None = None
     w: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         t = _series('odometry t', self.t)
         object.__setattr__(self, 't', t)
         for name in ('x', 'y', 'yaw', 'v', 'w'):
@@ -314,6 +263,11 @@ class Identification:
 # ---------------------------------------------------------------------------------------------
 # Model on the fine grid
 
+#: One channel's measurements: (index a, index b or None, width or None, z, mid time) into
+#: the odometry (a point sample reads index a; a pose window differences a and b).
+_Measurement = tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]
+
+
 def _check_times(name: str, t: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(t)):
         raise InputError(f'{name}: time stamps must be finite')
@@ -332,7 +286,7 @@ def _held_integral(tc: np.ndarray, u: np.ndarray, s: np.ndarray,
         tc, u = tc[order], u[order]
     cum = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(tc))])
     j = np.clip(np.searchsorted(tc, s, side='right') - 1, 0, tc.size - 1)
-    return cum[j] + u[j] * (s - tc[j])
+    return cast(np.ndarray, cum[j] + u[j] * (s - tc[j]))
 
 
 class _Channel:
@@ -355,7 +309,9 @@ class _Channel:
         self.accel = 0.0            # acceleration limit of the model (0: none, linear)
 
     @classmethod
-    def build(cls, name, source, u_avg, h, z, pos_all, ia, ib, width, t_mid) -> '_Channel':
+    def build(cls, name: str, source: str, u_avg: np.ndarray, h: float, z: np.ndarray,
+              pos_all: np.ndarray, ia: np.ndarray, ib: np.ndarray | None,
+              width: np.ndarray | None, t_mid: np.ndarray) -> '_Channel':
         """Keep only the positions the measurements use."""
         need = ia if ib is None else np.concatenate([ia, ib])
         keep, inv = np.unique(need, return_inverse=True)
@@ -413,7 +369,7 @@ class _Channel:
             return vals[:, ia]
         width = cast(np.ndarray, self.width)     # set whenever ib is
         width = width if n is None else width[:n]
-        return (vals[:, ib] - vals[:, ia]) / width
+        return cast(np.ndarray, (vals[:, ib] - vals[:, ia]) / width)
 
 
 def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
@@ -437,7 +393,7 @@ def _interp_shifted(sig: np.ndarray, pos: np.ndarray, shifts: np.ndarray) -> np.
         i0 = i0.astype(np.int64)
     np.clip(i0, 0, sig.size - 2, out=i0)
     lo = sig[i0]
-    return lo + (sig[i0 + 1] - lo) * f
+    return cast(np.ndarray, lo + (sig[i0 + 1] - lo) * f)
 
 
 def _stats(ch: _Channel, tau: float, shifts: np.ndarray, blocks: np.ndarray | None,
@@ -662,11 +618,12 @@ def _fitted(ch: _Channel, pos: float, tau: float) -> np.ndarray:
     m2 = ch.regressors(free, np.array([pos]))[0]
     a = np.stack([m1, m2], axis=1)
     coef = np.linalg.lstsq(a, ch.z, rcond=None)[0]
-    return a @ coef
+    return cast(np.ndarray, a @ coef)
 
 
 def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float],
-                  meas: dict, keep: dict[str, np.ndarray] | None, t_begin: float,
+                  meas: dict[str, _Measurement], keep: dict[str, np.ndarray] | None,
+                  t_begin: float,
                   t_end: float, tau_max: float
                   ) -> tuple[dict[str, np.ndarray], list[tuple[float, float]]] | None:
     """Spans where the motion does not follow the fitted model at all, and the samples kept.
@@ -697,7 +654,7 @@ def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, flo
     for c in chans:
         ia, ib, wd, z, tm = meas[c]
         ok = np.ones(z.size, dtype=bool) if keep is None else keep[c].copy()
-        half = 0.0 if wd is None else 0.5 * cast(np.ndarray, wd)
+        half = 0.0 if wd is None else 0.5 * wd
         for a, b in spans:
             ok &= ~((tm + half >= a) & (tm - half <= b))
         new_keep[c] = ok
@@ -710,7 +667,8 @@ def _gross_errors(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, flo
     return new_keep, excluded
 
 
-def _spans_of(meas: dict, keep: dict[str, np.ndarray]) -> list[tuple[float, float]]:
+def _spans_of(meas: dict[str, _Measurement], keep: dict[str, np.ndarray]
+              ) -> list[tuple[float, float]]:
     """Time spans (between kept samples) that hold excluded samples.
 
     From the first channel (both channels exclude the same spans).
@@ -906,7 +864,40 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         variance, or an estimate lies at a search limit.
     InputError
         Bad arguments (non-finite values, mismatched lengths, bad options).
+
+    Notes
+    -----
+    The stages, each its own function: the options checked (``_check_options``),
+    the samples sorted and gated into per-channel measurements (``_gather``), the
+    commands' excitation checked (``_check_excitation``), the model fitted and
+    extended where the recording needs it (``_Fit``: saturation, acceleration
+    limits, excluded segments, jitter), the fit's quality checked
+    (``_check_quality``), the block bootstrap (``_bootstrap``) and the
+    :class:`Identification` assembled (``_report``).
     """
+    _check_options(max_latency_s, max_tau_s, resolution_s, window_s, confidence, bootstrap,
+                   source, command_timeout_s)
+    data = _gather(commands, odometry, max_latency_s, source, window_s)
+    _check_excitation(data, max_latency_s, min_excitation)
+    fit = _Fit(data, float(resolution_s), max_latency_s, max_tau_s, command_timeout_s)
+    # 1. the linear FOPDT
+    fit.pos, fit.tau_hat, fit.lat_c = fit.search()
+    # 1b. a base that cannot reach the commanded speeds; 2. acceleration limits; 3. segments
+    # the base did not follow at all; 4. latency jitter
+    fit.model_saturation()
+    fit.model_limits()
+    excluded = fit.exclude_gross_errors()
+    events, _, _ = fit.model_jitter(excluded)
+    quality = _check_quality(fit, excluded, max_latency_s, max_tau_s)
+    pos_b, tau_b = _bootstrap(fit, np.random.default_rng(seed), int(bootstrap))
+    return _report(commands, odometry, fit, quality, (pos_b, tau_b), events,
+                   float(confidence), int(bootstrap))
+
+
+def _check_options(max_latency_s: Any, max_tau_s: Any, resolution_s: Any, window_s: Any,
+                   confidence: Any, bootstrap: Any, source: Any, command_timeout_s: Any
+                   ) -> None:
+    """Refuse bad options of :func:`identify_latency` (:class:`InputError`)."""
     for name, val, lo in (('max_latency_s', max_latency_s, 0.0), ('max_tau_s', max_tau_s, 0.0),
                           ('resolution_s', resolution_s, 0.0), ('window_s', window_s, 0.0)):
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val > lo):
@@ -922,8 +913,39 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         raise InputError(f'command_timeout_s must be > 0 s, got {command_timeout_s!r}')
     if resolution_s > 0.02:
         raise InputError(f'resolution_s must be at most 0.02 s, got {resolution_s!r}')
-    notes: list[str] = []
 
+
+@dataclass
+class _Data:
+    """The samples of a run, sorted and gated into what the fit uses (see :func:`_gather`).
+
+    ``tc``, ``cmd``: the commands by time; ``to``: the odometry times; ``use``: each
+    channel's source (``twist`` or ``pose``); ``meas``: each channel's measurements in
+    the fitted span ``[t_begin, t_end]`` (:data:`_Measurement`); ``block_len``,
+    ``n_blocks``: the bootstrap's blocks over it.
+    """
+
+    tc: np.ndarray
+    cmd: dict[str, np.ndarray]
+    to: np.ndarray
+    odom_rate: float
+    use: dict[str, str]
+    meas: dict[str, _Measurement]
+    t_begin: float
+    t_end: float
+    duration: float
+    block_len: float
+    n_blocks: int
+    notes: list[str] = field(default_factory=list)
+
+
+def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: float,
+            source: str, window_s: float) -> _Data:
+    """Sort the samples, choose each channel's source and keep the measurements fitted.
+
+    Raises :class:`NotEnoughDataError` for too few commands or odometry samples or too
+    short an overlap, :class:`InputError` for non-finite values or a missing twist.
+    """
     # -- commands
     if len(commands) < 10:
         raise NotEnoughDataError(f'the run has {len(commands)} velocity commands; at least 10 '
@@ -952,7 +974,6 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     odom_period = float(np.median(np.diff(to)))
     odom_rate = 1.0 / odom_period
 
-    h = float(resolution_s)
     t_first = tc[0] + max_latency_s            # earliest measurement with a known input
     t_last = tc[-1] + max(float(np.median(np.diff(tc))), 0.0)
 
@@ -966,7 +987,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     span = max(1, int(math.ceil(window_s / odom_period - 1e-9)))
     wa, wb, width, zv_pose, zw_pose = _window_measurements(to, x, y, yaw, span)
 
-    def measurement(c: str):
+    def measurement(c: str) -> _Measurement:
         """(index a, index b or None, width or None, z, mid time) into the odometry."""
         if use[c] == 'twist':
             ia = np.flatnonzero((to >= t_first) & (to <= t_last))
@@ -993,11 +1014,20 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             f'commands and odometry overlap for {duration:.2f} s after the first '
             f'{max_latency_s:g} s; at least {MIN_BLOCKS * 0.25:g} s are needed for the '
             'uncertainty (block bootstrap): record a longer run')
+    return _Data(tc, cmd, to, odom_rate, use, meas, t_begin, t_end, duration, block_len,
+                 n_blocks)
 
-    # -- excitation (commands over the fitted span, including the latency range before it)
+
+def _check_excitation(data: _Data, max_latency_s: float,
+                      min_excitation: tuple[float, float]) -> None:
+    """Refuse a channel whose commands hardly vary (:class:`InsufficientExcitationError`).
+
+    The commands over the fitted span and the latency range before it are looked at.
+    """
+    tc, t_begin, t_end = data.tc, data.t_begin, data.t_end
     for c, lo in zip(_CHANNELS, min_excitation):
         sel = (tc >= t_begin - max_latency_s) & (tc <= t_end)
-        u = cmd[c][sel]
+        u = data.cmd[c][sel]
         ptp = float(np.ptp(u)) if u.size else 0.0
         changes = int(np.count_nonzero(np.diff(u))) if u.size > 1 else 0
         if ptp < lo or changes < 3:
@@ -1007,74 +1037,118 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                 f'{changes} changes; its lag and the latency cannot be seen. Record a run that '
                 'varies both v and w (e.g. the figure eight), not a straight line or a hold')
 
-    # -- the grid: cell averages of the held commands
-    n_cells = int(math.ceil((t_end - tc[0]) / h)) + 2
-    s = tc[0] + h * np.arange(n_cells + 1)
-    u_grid = {c: np.diff(_held_integral(tc, cmd[c], s, command_timeout_s)) / h
-              for c in _CHANNELS}
-    odom_pos = (to - tc[0]) / h
 
-    # the rate-limited model costs a Python pass over the grid per simulation: its coarse
-    # stages run on a grid of at most 5 ms (the coarse latency step is 10 ms)
-    hc = h * max(1, int(round(0.005 / h))) if h < 0.005 else h
-    coarse_inputs: dict[str, np.ndarray] = {}
+class _Fit:
+    """The FOPDT fit of a run: the grid, the channels and the current estimate.
 
-    def make_channels(keep: dict[str, np.ndarray] | None, accel: dict[str, float],
-                      hh: float = h) -> dict[str, _Channel]:
+    The held commands are cell-averaged on a grid of step ``h`` (``u_grid``);
+    :meth:`make_channels` builds the channels (:class:`_Channel`) from them and the
+    measurements (``keep``: the samples left after exclusions), :meth:`search` fits
+    ``(latency, tau_v, tau_w)`` on the current channels ``chans``.  The estimate is
+    ``pos`` (the latency in grid steps), ``tau_hat``, ``lat_c`` (each channel's own
+    latency) and ``accel`` (the acceleration limits); the ``model_*`` stages refit it
+    where the recording needs a richer model and add their ``notes``.
+    """
+
+    def __init__(self, data: _Data, h: float, max_latency_s: float, max_tau_s: float,
+                 command_timeout_s: float | None):
+        self.data, self.h = data, h
+        self.notes = data.notes
+        self.max_latency_s, self.max_tau_s = max_latency_s, max_tau_s
+        self.command_timeout_s = command_timeout_s
+        tc, t_end = data.tc, data.t_end
+        # -- the grid: cell averages of the held commands
+        n_cells = int(math.ceil((t_end - tc[0]) / h)) + 2
+        self.s = tc[0] + h * np.arange(n_cells + 1)
+        self.u_grid = {c: np.diff(_held_integral(tc, data.cmd[c], self.s, command_timeout_s))
+                       / h for c in _CHANNELS}
+        self.odom_pos = (data.to - tc[0]) / h
+        # the rate-limited model costs a Python pass over the grid per simulation: its
+        # coarse stages run on a grid of at most 5 ms (the coarse latency step is 10 ms)
+        self.hc = h * max(1, int(round(0.005 / h))) if h < 0.005 else h
+        self.coarse_inputs: dict[str, np.ndarray] = {}
+        self.no_limit = {c: 0.0 for c in _CHANNELS}
+        self.keep: dict[str, np.ndarray] | None = None
+        self.chans = self.make_channels(None, self.no_limit)
+        self.d_max = int(round(max_latency_s / h))
+        self.taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
+        self.step = max(1, int(round(0.01 / h)))
+        self.coarse_all = np.arange(0, self.d_max + 1, self.step, dtype=float)
+        self.clips: dict[str, tuple[float, float, float]] = {}
+        self.pos = 0.0
+        self.tau_hat: dict[str, float] = {}
+        self.lat_c: dict[str, float] = {}
+        self.accel: dict[str, float] = dict(self.no_limit)
+
+    def make_channels(self, keep: dict[str, np.ndarray] | None, accel: dict[str, float],
+                      hh: float | None = None) -> dict[str, _Channel]:
+        """The channels on the grid (``hh``: a coarser one) with the samples ``keep``."""
+        h, data = self.h, self.data
+        hh = h if hh is None else hh
+        tc, cmd = data.tc, data.cmd
         out = {}
-        if hh != h and not coarse_inputs:
-            sc = tc[0] + hh * np.arange(int(math.ceil((t_end - tc[0]) / hh)) + 3)
-            coarse_inputs.update({c: np.diff(_held_integral(tc, cmd[c], sc, command_timeout_s))
-                                  / hh for c in _CHANNELS})
+        if hh != h and not self.coarse_inputs:
+            sc = tc[0] + hh * np.arange(int(math.ceil((data.t_end - tc[0]) / hh)) + 3)
+            self.coarse_inputs.update(
+                {c: np.diff(_held_integral(tc, cmd[c], sc, self.command_timeout_s)) / hh
+                 for c in _CHANNELS})
         for c in _CHANNELS:
-            ia, ib, wd, z, tm = meas[c]
+            ia, ib, wd, z, tm = data.meas[c]
             if keep is not None:
                 k = keep[c]
                 ia, z, tm = ia[k], z[k], tm[k]
                 if ib is not None:
                     ib, wd = ib[k], cast(np.ndarray, wd)[k]
             if hh == h:
-                ch = _Channel.build(c, use[c], u_grid[c], h, z, odom_pos, ia, ib, wd, tm)
-            else:
-                ch = _Channel.build(c, use[c], coarse_inputs[c], hh, z, (to - tc[0]) / hh, ia,
+                ch = _Channel.build(c, data.use[c], self.u_grid[c], h, z, self.odom_pos, ia,
                                     ib, wd, tm)
+            else:
+                ch = _Channel.build(c, data.use[c], self.coarse_inputs[c], hh, z,
+                                    (data.to - tc[0]) / hh, ia, ib, wd, tm)
             ch.accel = float(accel[c])
             out[c] = ch
         return out
 
-    no_limit = {c: 0.0 for c in _CHANNELS}
-    keep: dict[str, np.ndarray] | None = None
-    chans = make_channels(None, no_limit)
-    d_max = int(round(max_latency_s / h))
-    taus = np.concatenate([[0.0], np.geomspace(max(2 * h, 0.002), max_tau_s, 24)])
-    step = max(1, int(round(0.01 / h)))
-    coarse_all = np.arange(0, d_max + 1, step, dtype=float)
+    def around(self, centre: float, half: int | None = None) -> np.ndarray:
+        """Grid positions within ``half`` (default three coarse steps) of ``centre``."""
+        half = 3 * self.step if half is None else half
+        return np.arange(max(0, centre - half), min(self.d_max, centre + half) + 1,
+                         dtype=float)
 
-    def around(centre: float, half: int = 3 * step) -> np.ndarray:
-        return np.arange(max(0, centre - half), min(d_max, centre + half) + 1, dtype=float)
-
-    def tau_range(k: int, n: int) -> np.ndarray:
+    def tau_range(self, k: int, n: int) -> np.ndarray:
+        """``n`` time constants around the coarse grid's ``k``-th."""
+        taus = self.taus
         return np.linspace(taus[max(0, k - 2)], taus[min(taus.size - 1, k + 2)], n)
 
-    def local_taus(c: str, centre: float, spread: float) -> np.ndarray:
+    def local_taus(self, c: str, centre: float, spread: float) -> np.ndarray:
+        """Time constants within a factor ``spread`` of ``centre`` (the bootstrap's grid)."""
+        h = self.h
         lo = max(0.0, centre / spread - 2 * h * spread)
-        hi = min(max_tau_s, centre * spread + 2 * h * spread)
-        return np.linspace(lo, hi, 13 if chans[c].accel > 0 else 25)
+        hi = min(self.max_tau_s, centre * spread + 2 * h * spread)
+        return np.linspace(lo, hi, 13 if self.chans[c].accel > 0 else 25)
 
-    def grid_fit(shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool):
+    def grid_fit(self, shifts: np.ndarray, grids: dict[str, np.ndarray], blocks: bool
+                 ) -> dict[str, tuple[np.ndarray, Any]]:
         """Block statistics (nd, ntau, 5, nb) per channel and zz per block."""
+        data = self.data
+        n_blocks = data.n_blocks
         out = {}
-        for c, ch in chans.items():
-            bl = np.minimum(((ch.t_mid - t_begin) // block_len).astype(int), n_blocks - 1) \
-                if blocks else None
+        for c, ch in self.chans.items():
+            bl = np.minimum(((ch.t_mid - data.t_begin) // data.block_len).astype(int),
+                            n_blocks - 1) if blocks else None
             st = np.stack([_stats(ch, tau, shifts, bl, n_blocks) for tau in grids[c]], axis=1)
             zzb = (np.bincount(cast(np.ndarray, bl), weights=ch.z * ch.z, minlength=n_blocks)
                    if blocks else float(ch.z @ ch.z))
             out[c] = (st, zzb)
         return out
 
-    def estimate(stats, weights: np.ndarray | None, shifts, grids):
-        """(latency grid pos, {c: tau}, {c: channel latency pos}) from (weighted) statistics."""
+    def estimate(self, stats: dict[str, tuple[np.ndarray, Any]], weights: np.ndarray | None,
+                 shifts: np.ndarray, grids: dict[str, np.ndarray]
+                 ) -> tuple[float, dict[str, float], dict[str, float], Any]:
+        """The estimate from (weighted) statistics.
+
+        Returns (latency grid pos, {c: tau}, {c: channel latency pos}, the profile).
+        """
         j: Any = 0.0                    # + the profiles: an array of the latency grid
         tau_hat, lat_c = {}, {}
         sse_all = {}
@@ -1085,7 +1159,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             sse = _sse(st, zz)[0]                              # (nd, ntau)
             sse_all[c] = sse
             prof = sse.min(axis=1)
-            j = j + prof / chans[c].sigma2
+            j = j + prof / self.chans[c].sigma2
             i = int(np.argmin(prof))
             lat_c[c] = float(shifts[i]) + _parabola_min(prof, i)
         i = int(np.argmin(j))
@@ -1097,7 +1171,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             tau_hat[c] = float(g[k] + _parabola_min(row, k) * (g[1] - g[0]))
         return pos, tau_hat, lat_c, j
 
-    def search(near: float | None = None) -> tuple[float, dict[str, float], dict[str, float]]:
+    def search(self, near: float | None = None
+               ) -> tuple[float, dict[str, float], dict[str, float]]:
         """Coarse, fine and polished fit of (latency, tau_v, tau_w) on ``chans``.
 
         Sets each channel's noise variance (``sigma2``); returns (latency grid position,
@@ -1105,12 +1180,14 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         position: a refit after a change of the model) the coarse grid spans +-0.1 s
         around it only.
         """
-        coarse = coarse_all if near is None else \
-            coarse_all[np.abs(coarse_all - near) <= 0.1 / h + step]
+        h, chans, step, taus = self.h, self.chans, self.step, self.taus
+        coarse = self.coarse_all if near is None else \
+            self.coarse_all[np.abs(self.coarse_all - near) <= 0.1 / h + step]
         # coarse: 10 ms steps, at most ~1500 samples per channel
         sse_c = {}
-        rough = (make_channels(keep, {c: chans[c].accel for c in _CHANNELS}, hc)
-                 if hc != h and any(ch.accel > 0 for ch in chans.values()) else chans)
+        rough = (self.make_channels(self.keep, {c: chans[c].accel for c in _CHANNELS},
+                                    self.hc)
+                 if self.hc != h and any(ch.accel > 0 for ch in chans.values()) else chans)
         for c, ch in chans.items():
             stride = max(1, ch.z.size // 1500)
             sub = (ch if ch.accel <= 0 else rough[c]).subset(stride)
@@ -1125,26 +1202,33 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         for c, ch in chans.items():
             i = int(np.argmin(prof_c[c]))
             zz = float(ch.z @ ch.z)
-            best = min(float(_sse(_stats(ch, tau, around(coarse[i]), None, 0), zz)[0].min())
-                       for tau in tau_range(int(kbest[c][i]), 9 if ch.accel > 0 else 17))
+            best = min(float(_sse(_stats(ch, tau, self.around(coarse[i]), None, 0),
+                                  zz)[0].min())
+                       for tau in self.tau_range(int(kbest[c][i]), 9 if ch.accel > 0 else 17))
             ch.sigma2 = max(best / ch.z.size, 1e-12 * float(np.var(ch.z)), 1e-300)
         j_coarse = sum(prof_c[c] / chans[c].sigma2 for c in _CHANNELS)
         i_c = int(np.argmin(j_coarse))
         # fine: grid resolution around the coarse minimum, local time-constant grids
-        tau_grid = {c: tau_range(int(kbest[c][i_c]), 13 if chans[c].accel > 0 else 25)
+        tau_grid = {c: self.tau_range(int(kbest[c][i_c]), 13 if chans[c].accel > 0 else 25)
                     for c in _CHANNELS}
-        fine = around(coarse[i_c])
-        pos, tau0, lat_c, _ = estimate(grid_fit(fine, tau_grid, False), None, fine, tau_grid)
+        fine = self.around(coarse[i_c])
+        pos, tau0, lat_c, _ = self.estimate(self.grid_fit(fine, tau_grid, False), None, fine,
+                                            tau_grid)
         if any(ch.accel > 0 for ch in chans.values()):
-            p_l, t_l = polish_limited(pos, tau0, fine)
+            p_l, t_l = self.polish_limited(pos, tau0, fine)
             return p_l, t_l, lat_c
-        # polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps)
+        return self.polish(pos, tau0, lat_c)
+
+    def polish(self, pos: float, tau0: dict[str, float], lat_c: dict[str, float]
+               ) -> tuple[float, dict[str, float], dict[str, float]]:
+        """Polish (latency, tau_v, tau_w) together (Nelder-Mead, in grid steps)."""
         from scipy.optimize import minimize
+        h, max_tau_s = self.h, self.max_tau_s
         x0 = np.array([pos, max(tau0['v'], 0.0) / h, max(tau0['w'], 0.0) / h])
-        j0 = objective(x0)
+        j0 = self.objective(x0)
         simplex = np.vstack([x0, x0 + [0.5, 0, 0], x0 + [0, 0.5, 0], x0 + [0, 0, 0.5]])
-        polish = minimize(objective, x0, method='Nelder-Mead',
-                          bounds=[(0.0, float(d_max)), (0.0, max_tau_s / h),
+        polish = minimize(self.objective, x0, method='Nelder-Mead',
+                          bounds=[(0.0, float(self.d_max)), (0.0, max_tau_s / h),
                                   (0.0, max_tau_s / h)],
                           options={'initial_simplex': simplex, 'xatol': 0.01,
                                    'fatol': 1e-7 * j0 + 1e-12, 'maxfev': 200})
@@ -1153,7 +1237,7 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                                         'w': float(polish.x[2]) * h}, lat_c
         return pos, {c: max(tau0[c], 0.0) for c in _CHANNELS}, lat_c
 
-    def polish_limited(pos: float, tau0: dict[str, float], fine: np.ndarray
+    def polish_limited(self, pos: float, tau0: dict[str, float], fine: np.ndarray
                        ) -> tuple[float, dict[str, float]]:
         """Rate-limited channels: (tau, limit) polished per channel, then the latency.
 
@@ -1162,8 +1246,9 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         again on the fine grid.
         """
         from scipy.optimize import minimize
+        h = self.h
         tau_hat = {c: max(tau0[c], 0.0) for c in _CHANNELS}
-        for c, ch in chans.items():
+        for c, ch in self.chans.items():
             if ch.accel <= 0:
                 continue
             a_start = ch.accel
@@ -1182,114 +1267,168 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
             res = minimize(f, x0, method='Nelder-Mead',
                            options={'initial_simplex': simplex, 'xatol': 0.05,
                                     'fatol': 1e-7 * f0 + 1e-12, 'maxfev': 40})
-            if res.fun <= f0 and float(res.x[0]) * h <= max_tau_s:
+            if res.fun <= f0 and float(res.x[0]) * h <= self.max_tau_s:
                 tau_hat[c], ch.accel = float(res.x[0]) * h, float(res.x[1])
             else:
                 ch.accel = a_start
         j: Any = 0.0
-        for c, ch in chans.items():
+        for c, ch in self.chans.items():
             j = j + _sse(_stats(ch, tau_hat[c], fine, None, 0),
                          float(ch.z @ ch.z))[0] / ch.sigma2
         i = int(np.argmin(j))
         return float(fine[i]) + _parabola_min(j, i), tau_hat
 
-    def channel_sse(c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        ch = chans[c]
+    def channel_sse(self, c: str, p: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        """(residual sum of squares, gain) of channel ``c`` at latency ``p`` and ``tau``."""
+        ch = self.chans[c]
         return _sse(_stats(ch, tau, np.array([p]), None, 0), float(ch.z @ ch.z))
 
-    def objective(x: np.ndarray) -> float:
+    def objective(self, x: np.ndarray) -> float:
+        """The normalized residual of ``x = (latency, tau_v, tau_w)`` in grid steps."""
         p, tv, tw = (float(v) for v in x)
-        return sum(float(channel_sse(c, p, t * h)[0][0]) / chans[c].sigma2
+        return sum(float(self.channel_sse(c, p, t * self.h)[0][0]) / self.chans[c].sigma2
                    for c, t in (('v', tv), ('w', tw)))
 
-    # 1. the linear FOPDT
-    pos, tau_hat, lat_c = search()
-    # 1b. a base that cannot reach the commanded speeds: the commands clipped to its range
-    clips = _speed_saturation(chans, pos, tau_hat)
-    if clips:
+    def refit(self, keep: dict[str, np.ndarray] | None, accel: dict[str, float]) -> None:
+        """New channels (samples ``keep``, limits ``accel``), refitted near the estimate."""
+        self.chans = self.make_channels(keep, accel)
+        self.pos, self.tau_hat, self.lat_c = self.search(self.pos)
+
+    def model_saturation(self) -> None:
+        """Model a base that cannot reach the commanded speeds.
+
+        The commands are clipped to the range it reaches and the fit repeated.
+        """
+        self.clips = clips = _speed_saturation(self.chans, self.pos, self.tau_hat)
+        if not clips:
+            return
         for c, (lo_c, hi_c, frac) in clips.items():
-            u_grid[c] = np.clip(u_grid[c], lo_c, hi_c)
-            notes.append(f'the base does not reach the commanded {_NAMES[c]}: it saturates at '
-                         f'[{lo_c:.3g}, {hi_c:.3g}] {_UNITS[c]} (commands beyond that '
-                         f'{100 * frac:.0f} % of the time); modelled by clipping the commands')
-        coarse_inputs.clear()
-        chans = make_channels(None, no_limit)
-        pos, tau_hat, lat_c = search(pos)
-    # 2. acceleration limits: a rate-limited FOPDT where it explains the motion better
-    accel = _choose_limits(make_channels(None, no_limit, hc), pos * h, tau_hat, max_tau_s,
-                           max_latency_s)
-    if any(accel.values()):
-        chans = make_channels(None, accel)
-        pos, tau_hat, lat_c = search(pos)
-        accel = {c: chans[c].accel for c in _CHANNELS}      # polished
-    # 3. segments where the base did not follow the commands at all (a stall, a hiccup,
-    #    a glitch of the odometry): excluded, and the fit repeated without them
-    excluded: list[tuple[float, float]] = []
-    for _ in range(2):
-        found = _gross_errors(chans, pos, tau_hat, meas, keep, t_begin, t_end,
-                              max(tau_hat.values()))
-        if found is None:
-            break
-        keep, excluded = found
-        chans = make_channels(keep, accel)
-        pos, tau_hat, lat_c = search(pos)
-        accel = {c: chans[c].accel for c in _CHANNELS}
-    excluded_s = float(sum(b - a for a, b in excluded))
-    if excluded:
-        spans = ', '.join(f'{a:.2f}-{b:.2f} s' for a, b in excluded[:4])
-        more = f' and {len(excluded) - 4} more' if len(excluded) > 4 else ''
-        notes.append(f'excluded {excluded_s:.2f} s where the motion did not follow the commands '
-                     f'at all ({spans}{more}): a stall or hiccup of the base, slipping wheels or '
-                     'an odometry glitch; the fit uses the rest')
-    # 4. latency jitter: each distinct command step timed on its own; when they spread,
-    #    the commands are moved to the times they acted and the lags fitted again (a
-    #    single delay would take the smear of the jitter for lag)
-    events, ev_first, ev_last = _event_latencies(chans, pos, tau_hat, tc, cmd, t_begin, t_end,
-                                                 excluded)
-    if events.size >= MIN_EVENTS:
+            self.u_grid[c] = np.clip(self.u_grid[c], lo_c, hi_c)
+            self.notes.append(f'the base does not reach the commanded {_NAMES[c]}: it saturates '
+                              f'at [{lo_c:.3g}, {hi_c:.3g}] {_UNITS[c]} (commands beyond that '
+                              f'{100 * frac:.0f} % of the time); modelled by clipping the '
+                              'commands')
+        self.coarse_inputs.clear()
+        self.refit(None, self.no_limit)
+
+    def model_limits(self) -> None:
+        """Acceleration limits: a rate-limited FOPDT where it explains the motion better."""
+        accel = _choose_limits(self.make_channels(None, self.no_limit, self.hc),
+                               self.pos * self.h, self.tau_hat, self.max_tau_s,
+                               self.max_latency_s)
+        if any(accel.values()):
+            self.refit(None, accel)
+            accel = {c: self.chans[c].accel for c in _CHANNELS}      # polished
+        self.accel = accel
+
+    def exclude_gross_errors(self) -> list[tuple[float, float]]:
+        """Exclude the segments where the base did not follow the commands at all.
+
+        A stall, a hiccup, a glitch of the odometry: excluded, and the fit repeated
+        without them; returns the spans excluded (s).
+        """
+        data = self.data
+        excluded: list[tuple[float, float]] = []
+        for _ in range(2):
+            found = _gross_errors(self.chans, self.pos, self.tau_hat, data.meas, self.keep,
+                                  data.t_begin, data.t_end, max(self.tau_hat.values()))
+            if found is None:
+                break
+            self.keep, excluded = found
+            self.refit(self.keep, self.accel)
+            self.accel = {c: self.chans[c].accel for c in _CHANNELS}
+        if excluded:
+            excluded_s = float(sum(b - a for a, b in excluded))
+            spans = ', '.join(f'{a:.2f}-{b:.2f} s' for a, b in excluded[:4])
+            more = f' and {len(excluded) - 4} more' if len(excluded) > 4 else ''
+            self.notes.append(f'excluded {excluded_s:.2f} s where the motion did not follow the '
+                              f'commands at all ({spans}{more}): a stall or hiccup of the base, '
+                              'slipping wheels or an odometry glitch; the fit uses the rest')
+        return excluded
+
+    def model_jitter(self, excluded: list[tuple[float, float]]
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Model latency jitter; returns the command steps' latencies (grid steps) and spans.
+
+        Each distinct command step is timed on its own; when they spread, the commands
+        are moved to the times they acted and the lags fitted again (a single delay would
+        take the smear of the jitter for lag).
+        """
+        data, h = self.data, self.h
+        tc, cmd = data.tc, data.cmd
+        pos = self.pos
+        events, ev_first, ev_last = _event_latencies(self.chans, pos, self.tau_hat, tc, cmd,
+                                                     data.t_begin, data.t_end, excluded)
+        if events.size < MIN_EVENTS:
+            return events, ev_first, ev_last
         e_lo, e_hi = np.percentile(events, [2.5, 97.5])
-        if (e_hi - e_lo) * h > JITTER_REFIT_S:
-            shift = np.zeros(tc.size)
-            for p_k, a_k, b_k in zip(events, ev_first, ev_last):
-                shift[a_k:b_k] = (p_k - pos) * h
-            tcw = np.maximum.accumulate(tc + shift)
-            before = (dict(u_grid), chans, pos, tau_hat, lat_c, accel)
-            j_before = objective(np.array([pos, tau_hat['v'] / h, tau_hat['w'] / h]))
-            for c in _CHANNELS:
-                u_grid[c] = np.diff(_held_integral(tcw, cmd[c], s, command_timeout_s)) / h
-                if c in clips:
-                    u_grid[c] = np.clip(u_grid[c], clips[c][0], clips[c][1])
-            coarse_inputs.clear()
-            sig_before = {c: ch.sigma2 for c, ch in chans.items()}
-            chans = make_channels(keep, accel)
-            pos, tau_hat, lat_c = search(pos)
-            accel = {c: chans[c].accel for c in _CHANNELS}
-            j_after = sum(float(channel_sse(c, pos, tau_hat[c])[0][0]) / sig_before[c]
-                          for c in _CHANNELS)
-            if j_after < JITTER_GAIN * j_before:
-                notes.append(f'the latency jitters ({events.size} command steps over '
-                             f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with '
-                             'each step moved to the time it acted')
-            else:                   # the steps' spread is noise: keep the one-delay fit
-                u_grid.update(before[0])
-                coarse_inputs.clear()
-                chans, pos, tau_hat, lat_c, accel = before[1:]
-    latency = pos * h
+        if (e_hi - e_lo) * h <= JITTER_REFIT_S:
+            return events, ev_first, ev_last
+        shift = np.zeros(tc.size)
+        for p_k, a_k, b_k in zip(events, ev_first, ev_last):
+            shift[a_k:b_k] = (p_k - pos) * h
+        tcw = np.maximum.accumulate(tc + shift)
+        before = (dict(self.u_grid), self.chans, pos, self.tau_hat, self.lat_c, self.accel)
+        j_before = self.objective(np.array([pos, self.tau_hat['v'] / h,
+                                            self.tau_hat['w'] / h]))
+        for c in _CHANNELS:
+            self.u_grid[c] = np.diff(_held_integral(tcw, cmd[c], self.s,
+                                                    self.command_timeout_s)) / h
+            if c in self.clips:
+                self.u_grid[c] = np.clip(self.u_grid[c], self.clips[c][0], self.clips[c][1])
+        self.coarse_inputs.clear()
+        sig_before = {c: ch.sigma2 for c, ch in self.chans.items()}
+        self.refit(self.keep, self.accel)
+        self.accel = {c: self.chans[c].accel for c in _CHANNELS}
+        j_after = sum(float(self.channel_sse(c, self.pos, self.tau_hat[c])[0][0])
+                      / sig_before[c] for c in _CHANNELS)
+        if j_after < JITTER_GAIN * j_before:
+            self.notes.append(f'the latency jitters ({events.size} command steps over '
+                              f'[{e_lo * h:.3f}, {e_hi * h:.3f}] s): the lags are fitted with '
+                              'each step moved to the time it acted')
+        else:                   # the steps' spread is noise: keep the one-delay fit
+            self.u_grid.update(before[0])
+            self.coarse_inputs.clear()
+            self.chans, self.pos, self.tau_hat, self.lat_c, self.accel = before[1:]
+        return events, ev_first, ev_last
+
+
+@dataclass(frozen=True)
+class _Quality:
+    """The final fit's figures per channel (see :func:`_check_quality`)."""
+
+    gains: dict[str, float]
+    resid: dict[str, float]
+    r2: dict[str, float]
+    binding: dict[str, float]
+    excluded_s: float
+
+
+def _check_quality(fit: _Fit, excluded: list[tuple[float, float]], max_latency_s: float,
+                   max_tau_s: float) -> _Quality:
+    """Gains, residuals, R^2 and binding fractions of the final fit.
+
+    Refuses a poor fit or an estimate at a search limit (:class:`PoorFitError`).
+    """
+    data, chans, pos, tau_hat = fit.data, fit.chans, fit.pos, fit.tau_hat
+    tc = data.tc
+    excluded_s = float(sum(b - a for a, b in excluded))
     gains, resid, r2 = {}, {}, {}
     for c, ch in chans.items():
-        sse, g2 = channel_sse(c, pos, tau_hat[c])
+        sse, g2 = fit.channel_sse(c, pos, tau_hat[c])
         gains[c] = float(g2[0])
         resid[c] = math.sqrt(float(sse[0]) / ch.z.size)
         var = float(np.var(ch.z))
         r2[c] = 1.0 - float(sse[0]) / (ch.z.size * var) if var > 0 else 0.0
-    binding = {c: _binding_fraction(chans[c], tau_hat[c], pos, t_begin - tc[0], t_end - tc[0])
+    binding = {c: _binding_fraction(chans[c], tau_hat[c], pos, data.t_begin - tc[0],
+                                    data.t_end - tc[0])
                for c in _CHANNELS}
 
     for c in _CHANNELS:
         if r2[c] < MIN_R2:
-            raise PoorFitError(_poor_fit_cause(c, r2[c], use[c], chans[c], cmd[c], accel[c],
-                                               excluded_s))
-    if pos >= d_max - 0.5:
+            raise PoorFitError(_poor_fit_cause(c, r2[c], data.use[c], chans[c], data.cmd[c],
+                                               fit.accel[c], excluded_s))
+    if pos >= fit.d_max - 0.5:
         raise PoorFitError(f'the latency estimate is at the search limit {max_latency_s:g} s: '
                            'either the latency is longer (raise max_latency_s, --max-latency) '
                            'or the odometry does not respond to these commands (another '
@@ -1304,27 +1443,34 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                 'overshoots, a base that stalls for long) - a larger max_tau_s would only fit '
                 'that as a lag, with a wrong latency. Record commands within the base\'s speed '
                 'range (e.g. the figure eight at a lower rate)')
+    return _Quality(gains, resid, r2, binding, excluded_s)
 
-    # -- block bootstrap on a local grid (widened while estimates pile at an edge)
-    rng = np.random.default_rng(seed)
-    half = max(10, step)
+
+def _bootstrap(fit: _Fit, rng: np.random.Generator, bootstrap: int
+               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Block bootstrap on a local grid (widened while estimates pile at an edge).
+
+    Returns the replicates' latency grid positions and time constants.
+    """
+    pos, tau_hat, d_max, n_blocks = fit.pos, fit.tau_hat, fit.d_max, fit.data.n_blocks
+    half = max(10, fit.step)
     spread = 1.6
     for attempt in range(3):
         centre = int(round(pos))
         shifts = np.arange(max(0, centre - half), min(d_max, centre + half) + 1, dtype=float)
-        grids = {c: local_taus(c, tau_hat[c], spread) for c in _CHANNELS}
-        stats = grid_fit(shifts, grids, True)
+        grids = {c: fit.local_taus(c, tau_hat[c], spread) for c in _CHANNELS}
+        stats = fit.grid_fit(shifts, grids, True)
         pos_b, tau_b = np.empty(bootstrap), {c: np.empty(bootstrap) for c in _CHANNELS}
         for b in range(bootstrap):
             wts = np.bincount(rng.integers(0, n_blocks, n_blocks),
                               minlength=n_blocks).astype(float)
-            p, t_, _, _ = estimate(stats, wts, shifts, grids)
+            p, t_, _, _ = fit.estimate(stats, wts, shifts, grids)
             pos_b[b] = p
             for c in _CHANNELS:
                 tau_b[c][b] = t_[c]
         edge = np.mean((pos_b <= shifts[0] + 0.5) & (shifts[0] > 0)) + \
             np.mean((pos_b >= shifts[-1] - 0.5) & (shifts[-1] < d_max))
-        tedge = max(np.mean((tau_b[c] >= grids[c][-1] - 1e-12) & (grids[c][-1] < max_tau_s))
+        tedge = max(np.mean((tau_b[c] >= grids[c][-1] - 1e-12) & (grids[c][-1] < fit.max_tau_s))
                     + np.mean((tau_b[c] <= grids[c][0] + 1e-12) & (grids[c][0] > 0))
                     for c in _CHANNELS)
         if edge <= 0.01 and tedge <= 0.01:
@@ -1334,9 +1480,24 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         if tedge > 0.01:
             spread = spread ** 2
     else:
-        notes.append('bootstrap estimates reach the edge of the local search grid: the '
-                     'intervals may be too narrow')
+        fit.notes.append('bootstrap estimates reach the edge of the local search grid: the '
+                         'intervals may be too narrow')
+    return pos_b, tau_b
 
+
+def _report(commands: CommandSamples, odometry: OdometrySamples, fit: _Fit, q: _Quality,
+            replicates: tuple[np.ndarray, dict[str, np.ndarray]], events: np.ndarray,
+            confidence: float, bootstrap: int) -> Identification:
+    """Assemble the :class:`Identification`.
+
+    Intervals at ``confidence`` from the bootstrap ``replicates``, the latency range from
+    the command steps' ``events``, the commands' period and age, and the notes.
+    """
+    data, h, pos, tau_hat, lat_c, accel = fit.data, fit.h, fit.pos, fit.tau_hat, fit.lat_c, \
+        fit.accel
+    notes, tc, max_latency_s = fit.notes, data.tc, fit.max_latency_s
+    pos_b, tau_b = replicates
+    latency = pos * h
     alpha = 0.5 * (1.0 - confidence)
 
     def interval(values: np.ndarray, point: float, floor: float = 0.0) -> tuple[float, float]:
@@ -1364,7 +1525,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
                      'from command to command is not measured (the range is the interval of '
                      'the mean); a joystick drive with steps in v and w measures it')
 
-    used = np.sort(tc[(tc >= t_begin - max_latency_s) & (tc <= t_end)])
+    fitted = (tc >= data.t_begin - max_latency_s) & (tc <= data.t_end)
+    used = np.sort(tc[fitted])
     period = float(np.median(np.diff(used))) if used.size > 1 else math.nan
     age_lo, _, age_hi = measurement_to_command_delay(commands, odometry)
     driven = commands_follow_odometry(commands, odometry)
@@ -1376,18 +1538,18 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     for c, name in (('v', 'linear'), ('w', 'angular')):
         if accel[c] > 0:
             notes.append(f'{name} acceleration limit {accel[c]:.3g} {_ACCEL_UNITS[c]} (binding '
-                         f'{100 * binding[c]:.0f} % of the fitted time; rate-limited FOPDT)')
+                         f'{100 * q.binding[c]:.0f} % of the fitted time; rate-limited FOPDT)')
     return Identification(
         latency_s=latency, latency_low_s=lat_lo, latency_high_s=lat_hi,
         tau_v_s=tau_hat['v'], tau_v_low_s=tv_lo, tau_v_high_s=tv_hi,
         tau_w_s=tau_hat['w'], tau_w_low_s=tw_lo, tau_w_high_s=tw_hi,
-        odom_rate_hz=odom_rate, samples=int(max(ch.z.size for ch in chans.values())),
-        residual_rms_v=resid['v'], residual_rms_w=resid['w'],
-        gain_v=gains['v'], gain_w=gains['w'], r2_v=r2['v'], r2_w=r2['w'],
-        source_v=use['v'], source_w=use['w'],
+        odom_rate_hz=data.odom_rate, samples=int(max(ch.z.size for ch in fit.chans.values())),
+        residual_rms_v=q.resid['v'], residual_rms_w=q.resid['w'],
+        gain_v=q.gains['v'], gain_w=q.gains['w'], r2_v=q.r2['v'], r2_w=q.r2['w'],
+        source_v=data.use['v'], source_w=data.use['w'],
         latency_v_s=lat_c['v'] * h, latency_w_s=lat_c['w'] * h,
-        confidence=float(confidence), resolution_s=h, duration_s=duration,
-        commands=int(np.count_nonzero((tc >= t_begin - max_latency_s) & (tc <= t_end))),
+        confidence=float(confidence), resolution_s=h, duration_s=data.duration,
+        commands=int(np.count_nonzero(fitted)),
         bootstrap=int(bootstrap), notes=tuple(notes),
         command_period_s=period if period > 0 else math.nan,
         command_age_low_s=max(age_lo, 0.0) if math.isfinite(age_lo) else math.nan,
@@ -1395,8 +1557,8 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         latency_range_low_s=rng_lo, latency_range_high_s=rng_hi,
         latency_range_from=range_from, latency_events=int(events.size),
         max_linear_accel=accel['v'], max_angular_accel=accel['w'],
-        accel_binding_v=binding['v'], accel_binding_w=binding['w'],
-        commands_follow_odometry=driven, excluded_s=excluded_s)
+        accel_binding_v=q.binding['v'], accel_binding_w=q.binding['w'],
+        commands_follow_odometry=driven, excluded_s=q.excluded_s)
 
 
 def commands_follow_odometry(commands: CommandSamples, odometry: OdometrySamples
@@ -1442,6 +1604,13 @@ def measurement_to_command_delay(commands: CommandSamples, odometry: OdometrySam
     latency ``L`` (from the command) the loop's delay from measurement to motion is
     this plus ``L``, plus up to one command period while a command is held.
 
+    Parameters
+    ----------
+    commands : CommandSamples
+        The commands with the times they were sent.
+    odometry : OdometrySamples
+        The odometry by measurement stamp.
+
     Returns
     -------
     (float, float, float)
@@ -1464,7 +1633,7 @@ def _num(x: float) -> str:
     return f'{float(x):.6g}' if abs(x) >= 1e-4 or x == 0 else f'{float(x):.6e}'
 
 
-def write_identification(path: str | os.PathLike, result: Identification, *,
+def write_identification(path: str | os.PathLike[str], result: Identification, *,
                          overwrite: bool = True) -> Path:
     """Write ``result`` as the identification file the latency-aware design reads.
 
@@ -1543,7 +1712,7 @@ _OPTIONAL = ('command_period_s', 'command_age_s', 'latency_range_s', 'latency_ra
 
 def _yaml_str(text: str) -> str:
     out = yaml.safe_dump(str(text), default_style=None, width=1000).strip()
-    return out[:-3].strip() if out.endswith('...') else out
+    return out[:-3].strip() if out.endswith('...') else str(out)
 
 
 def _accel_from(result: Identification) -> str:
@@ -1586,7 +1755,25 @@ def _pair(where: str, key: str, value: Any, point: float) -> tuple[float, float]
 
 
 def read_identification_text(text: str, where: str = '<text>') -> Identification:
-    """Parse and validate the text of an identification file (see :func:`read_identification`)."""
+    """Parse and validate the text of an identification file (see :func:`read_identification`).
+
+    Parameters
+    ----------
+    text : str
+        The YAML text.
+    where : str
+        What the text is, for the messages (a file name).
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    IdentificationFileError
+        The text is not YAML, has no ``identification`` mapping, or a field is missing or
+        out of range, or unknown (the message names it).
+    """
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -1655,7 +1842,7 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
                           excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)))
 
 
-def read_identification(path: str | os.PathLike) -> Identification:
+def read_identification(path: str | os.PathLike[str]) -> Identification:
     """Read and validate an identification file written by :func:`write_identification`.
 
     Parameters
@@ -1683,6 +1870,18 @@ def read_identification(path: str | os.PathLike) -> Identification:
     return read_identification_text(p.read_text(), str(p))
 
 
-def with_source(result: Identification, source: str | os.PathLike) -> Identification:
-    """``result`` with its ``source`` (the bag path) set."""
+def with_source(result: Identification, source: str | os.PathLike[str]) -> Identification:
+    """``result`` with its ``source`` (the bag path) set.
+
+    Parameters
+    ----------
+    result : Identification
+        An identification.
+    source : str or os.PathLike
+        Where its data came from (written to the file's ``source``).
+
+    Returns
+    -------
+    Identification
+    """
     return replace(result, source=str(source))

@@ -7,44 +7,14 @@ spread of the odometry age.  Latency drifts at run time (network, CPU, battery);
 module estimates it from the tracker's own command history and the odometry twist over a
 sliding window and compares it with the certificate.
 
-Estimator (:func:`estimate_latency`; first order plus dead time per channel, the model of
-:mod:`nonfragile_tracker.control.identification.identify`, fitted by a small self-contained grid
-search so that it costs a few milliseconds): on a fine grid (``resolution``) the response of a
-first-order lag to the zero-order-held commands is computed for a set of time constants; a
-latency is a shift of that response; per channel the static gain is fitted by least
-squares and the residual is evaluated for every latency on the grid. The latency minimises
-the sum of the channels' residuals, each normalised by its own best residual (the channels
-have different units), then refined by a parabola through the three grid points around the
-minimum. Interval: the latencies whose normalised cost rises by at most ``chi2_level``
-over the minimum, widened by the grid step.
-
-Validity gating (per channel, per odometry sample), as mature estimators gate:
-
-* *saturation*: a sample is excluded while a command at the tracker's own limit
-  (``max_linear_speed`` / ``max_angular_speed``) can still act on it (within
-  ``max_latency + 3 max_lag``): a base at its limit does not follow a first-order model;
-* *acceleration limits*: where the measured ``|dy/dt|`` between two odometry samples
-  reaches ``accel_fraction`` of a known limit (``max_linear_accel`` /
-  ``max_angular_accel``, 0 = unknown) the sample and the following ``limit_guard`` are
-  excluded (the response is rate limited, not first order);
-* *odometry gaps*: an interval longer than ``gap_factor`` times the median period
-  excludes the samples around it;
-* *excitation*: a channel whose valid commands vary less than ``min_excitation``
-  (standard deviation) is not used; no usable channel, fewer than ``min_valid_fraction``
-  valid samples, a fit that explains less than ``min_r2`` of the motion, or valid
-  samples that hold less than ``min_information`` of the model's slope (the gates removed
-  the responses that place the latency), or an interval wider than ``max_interval`` (a
-  window straddling a latency change) give no estimate (STALE, with the reason).
-
-Status (:func:`evaluate`): with the certificate's residual range ``[r_lo, r_hi]`` and
-the predictor's latency ``P`` the certified latency interval is ``[P + r_lo, P + r_hi]``;
-OK inside, WARN within ``warn_margin`` of its upper end (or a lag above the certified
-one), ERROR outside (below ``P + r_lo - tolerance``: over-prediction; above ``P + r_hi``),
-STALE without a valid estimate or without a certificate.  Adaptation
-(:func:`adapted_prediction`) moves ``P`` to the estimate minus its uncertainty, clamped
-to the range the gain was identified for.
-
-Nothing here imports ROS; numpy and scipy only.
+Estimator (:func:`estimate_latency`): the identification's model (first order plus dead
+time per channel) fitted by a small grid search over the window, the samples it cannot
+explain gated out (saturated commands, binding acceleration limits, odometry gaps); no
+estimate (STALE, with the reason) when too little is left.  Status (:func:`evaluate`): OK,
+WARN, ERROR or STALE against the certified latency interval; adaptation
+(:func:`adapted_prediction`) moves the predictor's latency to the estimate.  The fit, the
+gates and the status are in the documentation: doc/theory.md, section "Latency monitor"
+(#latency-monitor).  Nothing here imports ROS; numpy and scipy only.
 """
 from __future__ import annotations
 
@@ -139,7 +109,7 @@ class MonitorSettings:
     accel_fraction: float = 0.9
     limit_guard: float = 0.2
     gap_factor: float = 3.0
-    min_excitation: tuple = (0.01, 0.02)
+    min_excitation: tuple[float, float] = (0.01, 0.02)
     min_valid_fraction: float = 0.3
     min_r2: float = 0.5
     chi2_level: float = 4.0
@@ -149,7 +119,7 @@ class MonitorSettings:
     tolerance: float = 0.01
     lag_tolerance: float = 1.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ('window', 'max_latency', 'max_lag', 'resolution', 'max_linear_speed',
                      'max_interval',
                      'max_angular_speed', 'accel_fraction', 'gap_factor', 'chi2_level'):
@@ -190,15 +160,15 @@ class LatencyEstimate:
     reason: str
     t_end: float = math.nan                  # last odometry stamp of the window (s)
     latency: float = math.nan                # command-to-motion latency (s)
-    interval: tuple = (math.nan, math.nan)   # its interval (s)
+    interval: tuple[float, float] = (math.nan, math.nan)   # its interval (s)
     lag_v: float = math.nan                  # first-order time constants (s); nan: unused
     lag_w: float = math.nan
     r2: float = math.nan                     # explained fraction of the motion (worst channel)
     confidence: float = 0.0                  # 0..1: r2 times the valid fraction's adequacy
     valid_fraction: float = 0.0
-    excluded: dict = field(default_factory=dict)   # reason -> samples excluded
-    channels: tuple = ()
-    information: dict = field(default_factory=dict)   # channel -> share of slope on valid
+    excluded: dict[str, int] = field(default_factory=dict)   # reason -> samples excluded
+    channels: tuple[str, ...] = ()
+    information: dict[str, float] = field(default_factory=dict)   # channel -> slope share
 
     @property
     def lag(self) -> float:
@@ -227,7 +197,7 @@ def _dilate(mask: np.ndarray, t: np.ndarray, before: float, after: float) -> np.
     return hi > lo
 
 
-def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
+def estimate_latency(cmd_t: Any, cmd_v: Any, cmd_w: Any, odom_t: Any, odom_v: Any, odom_w: Any,
                      settings: MonitorSettings = MonitorSettings(),
                      t_end: float | None = None) -> LatencyEstimate:
     """Latency and lags from commands and odometry twist over the last ``settings.window``.
@@ -247,6 +217,13 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
     -------
     LatencyEstimate
         ``valid`` False with the reason when the window cannot give one.
+
+    Notes
+    -----
+    The stages: the window's samples, the gating (``_gate``), each channel's residual
+    profile over the latency grid (``_channel_profile``), the latency and its interval
+    from the normalised total (``_latency_from``), its identifiability
+    (``_information``) and the verdict (``_verdict``).
     """
     s = settings
     ct = np.asarray(cmd_t, float)
@@ -260,12 +237,54 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
     start = max(end - s.window, float(ct[0]) + s.memory)
     sel = (ot >= start) & (ot <= end) & np.isfinite(oy[0]) & np.isfinite(oy[1])
     t = ot[sel]
-    n = t.size
-    if n < 10 or end - start < 0.5 * s.window:
+    if t.size < 10 or end - start < 0.5 * s.window:
         return LatencyEstimate(False, f'window not filled yet ({max(end - start, 0.0):.1f} of '
                                       f'{s.window:g} s with commands before it)', t_end=end)
     y = (oy[0][sel], oy[1][sel])
-    # --- gating -------------------------------------------------------------------------
+    masks, excluded = _gate(s, t, y, ct, cu)
+    grid = _Grid.of(s, start, end, t, ct)
+    used: list[str] = []
+    costs: list[np.ndarray] = []
+    best_tau: list[list[float]] = []
+    r2s: list[float] = []
+    fracs: list[float] = []
+    reasons = []
+    for c, name in enumerate(('v', 'w')):
+        fitted = _channel_profile(s, grid, cu[c][grid.ci], y[c], masks[c], c, name)
+        if isinstance(fitted, str):
+            reasons.append(fitted)
+            continue
+        used.append(name)
+        costs.append(fitted[0])
+        best_tau.append(fitted[1])
+        r2s.append(fitted[2])
+        fracs.append(fitted[3])
+    if not used:
+        return LatencyEstimate(False, 'no usable channel: ' + '; '.join(reasons), t_end=end,
+                               excluded=excluded)
+    nv = [int(masks[('v', 'w').index(name)].sum()) for name in used]
+    L, i0, lo, hi = _latency_from(s, grid, costs, nv)
+    info = _information(grid, cu, masks, used, best_tau, i0)
+    r2 = min(r2s)
+    lags = {name: float(bt[i0]) for name, bt in zip(used, best_tau)}
+    frac = min(fracs)
+    conf = max(0.0, min(1.0, r2)) * min(1.0, frac / max(s.min_valid_fraction, 1e-9) / 2.0 + 0.5)
+    est = LatencyEstimate(True, '', t_end=end, latency=float(L), interval=(max(0.0, lo), hi),
+                          lag_v=lags.get('v', math.nan), lag_w=lags.get('w', math.nan), r2=r2,
+                          confidence=conf, valid_fraction=frac, excluded=excluded,
+                          channels=tuple(used), information=info)
+    return _verdict(est, s, i0 == grid.nL - 1, reasons)
+
+
+def _gate(s: MonitorSettings, t: np.ndarray, y: tuple[np.ndarray, np.ndarray],
+          ct: np.ndarray, cu: tuple[np.ndarray, np.ndarray]
+          ) -> tuple[list[np.ndarray], dict[str, int]]:
+    """Each channel's valid samples and the count excluded per reason.
+
+    Excluded: odometry gaps (and the lag's reach after them), samples a saturated command
+    can act on, and samples where the measured rate binds an acceleration limit.
+    """
+    n = t.size
     excluded: dict[str, int] = {}
     period = float(np.median(np.diff(t)))
     gap_mask = np.zeros(n, bool)
@@ -301,65 +320,94 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                 excluded[f'{name} acceleration limit'] = int((bind & ~m).sum())
                 m |= bind
         masks.append(~m)
-    # --- model responses on the grid ------------------------------------------------------
-    res = s.resolution
-    g0 = start - s.memory
-    grid_n = int(math.ceil((end - g0) / res)) + 2
-    gt = g0 + res * np.arange(grid_n)
-    ci = np.clip(np.searchsorted(ct, gt, side='right') - 1, 0, ct.size - 1)
-    nL = int(math.floor(s.max_latency / res)) + 1
+    return masks, excluded
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """The model's time grid of a window.
+
+    Step ``res`` from ``g0`` (``n`` cells); ``ci`` the command in force in each cell,
+    ``nL`` latency candidates, ``base_idx`` each sample's cell and ``idx`` (nL, samples)
+    the cells each candidate latency reads.
+    """
+
+    res: float
+    g0: float
+    n: int
+    ci: np.ndarray
+    nL: int
+    base_idx: np.ndarray
+    idx: np.ndarray
+
+    @classmethod
+    def of(cls, s: MonitorSettings, start: float, end: float, t: np.ndarray,
+           ct: np.ndarray) -> _Grid:
+        """The grid of the window ``[start, end]`` (samples ``t``, command times ``ct``)."""
+        res = s.resolution
+        g0 = start - s.memory
+        grid_n = int(math.ceil((end - g0) / res)) + 2
+        gt = g0 + res * np.arange(grid_n)
+        ci = np.clip(np.searchsorted(ct, gt, side='right') - 1, 0, ct.size - 1)
+        nL = int(math.floor(s.max_latency / res)) + 1
+        base_idx = np.floor((t - g0) / res + 1e-9).astype(int)   # grid cell of each sample
+        shift = np.arange(nL)[:, None]
+        return cls(res, g0, grid_n, ci, nL, base_idx, base_idx[None, :] - shift)
+
+
+def _channel_profile(s: MonitorSettings, grid: _Grid, u: np.ndarray, yc: np.ndarray,
+                     ok: np.ndarray, c: int, name: str
+                     ) -> str | tuple[np.ndarray, list[float], float, float]:
+    """One channel's residual over the latency grid (its best lag at each candidate).
+
+    ``u``: the commands on the grid, ``yc`` the measured channel, ``ok`` its valid samples.
+    Returns ``(cost, best lag per candidate, R^2, valid fraction)``, or why the channel
+    is not used.
+    """
+    frac = float(ok.mean())
+    if frac < max(s.min_valid_fraction, 1e-9):
+        return f'{name}: {100 * (1 - frac):.0f} % of the window excluded'
+    # excitation of the commands that act on the valid samples
+    cmd_std = float(np.std(u[grid.base_idx[ok]]))
+    if cmd_std < s.min_excitation[c]:
+        return f'{name}: command varies too little ({cmd_std:.3g} < {s.min_excitation[c]:g})'
+    yo = yc[ok]
+    ss = float(np.sum((yo - yo.mean()) ** 2))
+    if ss <= 0:
+        return f'{name}: no measured motion'
+    res, nL = grid.res, grid.nL
     taus = [tau for tau in _TAUS if tau <= s.max_lag]
-    base_idx = np.floor((t - g0) / res + 1e-9).astype(int)       # grid cell of each sample
-    shift = np.arange(nL)[:, None]
-    idx = base_idx[None, :] - shift                                 # (nL, n)
-    used, costs, best_tau, r2s, fracs = [], [], [], [], []
-    reasons = []
-    for c, name in enumerate(('v', 'w')):
-        ok = masks[c]
-        frac = float(ok.mean())
-        if frac < max(s.min_valid_fraction, 1e-9):
-            reasons.append(f'{name}: {100 * (1 - frac):.0f} % of the window excluded')
-            continue
-        # excitation of the commands that act on the valid samples
-        u = cu[c][ci]
-        cmd_std = float(np.std(u[base_idx[ok]]))
-        if cmd_std < s.min_excitation[c]:
-            reasons.append(f'{name}: command varies too little ({cmd_std:.3g} < '
-                           f'{s.min_excitation[c]:g})')
-            continue
-        yo = y[c][ok]
-        ss = float(np.sum((yo - yo.mean()) ** 2))
-        if ss <= 0:
-            reasons.append(f'{name}: no measured motion')
-            continue
-        J = np.full((len(taus), nL), np.inf)
-        ii = idx[:, ok]
-        up = np.concatenate([u[:1], u[:-1]])     # the command held over (gt[i-1], gt[i]]
-        for k, tau in enumerate(taus):
-            if tau == 0:
-                ym = up
-            else:
-                a = math.exp(-res / tau)
-                ym = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
-            Y = ym[ii]                                            # (nL, n_ok)
-            yy = np.einsum('ij,ij->i', Y, Y)
-            yd = Y @ yo
-            J[k] = float(yo @ yo) - np.where(yy > 0, yd * yd / np.where(yy > 0, yy, 1), 0)
-        k_best = np.argmin(J, axis=0)
-        j = J[k_best, np.arange(nL)]
-        used.append(name)
-        costs.append(np.maximum(j, 1e-30))
-        best_tau.append([taus[k] for k in k_best])
-        r2s.append(1.0 - float(j.min()) / ss)
-        fracs.append(frac)
-    if not used:
-        return LatencyEstimate(False, 'no usable channel: ' + '; '.join(reasons), t_end=end,
-                               excluded=excluded)
-    # normalised total cost: each channel by its own best residual per valid sample
+    J = np.full((len(taus), nL), np.inf)
+    ii = grid.idx[:, ok]
+    up = np.concatenate([u[:1], u[:-1]])     # the command held over (gt[i-1], gt[i]]
+    for k, tau in enumerate(taus):
+        if tau == 0:
+            ym = up
+        else:
+            a = math.exp(-res / tau)
+            ym = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
+        Y = ym[ii]                                            # (nL, n_ok)
+        yy = np.einsum('ij,ij->i', Y, Y)
+        yd = Y @ yo
+        J[k] = float(yo @ yo) - np.where(yy > 0, yd * yd / np.where(yy > 0, yy, 1), 0)
+    k_best = np.argmin(J, axis=0)
+    j = J[k_best, np.arange(nL)]
+    return (np.maximum(j, 1e-30), [taus[k] for k in k_best], 1.0 - float(j.min()) / ss,
+            frac)
+
+
+def _latency_from(s: MonitorSettings, grid: _Grid, costs: list[np.ndarray], nv: list[int]
+                  ) -> tuple[float, int, float, float]:
+    """``(latency, its grid index, interval low, high)`` from the channels' profiles.
+
+    The normalised total cost: each channel by its own best residual per valid sample
+    (``nv`` of them); the minimum refined by a parabola, the interval where the total is
+    within ``chi2_level`` of it (one grid step wider either side).
+    """
+    res, nL = grid.res, grid.nL
     total = np.zeros(nL)
-    for name, j in zip(used, costs):
-        nv = int(masks[('v', 'w').index(name)].sum())
-        total += (j - j.min()) / (j.min() / max(nv - 3, 1))
+    for j, n_valid in zip(costs, nv):
+        total += (j - j.min()) / (j.min() / max(n_valid - 3, 1))
     i0 = int(np.argmin(total))
     L = i0 * res
     if 0 < i0 < nL - 1:
@@ -368,29 +416,41 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
         if den > 0:
             L += 0.5 * res * (a - cc) / den
     inside = np.nonzero(total <= total[i0] + s.chi2_level)[0]
-    lo, hi = inside.min() * res - res, inside.max() * res + res
-    # identifiability: the share of the model's sensitivity to the latency (its slope)
-    # that falls on valid samples; a gate that removed the responses leaves flat data
+    return L, i0, inside.min() * res - res, inside.max() * res + res
+
+
+def _information(grid: _Grid, cu: tuple[np.ndarray, np.ndarray], masks: list[np.ndarray],
+                 used: list[str], best_tau: list[list[float]], i0: int) -> dict[str, float]:
+    """Identifiability per channel used.
+
+    The share of the model's sensitivity to the latency (its slope) that falls on valid
+    samples (a gate that removed the responses leaves flat data).
+    """
+    res = grid.res
     info = {}
     for name, bt in zip(used, best_tau):
         c = ('v', 'w').index(name)
-        u = cu[c][ci]
+        u = cu[c][grid.ci]
         up = np.concatenate([u[:1], u[:-1]])
         tau = bt[i0]
         if tau > 0:
             a = math.exp(-res / tau)
             up = _lfilter([1 - a], [1, -a], up, zi=[a * up[0]])[0]
-        slope = np.gradient(up)[np.clip(base_idx - i0, 0, grid_n - 1)]
+        slope = np.gradient(up)[np.clip(grid.base_idx - i0, 0, grid.n - 1)]
         e_all = float(slope @ slope)
         info[name] = float(slope[masks[c]] @ slope[masks[c]]) / e_all if e_all > 0 else 0.0
-    r2 = min(r2s)
-    lags = {name: float(bt[i0]) for name, bt in zip(used, best_tau)}
-    frac = min(fracs)
-    conf = max(0.0, min(1.0, r2)) * min(1.0, frac / max(s.min_valid_fraction, 1e-9) / 2.0 + 0.5)
-    est = LatencyEstimate(True, '', t_end=end, latency=float(L), interval=(max(0.0, lo), hi),
-                          lag_v=lags.get('v', math.nan), lag_w=lags.get('w', math.nan), r2=r2,
-                          confidence=conf, valid_fraction=frac, excluded=excluded,
-                          channels=tuple(used), information=info)
+    return info
+
+
+def _verdict(est: LatencyEstimate, s: MonitorSettings, at_limit: bool, reasons: list[str]
+             ) -> LatencyEstimate:
+    """``est``, refused (``valid`` False, with the reason) where it must be.
+
+    Refused when the fit is poor, the latency is not observable or not determined or at
+    the search limit; else the channels left out are named.
+    """
+    r2, info = est.r2, est.information
+    lo, hi = est.interval
     if r2 < s.min_r2:
         return replace(est, valid=False, reason=f'the model explains only {100 * r2:.0f} % of '
                        f'the motion (at least {100 * s.min_r2:.0f} % needed)')
@@ -400,17 +460,17 @@ def estimate_latency(cmd_t, cmd_v, cmd_w, odom_t, odom_v, odom_w,
                        '(share of the response slope outside the excluded segments: '
                        + ', '.join(weak) + f'; at least {100 * s.min_information:.0f} % '
                        'needed)')
-    if hi - max(0.0, lo) > s.max_interval:
+    if hi - lo > s.max_interval:
         return replace(est, valid=False, reason=f'latency not determined: interval '
-                       f'{1e3 * max(0.0, lo):.0f}-{1e3 * hi:.0f} ms is wider than '
+                       f'{1e3 * lo:.0f}-{1e3 * hi:.0f} ms is wider than '
                        f'{1e3 * s.max_interval:.0f} ms (the latency is changing, or the motion '
                        'hardly constrains it)')
-    if i0 == nL - 1:
+    if at_limit:
         return replace(est, valid=False, reason=f'latency at the search limit '
                        f'{s.max_latency:g} s')
     if reasons:
-        return replace(est, reason='only ' + ', '.join(used) + ' used (' + '; '.join(reasons)
-                       + ')')
+        return replace(est, reason='only ' + ', '.join(est.channels) + ' used ('
+                       + '; '.join(reasons) + ')')
     return est
 
 
@@ -433,14 +493,25 @@ class Certificate:
     design records none).
     """
 
-    residual: tuple
+    residual: tuple[float, float]
     lag: float
-    adapt_range: tuple | None
+    adapt_range: tuple[float, float] | None
     hold: float = 0.0
     source: str = ''
 
     def interval(self, predict_latency: float) -> tuple[float, float]:
-        """Certified latency interval ``[P + h_min, P + H - hold]`` for the predictor's ``P``."""
+        """Certified latency interval ``[P + h_min, P + H - hold]`` for the predictor's ``P``.
+
+        Parameters
+        ----------
+        predict_latency : float
+            The predictor's latency ``P`` (s).
+
+        Returns
+        -------
+        (float, float)
+            The interval (s).
+        """
         return (predict_latency + self.residual[0],
                 predict_latency + self.residual[1] - self.hold)
 
@@ -512,7 +583,7 @@ def certificate_from_design(design: Mapping[str, Any] | None, hold: float,
                        hold=_pos('command period', hold, zero=True), source=source)
 
 
-def certificate_from_parameters(residual, lag: float, adapt_range, hold: float = 0.0,
+def certificate_from_parameters(residual: Any, lag: float, adapt_range: Any, hold: float = 0.0,
                                 source: str = 'tracker parameters') -> Certificate | None:
     """The certificate carried by the tracker's ``certified_*`` parameters (None: unset).
 
@@ -550,7 +621,7 @@ class MonitorStatus:
 
     level: int
     message: str
-    values: dict
+    values: dict[str, Any]
     predict_latency: float          # the predictor latency the verdict is for
 
     @property
@@ -650,6 +721,22 @@ def adapted_prediction(est: LatencyEstimate, cert: Certificate, current: float,
     latency is inside the OK band for ``current`` (above ``current + r_lo - tolerance``,
     below the WARN margin: no change while nothing needs one) or the change is below half
     the tolerance (no chatter).
+
+    Parameters
+    ----------
+    est : LatencyEstimate
+        The monitor's latest estimate.
+    cert : Certificate
+        The gain's certificate (residual range, adaptation range).
+    current : float
+        The predictor's latency now (s).
+    settings : MonitorSettings
+        ``tolerance`` and ``warn_margin`` of the status.
+
+    Returns
+    -------
+    float
+        The predictor latency to use (s).
     """
     if not est.valid or cert.adapt_range is None:
         return current
@@ -679,18 +766,34 @@ class SampleWindow:
     def __init__(self, span: float):
         self.span = float(span)
         self._lock = threading.Lock()
-        self._cmd: deque = deque()
-        self._odom: deque = deque()
+        self._cmd: deque[tuple[float, float, float]] = deque()
+        self._odom: deque[tuple[float, float, float]] = deque()
 
     def add_command(self, t: float, v: float, w: float) -> None:
-        """A command sent at ``t`` (s)."""
+        """A command sent at ``t`` (s).
+
+        Parameters
+        ----------
+        t : float
+            Time it was sent (s).
+        v, w : float
+            Commanded speed (m/s) and yaw rate (rad/s).
+        """
         with self._lock:
             self._cmd.append((t, v, w))
             while self._cmd and self._cmd[0][0] < t - self.span:
                 self._cmd.popleft()
 
     def add_odometry(self, t: float, v: float, w: float) -> None:
-        """An odometry twist measured at ``t`` (s)."""
+        """An odometry twist measured at ``t`` (s).
+
+        Parameters
+        ----------
+        t : float
+            Measurement stamp (s).
+        v, w : float
+            Measured speed (m/s) and yaw rate (rad/s).
+        """
         with self._lock:
             self._odom.append((t, v, w))
             while self._odom and self._odom[0][0] < t - self.span:

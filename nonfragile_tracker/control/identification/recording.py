@@ -22,7 +22,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path as FilePath
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import yaml
@@ -59,7 +59,7 @@ class Recording:
     @property
     def latencies(self) -> np.ndarray:
         """Command-to-motion latency of every command (s), from the plant's truth."""
-        return (self.act_steps - self.cmd_steps) * self.dt
+        return cast(np.ndarray, (self.act_steps - self.cmd_steps) * self.dt)
 
 
 def _stamp_offset(plant: UnicyclePlant, stamp: str) -> int:
@@ -125,7 +125,7 @@ def record_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, pa
     tracker = Tracker(tracker_config)
     dt = plant_config.dt
 
-    def decide(plant: UnicyclePlant, k: int, got) -> tuple[float, float] | None:
+    def decide(plant: UnicyclePlant, k: int, got: Any) -> tuple[float, float] | None:
         if got is None:
             return None
         meas, th = got
@@ -164,7 +164,7 @@ def record_open_loop(plant_config: PlantConfig, t: np.ndarray, v: np.ndarray, w:
         raise InputError(f'two commands fall on the same plant step (dt = {dt:g} s)')
     index = {int(k): i for i, k in enumerate(ks)}
 
-    def decide(plant: UnicyclePlant, k: int, got) -> tuple[float, float] | None:
+    def decide(plant: UnicyclePlant, k: int, got: Any) -> tuple[float, float] | None:
         i = index.get(k)
         return None if i is None else (float(v[i]), float(w[i]))
 
@@ -207,13 +207,28 @@ def joystick_steps(duration: float, *, period: float = 0.05, hold: tuple[float, 
     return t, v, w
 
 
-def load_cases(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
+def load_cases(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """The recording cases of a YAML file (``config/identify_cases.yaml``), by name.
 
     Each case has ``plant`` (:class:`~control.loop.PlantConfig` fields), ``drive``
     (a tracker: ``gains`` - a gain file relative to the YAML file - ``dt``,
     ``max_angular_speed``, ``path``, ``radius``, ``rate``; or a joystick: ``period``,
     ``hold``, ``v_range``, ``w_range``) and ``title``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The YAML file.
+
+    Returns
+    -------
+    dict of str to dict
+        The cases by name.
+
+    Raises
+    ------
+    InputError
+        The file has no ``cases`` mapping or a case lacks ``plant`` or ``drive``.
     """
     p = FilePath(path)
     data = yaml.safe_load(p.read_text())

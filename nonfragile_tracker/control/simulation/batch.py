@@ -41,12 +41,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from .loop import PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time_ns
-from .reference import Path, circle, figure_eight
+from .reference import PATHS, Path
 from .errors import BatchError
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
@@ -77,21 +77,42 @@ class PathBatch:
     phase: Any = 0.0
 
     def path(self, i: int) -> Path:
-        """The single-run :class:`control.reference.Path` of case ``i``."""
-        factory = {'circle': circle, 'figure_eight': figure_eight}.get(self.kind)
+        """The single-run :class:`control.reference.Path` of case ``i``.
+
+        Parameters
+        ----------
+        i : int
+            Case index.
+
+        Returns
+        -------
+        Path
+        """
+        factory = PATHS.get(self.kind)
         if factory is None:
-            raise BatchError(f'path kind {self.kind!r}: choose circle or figure_eight')
+            raise BatchError(f'path kind {self.kind!r}: choose {_KINDS}')
         return factory(**{name: float(_pick(getattr(self, name), i)) for name in _PATH_FIELDS})
 
-    def take(self, idx) -> 'PathBatch':
-        """The cases ``idx`` (index array) as a new :class:`PathBatch`."""
+    def take(self, idx: Any) -> 'PathBatch':
+        """The cases ``idx`` (index array) as a new :class:`PathBatch`.
+
+        Parameters
+        ----------
+        idx : array_like of int
+            Indices of the cases kept (scalar parameters stay scalars).
+
+        Returns
+        -------
+        PathBatch
+        """
         return replace(self, **{name: _pick(getattr(self, name), idx) for name in _PATH_FIELDS})
 
 
 _PATH_FIELDS = ('radius', 'rate', 'center_x', 'center_y', 'phase')
+_KINDS = ' or '.join(PATHS)
 
 
-def _pick(value, i):
+def _pick(value: Any, i: Any) -> Any:
     """``value[i]`` for a per-case array, ``value`` for a scalar."""
     arr = np.asarray(value, float)
     return arr if arr.ndim == 0 else arr[i]
@@ -124,8 +145,18 @@ class BatchCases:
     odom_noise: Any = None
     noise_seed: Any = None
 
-    def take(self, idx) -> 'BatchCases':
-        """The cases ``idx`` (an index array or slice) as a new :class:`BatchCases`."""
+    def take(self, idx: Any) -> 'BatchCases':
+        """The cases ``idx`` (an index array or slice) as a new :class:`BatchCases`.
+
+        Parameters
+        ----------
+        idx : array_like of int or slice
+            The cases kept, in that order.
+
+        Returns
+        -------
+        BatchCases
+        """
         idx = np.arange(self.n)[idx]
         kw = {}
         for name, ndim in [(nm, 1) for nm in _PER_CASE] + [('K', 3), ('odom_noise', 2)]:
@@ -141,7 +172,22 @@ class BatchCases:
                 ) -> tuple[PlantConfig, TrackerConfig]:
         """The single-run configurations of case ``i`` (constant perturbation only).
 
-        Raises :class:`BatchError` if case ``i`` has a time-varying perturbation.
+        Parameters
+        ----------
+        i : int
+            Case index.
+        plant, tracker : PlantConfig, TrackerConfig
+            The batch's base configuration (the values of the fields left ``None``).
+
+        Returns
+        -------
+        tuple of (PlantConfig, TrackerConfig)
+            What :func:`control.simulate.simulate_tracking` runs for case ``i``.
+
+        Raises
+        ------
+        BatchError
+            If case ``i`` has a time-varying perturbation.
         """
         s = _resolve(self, plant, tracker)
         kw: dict[str, Any] = {name: float(getattr(s, name)[i]) for name in _PER_CASE
@@ -162,7 +208,7 @@ _PER_CASE = ('x0', 'y0', 'th0', 'v0', 'cmd_latency', 'lag_v', 'lag_w', 'max_line
              'max_angular_accel', 'odom_latency', 'odom_rate', 'noise_seed')
 
 
-def _vector(value, name: str, n: int, *, low: float | None = None) -> np.ndarray:
+def _vector(value: Any, name: str, n: int, *, low: float | None = None) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -189,7 +235,7 @@ class _Settings:
     K: np.ndarray          # (N, 2, 4)
     P: np.ndarray          # (N, S, 2, 4)
     hold_ns: int
-    vals: dict
+    vals: dict[str, np.ndarray]
     noise: np.ndarray      # (N, 3)
     seed: np.ndarray       # (N,) int
     cmd_d: np.ndarray      # (N,) int steps
@@ -198,7 +244,7 @@ class _Settings:
     tdt: np.ndarray        # tracker dt per case
     comp_n: np.ndarray     # compensation history length per case
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> np.ndarray:
         try:
             return self.vals[name]
         except KeyError:
@@ -274,21 +320,41 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     return _Settings(n, K, P, hold_ns, vals, noise, seed, cmd_d, odom_d, period, tdt, comp_n)
 
 
-def _per_value(fn, values: np.ndarray, dtype) -> np.ndarray:
+def _per_value(fn: Callable[[float], Any], values: np.ndarray, dtype: Any) -> np.ndarray:
     """``[fn(v) for v in values]`` evaluated once per distinct value (scalar functions)."""
     uniq, inv = np.unique(values, return_inverse=True)
     return np.array([fn(float(v)) for v in uniq], dtype=dtype)[inv.reshape(-1)]
 
 
-def perturbation_schedule(E, F, deltas) -> np.ndarray:
-    """``E Delta F`` for an array of ``Delta`` (``(..., p, q)``): shape ``(..., m, n)``."""
+def perturbation_schedule(E: Any, F: Any, deltas: Any) -> np.ndarray:
+    """``E Delta F`` for an array of ``Delta`` (``(..., p, q)``): shape ``(..., m, n)``.
+
+    Parameters
+    ----------
+    E : array_like, (m, p)
+        Left factor of the perturbation.
+    F : array_like, (q, n)
+        Right factor of the perturbation.
+    deltas : array_like, (..., p, q)
+        The uncertainties ``Delta`` (e.g. from :func:`sample_deltas`).
+
+    Returns
+    -------
+    numpy.ndarray, (..., m, n)
+
+    Raises
+    ------
+    BatchError
+        If the shape of ``Delta`` does not match ``E`` and ``F``.
+    """
     E = np.asarray(E, float)
     F = np.asarray(F, float)
     D = np.asarray(deltas, float)
     if D.shape[-2:] != (E.shape[1], F.shape[0]):
         raise BatchError(f'Delta must be {E.shape[1]}x{F.shape[0]} (E is {E.shape}, F is '
                          f'{F.shape}), got {D.shape[-2:]}')
-    return np.einsum('ip,...pq,qj->...ij', E, D, F)
+    out: np.ndarray = np.einsum('ip,...pq,qj->...ij', E, D, F)
+    return out
 
 
 def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[int, int],
@@ -297,6 +363,28 @@ def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[
 
     Each matrix is a Gaussian matrix scaled to spectral norm ``r``, ``r`` uniform in
     ``radius`` (``(1, 1)``: on the boundary ``||Delta||_2 = 1``).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the draws.
+    n : int
+        Number of cases.
+    segments : int
+        Matrices per case (the segments of a switching schedule; 1: constant).
+    shape : (int, int)
+        ``(p, q)``, the shape of ``Delta``.
+    radius : (float, float)
+        Range ``[lo, hi]`` of the spectral norms, ``0 <= lo <= hi``.
+
+    Returns
+    -------
+    numpy.ndarray, (n, segments, p, q)
+
+    Raises
+    ------
+    BatchError
+        If ``radius`` is not a valid range.
     """
     lo, hi = (float(v) for v in radius)
     if not (0 <= lo <= hi and math.isfinite(hi)):
@@ -304,11 +392,29 @@ def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[
     G = rng.standard_normal((n, segments) + tuple(shape))
     norms = np.linalg.norm(G, ord=2, axis=(-2, -1))
     r = rng.uniform(lo, hi, size=(n, segments))
-    return G * (r / np.maximum(norms, 1e-300))[..., None, None]
+    out: np.ndarray = G * (r / np.maximum(norms, 1e-300))[..., None, None]
+    return out
 
 
-def segment_index(k, dt: float, hold_ns: int, segments: int):
-    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``."""
+def segment_index(k: Any, dt: float, hold_ns: int, segments: int) -> Any:
+    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``.
+
+    Parameters
+    ----------
+    k : int or array_like of int
+        Plant step(s).
+    dt : float
+        Plant step (s).
+    hold_ns : int
+        Segment length (ns).
+    segments : int
+        Number of segments ``S``.
+
+    Returns
+    -------
+    int or numpy.ndarray
+        The segment index(es), in ``0 .. S - 1``.
+    """
     return (step_time_ns(k, dt) // hold_ns) % segments
 
 
@@ -342,7 +448,9 @@ def _wrap(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _first_order(s, c, T, amax, em1, has_lag, has_lim, h):
+def _first_order(s: np.ndarray, c: np.ndarray, T: np.ndarray, amax: np.ndarray,
+                 em1: np.ndarray, has_lag: np.ndarray, has_lim: np.ndarray, h: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`control.actuator.first_order_step` element-wise: ``(end, mean)``."""
     d = c - s
     end = c.copy()
@@ -379,15 +487,15 @@ def _first_order(s, c, T, amax, em1, has_lag, has_lim, h):
 class _Reference:
     """Reference samples at step indices: a shared table or per-case analytic formulas."""
 
-    def __init__(self, path, n: int, steps: int, dt: float):
+    def __init__(self, path: Any, n: int, steps: int, dt: float):
         self.n = n
         self.dt_ns = int(round(dt * 1e9))
         if isinstance(path, PathBatch) and all(np.ndim(getattr(path, f)) == 0
                                                for f in _PATH_FIELDS):
             path = path.path(0)             # the same path for every case: one table
         if isinstance(path, PathBatch):
-            if path.kind not in ('circle', 'figure_eight'):
-                raise BatchError(f'path kind {path.kind!r}: choose circle or figure_eight')
+            if path.kind not in PATHS:
+                raise BatchError(f'path kind {path.kind!r}: choose {_KINDS}')
             self.table = None
             self.kind = path.kind
             self.r = _vector(path.radius, 'radius', n)
@@ -406,14 +514,15 @@ class _Reference:
             self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
             self.rows = list(zip(*self.table))      # (position, velocity, acceleration)
 
-    def at(self, k):
+    def at(self, k: Any) -> tuple[Any, Any, Any]:
         """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
 
         ``k`` is an int or an array of N ints (per-case odometry stamps).
         """
         if self.table is not None:
             if np.ndim(k) == 0:
-                return self.rows[k]
+                row: tuple[Any, Any, Any] = self.rows[k]
+                return row
             return tuple(col[k][:, :, 0].T for col in self.table)
         t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
         r, w, cx, cy = self.r, self.w, self.cx, self.cy
@@ -456,7 +565,7 @@ class BatchRun:
     peak_abs_v: np.ndarray
     peak_abs_w: np.ndarray
     finite: np.ndarray
-    trace: dict | None = None
+    trace: dict[str, np.ndarray] | None = None
 
     @property
     def n(self) -> int:
@@ -467,7 +576,7 @@ class BatchRun:
 # ---------------------------------------------------------------------------------------------
 # The loop
 
-def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
+def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps: int,
                    cases: BatchCases | None = None, *, tolerance: float = 0.01,
                    steady_from: float | None = None, record: bool = False,
                    exact: bool = True) -> BatchRun:
@@ -508,7 +617,50 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
     BatchError
         A bad per-case value, or a feature that is not vectorized (the predictor, the
         tracker's command rate limit).
+
+    Notes
+    -----
+    The run is set up from parts that each hold one piece of the single run's state for
+    every case (``_Odometry``, ``_BatchTracker``, ``_CommandLine``,
+    ``_BatchPlant``, ``_Metrics``) and stepped by ``_loop``; the common
+    configuration of odometry of the plant's own state, no delay compensation and no
+    actuator dynamics (without ``exact``) takes the specialised ``_ideal_loop``.
     """
+    _check_run(tracker, steps, tolerance)
+    steps = int(steps)
+    cases = BatchCases(1) if cases is None else cases
+    s = _resolve(cases, plant, tracker)
+    metrics = _Metrics(s.n, steps, plant.dt, tolerance, steady_from, exact)
+    ref = _Reference(path, s.n, steps, plant.dt)
+    odom = _Odometry(s)
+    body = _BatchPlant(plant, s, exact, odom.ideal, tracker.max_angular_speed)
+    schedule = _Schedule(s.K, s.P, s.hold_ns, plant.dt)
+    tdt = float(s.tdt[0]) if np.all(s.tdt == s.tdt[0]) else s.tdt   # a scalar when shared
+    trace = {name: np.zeros((steps + 1, s.n)) for name in _TRACE} if record else None
+    # odometry of the plant's own state every step, no compensation, no actuator dynamics,
+    # no or the paper's delay form: fewer operations per step (_ideal_loop)
+    delay = body.delay
+    ideal = (body.recur and not tracker.delay_compensation and not body.act.on
+             and isinstance(tdt, float) and (not delay.on or (delay.diag and delay.Nd > 0)))
+    with np.errstate(all='ignore'):
+        if ideal:
+            run = _IdealRun(steps, plant.dt, float(tdt), ref, schedule,
+                            (tracker.max_linear_speed, tracker.max_angular_speed,
+                             tracker.min_speed),
+                            (delay.Nd, delay.ax, delay.ay) if delay.on else None,
+                            s.cmd_d if np.any(s.cmd_d) else None)
+            pos, th, err = _ideal_loop(run, body.pos, body.th, body.pv, metrics, trace)
+            finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
+        else:
+            trk = _BatchTracker(s, tracker, schedule, tdt, metrics.cblk, exact, body.recur,
+                                odom.ideal)
+            line = _CommandLine(s.cmd_d, s.v0, bool(np.any(s.cmd_d) and odom.ideal))
+            err, finite = _loop(_Parts(ref, odom, trk, line, body, metrics), steps, trace)
+    return metrics.result(err, finite, trace)
+
+
+def _check_run(tracker: TrackerConfig, steps: Any, tolerance: Any) -> None:
+    """Refuse what the batch does not vectorize and bad run lengths or tolerances."""
     if tracker.predicts:
         raise BatchError('the batch simulation does not vectorize the latency predictor '
                          '(predict_latency, predict_odom_latency, predict_lag_v, predict_lag_w); '
@@ -522,407 +674,559 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path, steps: int,
         raise BatchError(f'steps must be an integer >= 1, got {steps!r}')
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
         raise BatchError(f'tolerance must be a finite number > 0 m, got {tolerance!r}')
-    steps = int(steps)
-    cases = BatchCases(1) if cases is None else cases
-    s = _resolve(cases, plant, tracker)
-    n = s.n
+
+
+#: The per-step arrays of ``BatchRun.trace`` (rows as :class:`control.simulate.TrackingRun`).
+_TRACE = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
+
+
+@dataclass(frozen=True)
+class _Parts:
+    """The state of a batch run, one part per piece of the single run (see :func:`_loop`)."""
+
+    ref: _Reference
+    odometry: _Odometry
+    tracker: _BatchTracker
+    commands: _CommandLine
+    plant: _BatchPlant
+    metrics: _Metrics
+
+
+def _loop(parts: _Parts, steps: int, trace: dict[str, np.ndarray] | None
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`simulate_batch`'s general loop; the last error row and which cases stayed finite.
+
+    Every step in the order of :func:`control.simulate.run_loop`: the odometry due, the
+    tracker's command (cases whose odometry is due), the command sent into the plant's
+    command line, the log row and metrics, then the plant's advance with the command in
+    force and the next measurement.
+    """
+    ref, odom, trk, line = parts.ref, parts.odometry, parts.tracker, parts.commands
+    plant, metrics = parts.plant, parts.metrics
     dt = plant.dt
-    dt_ns = int(round(dt * 1e9))
-    t_end = steps * dt_ns * 1e-9
-    steady_from = 0.5 * t_end if steady_from is None else float(steady_from)
-    ref = _Reference(path, n, steps, dt)
-    idx = np.arange(n)
+    reuse_error = odom.ideal and not trk.comp       # tracker's position error = logged one
+    ref_rows = ref.rows if ref.table is not None else None
+    if not odom.ideal:
+        odom.measure(0, plant.pos, plant.th, plant.pv)
+    err = np.zeros(trk.n)
+    for k in range(steps + 1):
+        j = k % _BLOCK
+        rpos, rvel, racc = ref_rows[k] if ref_rows is not None else ref.at(k)
+        # ---- odometry due at k
+        if odom.ideal:
+            due: bool | np.ndarray = True
+            mpos, mth, mv = plant.pos, plant.th, plant.pv
+            mstep: int | np.ndarray = k
+        else:
+            due, mpos, mth, mv, mstep = odom.read(k)
+        if due is not False:
+            if odom.ideal or (np.ndim(mstep) == 0 and mstep == k):
+                q = (rpos, rvel, racc)
+            else:
+                q = ref.at(mstep)
+            line.send(k, trk.command(k, j, due, mpos, mth, mv, q), due)
+        # ---- log row k and metrics (err: the error, or its square without exact)
+        err = metrics.error(j, trk.epos if reuse_error else plant.pos - rpos)
+        if not odom.ideal:
+            metrics.cblk[j] = 0.0 if due is False else trk.cmd_log
+        if j == _BLOCK - 1 or k == steps:
+            metrics.flush(k - j, j + 1)
+        if trace is not None:
+            commanded = 0.0 if due is False else (1.0 if due is True else due)
+            row = (step_time_ns(k, dt) * 1e-9, plant.pos[0], plant.pos[1], plant.th, plant.pv,
+                   rpos[0], rpos[1], trk.cmd_log[0], trk.cmd_log[1], commanded)
+            for name, val in zip(_TRACE, row):
+                trace[name][k] = val
+        if k == steps:
+            break
+        v, w = line.in_force(k)
+        plant.advance(k, v, w, trk.cs)
+        if not odom.ideal:
+            odom.measure(k + 1, plant.pos, plant.th, plant.pv)
+    pos, th = plant.pos, plant.th
+    return err, np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
 
-    # -- plant state; pairs (x, y) as (2, N) arrays
-    pos = np.stack((s.x0, s.y0))
-    th, pv = s.th0.copy(), s.v0.copy()
-    pw = np.zeros(n)
-    off = np.zeros((2, n))                          # velocity offset (ox, oy)
-    force_v, force_w = pv.copy(), np.zeros(n)       # command in force
-    Nd = delay_steps(plant.tau, dt)[0]
-    At = np.array(plant.A_tau, dtype=float)
-    terms = [[(j, float(At[i, j])) for j in range(4) if At[i, j] != 0.0] for i in range(4)]
-    use_delay = any(terms)
-    if use_delay:
-        # history of the parts of xi = (x, x', y, y') that A_tau uses, by step % (Nd + 1)
-        cols = sorted({j for row in terms for j, _ in row})
-        need_vel = 1 in cols or 3 in cols
-        has_off = bool(terms[1] or terms[3])        # else the velocity offset stays 0
-        hterms = [[(cols.index(j), a) for j, a in row] for row in terms]
-        # the paper's form: d_x = a x(t - tau), d_y = b y(t - tau) (one product for both)
-        diag = (cols == [0, 2] and not has_off and [len(r) for r in terms] == [1, 0, 1, 0]
-                and terms[0][0][0] == 0 and terms[2][0][0] == 2)
-        if diag:
-            ax, ay = terms[0][0][1], terms[2][0][1]
-        xi0 = (pos[0], pv * np.cos(th), pos[1], pv * np.sin(th))
-        hist = np.empty((Nd + 1, len(cols), n))
-        hist[:] = np.array([xi0[j] for j in cols])[None]
-        dbuf = np.zeros((4, n))
-        dpos, dvel = dbuf[0::2], dbuf[1::2]
-    # actuator
-    lag_v, lag_w = s.lag_v, s.lag_w
-    alv, alw = s.max_linear_accel, s.max_angular_accel
-    act_on = bool(np.any(lag_v) or np.any(lag_w) or np.any(alv) or np.any(alw))
-    em1_v = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_v, float)
-    em1_w = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_w, float)
-    lagv_m, lagw_m, limv_m, limw_m = lag_v > 0, lag_w > 0, alv > 0, alw > 0
-    # command latency
-    cmd_d = s.cmd_d
-    cmd_delayed = bool(np.any(cmd_d))
-    if cmd_delayed:
-        R = int(cmd_d.max()) + 1
-        cbuf = np.zeros((R, 2, n))
-        cstep = np.full((R, n), np.iinfo(np.int64).min, dtype=np.int64)   # no command yet
-    # odometry
-    period, odom_d = s.period, s.odom_d
-    noisy = np.any(s.noise != 0.0, axis=1)
-    any_noise = bool(noisy.any())
-    uniform_odom = bool(np.all(period == period[0]) and np.all(odom_d == odom_d[0]))
-    ideal_odom = uniform_odom and period[0] == 1 and odom_d[0] == 0 and not any_noise
-    if not ideal_odom:
-        Ro = int(odom_d.max()) + 1
-        obuf = np.zeros((Ro, 4, n))                 # measured x, y, th, v by step % Ro
-        if any_noise:
-            rngs = {int(i): np.random.default_rng(int(s.seed[i])) for i in np.flatnonzero(noisy)}
-            blk = 256
-            nbuf = np.zeros((n, blk, 3))
-            ncount = np.zeros(n, dtype=np.int64)    # measurements taken per case
 
-    def measure(k: int) -> None:
-        take = (k % period) == 0
+@dataclass(frozen=True)
+class _Schedule:
+    """Per-case gains ``K`` (N, 2, 4) and perturbations ``P`` (N, S, 2, 4) by segment."""
+
+    K: np.ndarray
+    P: np.ndarray
+    hold_ns: int
+    dt: float
+
+    @property
+    def segments(self) -> int:
+        """Number of perturbation segments ``S``."""
+        return int(self.P.shape[1])
+
+    def segment(self, k: int) -> int:
+        """The segment in force at step ``k`` (:func:`segment_index`)."""
+        S = self.P.shape[1]
+        return segment_index(k, self.dt, self.hold_ns, S) if S > 1 else 0
+
+    def gain(self, seg: int) -> np.ndarray:
+        """``K + P[:, seg]`` of every case as one contiguous ``(2, 4, N)`` array."""
+        return np.ascontiguousarray((self.K + self.P[:, seg]).transpose(1, 2, 0))
+
+
+class _Odometry:
+    """:class:`control.sensors.Odometer` for every case: rate, latency and noise.
+
+    ``ideal``: every case measures the plant's own state at every step, without noise or
+    latency (nothing is buffered).  Otherwise the measurements go into a ring of
+    ``max(odom_latency) + 1`` steps (:meth:`measure`) from which :meth:`read` takes those
+    published at a step.
+    """
+
+    def __init__(self, s: _Settings):
+        n = s.n
+        self.idx = np.arange(n)
+        period, odom_d = self.period, self.odom_d = s.period, s.odom_d
+        self.noise = s.noise
+        self.noisy = np.any(s.noise != 0.0, axis=1)
+        self.any_noise = bool(self.noisy.any())
+        self.uniform = bool(np.all(period == period[0]) and np.all(odom_d == odom_d[0]))
+        self.ideal = (self.uniform and period[0] == 1 and odom_d[0] == 0
+                      and not self.any_noise)
+        if not self.ideal:
+            self.Ro = int(odom_d.max()) + 1
+            self.obuf = np.zeros((self.Ro, 4, n))   # measured x, y, th, v by step % Ro
+            if self.any_noise:
+                self.rngs = {int(i): np.random.default_rng(int(s.seed[i]))
+                             for i in np.flatnonzero(self.noisy)}
+                self.blk = 256
+                self.nbuf = np.zeros((n, self.blk, 3))
+                self.ncount = np.zeros(n, dtype=np.int64)    # measurements taken per case
+
+    def measure(self, k: int, pos: np.ndarray, th: np.ndarray, pv: np.ndarray) -> None:
+        """Measure the plant's state at step ``k`` for every case whose period is due."""
+        take = (k % self.period) == 0
         if not take.any():
             return
         mx, my, mth = pos[0], pos[1], th
-        if any_noise:
-            nz = take & noisy
+        if self.any_noise:
+            nz = take & self.noisy
             if nz.any():
-                j = ncount % blk
+                blk, nbuf = self.blk, self.nbuf
+                j = self.ncount % blk
                 for i in np.flatnonzero(nz & (j == 0)):
-                    nbuf[i] = rngs[int(i)].standard_normal((blk, 3))
-                draw = nbuf[idx, j]
-                sx, sy, sth = s.noise[:, 0], s.noise[:, 1], s.noise[:, 2]
+                    nbuf[i] = self.rngs[int(i)].standard_normal((blk, 3))
+                draw = nbuf[self.idx, j]
+                sx, sy, sth = self.noise[:, 0], self.noise[:, 1], self.noise[:, 2]
                 mx = np.where(nz, mx + sx * draw[:, 0], mx)
                 my = np.where(nz, my + sy * draw[:, 1], my)
                 mth = np.where(nz, _wrap(th + sth * draw[:, 2]), th)
-                ncount[nz] += 1
-        slot = k % Ro
+                self.ncount[nz] += 1
+        slot = k % self.Ro
         sel = take if not take.all() else slice(None)
+        obuf = self.obuf
         obuf[slot, 0, sel] = mx[sel]
         obuf[slot, 1, sel] = my[sel]
         obuf[slot, 2, sel] = mth[sel]
         obuf[slot, 3, sel] = pv[sel]
 
-    # -- tracker state
-    K = s.K
-    P = s.P
-    S = P.shape[1]
-    seg = 0                                         # segment_index(0, ...) is 0
-    Kc = np.ascontiguousarray((K + P[:, seg]).transpose(1, 2, 0))   # (2, 4, N)
-    tv = np.zeros(n)
-    started = np.zeros(n, dtype=bool)
-    all_started = False
-    tdt: np.ndarray | float = s.tdt
-    if np.all(s.tdt == s.tdt[0]):
-        tdt = float(s.tdt[0])                       # the same value, a scalar operand
-    vmax, wmax, vmin = tracker.max_linear_speed, tracker.max_angular_speed, tracker.min_speed
-    comp = tracker.delay_compensation
-    if comp:
-        Atc = np.array(tracker.A_tau, dtype=float)
-        cterms = [[(j, float(Atc[i, j])) for j in range(4)] for i in range(4)]
-        Lc = s.comp_n
-        cbuf_ref = np.zeros((int(Lc.max()), 8, n))
-        ccount = np.zeros(n, dtype=np.int64)
-    reuse_error = ideal_odom and not comp           # tracker's position error = logged one
-    cs = np.empty((2, n))                           # cos, sin of the measured heading
-    cs_rev = cs[::-1]
-    mid = np.empty((2, n))
-    e = np.empty((4, n))                            # tracking error (x, x', y, y')
-    epos, evel = e[0::2], e[1::2]
-    prod = np.empty((2, 5, n))                      # u* and the four K_j e_j terms
-    prod_ud, prod_ke = prod[:, 0], prod[:, 1:]
-    u = np.empty((2, n))
-    uc = np.empty((2, n))
-    uc0, uc1 = uc[0], uc[1]
-    vabs = np.empty(n)
-    arcbuf = np.empty((4, n))
-    # |w| <= max_angular_speed for every command (clipped, held, or a mean of two through
-    # the actuator): the arc's series applies at every step when 0.5 wmax dt <= 0.01
-    small_arc = not exact and 0.5 * wmax * dt <= _SERIES_MAX
-    # the heading's cosine and sine carried from step to step by angle addition (the
-    # tracker measures the plant's own heading), evaluated afresh every _ANCHOR steps
-    recur = small_arc and ideal_odom
-    hdt = 0.5 * dt
-    # the heading moves at most wmax dt per step: after a look at max |th| = m the wrap
-    # (|th| > pi) cannot be needed for (pi - m) / (wmax dt) steps
-    wstep = wmax * dt * (1.0 + 1e-9)
-    wrap_next = 0
-    queue = cmd_delayed and ideal_odom
-    if queue:
-        # a command every step: the one sent at k is put where step k + d reads it, a ring
-        # of Rq steps whose slots hold the initial command in force, (v0, 0), until then
-        # (one slot more than the longest delay: the slot read at k is not written at k + 1)
-        Rq = int(cmd_d.max()) + 2
-        cq = np.empty((Rq, 2, n))
-        cq[:, 0] = force_v
-        cq[:, 1] = force_w
-        cq_flat = cq.reshape(-1)
-        slots = (np.arange(Rq)[:, None] + cmd_d[None, :]) % Rq               # (Rq, N)
-        put_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
-                   + np.arange(n)[None, None, :])                            # (Rq, 2, N)
+    def read(self, k: int) -> tuple[Any, Any, Any, Any, Any]:
+        """``(due, position, heading, speed, measured step)`` of the odometry due at ``k``.
 
-    # -- metrics (without exact: on the squared error, square roots at the end), from
-    # blocks of _BLOCK steps: the error and the command of each step are written to a row
-    # of a block, whose rows are reduced at once when it is full (_flush_metrics)
-    thr = tolerance if exact else tolerance * tolerance
-    last_out = np.full(n, -1, dtype=np.int64)
-    first_in = np.full(n, -1, dtype=np.int64)
-    sqblk = np.zeros((_BLOCK + 1, n))               # row 0: the sum of squares so far
-    eblk = np.empty((_BLOCK, n)) if exact else sqblk[1:]
-    cblk = np.zeros((_BLOCK, 2, n))                 # commands sent (0: none)
-    steady = np.zeros(n)
-    steady_k = max(0, int(steady_from / (dt_ns * 1e-9)) - 2)   # first k with t_k >= steady_from
-    while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < steady_from:
-        steady_k += 1
-    peak = np.zeros((2, n))
-    cmd_log = np.stack((force_v, force_w))
-    metrics = _Metrics(thr, last_out, first_in, sqblk, eblk, cblk, steady, steady_k, peak)
-    if record:
-        names = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
-        trace = {name: np.zeros((steps + 1, n)) for name in names}
-
-    # odometry of the plant's own state every step, no compensation, no actuator dynamics,
-    # no or the paper's delay form: fewer operations per step (_ideal_loop)
-    ideal = (recur and not comp and not act_on and isinstance(tdt, float)
-             and (not use_delay or (diag and Nd > 0)))
-    if not ideal_odom:
-        measure(0)
-    err = np.zeros(n)
-    ref_rows = ref.rows if ref.table is not None else None
-    with np.errstate(all='ignore'):
-        if ideal:
-            pos, th, err = _ideal_loop(
-                steps, dt, tdt, wmax, ref, pos, th, pv, K, P, S, s.hold_ns,
-                (Nd, ax, ay) if use_delay else None, cmd_d if cmd_delayed else None,
-                (vmax, wmax, vmin), metrics, trace if record else None)
-        for k in range(0 if ideal else steps + 1):
-            j = k % _BLOCK
-            rpos, rvel, racc = ref_rows[k] if ref_rows is not None else ref.at(k)
-            # ---- odometry due at k
-            if ideal_odom:
-                due = True
-                mpos, mth, mv = pos, th, pv
-                mstep: int | np.ndarray = k
-            else:
-                ms = k - odom_d
-                dmask = (ms >= 0) & ((ms % period) == 0)
-                if uniform_odom:
-                    due = bool(dmask[0])
-                else:
-                    due = dmask if dmask.any() else False
-                if due is not False:
-                    slot: int | np.ndarray = ms % Ro
-                    mpos = obuf[slot, 0:2, idx].T
-                    mth, mv = obuf[slot, 2, idx], obuf[slot, 3, idx]
-                    mstep = ms if not uniform_odom else int(ms[0])
-            if due is not False:
-                if ideal_odom or (np.ndim(mstep) == 0 and mstep == k):
-                    qpos, qvel, qacc = rpos, rvel, racc
-                else:
-                    qpos, qvel, qacc = ref.at(mstep)
-                # ---- Tracker.step
-                if not all_started:
-                    new = ~started if due is True else (~started & due)
-                    if new.any():
-                        v_init = np.where(np.isfinite(mv), mv, 0.0)
-                        v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
-                        tv = np.where(new, v_init, tv)
-                        started = started | new
-                        all_started = bool(started.all())
-                v = tv
-                if exact:
-                    # yaw through the message's quaternion (its qx = qy = 0 terms add exact
-                    # zeros: left out), as the tracker node reads it
-                    # (libm's atan2 per element: numpy's SIMD arctan2 differs from it by an
-                    # ulp for about 3 % of arguments)
-                    qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
-                    mth = _ATAN2(2.0 * (qw * qz), qw * qw - qz * qz).astype(float)
-                # (otherwise the yaw is used as measured: the same angle to round-off)
-                if not recur or k % _ANCHOR == 0:
-                    np.cos(mth, out=cs[0])
-                    np.sin(mth, out=cs[1])
-                if comp:
-                    xdpos, xdvel, ud = _compensated(cbuf_ref, ccount, Lc, cterms, qpos, qvel,
-                                                    qacc, due, idx, n)
-                else:
-                    xdpos, xdvel, ud = qpos, qvel, qacc
-                np.subtract(mpos, xdpos, out=epos)
-                np.multiply(cs, v, out=uc)
-                np.subtract(uc, xdvel, out=evel)
-                sg = segment_index(k, dt, s.hold_ns, S) if S > 1 else 0
-                if sg != seg:
-                    Kc = np.ascontiguousarray((K + P[:, sg]).transpose(1, 2, 0))   # (2, 4, N)
-                    seg = sg
-                # u = u* + K_0 e_0 + K_1 e_1 + K_2 e_2 + K_3 e_3, left to right (a reduction
-                # over a non-contiguous axis of 5 adds in order, as the tracker does)
-                prod_ud[...] = ud
-                np.multiply(Kc, e, out=prod_ke)
-                np.add.reduce(prod, axis=1, out=u)
-                np.abs(v, out=vabs)
-                if np.minimum.reduce(vabs) < vmin:
-                    vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
-                else:
-                    vf = v
-                # (v, w) sent; with a command every step, straight into the block
-                cmd = cblk[j] if ideal_odom else np.empty((2, n))
-                cv, w = cmd[0], cmd[1]
-                np.multiply(u, cs, out=uc)                # u1 cos, u2 sin
-                np.add(uc0, uc1, out=cv)                  # a
-                cv *= tdt
-                cv += v                                   # v_next = v + a dt
-                np.multiply(u, cs_rev, out=uc)            # u1 sin, u2 cos
-                np.subtract(uc1, uc0, out=w)
-                w /= vf
-                np.maximum(w, -wmax, out=w)               # nan stays nan
-                np.minimum(w, wmax, out=w)
-                np.maximum(cv, -vmax, out=cv)             # v_next clipped
-                np.minimum(cv, vmax, out=cv)
-                v_next = cv.copy()
-                cv += v
-                cv *= 0.5                                 # (v + v_next) / 2
-                # the sum is finite unless a value is nan (all are clipped)
-                if math.isfinite(np.add.reduce(cmd, axis=None)):
-                    tv = v_next if due is True else np.where(due, v_next, tv)
-                else:       # non-finite: stop, keep the compensator state
-                    ok = np.isfinite(w) & np.isfinite(v_next)
-                    tv = np.where(ok if due is True else ok & due, v_next, tv)
-                    cmd[...] = np.where(ok, cmd, 0.0)
-                cmd_log = cmd if due is True else np.where(due, cmd, cmd_log)
-                # ---- UnicyclePlant.command
-                if queue:
-                    np.put(cq_flat, put_idx[k % Rq], cmd)
-                elif cmd_delayed:
-                    slot = k % R
-                    if due is True:
-                        cbuf[slot] = cmd
-                        cstep[slot] = k
-                    else:
-                        cbuf[slot] = np.where(due, cmd, cbuf[slot])
-                        cstep[slot] = np.where(due, k, cstep[slot])
-                elif due is True:
-                    force_v, force_w = cv, w
-                else:
-                    force_v = np.where(due, cv, force_v)
-                    force_w = np.where(due, w, force_w)
-            # ---- log row k and metrics (err: the error, or its square without exact)
-            dp = epos if reuse_error else pos - rpos
-            err = eblk[j]
-            if exact:
-                np.hypot(dp[0], dp[1], out=err)
-                np.multiply(err, err, out=sqblk[j + 1])
-            else:
-                np.multiply(dp, dp, out=uc)
-                np.add(uc0, uc1, out=err)
-            if not ideal_odom:
-                cblk[j] = 0.0 if due is False else cmd_log
-            if j == _BLOCK - 1 or k == steps:
-                metrics.flush(k - j, j + 1)
-            if record:
-                commanded = 0.0 if due is False else (1.0 if due is True else due)
-                row = (step_time_ns(k, dt) * 1e-9, pos[0], pos[1], th, pv, rpos[0], rpos[1],
-                       cmd_log[0], cmd_log[1], commanded)
-                for name, val in zip(names, row):
-                    trace[name][k] = val
-            if k == steps:
-                break
-            # ---- UnicyclePlant.advance
-            if queue:                            # the command sent at k - d, or (v0, 0)
-                force_v, force_w = cq[k % Rq]
-            elif cmd_delayed:
-                ks = k - cmd_d
-                slot = ks % R
-                hit = cstep[slot, idx] == ks
-                if hit.any():
-                    force_v = np.where(hit, cbuf[slot, 0, idx], force_v)
-                    force_w = np.where(hit, cbuf[slot, 1, idx], force_w)
-            v, w = force_v, force_w
-            if act_on:
-                v_end, v = _first_order(pv, v, lag_v, alv, em1_v, lagv_m, limv_m, dt)
-                w_end, w = _first_order(pw, w, lag_w, alw, em1_w, lagw_m, limw_m, dt)
-            if ideal_odom and not exact:     # the tracker measured this very heading
-                csp = cs
-            elif use_delay:
-                csp = np.stack((np.cos(th), np.sin(th)))
-            else:
-                csp = None
-            if use_delay and diag and Nd > 0:
-                old = hist[k % (Nd + 1)]                # (x, y) at step k - N
-                np.multiply(ax, old[0], out=dpos[0])
-                np.multiply(ay, old[1], out=dpos[1])
-                old[...] = pos
-            elif use_delay:
-                if need_vel:
-                    vel = v * csp
-                    if has_off:
-                        vel += off
-                    xi = (pos[0], vel[0], pos[1], vel[1])   # xi_now = (x, vel_x, y, vel_y)
-                else:
-                    xi = (pos[0], None, pos[1], None)
-                if Nd == 0:
-                    for i in range(4):
-                        _dot_terms(terms[i], xi, dbuf[i])
-                else:
-                    old = hist[k % (Nd + 1)]            # the used parts of xi at step k - N
-                    for i in range(4):
-                        _dot_terms(hterms[i], old, dbuf[i])
-                    for r, j in enumerate(cols):
-                        old[r] = xi[j]
-            half = w * hdt                           # = 0.5 w dt (halving is exact)
-            if small_arc and csp is not None:
-                sinc, ch, sh = _arc_series(half, csp, mid, uc, arcbuf)
-                if recur:                            # cos, sin (th + 2 half) for the tracker
-                    _rotate(mid, ch, sh, cs, uc)
-            else:
-                sinc = _arc_terms(th, half, csp, exact, mid)
-            arc = v * dt
-            arc *= sinc
-            step = mid * arc
-            if use_delay:
-                if has_off:
-                    step += (dpos + off) * dt
-                    step += 0.5 * dvel * dt * dt
-                    off = off + dvel * dt
-                else:                                # the velocity terms are exact zeros
-                    step += dpos * dt
-            pos = pos + step
-            th = th + w * dt
-            if k >= wrap_next:
-                th, wrap_next = _wrap_due(th, k, wstep)
-            if act_on:
-                pv, pw = v_end, w_end
-            else:
-                pv, pw = v, w
-            if not ideal_odom:
-                measure(k + 1)
-        finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
-
-    sq = sqblk[0]
-    if not exact:
-        err = np.sqrt(err)
-        steady = np.sqrt(steady)
-    t_of = lambda kk: (kk * dt_ns) * 1e-9   # noqa: E731
-    within_end = err <= tolerance
-    settle = np.where(within_end, t_of(last_out + 1), np.nan)
-    first = np.where(first_in >= 0, t_of(first_in), np.nan)
-    steady = np.where(finite, steady, np.nan)
-    return BatchRun(steps=steps, dt=dt, tolerance=float(tolerance), steady_from=steady_from,
-                    settling_time=settle, first_within=first, final_error=err.copy(),
-                    rms_error=np.sqrt(sq / (steps + 1)), steady_error=steady,
-                    peak_abs_v=peak[0].copy(), peak_abs_w=peak[1].copy(), finite=finite,
-                    trace=trace if record else None)
+        ``due`` is True (every case), False (none: the rest is None) or a mask of cases.
+        """
+        ms = k - self.odom_d
+        dmask = (ms >= 0) & ((ms % self.period) == 0)
+        if self.uniform:
+            due = bool(dmask[0])
+        else:
+            due = dmask if dmask.any() else False
+        if due is False:
+            return False, None, None, None, None
+        slot = ms % self.Ro
+        idx = self.idx
+        mpos = self.obuf[slot, 0:2, idx].T
+        mth, mv = self.obuf[slot, 2, idx], self.obuf[slot, 3, idx]
+        return due, mpos, mth, mv, (ms if not self.uniform else int(ms[0]))
 
 
-def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns, delay, cmd_d,
-                lims, metrics, trace):
+class _BatchTracker:
+    """:meth:`control.loop.Tracker.step` for every case, its operations in the same order.
+
+    Holds the tracker's state (its speed ``tv``, started cases, the gain in force, the
+    compensation history) and the buffers of one step; :meth:`command` computes the
+    command ``(v, w)`` of the cases whose odometry is due (with a command every step,
+    straight into the metrics block ``cblk``).
+    """
+
+    def __init__(self, s: _Settings, tracker: TrackerConfig, schedule: _Schedule,
+                 tdt: np.ndarray | float, cblk: np.ndarray, exact: bool, recur: bool,
+                 ideal_odom: bool):
+        n = s.n
+        self.n, self.idx = n, np.arange(n)
+        self.schedule = schedule
+        self.seg = 0                                # segment_index(0, ...) is 0
+        self.Kc = schedule.gain(0)                  # (2, 4, N)
+        self.tv = np.zeros(n)
+        self.started = np.zeros(n, dtype=bool)
+        self.all_started = False
+        self.tdt = tdt
+        self.vmax, self.wmax = tracker.max_linear_speed, tracker.max_angular_speed
+        self.vmin = tracker.min_speed
+        self.exact, self.recur, self.ideal_odom, self.cblk = exact, recur, ideal_odom, cblk
+        self.comp = tracker.delay_compensation
+        if self.comp:
+            Atc = np.array(tracker.A_tau, dtype=float)
+            self.cterms = [[(j, float(Atc[i, j])) for j in range(4)] for i in range(4)]
+            self.Lc = s.comp_n
+            self.cbuf_ref = np.zeros((int(self.Lc.max()), 8, n))
+            self.ccount = np.zeros(n, dtype=np.int64)
+        self.cs = np.empty((2, n))                  # cos, sin of the measured heading
+        self.cs_rev = self.cs[::-1]
+        self.e = np.empty((4, n))                   # tracking error (x, x', y, y')
+        self.epos, self.evel = self.e[0::2], self.e[1::2]
+        self.prod = np.empty((2, 5, n))             # u* and the four K_j e_j terms
+        self.prod_ud, self.prod_ke = self.prod[:, 0], self.prod[:, 1:]
+        self.u = np.empty((2, n))
+        self.uc = np.empty((2, n))
+        self.vabs = np.empty(n)
+        self.cmd_log = np.stack((s.v0, np.zeros(n)))    # the command in force: (v0, 0)
+
+    def command(self, k: int, j: int, due: Any, mpos: np.ndarray, mth: np.ndarray,
+                mv: np.ndarray, ref: tuple[Any, Any, Any]) -> np.ndarray:
+        """The command ``(v, w)`` (2, N) at step ``k`` (block row ``j``) from odometry."""
+        n = self.n
+        qpos, qvel, qacc = ref
+        vmax, wmax, vmin = self.vmax, self.wmax, self.vmin
+        if not self.all_started:
+            new = ~self.started if due is True else (~self.started & due)
+            if new.any():
+                v_init = np.where(np.isfinite(mv), mv, 0.0)
+                v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
+                self.tv = np.where(new, v_init, self.tv)
+                self.started = self.started | new
+                self.all_started = bool(self.started.all())
+        v = self.tv
+        if self.exact:
+            # yaw through the message's quaternion (its qx = qy = 0 terms add exact
+            # zeros: left out), as the tracker node reads it
+            # (libm's atan2 per element: numpy's SIMD arctan2 differs from it by an
+            # ulp for about 3 % of arguments)
+            qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
+            mth = _ATAN2(2.0 * (qw * qz), qw * qw - qz * qz).astype(float)
+        # (otherwise the yaw is used as measured: the same angle to round-off)
+        cs, uc = self.cs, self.uc
+        uc0, uc1 = uc[0], uc[1]
+        if not self.recur or k % _ANCHOR == 0:
+            np.cos(mth, out=cs[0])
+            np.sin(mth, out=cs[1])
+        if self.comp:
+            xdpos, xdvel, ud = _compensated(self.cbuf_ref, self.ccount, self.Lc, self.cterms,
+                                            qpos, qvel, qacc, due, self.idx, n)
+        else:
+            xdpos, xdvel, ud = qpos, qvel, qacc
+        np.subtract(mpos, xdpos, out=self.epos)
+        np.multiply(cs, v, out=uc)
+        np.subtract(uc, xdvel, out=self.evel)
+        sg = self.schedule.segment(k)
+        if sg != self.seg:
+            self.Kc = self.schedule.gain(sg)
+            self.seg = sg
+        # u = u* + K_0 e_0 + K_1 e_1 + K_2 e_2 + K_3 e_3, left to right (a reduction
+        # over a non-contiguous axis of 5 adds in order, as the tracker does)
+        u = self.u
+        self.prod_ud[...] = ud
+        np.multiply(self.Kc, self.e, out=self.prod_ke)
+        np.add.reduce(self.prod, axis=1, out=u)
+        vabs = np.abs(v, out=self.vabs)
+        if np.minimum.reduce(vabs) < vmin:
+            vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
+        else:
+            vf = v
+        # (v, w) sent; with a command every step, straight into the block
+        cmd = self.cblk[j] if self.ideal_odom else np.empty((2, n))
+        cv, w = cmd[0], cmd[1]
+        np.multiply(u, cs, out=uc)                # u1 cos, u2 sin
+        np.add(uc0, uc1, out=cv)                  # a
+        cv *= self.tdt
+        cv += v                                   # v_next = v + a dt
+        np.multiply(u, self.cs_rev, out=uc)       # u1 sin, u2 cos
+        np.subtract(uc1, uc0, out=w)
+        w /= vf
+        np.maximum(w, -wmax, out=w)               # nan stays nan
+        np.minimum(w, wmax, out=w)
+        np.maximum(cv, -vmax, out=cv)             # v_next clipped
+        np.minimum(cv, vmax, out=cv)
+        v_next = cv.copy()
+        cv += v
+        cv *= 0.5                                 # (v + v_next) / 2
+        # the sum is finite unless a value is nan (all are clipped)
+        if math.isfinite(np.add.reduce(cmd, axis=None)):
+            self.tv = v_next if due is True else np.where(due, v_next, self.tv)
+        else:       # non-finite: stop, keep the compensator state
+            ok = np.isfinite(w) & np.isfinite(v_next)
+            self.tv = np.where(ok if due is True else ok & due, v_next, self.tv)
+            cmd[...] = np.where(ok, cmd, 0.0)
+        self.cmd_log = cmd if due is True else np.where(due, cmd, self.cmd_log)
+        return cmd
+
+
+class _CommandLine:
+    """:meth:`control.loop.UnicyclePlant.command` for every case: the command in force.
+
+    A command sent at step ``k`` acts from ``k + cmd_latency`` steps; until a case's first
+    one arrives its plant holds ``(v0, 0)``.  ``queue`` (a command every step for every
+    case): a ring of steps each command is put into at the slot its step reads; otherwise
+    a ring of the commands sent and their steps.
+    """
+
+    def __init__(self, cmd_d: np.ndarray, v0: np.ndarray, queue: bool):
+        n = cmd_d.size
+        self.idx = np.arange(n)
+        self.cmd_d = cmd_d
+        self.force_v, self.force_w = v0.copy(), np.zeros(n)     # command in force
+        self.delayed = bool(np.any(cmd_d))
+        if self.delayed:
+            self.R = int(cmd_d.max()) + 1
+            self.cbuf = np.zeros((self.R, 2, n))
+            self.cstep = np.full((self.R, n), np.iinfo(np.int64).min, dtype=np.int64)
+        self.queue = queue
+        if queue:
+            # a command every step: the one sent at k is put where step k + d reads it, a
+            # ring of Rq steps whose slots hold the initial command in force, (v0, 0), until
+            # then (one slot more than the longest delay: the slot read at k is not written
+            # at k + 1)
+            Rq = self.Rq = int(cmd_d.max()) + 2
+            self.cq = cq = np.empty((Rq, 2, n))
+            cq[:, 0] = self.force_v
+            cq[:, 1] = self.force_w
+            self.cq_flat = cq.reshape(-1)
+            slots = (np.arange(Rq)[:, None] + cmd_d[None, :]) % Rq               # (Rq, N)
+            self.put_idx = (slots[:, None, :] * (2 * n) + np.arange(2)[None, :, None] * n
+                            + np.arange(n)[None, None, :])                       # (Rq, 2, N)
+
+    def send(self, k: int, cmd: np.ndarray, due: Any) -> None:
+        """The commands ``cmd`` (2, N) sent at step ``k`` by the cases ``due``."""
+        if self.queue:
+            np.put(self.cq_flat, self.put_idx[k % self.Rq], cmd)
+        elif self.delayed:
+            slot = k % self.R
+            if due is True:
+                self.cbuf[slot] = cmd
+                self.cstep[slot] = k
+            else:
+                self.cbuf[slot] = np.where(due, cmd, self.cbuf[slot])
+                self.cstep[slot] = np.where(due, k, self.cstep[slot])
+        elif due is True:
+            self.force_v, self.force_w = cmd[0], cmd[1]
+        else:
+            self.force_v = np.where(due, cmd[0], self.force_v)
+            self.force_w = np.where(due, cmd[1], self.force_w)
+
+    def in_force(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The command ``(v, w)`` each plant acts on over step ``k``."""
+        if self.queue:                      # the command sent at k - d, or (v0, 0)
+            self.force_v, self.force_w = self.cq[k % self.Rq]
+        elif self.delayed:
+            ks = k - self.cmd_d
+            slot = ks % self.R
+            idx = self.idx
+            hit = self.cstep[slot, idx] == ks
+            if hit.any():
+                self.force_v = np.where(hit, self.cbuf[slot, 0, idx], self.force_v)
+                self.force_w = np.where(hit, self.cbuf[slot, 1, idx], self.force_w)
+        return self.force_v, self.force_w
+
+
+class _Actuator:
+    """:func:`control.actuator.first_order_step` of ``v`` and ``w`` for every case."""
+
+    def __init__(self, s: _Settings, dt: float):
+        self.dt = dt
+        self.lag_v, self.lag_w = lag_v, lag_w = s.lag_v, s.lag_w
+        self.alv, self.alw = alv, alw = s.max_linear_accel, s.max_angular_accel
+        self.on = bool(np.any(lag_v) or np.any(lag_w) or np.any(alv) or np.any(alw))
+        self.em1_v = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_v, float)
+        self.em1_w = _per_value(lambda T: -math.expm1(-dt / T) if T > 0 else 0.0, lag_w, float)
+        self.lagv_m, self.lagw_m, self.limv_m, self.limw_m = lag_v > 0, lag_w > 0, alv > 0, alw > 0
+
+    def step(self, pv: np.ndarray, pw: np.ndarray, v: np.ndarray, w: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(v_end, v_mean, w_end, w_mean)`` over a step from ``(pv, pw)`` towards ``(v, w)``."""
+        v_end, v = _first_order(pv, v, self.lag_v, self.alv, self.em1_v, self.lagv_m,
+                                self.limv_m, self.dt)
+        w_end, w = _first_order(pw, w, self.lag_w, self.alw, self.em1_w, self.lagw_m,
+                                self.limw_m, self.dt)
+        return v_end, v, w_end, w
+
+
+class _PlantDelay:
+    """The plant's delayed-state term ``d = A_tau xi(t - tau)`` for every case.
+
+    A history of the parts of ``xi = (x, x', y, y')`` that ``A_tau`` uses, by step
+    ``% (Nd + 1)``; ``diag``: the paper's form ``d_x = a x(t - tau)``, ``d_y = b y(t - tau)``
+    (one product for both).  :meth:`update` fills ``dpos`` and ``dvel`` for a step.
+    """
+
+    def __init__(self, plant: PlantConfig, pos: np.ndarray, pv: np.ndarray, th: np.ndarray):
+        n = pv.size
+        self.Nd = Nd = delay_steps(plant.tau, plant.dt)[0]
+        At = np.array(plant.A_tau, dtype=float)
+        terms = [[(j, float(At[i, j])) for j in range(4) if At[i, j] != 0.0] for i in range(4)]
+        self.terms = terms
+        self.on = any(terms)
+        self.diag = self.need_vel = self.has_off = False
+        self.ax = self.ay = 0.0
+        if not self.on:
+            return
+        self.cols = cols = sorted({j for row in terms for j, _ in row})
+        self.need_vel = 1 in cols or 3 in cols
+        self.has_off = bool(terms[1] or terms[3])   # else the velocity offset stays 0
+        self.hterms = [[(cols.index(j), a) for j, a in row] for row in terms]
+        self.diag = (cols == [0, 2] and not self.has_off
+                     and [len(r) for r in terms] == [1, 0, 1, 0]
+                     and terms[0][0][0] == 0 and terms[2][0][0] == 2)
+        if self.diag:
+            self.ax, self.ay = terms[0][0][1], terms[2][0][1]
+        xi0 = (pos[0], pv * np.cos(th), pos[1], pv * np.sin(th))
+        self.hist = np.empty((Nd + 1, len(cols), n))
+        self.hist[:] = np.array([xi0[j] for j in cols])[None]
+        self.dbuf = np.zeros((4, n))
+        self.dpos, self.dvel = self.dbuf[0::2], self.dbuf[1::2]
+
+    def update(self, k: int, pos: np.ndarray, v: np.ndarray, csp: np.ndarray | None,
+               off: np.ndarray) -> None:
+        """``dpos``, ``dvel`` of step ``k``; the history takes the state of step ``k``."""
+        Nd = self.Nd
+        if self.diag and Nd > 0:
+            old = self.hist[k % (Nd + 1)]               # (x, y) at step k - N
+            np.multiply(self.ax, old[0], out=self.dpos[0])
+            np.multiply(self.ay, old[1], out=self.dpos[1])
+            old[...] = pos
+            return
+        xi: tuple[Any, Any, Any, Any]
+        if self.need_vel:
+            vel = v * csp
+            if self.has_off:
+                vel += off
+            xi = (pos[0], vel[0], pos[1], vel[1])       # xi_now = (x, vel_x, y, vel_y)
+        else:
+            xi = (pos[0], None, pos[1], None)
+        if Nd == 0:
+            for i in range(4):
+                _dot_terms(self.terms[i], xi, self.dbuf[i])
+        else:
+            old = self.hist[k % (Nd + 1)]               # the used parts of xi at step k - N
+            for i in range(4):
+                _dot_terms(self.hterms[i], old, self.dbuf[i])
+            for r, j in enumerate(self.cols):
+                old[r] = xi[j]
+
+
+class _BatchPlant:
+    """:meth:`control.loop.UnicyclePlant.advance` for every case: pose, speed, delay term.
+
+    ``pos`` (2, N), ``th``, the speed and rate at the end of the last step ``pv``, ``pw``
+    and the velocity offset ``off`` of the delay term.  Without ``exact`` the arc's sine
+    and cosines come from series (``small_arc``, when ``|w| dt / 2 <= 0.01`` holds for
+    every command) and, with ``recur``, the tracker's heading cosine and sine are carried
+    to the next step by angle addition.
+    """
+
+    def __init__(self, plant: PlantConfig, s: _Settings, exact: bool, ideal_odom: bool,
+                 wmax: float):
+        n = s.n
+        dt = self.dt = plant.dt
+        self.hdt = 0.5 * dt
+        self.pos = np.stack((s.x0, s.y0))           # (x, y) as (2, N)
+        self.th, self.pv = s.th0.copy(), s.v0.copy()
+        self.pw = np.zeros(n)
+        self.off = np.zeros((2, n))                 # velocity offset (ox, oy)
+        self.delay = _PlantDelay(plant, self.pos, self.pv, self.th)
+        self.act = _Actuator(s, dt)
+        self.exact, self.ideal_odom = exact, ideal_odom
+        # |w| <= max_angular_speed for every command (clipped, held, or a mean of two
+        # through the actuator): the arc's series applies at every step when
+        # 0.5 wmax dt <= 0.01
+        self.small_arc = not exact and 0.5 * wmax * dt <= _SERIES_MAX
+        # the heading's cosine and sine carried from step to step by angle addition (the
+        # tracker measures the plant's own heading), evaluated afresh every _ANCHOR steps
+        self.recur = self.small_arc and ideal_odom
+        # the heading moves at most wmax dt per step: after a look at max |th| = m the wrap
+        # (|th| > pi) cannot be needed for (pi - m) / (wmax dt) steps
+        self.wstep = wmax * dt * (1.0 + 1e-9)
+        self.wrap_next = 0
+        self.mid = np.empty((2, n))
+        self.tmp = np.empty((2, n))
+        self.arcbuf = np.empty((4, n))
+
+    def advance(self, k: int, v: np.ndarray, w: np.ndarray, cs: np.ndarray) -> None:
+        """Advance step ``k`` under the command ``(v, w)`` in force.
+
+        ``cs``: the tracker's cosine and sine of the heading it measured (carried to the
+        next step with ``recur``).
+        """
+        dt = self.dt
+        act, d = self.act, self.delay
+        if act.on:
+            v_end, v, w_end, w = act.step(self.pv, self.pw, v, w)
+        if self.ideal_odom and not self.exact:      # the tracker measured this very heading
+            csp: np.ndarray | None = cs
+        elif d.on:
+            csp = np.stack((np.cos(self.th), np.sin(self.th)))
+        else:
+            csp = None
+        if d.on:
+            d.update(k, self.pos, v, csp, self.off)
+        half = w * self.hdt                         # = 0.5 w dt (halving is exact)
+        mid = self.mid
+        if self.small_arc and csp is not None:
+            sinc, ch, sh = _arc_series(half, csp, mid, self.tmp, self.arcbuf)
+            if self.recur:                          # cos, sin (th + 2 half) for the tracker
+                _rotate(mid, ch, sh, cs, self.tmp)
+        else:
+            sinc = _arc_terms(self.th, half, csp, self.exact, mid)
+        arc = v * dt
+        arc *= sinc
+        step = mid * arc
+        if d.on:
+            if d.has_off:
+                step += (d.dpos + self.off) * dt
+                step += 0.5 * d.dvel * dt * dt
+                self.off = self.off + d.dvel * dt
+            else:                                   # the velocity terms are exact zeros
+                step += d.dpos * dt
+        self.pos = self.pos + step
+        th = self.th + w * dt
+        if k >= self.wrap_next:
+            th, self.wrap_next = _wrap_due(th, k, self.wstep)
+        self.th = th
+        if act.on:
+            self.pv, self.pw = v_end, w_end
+        else:
+            self.pv, self.pw = v, w
+
+
+@dataclass(frozen=True)
+class _IdealRun:
+    """What :func:`_ideal_loop` runs (besides the initial state and the metrics).
+
+    ``limits`` is ``(max_linear_speed, max_angular_speed, min_speed)`` of the tracker
+    (at the shared period ``tdt``), ``delay`` ``None`` or ``(Nd, ax, ay)``
+    (``d = (ax x, ay y)(t - tau)``), ``cmd_d`` the command latencies in steps (``None``:
+    none).
+    """
+
+    steps: int
+    dt: float
+    tdt: float
+    ref: _Reference
+    schedule: _Schedule
+    limits: tuple[float, float, float]
+    delay: tuple[int, float, float] | None
+    cmd_d: np.ndarray | None
+
+
+def _ideal_loop(run: _IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
+                metrics: _Metrics, trace: dict[str, np.ndarray] | None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`simulate_batch`'s loop for the ideal odometry case (fewer operations per step).
 
     Without ``exact``, for odometry of the plant's own state at every step, no delay
@@ -937,14 +1241,16 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     rotation per step), the new position is written into the ring of delayed
     positions over the oldest one, constants are 0-d arrays (no conversion per call);
     without a trace the heading advances once per metrics block by the sum of its rows of
-    ``w dt`` (its one use is the fresh cosine and sine at the block's start).
-    ``delay`` is ``None`` or ``(Nd, ax, ay)`` (``d = (ax x, ay y)(t - tau)``), ``cmd_d``
-    the command latencies in steps (``None``: none).  ``K e`` and the squared error are
-    sums of products (``einsum``: one pass).  Returns the final position, heading and
-    squared error (a row of ``metrics``).
+    ``w dt`` (its one use is the fresh cosine and sine at the block's start).  ``K e``
+    and the squared error are sums of products (``einsum``: one pass).  ``run`` holds the
+    settings (:class:`_IdealRun`), ``pos0``, ``th0``, ``v0`` the initial state.  Returns
+    the final position, heading and squared error (a row of ``metrics``).
     """
     n = pos0.shape[1]
-    vmax, wmax, vmin = lims
+    steps, dt, tdt, ref, delay, cmd_d = run.steps, run.dt, run.tdt, run.ref, run.delay, run.cmd_d
+    schedule = run.schedule
+    hold_ns, S = schedule.hold_ns, schedule.segments
+    vmax, wmax, vmin = run.limits
     hdt = 0.5 * dt
     mul, add, sub = np.multiply, np.add, np.subtract
     fmax, fmin, absolute = np.maximum, np.minimum, np.absolute
@@ -989,7 +1295,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     vmin_, zero = np.full(n, vmin), np.zeros(n)
     copysign = np.copysign
     seg = 0                                         # segment_index(0, ...) is 0
-    Kc = np.ascontiguousarray((K + P[:, seg]).transpose(1, 2, 0))   # (2, 4, N)
+    Kc = schedule.gain(seg)                         # (2, 4, N)
     # plant: the arc's series in w**2: Q = hdt sin(h) / h (sin h = w Q); ch = cos h
     W2 = np.empty(n)
     hh = hdt * hdt
@@ -1002,7 +1308,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     tmp = np.empty((2, n))
     thstep = np.empty(n)
     queue = cmd_d is not None
-    if queue:
+    if cmd_d is not None:
         # the command sent at k is row k % Rq of a ring (a contiguous copy); case i reads
         # row (k - d_i) % Rq (a gather), which holds the initial command in force, (v0, 0),
         # until k = d_i; rows of the commands in force by block row (w: the heading's rows)
@@ -1019,7 +1325,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
     # metrics
     cblk, eblk = metrics.cblk, metrics.eblk
     flush = metrics.flush
-    wstep = wrap_wmax * dt * (1.0 + 1e-9)
+    wstep = wmax * dt * (1.0 + 1e-9)
     wrap_next = 0
     pv = v0.copy()
     # without a trace the heading advances once per block (the rows of w summed), the only
@@ -1041,7 +1347,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
         sub(evel, rvel, out=evel)
         sg = segment_index(k, dt, hold_ns, S) if S > 1 else 0
         if sg != seg:
-            Kc = np.ascontiguousarray((K + P[:, sg]).transpose(1, 2, 0))   # (2, 4, N)
+            Kc = schedule.gain(sg)                  # (2, 4, N)
             seg = sg
         einsum('ijn,jn->in', Kc, E, out=U)          # K e, then u = K e + u*
         U += racc
@@ -1097,7 +1403,7 @@ def _ideal_loop(steps, dt, tdt, wrap_wmax, ref, pos0, th0, v0, K, P, S, hold_ns,
                 th += thstep
                 if float(maxred(absolute(th, out=thstep))) > _PI:
                     th = _wrap(th)
-        if not lazy:
+        if trace is not None:
             row = (step_time_ns(k, dt) * 1e-9, pos[0], pos[1], th, pv, rpos[0], rpos[1],
                    0.5 * X[0], X[1], 1.0)
             for name, val in zip(trace, row):
@@ -1152,16 +1458,47 @@ _BLOCK = 16
 
 
 class _Metrics:
-    """Per-case metrics updated from blocks of per-step rows (see :func:`simulate_batch`)."""
+    """Per-case metrics updated from blocks of per-step rows (see :func:`simulate_batch`).
 
-    def __init__(self, thr, last_out, first_in, sqblk, eblk, cblk, steady, steady_k, peak):
-        self.thr, self.last_out, self.first_in = thr, last_out, first_in
-        self.sqblk, self.eblk, self.cblk = sqblk, eblk, cblk
-        self.steady, self.steady_k, self.peak = steady, steady_k, peak
+    Without ``exact`` on the squared error (square roots at the end).  The error and the
+    command of each step are written to a row of a block of ``_BLOCK`` steps (``eblk``,
+    ``cblk``), whose rows are reduced at once when it is full (:meth:`flush`).
+    """
+
+    def __init__(self, n: int, steps: int, dt: float, tolerance: float,
+                 steady_from: float | None, exact: bool):
+        self.steps, self.dt, self.tolerance, self.exact = steps, dt, tolerance, exact
+        self.dt_ns = dt_ns = int(round(dt * 1e9))
+        t_end = steps * dt_ns * 1e-9
+        self.steady_from = 0.5 * t_end if steady_from is None else float(steady_from)
+        self.thr = tolerance if exact else tolerance * tolerance
+        self.last_out = np.full(n, -1, dtype=np.int64)
+        self.first_in = np.full(n, -1, dtype=np.int64)
+        self.sqblk = np.zeros((_BLOCK + 1, n))      # row 0: the sum of squares so far
+        self.eblk = np.empty((_BLOCK, n)) if exact else self.sqblk[1:]
+        self.cblk = np.zeros((_BLOCK, 2, n))        # commands sent (0: none)
+        self.steady = np.zeros(n)
+        steady_k = max(0, int(self.steady_from / (dt_ns * 1e-9)) - 2)   # first k: t_k >= from
+        while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < self.steady_from:
+            steady_k += 1
+        self.steady_k = steady_k
+        self.peak = np.zeros((2, n))
         self.searching = True
-        self.cabs = np.empty_like(cblk)
-        self.sums = np.empty_like(steady)
-        self.out = np.empty(eblk.shape, dtype=bool)
+        self.cabs = np.empty_like(self.cblk)
+        self.sums = np.empty_like(self.steady)
+        self.out = np.empty(self.eblk.shape, dtype=bool)
+        self.sq = np.empty((2, n))
+
+    def error(self, j: int, dp: np.ndarray) -> np.ndarray:
+        """Row ``j`` of the block: the position error ``|dp|`` (its square without exact)."""
+        err: np.ndarray = self.eblk[j]
+        if self.exact:
+            np.hypot(dp[0], dp[1], out=err)
+            np.multiply(err, err, out=self.sqblk[j + 1])
+        else:
+            np.multiply(dp, dp, out=self.sq)
+            np.add(self.sq[0], self.sq[1], out=err)
+        return err
 
     def flush(self, k0: int, m: int) -> None:
         """Take the first ``m`` rows, those of steps ``k0 .. k0 + m - 1``.
@@ -1190,8 +1527,30 @@ class _Metrics:
         cabs = np.abs(self.cblk[:m], out=self.cabs[:m])
         np.fmax(self.peak, np.fmax.reduce(cabs, axis=0), out=self.peak)
 
+    def result(self, err: np.ndarray, finite: np.ndarray,
+               trace: dict[str, np.ndarray] | None) -> BatchRun:
+        """The :class:`BatchRun` of the run whose last error row is ``err``."""
+        steady = self.steady
+        if not self.exact:
+            err = np.sqrt(err)
+            steady = np.sqrt(steady)
+        dt_ns = self.dt_ns
+        last_out, first_in = self.last_out, self.first_in
+        within_end = err <= self.tolerance
+        settle = np.where(within_end, ((last_out + 1) * dt_ns) * 1e-9, np.nan)
+        first = np.where(first_in >= 0, (first_in * dt_ns) * 1e-9, np.nan)
+        steady = np.where(finite, steady, np.nan)
+        return BatchRun(steps=self.steps, dt=self.dt, tolerance=float(self.tolerance),
+                        steady_from=self.steady_from, settling_time=settle,
+                        first_within=first, final_error=err.copy(),
+                        rms_error=np.sqrt(self.sqblk[0] / (self.steps + 1)),
+                        steady_error=steady, peak_abs_v=self.peak[0].copy(),
+                        peak_abs_w=self.peak[1].copy(), finite=finite, trace=trace)
 
-def _compensated(buf, count, L, terms, qpos, qvel, qacc, due, idx, n):
+
+def _compensated(buf: np.ndarray, count: np.ndarray, L: np.ndarray,
+                 terms: list[list[tuple[int, float]]], qpos: Any, qvel: Any, qacc: Any,
+                 due: Any, idx: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`control.loop.Tracker._compensated_reference` for every case that is due.
 
     ``buf`` holds per case the last ``L`` pairs ``(xi*, xi*')`` (8 rows) in a ring
@@ -1236,7 +1595,8 @@ _SERIES_MAX = 1e-2
 _ANCHOR = 16
 
 
-def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
+def _arc_series(half: np.ndarray, cs: np.ndarray, mid: np.ndarray, tmp: np.ndarray,
+                buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(sin(h)/h, cos h, sin h)`` of ``h = half`` from their series.
 
     ``mid`` receives ``cos, sin (th + half)`` from ``cs = (cos th, sin th)`` by angle
@@ -1257,7 +1617,8 @@ def _arc_series(half, cs, mid: np.ndarray, tmp: np.ndarray, buf: np.ndarray):
     return sinc, ch, sh
 
 
-def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
+def _rotate(cs: np.ndarray, ch: np.ndarray, sh: np.ndarray, out: np.ndarray,
+            tmp: np.ndarray) -> None:
     """``out = (c ch - s sh, s ch + c sh)`` for ``cs = (c, s)`` (angle addition)."""
     c, s = cs
     t = tmp[0]
@@ -1269,7 +1630,8 @@ def _rotate(cs, ch, sh, out: np.ndarray, tmp: np.ndarray) -> None:
     out[1] += t
 
 
-def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
+def _arc_terms(th: np.ndarray, half: np.ndarray, cs: np.ndarray | None, exact: bool,
+               mid: np.ndarray) -> np.ndarray:
     """``sin(half) / half`` of the exact arc; ``mid`` receives ``cos, sin (th + half)``.
 
     ``exact``: the plant's own operations.  Otherwise, for ``|half| <= 0.01``
@@ -1280,7 +1642,7 @@ def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     """
     if not exact and np.max(np.abs(half)) <= _SERIES_MAX:
         h2 = half * half
-        sinc = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
+        sinc: np.ndarray = ((h2 * _S3 + _S2) * h2 + _S1) * h2 + 1.0
         if cs is not None:
             sh = half * sinc
             ch = ((h2 * _C3 + _C2) * h2 + _C1) * h2 + 1.0
@@ -1297,12 +1659,12 @@ def _arc_terms(th, half, cs, exact: bool, mid: np.ndarray) -> np.ndarray:
     return sinc
 
 
-def _stack(values, n: int) -> np.ndarray:
+def _stack(values: Any, n: int) -> np.ndarray:
     """Rows of scalars or arrays of ``n`` as one ``(len(values), n)`` array."""
     return np.stack([np.broadcast_to(v, (n,)) for v in values])
 
 
-def _dot_terms(terms, xi, out: np.ndarray) -> None:
+def _dot_terms(terms: list[tuple[int, float]], xi: Any, out: np.ndarray) -> None:
     """``out = sum(a * xi[j])`` over the nonzero terms, left to right (as the plant).
 
     The plant starts from ``0.0``: that changes at most the sign of a zero.  Rows
@@ -1316,7 +1678,7 @@ def _dot_terms(terms, xi, out: np.ndarray) -> None:
         out += a * xi[j]
 
 
-def _dot4(terms, z):
+def _dot4(terms: list[tuple[int, float]], z: Any) -> Any:
     """``sum(A[i][j] * z[j] for j in range(4))`` left to right (Python's ``sum`` from 0)."""
     out = 0
     for j, a in terms:
@@ -1327,8 +1689,8 @@ def _dot4(terms, z):
 # ---------------------------------------------------------------------------------------------
 # Linear delay loop
 
-def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: float = 1e-3
-                              ) -> tuple[np.ndarray, np.ndarray]:
+def simulate_delay_loop_batch(A0: Any, A1: Any, tau: float, xi0: Any, duration: float,
+                              dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """:func:`control.simulate.simulate_delay_loop` for N loops at once (constant history).
 
     Parameters
@@ -1374,7 +1736,7 @@ def simulate_delay_loop_batch(A0, A1, tau: float, xi0, duration: float, dt: floa
     out = np.zeros((Nd + steps + 1, N, n))
     out[:Nd + 1] = xi0
 
-    def f(x, xd):
+    def f(x: np.ndarray, xd: np.ndarray) -> Any:
         return np.einsum('kij,kj->ki', A0, x) + np.einsum('kij,kj->ki', A1, xd)
 
     rk4_delay_steps(out, Nd, steps, dt, f)

@@ -15,6 +15,7 @@ so a lockstep ROS run and it agree to round-off.  No ROS import.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 
 from .limits import Limits, within_limits
@@ -68,12 +69,26 @@ def start_offset(trajectory: Trajectory, t_first: float, *,
     return late
 
 
-def path_errors(x: float, y: float, th: float, ref) -> tuple[float, float, float]:
+def path_errors(x: float, y: float, th: float, ref: RefSample) -> tuple[float, float, float]:
     """Along-track, cross-track (m) and heading error (rad) of a pose against a reference.
 
     In the reference point's frame (x along its heading, y to its left, REP-103):
     along-track ``> 0`` means the robot is ahead, cross-track ``> 0`` that it is to the
     left; the heading error is ``th - heading`` wrapped to ``[-pi, pi]``.
+
+    Parameters
+    ----------
+    x, y : float
+        Position of the robot (m).
+    th : float
+        Heading of the robot (rad).
+    ref : RefSample
+        The reference point (position ``x``, ``y`` and ``heading``).
+
+    Returns
+    -------
+    (float, float, float)
+        Along-track (m), cross-track (m), heading error (rad).
     """
     dx, dy = x - ref.x, y - ref.y
     c, s = math.cos(ref.heading), math.sin(ref.heading)
@@ -85,12 +100,37 @@ def trajectory_time(stamp_ns: int, origin_ns: int) -> float:
 
     What a lockstep tracker passes to :meth:`Follower.step` for the odometry stamp, and
     what the bag reader samples a recorded trajectory message at (one formula).
+
+    Parameters
+    ----------
+    stamp_ns : int
+        The stamp (ns).
+    origin_ns : int
+        The trajectory's origin (ns: its header stamp, or when it was received).
+
+    Returns
+    -------
+    float
     """
     return (int(stamp_ns) - int(origin_ns)) * 1e-9
 
 
 def reference_at(trajectory: Trajectory, origin_ns: int, stamp_ns: int) -> RefSample:
-    """The reference :meth:`Follower.step` uses for the odometry stamped ``stamp_ns``."""
+    """The reference :meth:`Follower.step` uses for the odometry stamped ``stamp_ns``.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The trajectory followed.
+    origin_ns : int
+        Its origin (ns).
+    stamp_ns : int
+        The odometry stamp (ns).
+
+    Returns
+    -------
+    RefSample
+    """
     return trajectory.sample(trajectory_time(stamp_ns, origin_ns))
 
 
@@ -129,7 +169,13 @@ class Follower:
         self.set_trajectory(trajectory)
 
     def set_trajectory(self, trajectory: Trajectory) -> None:
-        """Start a new run on ``trajectory`` (compensator re-initialised from odometry)."""
+        """Start a new run on ``trajectory`` (compensator re-initialised from odometry).
+
+        Parameters
+        ----------
+        trajectory : Trajectory
+            The trajectory to follow from now on.
+        """
         self.trajectory = trajectory
         self.finished = False
         self.ended = False          # past t_end (still settling until finished)
@@ -148,6 +194,21 @@ class Follower:
         the command acts) and the trajectory is sampled there; the times the predictor
         sees are trajectory times (consistent: it uses differences only, and a new
         trajectory resets it).
+
+        Parameters
+        ----------
+        x, y : float
+            Measured position (m).
+        th : float
+            Measured heading (rad).
+        t : float
+            Trajectory time of the measurement (s, :func:`trajectory_time`).
+        measured_speed : float, optional
+            Measured speed (m/s; initialises the tracker's speed state).
+
+        Returns
+        -------
+        Command
         """
         traj = self.trajectory
         if not self.started and t >= traj.t_start:
@@ -207,6 +268,31 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     ``(t_k - origin_ns) * 1e-9`` as the tracker node does.  With ``limits`` the
     trajectory is first re-timed within them as the tracker node (``retime: true``) does
     (:func:`control.limits.within_limits`).
+
+    Parameters
+    ----------
+    plant_config, tracker_config : PlantConfig, TrackerConfig
+        The plant and the tracker.
+    trajectory : Trajectory
+        The trajectory followed.
+    steps : int
+        Plant steps (``steps + 1`` samples).
+    rest_speed : float
+        Speed (m/s) below which the robot is at rest (after the trajectory's end; a
+        trajectory that starts slower starts at rest, :func:`start_offset`).
+    origin_ns : int
+        The trajectory's origin (ns).
+    start_tolerance : float
+        Lateness (s) of the first step accepted without re-basing a trajectory that starts
+        at rest (:func:`start_offset`).
+    max_start_distance : float
+        Largest distance (m) between the robot and the reference at the first step.
+    limits : Limits, optional
+        The robot's limits: the trajectory is re-timed within them first.
+
+    Returns
+    -------
+    TrackingRun
     """
     if limits is not None:
         trajectory = within_limits(trajectory, limits)[0]
@@ -221,7 +307,7 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     def traj_time(k: int) -> float:
         return (step_time_ns(k, dt) - origin_ns) * 1e-9
 
-    def command(meas, th: float, k: int, ref) -> Command:
+    def command(meas: Any, th: float, k: int, ref: RefSample) -> Command:
         return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v)
 
     return run_loop(plant_config, steps, command,

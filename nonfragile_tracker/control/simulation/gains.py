@@ -45,7 +45,26 @@ DESIGN_SECTION = 'gain_design'
 
 
 def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> np.ndarray:
-    """Build and validate ``K`` from the flat row-major list and its shape."""
+    """Build and validate ``K`` from the flat row-major list and its shape.
+
+    Parameters
+    ----------
+    flat : sequence of float
+        The entries of ``K``, row-major (the ``K`` parameter).
+    shape : sequence of int
+        ``[rows, cols]`` (the ``K_shape`` parameter).
+
+    Returns
+    -------
+    numpy.ndarray
+
+    Raises
+    ------
+    GainFileError
+        A bad shape or a non-numeric entry.
+    LoopConfigError
+        A gain the tracker refuses (:func:`control.loop.validate_gain`).
+    """
     try:
         shp = tuple(int(s) for s in shape)
     except (TypeError, ValueError):
@@ -60,8 +79,18 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
     return validate_gain(list(flat), shape=shp)
 
 
-def gain_parameters(K) -> dict[str, list]:
-    """``{'K': [...floats...], 'K_shape': [rows, cols]}`` for a gain matrix."""
+def gain_parameters(K: Any) -> dict[str, list[Any]]:
+    """``{'K': [...floats...], 'K_shape': [rows, cols]}`` for a gain matrix.
+
+    Parameters
+    ----------
+    K : array_like, 2-D
+        The gain.
+
+    Returns
+    -------
+    dict
+    """
     K = np.asarray(K, dtype=float)
     return {'K': [float(v) for v in K.ravel()], 'K_shape': [int(s) for s in K.shape]}
 
@@ -82,8 +111,8 @@ def _design_value(key: str, value: Any) -> Any:
                         'a non-empty list of numbers or strings')
 
 
-def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite: bool = False,
-                    extra: dict[str, Any] | None = None,
+def write_gain_file(path: str | os.PathLike[str], K: Any, *, comment: str = '',
+                    overwrite: bool = False, extra: dict[str, Any] | None = None,
                     design: dict[str, Any] | None = None) -> Path:
     """Write the tracker parameter file; refuses to replace an existing file unless asked.
 
@@ -122,8 +151,25 @@ def write_gain_file(path: str | os.PathLike, K, *, comment: str = '', overwrite:
     return path
 
 
-def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndarray:
-    """Read ``K`` from a tracker parameter file (``node`` or ``/**`` section)."""
+def read_gain_file(path: str | os.PathLike[str], node: str = TRACKER_NODE) -> np.ndarray:
+    """Read ``K`` from a tracker parameter file (``node`` or ``/**`` section).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The parameter file.
+    node : str
+        The node section to read (a ``/**`` section also counts).
+
+    Returns
+    -------
+    numpy.ndarray
+
+    Raises
+    ------
+    GainFileError
+        The file cannot be read, has no such section or ``K``, or ``K`` is invalid.
+    """
     path = Path(path)
     data = read_yaml(path, 'gain file', error=GainFileError)
     if not isinstance(data, dict):
@@ -142,8 +188,23 @@ def read_gain_file(path: str | os.PathLike, node: str = TRACKER_NODE) -> np.ndar
     raise GainFileError(f'{path}: no {node}.ros__parameters.K found')
 
 
-def read_gain_design(path: str | os.PathLike) -> dict[str, Any] | None:
-    """The design record of a gain file (see module docstring), ``None`` if it has none."""
+def read_gain_design(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The design record of a gain file (see module docstring), ``None`` if it has none.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The gain file.
+
+    Returns
+    -------
+    dict or None
+
+    Raises
+    ------
+    GainFileError
+        The file cannot be read, is not YAML, or the record is not a mapping.
+    """
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())

@@ -11,36 +11,20 @@ place, the margin and the first violation.  :func:`retime` gives a trajectory al
 same path whose timing satisfies the limits: the time-optimal parameterization ``s(t)``
 along the arc length under the limits and under the planner's own speed at each place
 (it never drives faster than the plan, it only slows down where the plan is too fast for
-the base).  The method is TOPP-RA (Pham and Pham, "A new approach to time-optimal path
-parameterization based on reachability analysis", IEEE T-RO 2018): on a grid
-``s_0 .. s_N`` with ``x = s'^2`` and ``u = s''`` constant per interval
-(``x_{i+1} = x_i + 2 ds u_i``), every limit is linear in ``(x, u)``:
-
-* speed: ``x <= v_max^2``, and ``x <= v_plan(s)^2``;
-* turn rate ``w = kappa s'``: ``x <= (w_max / kappa)^2``;
-* linear acceleration: ``|u| <= a_max``;
-* angular acceleration ``w' = kappa' x + kappa u``: ``|kappa' x + kappa u| <= alpha_max``.
-
-A backward pass computes the controllable sets ``K_i = [lo_i, hi_i]`` of ``x`` (from
-``K_N = {0}``: the trajectory ends at rest) by two 2-variable linear programs per grid
-point (their optimum is a vertex: all pairs of constraints are tried, vectorised); a
-forward pass then takes the largest admissible ``u`` from rest.  The angular-acceleration
-row bounds ``dw/dt``, so the commanded turn rate is continuous: at a curvature jump of a
-line-arc path (``kappa'`` infinite) the path is only passable at rest, which is why
-waypoint files are interpolated by a C2 spline first (continuous curvature between the
-waypoints, :mod:`control.trajectory`) and re-timed here.  The result is sampled every
-``knot_step`` seconds into the quintic Hermite form (position, velocity and acceleration
-at each knot: :func:`control.trajectory.from_states`).
-
-Why not the ``toppra`` package: it builds Cython extensions and wants a joint-space
-spline; the planar base has two path coordinates and six linear rows per grid point, which
-this module solves exactly with numpy in well under a second for a lap.
+the base).  The method is TOPP-RA (Pham and Pham, IEEE T-RO 2018): with ``x = s'^2`` and
+``u = s''`` on an arc-length grid every limit is linear in ``(x, u)``; a backward pass
+computes the controllable sets of ``x``, a forward pass takes the largest admissible
+``u``, and the result is sampled into the quintic Hermite form
+(:func:`control.trajectory.from_states`).  The rows, the passes and why not the
+``toppra`` package are in the documentation: doc/theory.md, section "Re-timing within
+limits" (#topp-ra).
 """
 from __future__ import annotations
 
 import functools
 import math
 from dataclasses import dataclass, field
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -92,7 +76,7 @@ class Limits:
     max_angular_accel: float = 0.0
     min_turning_radius: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in LIMIT_NAMES:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or \
@@ -101,12 +85,32 @@ class Limits:
                                       f'({_UNITS[name]}; 0 = none), got {v!r}')
 
     @classmethod
-    def from_values(cls, values: dict) -> 'Limits':
-        """The limits among a parameter dict (missing names: 0)."""
+    def from_values(cls, values: Mapping[str, Any]) -> 'Limits':
+        """The limits among a parameter dict (missing names: 0).
+
+        Parameters
+        ----------
+        values : mapping
+            Parameters by name (e.g. the tracker's); the names of :data:`LIMIT_NAMES` are read.
+
+        Returns
+        -------
+        Limits
+        """
         return cls(**{n: float(values.get(n, 0.0) or 0.0) for n in LIMIT_NAMES})
 
     def scaled(self, factor: float) -> 'Limits':
-        """Rate limits times ``factor`` (headroom for the feedback); the radius unchanged."""
+        """Rate limits times ``factor`` (headroom for the feedback); the radius unchanged.
+
+        Parameters
+        ----------
+        factor : float
+            Scale of the speed and acceleration limits.
+
+        Returns
+        -------
+        Limits
+        """
         return Limits(self.max_linear_speed * factor, self.max_linear_accel * factor,
                       self.max_angular_speed * factor, self.max_angular_accel * factor,
                       self.min_turning_radius)
@@ -280,6 +284,20 @@ def refuse_tight_turns(traj: Trajectory, limits: Limits, *, step: float = 1e-3) 
     """Raise :class:`TrajectoryError` if the path turns tighter than ``min_turning_radius``.
 
     No timing fixes a curvature: the message names the place, the time and the curvature.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A bounded trajectory.
+    limits : Limits
+        The robot's limits (``min_turning_radius`` 0: nothing to refuse).
+    step : float
+        Sampling step of the check (s).
+
+    Raises
+    ------
+    TrajectoryError
+        If the path's curvature exceeds ``1 / min_turning_radius`` somewhere.
     """
     if limits.min_turning_radius <= 0:
         return
@@ -355,7 +373,8 @@ def _vertices_max_min(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(xs.max()), float(xs.min())
 
 
-def _rows(lim: Limits, kappa: float, dkappa: float, xmax: float) -> tuple[list, list]:
+def _rows(lim: Limits, kappa: float, dkappa: float, xmax: float
+          ) -> tuple[list[list[float]], list[float]]:
     """Constraint rows ``A [x, u] <= b`` of one grid point (x = s'^2, u = s'')."""
     A = [[1.0, 0.0], [-1.0, 0.0]]
     b = [xmax, 0.0]
@@ -413,38 +432,92 @@ def retime(traj: Trajectory, limits: Limits, *, ds: float = 0.002, knot_step: fl
 
 def _topp(traj: Trajectory, limits: Limits, *, ds: float, knot_step: float, step: float,
           smooth: int) -> tuple[Trajectory, float, list[tuple[float, float]]]:
-    """One TOPP-RA pass: the re-timed trajectory, its duration and the slowed spans."""
-    p = _profile(traj, step)
-    # arc length along the original timing
-    s_t = np.concatenate([[0.0], np.cumsum(0.5 * (p.speed[1:] + p.speed[:-1]) * np.diff(p.t))])
-    L = float(s_t[-1])
-    if L <= 0:
-        raise TrajectoryError(f'{traj.source}: the trajectory does not move; nothing to time')
-    n = max(int(math.ceil(L / ds)), 20)
-    sg = np.linspace(0.0, L, n + 1)
-    h = L / n
-    # original time at each grid place (first time there: stops keep their place)
-    keep = np.concatenate([[True], np.diff(s_t) > 0])
-    t_of_s = np.interp(sg, s_t[keep], p.t[keep])
-    g = traj.evaluate(t_of_s)
-    vplan = np.hypot(g.vx, g.vy)
-    mv = vplan > MOVING_SPEED
-    sv = np.where(mv, vplan, 1.0)
-    kappa = np.where(mv, (g.vx * g.ay - g.vy * g.ax) / sv ** 3, 0.0)
-    # curvature on the grid between stops; interpolated over near-rest samples
-    if mv.any():
-        kappa = np.interp(sg, sg[mv], kappa[mv])
-    dkappa = np.gradient(kappa, sg)
-    xmax = vplan ** 2
-    if limits.max_linear_speed > 0:
-        xmax = np.minimum(xmax, limits.max_linear_speed ** 2)
-    if limits.max_angular_speed > 0:
-        with np.errstate(divide='ignore'):
-            xmax = np.minimum(xmax, np.where(np.abs(kappa) > 0,
-                                             (limits.max_angular_speed / np.abs(kappa)) ** 2,
-                                             np.inf))
-    # backward pass: controllable sets (the end at most as fast as planned: at rest for a
-    # trajectory that ends at rest)
+    """One TOPP-RA pass: the re-timed trajectory, its duration and the slowed spans.
+
+    The path on an arc-length grid (:class:`_PathGrid`), the controllable sets of the
+    squared speed (backward pass, :func:`_controllable`), the greedy forward pass
+    (:func:`_forward`), the new timing as a map of the original time
+    (:func:`_retimed`) and the spans slowed (:func:`_slowed_spans`).
+    """
+    path = _PathGrid.of(traj, limits, _profile(traj, step), ds)
+    lo, hi = _controllable(limits, path)
+    xs = _forward(limits, path, lo, hi, smooth)
+    sd = np.sqrt(xs)
+    h = path.h
+    dt = np.where(sd[1:] + sd[:-1] > 0, 2 * h / np.maximum(sd[1:] + sd[:-1], 1e-300), 0.0)
+    if not np.all(np.isfinite(dt)) or np.any((sd[1:] + sd[:-1]) <= 0):
+        raise TrajectoryError(f'{traj.source}: the path cannot be timed within the limits '
+                              '(it would have to stop inside); check the limits')
+    tg = traj.t_start + np.concatenate([[0.0], np.cumsum(dt)])
+    T = float(tg[-1] - tg[0])
+    new = _retimed(traj, path, tg, T, knot_step)
+    return new, T, _slowed_spans((path.vplan > 1.01 * sd) & path.mv, tg)
+
+
+@dataclass(frozen=True)
+class _PathGrid:
+    """The path on ``n + 1`` places of arc length ``sg`` (step ``h``) for TOPP-RA.
+
+    ``s_t``: arc length at the profile's times ``t`` (``keep``: the first time at each
+    place: stops keep their place); ``vplan`` the planned speed, ``mv`` where it moves,
+    ``kappa``/``dkappa`` the curvature and its derivative in arc length, ``xmax`` the
+    largest squared speed the speed limits allow.
+    """
+
+    n: int
+    h: float
+    sg: np.ndarray
+    s_t: np.ndarray
+    t: np.ndarray
+    keep: np.ndarray
+    vplan: np.ndarray
+    mv: np.ndarray
+    kappa: np.ndarray
+    dkappa: np.ndarray
+    xmax: np.ndarray
+
+    @classmethod
+    def of(cls, traj: Trajectory, limits: Limits, p: _Profile, ds: float) -> _PathGrid:
+        """The grid of ``traj`` (profile ``p``: its samples) at spacing about ``ds``."""
+        # arc length along the original timing
+        s_t = np.concatenate([[0.0],
+                              np.cumsum(0.5 * (p.speed[1:] + p.speed[:-1]) * np.diff(p.t))])
+        L = float(s_t[-1])
+        if L <= 0:
+            raise TrajectoryError(f'{traj.source}: the trajectory does not move; nothing to '
+                                  'time')
+        n = max(int(math.ceil(L / ds)), 20)
+        sg = np.linspace(0.0, L, n + 1)
+        h = L / n
+        # original time at each grid place (first time there: stops keep their place)
+        keep = np.concatenate([[True], np.diff(s_t) > 0])
+        t_of_s = np.interp(sg, s_t[keep], p.t[keep])
+        g = traj.evaluate(t_of_s)
+        vplan = np.hypot(g.vx, g.vy)
+        mv = vplan > MOVING_SPEED
+        sv = np.where(mv, vplan, 1.0)
+        kappa = np.where(mv, (g.vx * g.ay - g.vy * g.ax) / sv ** 3, 0.0)
+        # curvature on the grid between stops; interpolated over near-rest samples
+        if mv.any():
+            kappa = np.interp(sg, sg[mv], kappa[mv])
+        dkappa = np.gradient(kappa, sg)
+        xmax = vplan ** 2
+        if limits.max_linear_speed > 0:
+            xmax = np.minimum(xmax, limits.max_linear_speed ** 2)
+        if limits.max_angular_speed > 0:
+            with np.errstate(divide='ignore'):
+                xmax = np.minimum(xmax, np.where(np.abs(kappa) > 0,
+                                                 (limits.max_angular_speed / np.abs(kappa)) ** 2,
+                                                 np.inf))
+        return cls(n, h, sg, s_t, p.t, keep, vplan, mv, kappa, dkappa, xmax)
+
+
+def _controllable(limits: Limits, path: _PathGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Backward pass: the controllable sets ``[lo, hi]`` of the squared speed per place.
+
+    The end at most as fast as planned: at rest for a trajectory that ends at rest.
+    """
+    n, h, kappa, dkappa, xmax = path.n, path.h, path.kappa, path.dkappa, path.xmax
     lo = np.zeros(n + 1)
     hi = np.zeros(n + 1)
     hi[n] = xmax[n]
@@ -456,10 +529,22 @@ def _topp(traj: Trajectory, limits: Limits, *, ds: float, knot_step: float, step
         if math.isnan(top):                  # empty by round-off: the slowest admissible
             top = bot = 0.0
         hi[i], lo[i] = max(top, 0.0), max(bot, 0.0)
-    # forward pass: greedy largest u
+    return lo, hi
+
+
+def _forward(limits: Limits, path: _PathGrid, lo: np.ndarray, hi: np.ndarray, smooth: int
+             ) -> np.ndarray:
+    """Forward pass: the squared speed at each place, the largest admissible ``u``.
+
+    TOPP-RA chatters where a second-order row (the angular acceleration) is active: u
+    alternates between its bounds from one grid step to the next while x stays on the
+    boundary.  A moving average of x over ``smooth`` grid steps (linear rows: the average
+    of admissible (x, u) pairs is admissible where the coefficients vary slowly), kept
+    below the controllable bound, removes it.
+    """
+    n, h, kappa, dkappa = path.n, path.h, path.kappa, path.dkappa
     xs = np.zeros(n + 1)
-    xs[0] = min(xmax[0], hi[0])            # the start as planned (within the limits)
-    us = np.zeros(n)
+    xs[0] = min(path.xmax[0], hi[0])       # the start as planned (within the limits)
     for i in range(n):
         x = xs[i]
         u_hi = (hi[i + 1] - x) / (2 * h)
@@ -474,34 +559,29 @@ def _topp(traj: Trajectory, limits: Limits, *, ds: float, knot_step: float, step
             u_lo = max(u_lo, min(a, c))
         u = u_hi if u_hi >= u_lo else u_lo
         xs[i + 1] = max(x + 2 * h * u, 0.0)
-        us[i] = (xs[i + 1] - x) / (2 * h)
-    # TOPP-RA chatters where a second-order row (the angular acceleration) is active:
-    # u alternates between its bounds from one grid step to the next while x stays on
-    # the boundary.  A moving average of x over `smooth` grid steps (linear rows: the
-    # average of admissible (x, u) pairs is admissible where the coefficients vary
-    # slowly), kept below the controllable bound, removes it.
     if smooth > 1:
         kern = np.ones(smooth) / smooth
         pad = np.pad(xs, smooth, mode='edge')
         ends = xs[0], xs[-1]
         xs = np.minimum(np.convolve(pad, kern, mode='same')[smooth:-smooth], hi)
         xs[0], xs[-1] = ends
-        us = np.diff(xs) / (2 * h)
-    sd = np.sqrt(xs)
-    dt = np.where(sd[1:] + sd[:-1] > 0, 2 * h / np.maximum(sd[1:] + sd[:-1], 1e-300), 0.0)
-    if not np.all(np.isfinite(dt)) or np.any((sd[1:] + sd[:-1]) <= 0):
-        raise TrajectoryError(f'{traj.source}: the path cannot be timed within the limits '
-                              '(it would have to stop inside); check the limits')
-    tg = traj.t_start + np.concatenate([[0.0], np.cumsum(dt)])
-    T = float(tg[-1] - tg[0])
+    return xs
+
+
+def _retimed(traj: Trajectory, path: _PathGrid, tg: np.ndarray, T: float, knot_step: float
+             ) -> Trajectory:
+    """The trajectory re-timed to reach the grid places at the times ``tg``.
+
+    The new timing as a C2 map sigma(t) of the original time (sigma = t_of_s(s(t))): the
+    re-timed trajectory is q(sigma(t)) with the original q, so its position, velocity
+    q' sigma' and acceleration q'' sigma'^2 + q' sigma'' are consistent to round-off (a
+    switch of the bang-bang s'' is smoothed over a few grid steps by the spline).
+    """
+    from scipy.interpolate import CubicSpline
     m = max(int(math.ceil(T / knot_step)), 2)
     tk = np.linspace(tg[0], tg[-1], m + 1)
-    # the new timing as a C2 map sigma(t) of the original time (sigma = t_of_s(s(t))): the
-    # re-timed trajectory is q(sigma(t)) with the original q, so its position, velocity
-    # q' sigma' and acceleration q'' sigma'^2 + q' sigma'' are consistent to round-off
-    # (a switch of the bang-bang s'' is smoothed over a few grid steps by the spline)
-    from scipy.interpolate import CubicSpline
-    sig = np.interp(sg, s_t[keep], p.t[keep])       # on the dense samples: on the path
+    keep = path.keep
+    sig = np.interp(path.sg, path.s_t[keep], path.t[keep])   # on the dense samples: on the path
     sig[0], sig[-1] = traj.t_start, traj.t_end
     ok = np.concatenate([[True], np.diff(tg) > 1e-12])
     smap = CubicSpline(tg[ok], sig[ok])
@@ -510,13 +590,15 @@ def _topp(traj: Trajectory, limits: Limits, *, ds: float, knot_step: float, step
     vx, vy = gk.vx * sdk, gk.vy * sdk
     ax = gk.ax * sdk ** 2 + gk.vx * sddk
     ay = gk.ay * sdk ** 2 + gk.vy * sddk
-    new = from_states(tk, gk.x, gk.y, vx, vy, ax, ay, yaw=gk.heading,
-                      source=f'{traj.source} (re-timed)')
-    # spans of the new time where the plan was more than 1 % faster
-    slow = (vplan > 1.01 * sd) & mv
+    return from_states(tk, gk.x, gk.y, vx, vy, ax, ay, yaw=gk.heading,
+                       source=f'{traj.source} (re-timed)')
+
+
+def _slowed_spans(slow: np.ndarray, tg: np.ndarray) -> list[tuple[float, float]]:
+    """Spans of the new time ``tg`` where ``slow`` holds (the plan was > 1 % faster)."""
     spans: list[tuple[float, float]] = []
     start = None
-    for i in range(n + 1):
+    for i in range(slow.size):
         if slow[i] and start is None:
             start = tg[i]
         elif not slow[i] and start is not None:
@@ -524,7 +606,7 @@ def _topp(traj: Trajectory, limits: Limits, *, ds: float, knot_step: float, step
             start = None
     if start is not None:
         spans.append((float(start), float(tg[-1])))
-    return new, T, spans
+    return spans
 
 
 def within_limits(traj: Trajectory, limits: Limits) -> tuple[Trajectory, str]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import NamedTuple, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -40,12 +40,36 @@ __all__ = ['LoopConfigError', 'PlantConfig', 'UnicyclePlant', 'TrackerConfig', '
 
 
 def step_time_ns(k: int, dt: float) -> int:
-    """Stamp of step ``k`` in integer nanoseconds (``k * round(dt * 1e9)``)."""
+    """Stamp of step ``k`` in integer nanoseconds (``k * round(dt * 1e9)``).
+
+    Parameters
+    ----------
+    k : int
+        Step index.
+    dt : float
+        Step (s).
+
+    Returns
+    -------
+    int
+    """
     return k * int(round(dt * 1e9))
 
 
 def step_time(k: int, dt: float) -> float:
-    """Time of step ``k`` in seconds, computed exactly as a ROS node reads a stamp."""
+    """Time of step ``k`` in seconds, computed exactly as a ROS node reads a stamp.
+
+    Parameters
+    ----------
+    k : int
+        Step index.
+    dt : float
+        Step (s).
+
+    Returns
+    -------
+    float
+    """
     return step_time_ns(k, dt) * 1e-9
 
 
@@ -54,6 +78,18 @@ def delay_steps(tau: float, dt: float) -> tuple[int, float]:
 
     A delay that is not a multiple of the step is rounded to the nearest one; the
     caller reports ``N dt`` when it differs from ``tau``.
+
+    Parameters
+    ----------
+    tau : float
+        Delay (s), >= 0.
+    dt : float
+        Step (s).
+
+    Returns
+    -------
+    (int, float)
+        ``N`` and ``N dt`` (s).
     """
     if not (math.isfinite(tau) and tau >= 0):
         raise LoopConfigError(f'delay tau must be a finite number >= 0 s, got {tau!r}')
@@ -64,16 +100,37 @@ def delay_steps(tau: float, dt: float) -> tuple[int, float]:
 
 
 def yaw_to_quaternion(th: float) -> tuple[float, float, float, float]:
-    """Quaternion (x, y, z, w) of a rotation by ``th`` about z (REP-103)."""
+    """Quaternion (x, y, z, w) of a rotation by ``th`` about z (REP-103).
+
+    Parameters
+    ----------
+    th : float
+        Yaw (rad).
+
+    Returns
+    -------
+    (float, float, float, float)
+    """
     return (0.0, 0.0, math.sin(0.5 * th), math.cos(0.5 * th))
 
 
 def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
-    """Yaw (rotation about z) of a quaternion; valid for any non-zero norm."""
+    """Yaw (rotation about z) of a quaternion; valid for any non-zero norm.
+
+    Parameters
+    ----------
+    qx, qy, qz, qw : float
+        The quaternion.
+
+    Returns
+    -------
+    float
+        Yaw (rad) in ``[-pi, pi]``.
+    """
     return math.atan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
 
 
-def _nonneg(name: str, value) -> float:
+def _nonneg(name: str, value: Any) -> float:
     return as_finite_float(value, name, low=0.0, error=LoopConfigError)
 
 
@@ -82,6 +139,23 @@ def odometry_period_steps(rate: float, dt: float) -> tuple[int, float]:
 
     ``rate = 0`` means every step.  A rate above the plant rate ``1/dt`` is refused;
     one that does not divide it is rounded (the caller reports the effective rate).
+
+    Parameters
+    ----------
+    rate : float
+        Odometry rate (Hz; 0: every step).
+    dt : float
+        Plant step (s).
+
+    Returns
+    -------
+    (int, float)
+        ``N`` and the effective rate (Hz).
+
+    Raises
+    ------
+    LoopConfigError
+        If ``rate`` is above ``1 / dt``.
     """
     rate = _nonneg('odom_rate', rate)
     if rate == 0.0:
@@ -93,7 +167,7 @@ def odometry_period_steps(rate: float, dt: float) -> tuple[int, float]:
     return n, 1.0 / (n * dt)
 
 
-def _latency_schedule(value, dt: float) -> tuple:
+def _latency_schedule(value: Any, dt: float) -> tuple[float, ...]:
     """Validated flat ``(t_1, L_1, t_2, L_2, ...)``: times increasing >= 0, latencies >= 0."""
     if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
         raise LoopConfigError('cmd_latency_schedule must be a flat list [t_1, L_1, t_2, L_2, '
@@ -146,7 +220,7 @@ class PlantConfig:
 
     dt: float = 0.01
     tau: float = 0.0
-    A_tau: tuple = ((0.0,) * 4,) * 4
+    A_tau: tuple[tuple[float, ...], ...] = ((0.0,) * 4,) * 4
     x0: float = 0.0
     y0: float = 0.0
     th0: float = 0.0
@@ -158,13 +232,13 @@ class PlantConfig:
     max_angular_accel: float = 0.0
     odom_latency: float = 0.0
     odom_rate: float = 0.0
-    odom_noise: tuple = (0.0, 0.0, 0.0)
+    odom_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     noise_seed: int = 0
-    cmd_latency_schedule: tuple = ()
+    cmd_latency_schedule: tuple[float, ...] = ()
     cmd_latency_jitter: float = 0.0
-    stalls: tuple = ()
+    stalls: tuple[tuple[float, float], ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
             self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
         delay_steps(self.tau, self.dt)
@@ -234,7 +308,7 @@ class PlantConfig:
                              self.odom_noise, int(self.noise_seed))
 
 
-def _stalls(value) -> tuple[tuple[float, float], ...]:
+def _stalls(value: Any) -> tuple[tuple[float, float], ...]:
     try:
         rows = [tuple(float(x) for x in row) for row in value]
     except (TypeError, ValueError):
@@ -270,6 +344,13 @@ class UnicyclePlant:
     """
 
     def __init__(self, config: PlantConfig):
+        """Plant at step 0 in the initial state of ``config``.
+
+        Parameters
+        ----------
+        config : PlantConfig
+            Step, delay term, initial state, latencies, actuator and odometry settings.
+        """
         self.config = config
         self.N = config.delay_steps
         # nonzero entries of A_tau per row: the delay term costs only what it uses
@@ -294,8 +375,9 @@ class UnicyclePlant:
         self.v = float(c.v0)            # speed in force (last applied command)
         self.w = 0.0
         xi0 = xi_from_state(self.x, self.y, self.th, self.v)
-        self._hist: deque = deque([xi0] * (self.N + 1), maxlen=self.N + 1)
-        self._queue: deque = deque()    # (first step it acts, v, w)
+        self._hist: deque[tuple[float, float, float, float]] = deque([xi0] * (self.N + 1),
+                                                                    maxlen=self.N + 1)
+        self._queue: deque[tuple[int, float, float]] = deque()    # (first step it acts, v, w)
         self.cmd = (self.v, 0.0)        # command in force
         self.cmd_delay = c.cmd_latency_steps
         self._next_change = 0           # index of the next schedule entry
@@ -314,7 +396,18 @@ class UnicyclePlant:
         return step_time(self.k, self.config.dt)
 
     def xi(self, v: float | None = None) -> tuple[float, float, float, float]:
-        """Linearized state at the current step with speed ``v`` (default: in force)."""
+        """Linearized state at the current step with speed ``v`` (default: in force).
+
+        Parameters
+        ----------
+        v : float, optional
+            Speed (m/s) to use instead of the speed in force.
+
+        Returns
+        -------
+        (float, float, float, float)
+            ``xi = [x, v cos th + ox, y, v sin th + oy]``.
+        """
         v = self.v if v is None else v
         c, s = math.cos(self.th), math.sin(self.th)
         return (self.x, v * c + self.ox, self.y, v * s + self.oy)
@@ -326,6 +419,11 @@ class UnicyclePlant:
         that would act no earlier than this one are replaced by it.
         (With ``cmd_latency_jitter``, from a drawn step; :attr:`last_act_step` is the step
         the newest command acts from.)
+
+        Parameters
+        ----------
+        v, w : float
+            Commanded speed (m/s) and yaw rate (rad/s).
         """
         if self._schedule:
             sch = self._schedule
@@ -355,7 +453,13 @@ class UnicyclePlant:
         return self.odometer.due(self.k)
 
     def step(self, v: float, w: float) -> None:
-        """Receive ``(v, w)`` and advance one step ``dt``: ``k -> k + 1``."""
+        """Receive ``(v, w)`` and advance one step ``dt``: ``k -> k + 1``.
+
+        Parameters
+        ----------
+        v, w : float
+            Commanded speed (m/s) and yaw rate (rad/s).
+        """
         self.command(v, w)
         self.advance()
 
@@ -411,12 +515,32 @@ def _toward(cmd: float, prev: float, step: float) -> float:
     return cmd
 
 
-def validate_gain(K, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
-                  A=None, B=None) -> np.ndarray:
+def validate_gain(K: Any, *, name: str = 'K', shape: tuple[int, int] = (2, 4),
+                  A: Any = None, B: Any = None) -> np.ndarray:
     """The one gain check used everywhere: shape, finiteness, Hurwitz nominal loop.
 
-    ``A, B`` default to the paper's double integrators (eq. 4).  Returns ``K`` as a
-    float array; raises :class:`LoopConfigError` saying what is wrong and what to do.
+    ``A, B`` default to the paper's double integrators (eq. 4).
+
+    Parameters
+    ----------
+    K : array_like
+        The gain (nested or flat row-major).
+    name : str
+        What the gain is called in the messages.
+    shape : (int, int)
+        Its shape ``(m, n)``.
+    A, B : array_like, optional
+        The linear model whose nominal loop ``A + B K`` must be Hurwitz.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``K`` as a float array of ``shape``.
+
+    Raises
+    ------
+    LoopConfigError
+        Saying what is wrong and what to do.
     """
     try:
         arr = np.array(K, dtype=float)
@@ -456,14 +580,14 @@ class TrackerConfig:
     and its predictor models them (see :class:`Tracker`).
     """
 
-    K: tuple
+    K: tuple[tuple[float, ...], ...]
     dt: float = 0.01
     max_linear_speed: float = 1.0
     max_angular_speed: float = 2.0
     min_speed: float = 1e-3
-    perturbation: tuple | None = None
+    perturbation: tuple[tuple[float, ...], ...] | None = None
     delay_compensation: bool = False
-    A_tau: tuple | None = None
+    A_tau: tuple[tuple[float, ...], ...] | None = None
     tau: float = 0.0
     predict_latency: float = 0.0
     predict_odom_latency: float = 0.0
@@ -472,9 +596,9 @@ class TrackerConfig:
     max_linear_accel: float = 0.0
     max_angular_accel: float = 0.0
     #: The gain actually applied, ``K + E D F`` (set from ``K`` and ``perturbation``).
-    K_effective: tuple = field(init=False, repr=False, compare=False)
+    K_effective: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         K = validate_gain(self.K)
         object.__setattr__(self, 'K', tuple(tuple(float(v) for v in row) for row in K))
         if self.perturbation is not None:
@@ -523,8 +647,8 @@ class Command(NamedTuple):
     v: float                 # commanded linear speed (m/s), cmd_vel.linear.x
     w: float                 # commanded angular speed (rad/s), cmd_vel.angular.z
     a: float = 0.0           # acceleration of the compensator (m/s^2)
-    u: tuple = (0.0, 0.0)    # linear-model input
-    error: tuple = (0.0, 0.0, 0.0, 0.0)   # xi - xi_d
+    u: tuple[float, float] = (0.0, 0.0)    # linear-model input
+    error: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)   # xi - xi_d
     saturated: bool = False
     floored: bool = False
 
@@ -565,9 +689,16 @@ class Tracker:
     """
 
     def __init__(self, config: TrackerConfig):
+        """Tracker with its compensator not started (initialised from the first measured speed).
+
+        Parameters
+        ----------
+        config : TrackerConfig
+            Gain, perturbation, limits, delay compensation, predictor settings.
+        """
         self.config = config
         self.v: float | None = None
-        self._ref_hist: deque | None = None
+        self._ref_hist: deque[Any] | None = None
         if config.delay_compensation:
             n = delay_steps(config.tau, config.dt)[0]
             self._ref_hist = deque(maxlen=max(n, 1))
@@ -581,7 +712,14 @@ class Tracker:
         self._last_cmd: tuple[float, float] | None = None
 
     def reset(self, v: float | None = None) -> None:
-        """Forget the compensator state (re-initialised from the next measured speed)."""
+        """Forget the compensator state (re-initialised from the next measured speed).
+
+        Parameters
+        ----------
+        v : float, optional
+            Compensator speed (m/s) to start from at once (default: none, the next
+            measured speed).
+        """
         self.v = v
         self._last_cmd = None
         if self._ref_hist is not None:
@@ -595,6 +733,23 @@ class Tracker:
 
         The pose ``(x, y, th)`` is measured at ``stamp`` (s; default ``ref.t``); the
         reference sample may be of any time (the predictor extrapolates it).
+
+        Parameters
+        ----------
+        x, y : float
+            Measured position (m).
+        th : float
+            Measured heading (rad).
+        ref : RefSample
+            The reference sample.
+        measured_speed : float, optional
+            Measured speed (m/s): starts the compensator at the first step.
+        stamp : float, optional
+            Measurement time (s).
+
+        Returns
+        -------
+        Command
         """
         c = self.config
         if self.v is None:
@@ -680,7 +835,8 @@ class Tracker:
         self._last_cmd = (cv, cw)
         return cv, cw, limited
 
-    def _compensated_reference(self, ref: RefSample) -> tuple[tuple, tuple]:
+    def _compensated_reference(self, ref: RefSample) -> tuple[tuple[float, float, float, float],
+                                                             tuple[float, float]]:
         """Delay-consistent reference ``xi*`` and its feedforward input ``u*``.
 
         In the model, per axis ``p' = q + d_p`` and ``q' = u + d_q`` with
@@ -692,8 +848,9 @@ class Tracker:
         history is the first sample at rest).  Then ``e = xi - xi*`` obeys
         ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
         """
-        At = cast(tuple, self.config.A_tau)     # set whenever delay_compensation is
-        hist = cast(deque, self._ref_hist)      # bounded deque whenever delay_compensation is
+        # set whenever delay_compensation is
+        At = cast(tuple[tuple[float, ...], ...], self.config.A_tau)
+        hist = cast(deque[Any], self._ref_hist)      # bounded deque whenever delay_compensation is
         p_dot = (ref.vx, ref.vy)
         if not hist:
             first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))

@@ -73,7 +73,24 @@ def extrapolate_reference(ref: RefSample, t: float, jerk: tuple[float, float] = 
 
 
 def invert_lag(target: float, s: float, T: float, h: float) -> float:
-    """Command held for ``h`` that takes ``s' = (c - s)/T`` from ``s`` exactly to ``target``."""
+    """Command held for ``h`` that takes ``s' = (c - s)/T`` from ``s`` exactly to ``target``.
+
+    Parameters
+    ----------
+    target : float
+        State wanted at the end of the interval.
+    s : float
+        State at its start.
+    T : float
+        Time constant of the first-order actuator (s; 0: no lag, the target itself).
+    h : float
+        Length of the interval the command is held (s).
+
+    Returns
+    -------
+    float
+        The command.
+    """
     em1 = -math.expm1(-h / T)                    # 1 - e^{-h/T}
     return (target - s * (1.0 - em1)) / em1
 
@@ -110,13 +127,15 @@ class LatencyPredictor:
 
     def reset(self) -> None:
         """Forget the commands sent and the reference history (re-initialise on next call)."""
-        self._segs: deque = deque()              # (t_start, cv, cw), increasing t_start
+        # (t_start, cv, cw), increasing t_start
+        self._segs: deque[tuple[float, float, float]] = deque()
         self._anchor: tuple[float, float, float] | None = None   # (t, v, w) of the model
         self._ref_prev: RefSample | None = None
         self._ref_last: RefSample | None = None
 
     # ------------------------------------------------------------------ state
-    def _run(self, x, y, th, v, w, cv, cw, t0, t1, pose: bool):
+    def _run(self, x: float, y: float, th: float, v: float, w: float, cv: float, cw: float,
+             t0: float, t1: float, pose: bool) -> tuple[float, float, float, float, float]:
         """Hold ``(cv, cw)`` over ``[t0, t1]``: actuator (and pose if ``pose``)."""
         span = t1 - t0
         if span <= 0.0:
@@ -141,6 +160,21 @@ class LatencyPredictor:
         ``speed`` (the measured speed) initialises the model on the first call.
         A stamp slightly before the last is treated as the last one; a gap of more
         than ``max_gap`` either way restarts the model.
+
+        Parameters
+        ----------
+        x, y : float
+            Measured position (m).
+        th : float
+            Measured heading (rad).
+        stamp : float
+            Measurement time (s).
+        speed : float
+            Measured speed (m/s).
+
+        Returns
+        -------
+        Prediction
         """
         segs = self._segs
         if self._anchor is not None and abs(stamp - self._anchor[0]) > self.max_gap:
@@ -170,7 +204,15 @@ class LatencyPredictor:
         return Prediction(t_act, x, y, th, v, w)
 
     def record(self, t_act: float, cv: float, cw: float) -> None:
-        """The command just sent, acting from ``t_act`` until the next one acts."""
+        """The command just sent, acting from ``t_act`` until the next one acts.
+
+        Parameters
+        ----------
+        t_act : float
+            Time the command acts from (s).
+        cv, cw : float
+            Commanded speed (m/s) and yaw rate (rad/s).
+        """
         segs = self._segs
         if segs and t_act <= segs[-1][0]:
             segs[-1] = (segs[-1][0], cv, cw)     # same (or earlier) act time: replaces
@@ -179,7 +221,19 @@ class LatencyPredictor:
 
     # ------------------------------------------------------------------ reference
     def reference(self, ref: RefSample, t: float) -> RefSample:
-        """The reference at ``t`` extrapolated from ``ref`` (jerk from the previous sample)."""
+        """The reference at ``t`` extrapolated from ``ref`` (jerk from the previous sample).
+
+        Parameters
+        ----------
+        ref : RefSample
+            The reference sample at hand.
+        t : float
+            Time to extrapolate to (s, the time the command acts).
+
+        Returns
+        -------
+        RefSample
+        """
         last = self._ref_last
         if last is None or ref.t > last.t:
             self._ref_prev, self._ref_last = last, ref

@@ -22,9 +22,10 @@ settle, steady error over the cases that stay finite.  No ROS import.
 from __future__ import annotations
 
 import math
+import os
 from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, cast
 
 import numpy as np
 
@@ -55,7 +56,7 @@ def default_jobs() -> int:
     return default_workers()
 
 
-def _range(value, name: str, low: float = 0.0) -> tuple[float, float]:
+def _range(value: Any, name: str, low: float = 0.0) -> tuple[float, float]:
     try:
         lo, hi = (float(v) for v in value)
     except (TypeError, ValueError):
@@ -87,7 +88,7 @@ class StudySpec:
     tolerance: float = 0.01
     steady_from: float | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = self.cases
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise InputError(f'cases must be an integer >= 1, got {n!r}')
@@ -121,7 +122,7 @@ class StudyCases:
     th0: np.ndarray
 
 
-def sample_study_cases(spec: StudySpec, plant: PlantConfig, E, F) -> StudyCases:
+def sample_study_cases(spec: StudySpec, plant: PlantConfig, E: Any, F: Any) -> StudyCases:
     """Draw ``spec.cases`` cases around ``plant`` (seeded by ``spec.seed``).
 
     Parameters
@@ -165,10 +166,24 @@ def sample_study_cases(spec: StudySpec, plant: PlantConfig, E, F) -> StudyCases:
 
 
 def certified_limits(design: Mapping[str, Any] | None) -> dict[str, float]:
-    """Certified latency (s) without lag, and the lag and latency certified with it."""
+    """Certified latency (s) without lag, and the lag and latency certified with it.
+
+    Parameters
+    ----------
+    design : mapping or None
+        The gain file's design record (:func:`control.gains.read_gain_design`; ``None``:
+        nothing recorded).
+
+    Returns
+    -------
+    dict
+        ``latency`` (``certified_h_max``, else ``certified_latency``; 0 if absent), ``lag``
+        (``actuator_lag``), ``lag_latency`` (``lag_certified_h_max``) and ``recorded``
+        (whether the record names a certified latency).
+    """
     design = design or {}
 
-    def num(key):
+    def num(key: str) -> float | None:
         val = design.get(key)
         return float(val) if isinstance(val, (int, float)) and not isinstance(val, bool) \
             and math.isfinite(val) else None
@@ -183,7 +198,22 @@ def certified_limits(design: Mapping[str, Any] | None) -> dict[str, float]:
 
 def in_certified_region(cases: StudyCases, limits: Mapping[str, float],
                         odom_latency: float = 0.0) -> np.ndarray:
-    """Per case: ``||Delta|| <= 1`` and latency (and lag) within the certified limits."""
+    """Per case: ``||Delta|| <= 1`` and latency (and lag) within the certified limits.
+
+    Parameters
+    ----------
+    cases : StudyCases
+        The sampled cases.
+    limits : mapping of str to float
+        :func:`certified_limits` of the gain.
+    odom_latency : float
+        Odometry latency (s) added to each case's command latency (the loop's latency).
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        One entry per case.
+    """
     eps = 1e-12
     loop_latency = cases.latency + odom_latency
     no_lag = (cases.lag_v == 0) & (cases.lag_w == 0)
@@ -191,16 +221,17 @@ def in_certified_region(cases: StudyCases, limits: Mapping[str, float],
     if limits['lag'] > 0:
         lag_ok |= ((np.maximum(cases.lag_v, cases.lag_w) <= limits['lag'] + eps)
                    & (loop_latency <= limits['lag_latency'] + eps))
-    return (cases.delta_norm <= 1.0 + eps) & lag_ok
+    return cast(np.ndarray, (cases.delta_norm <= 1.0 + eps) & lag_ok)
 
 
-def _run_chunk(plant, tracker, path, steps, batch, tolerance, steady_from):
+def _run_chunk(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps: int,
+               batch: BatchCases, tolerance: float, steady_from: float | None) -> BatchRun:
     # statistics over many cases: the cheaper forms (``exact=False``) of simulate_batch
     return simulate_batch(plant, tracker, path, steps, batch, tolerance=tolerance,
                           steady_from=steady_from, exact=False)
 
 
-def _chunk_task(task):
+def _chunk_task(task: tuple[Any, ...]) -> BatchRun:
     return _run_chunk(*task)
 
 
@@ -212,7 +243,7 @@ class StudyResult:
     cases: StudyCases
     run: BatchRun
     inside: np.ndarray
-    limits: dict
+    limits: dict[str, float]
     jobs: int
 
 
@@ -232,7 +263,8 @@ def _concat(runs: list[BatchRun]) -> BatchRun:
                     finite=cat('finite'))
 
 
-def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path, E, F,
+def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path: Any, E: Any,
+              F: Any,
               design: Mapping[str, Any] | None = None, jobs: int | None = None, *,
               executor: str | Executor = 'local', scheduler: str | None = None
               ) -> StudyResult:
@@ -313,7 +345,10 @@ def _group(run: BatchRun, mask: np.ndarray) -> dict[str, Any]:
 
 def _case(result: StudyResult, i: int) -> dict[str, Any]:
     c, r = result.cases, result.run
-    num = lambda v: float(v) if math.isfinite(v) else None   # noqa: E731
+
+    def num(v: float) -> float | None:
+        return float(v) if math.isfinite(v) else None
+
     return {'index': int(i), 'delta_norm': float(c.delta_norm[i]),
             'latency': float(c.latency[i]), 'lag_v': float(c.lag_v[i]),
             'lag_w': float(c.lag_w[i]), 'x0': float(c.x0[i]), 'y0': float(c.y0[i]),
@@ -323,7 +358,17 @@ def _case(result: StudyResult, i: int) -> dict[str, Any]:
 
 
 def summarize(result: StudyResult) -> dict[str, Any]:
-    """JSON-ready summary: spec, certified limits, per-group distributions, worst cases."""
+    """JSON-ready summary: spec, certified limits, per-group distributions, worst cases.
+
+    Parameters
+    ----------
+    result : StudyResult
+        A study's result (:func:`run_study`).
+
+    Returns
+    -------
+    dict
+    """
     run = result.run
     allc = np.ones(run.n, dtype=bool)
     steady = np.where(np.isfinite(run.steady_error), run.steady_error, np.inf)
@@ -340,12 +385,30 @@ def summarize(result: StudyResult) -> dict[str, Any]:
 
 
 def case_records(result: StudyResult) -> list[dict[str, Any]]:
-    """One JSON-ready record per case (parameters and metrics)."""
+    """One JSON-ready record per case (parameters and metrics).
+
+    Parameters
+    ----------
+    result : StudyResult
+        A study's result (:func:`run_study`).
+
+    Returns
+    -------
+    list of dict
+    """
     return [_case(result, i) for i in range(result.run.n)]
 
 
-def plot_study(result: StudyResult, path) -> None:
-    """PNG of the distributions: settling time, steady error, error against latency."""
+def plot_study(result: StudyResult, path: str | os.PathLike[str]) -> None:
+    """PNG of the distributions: settling time, steady error, error against latency.
+
+    Parameters
+    ----------
+    result : StudyResult
+        A study's result (:func:`run_study`).
+    path : str or os.PathLike
+        The PNG file written.
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt

@@ -49,9 +49,10 @@ import bisect
 import csv
 import io
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path as FsPath
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -100,9 +101,27 @@ class Trajectory:
     :func:`from_poses` or :func:`load_waypoints`; do not call the constructor directly.
     """
 
-    def __init__(self, *, path: Path | None = None, pp=None, knots: np.ndarray | None = None,
-                 direction: np.ndarray | None = None, source: str = 'trajectory',
-                 kind: str = 'analytic'):
+    def __init__(self, *, path: Path | None = None, pp: Any = None,
+                 knots: np.ndarray | None = None, direction: np.ndarray | None = None,
+                 source: str = 'trajectory', kind: str = 'analytic'):
+        """Use the factories (:meth:`analytic`, :func:`from_waypoints`, ...), not this.
+
+        Parameters
+        ----------
+        path : Path, optional
+            The analytic path (``kind='analytic'``).
+        pp : scipy.interpolate.PPoly, optional
+            The piecewise polynomial of ``(x, y)`` (power basis, ``c`` of shape
+            ``(k + 1, segments, 2)``); with it ``knots`` and ``direction``.
+        knots : numpy.ndarray, optional
+            Its breakpoints (s).
+        direction : numpy.ndarray, optional
+            Per segment, +1 forwards or -1 backwards.
+        source : str
+            Where the trajectory came from (for messages).
+        kind : str
+            What built it (``analytic``, ``cubic spline``, ``quintic Hermite`` ...).
+        """
         self.path = path
         self.source = source
         self.kind = kind
@@ -129,7 +148,17 @@ class Trajectory:
     # ------------------------------------------------------------------ construction
     @classmethod
     def analytic(cls, path: Path) -> 'Trajectory':
-        """The trajectory of an analytic path; ``sample`` returns ``path.sample`` exactly."""
+        """The trajectory of an analytic path; ``sample`` returns ``path.sample`` exactly.
+
+        Parameters
+        ----------
+        path : Path
+            A :mod:`control.reference` path.
+
+        Returns
+        -------
+        Trajectory
+        """
         return cls(path=path, source=f'path {path.name}', kind='analytic')
 
     @property
@@ -172,6 +201,15 @@ class Trajectory:
 
         Outside ``[t_start, t_end]`` the first/last point at rest (zero velocity and
         acceleration, heading of the nearest motion).
+
+        Parameters
+        ----------
+        t : float
+            Trajectory time (s).
+
+        Returns
+        -------
+        RefSample
         """
         if self.path is not None:
             return self.path.sample(t)
@@ -198,7 +236,7 @@ class Trajectory:
     def _rest_headings(self) -> list[float]:
         cached = self.__dict__.get('_rh')
         if cached is not None:
-            return cached
+            return cast(list[float], cached)
         n = len(self._bp)
         # direction of travel just inside each knot interval, else the chord to the next
         # distinct point; carried forward/backward over stops
@@ -221,8 +259,18 @@ class Trajectory:
         self.__dict__['_rh'] = h
         return h
 
-    def evaluate(self, t) -> TrajectorySamples:
-        """Vectorised :meth:`sample` over an array of times (same values as ``sample``)."""
+    def evaluate(self, t: Any) -> TrajectorySamples:
+        """Vectorised :meth:`sample` over an array of times (same values as ``sample``).
+
+        Parameters
+        ----------
+        t : array_like
+            Trajectory times (s).
+
+        Returns
+        -------
+        TrajectorySamples
+        """
         tt = np.atleast_1d(np.asarray(t, dtype=float))
         if self.path is not None:
             rows = np.array([self.path.sample(float(s)) for s in tt]).reshape(-1, 8)
@@ -249,8 +297,18 @@ class Trajectory:
         return TrajectorySamples(tt, pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1], acc[:, 0],
                                  acc[:, 1], heading)
 
-    def poses(self, times=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(t, x, y, heading)`` at ``times`` (default: the knots) - e.g. for a nav_msgs/Path."""
+    def poses(self, times: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(t, x, y, heading)`` at ``times`` (default: the knots) - e.g. for a nav_msgs/Path.
+
+        Parameters
+        ----------
+        times : array_like, optional
+            Trajectory times (s).
+
+        Returns
+        -------
+        tuple of 4 numpy.ndarray
+        """
         if times is None:
             if self.path is not None:
                 raise TrajectoryError(f'{self.source}: an analytic path has no knots; '
@@ -268,7 +326,7 @@ class Trajectory:
 
 # ------------------------------------------------------------------------- validation
 
-def _array(name: str, values, n: int | None, source: str) -> np.ndarray:
+def _array(name: str, values: Any, n: int | None, source: str) -> np.ndarray:
     try:
         arr = np.asarray(values, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -297,7 +355,8 @@ def _check_times(t: np.ndarray, source: str) -> None:
                               'strictly')
 
 
-def _direction(vx, vy, yaw, speed, n) -> np.ndarray:
+def _direction(vx: np.ndarray, vy: np.ndarray, yaw: np.ndarray | None,
+               speed: np.ndarray | None, n: int) -> np.ndarray:
     d = np.ones(n)
     if speed is not None:
         d = np.where(speed < 0, -1.0, 1.0)
@@ -307,7 +366,8 @@ def _direction(vx, vy, yaw, speed, n) -> np.ndarray:
     return d
 
 
-def _direction_from_yaw_chord(t, x, y, yaw, speed) -> np.ndarray:
+def _direction_from_yaw_chord(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
+                              speed: np.ndarray | None) -> np.ndarray:
     n = t.size
     if speed is not None:
         return np.where(speed < 0, -1.0, 1.0)
@@ -323,8 +383,9 @@ def _direction_from_yaw_chord(t, x, y, yaw, speed) -> np.ndarray:
 
 # ------------------------------------------------------------------------- builders
 
-def from_waypoints(t, x, y, yaw=None, speed=None, *, ends: str = 'rest',
-                   smoothing: float = 0.0, source: str = 'waypoints') -> Trajectory:
+def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *,
+                   ends: str = 'rest', smoothing: float = 0.0,
+                   source: str = 'waypoints') -> Trajectory:
     """Twice-differentiable trajectory through timed waypoints.
 
     Parameters
@@ -410,14 +471,38 @@ def from_waypoints(t, x, y, yaw=None, speed=None, *, ends: str = 'rest',
     return Trajectory(pp=pp, knots=knots, direction=direction, source=source, kind=kind)
 
 
-def from_states(t, x, y, vx, vy, ax=None, ay=None, yaw=None, *,
-                source: str = 'trajectory') -> Trajectory:
+def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: Any = None,
+                yaw: Any = None, *, source: str = 'trajectory') -> Trajectory:
     """C2 trajectory matching given positions, velocities (and accelerations) at each time.
 
     The quintic Hermite interpolant (``BPoly.from_derivatives``) matches position,
     velocity and acceleration at every point (cubic Hermite if no accelerations are given,
     then only C1).  This is the form of trajectory_msgs/MultiDOFJointTrajectory and
     nav2_msgs/Trajectory points; velocities and accelerations are in the trajectory frame.
+
+    Parameters
+    ----------
+    t : array_like
+        Times (s), strictly increasing.
+    x, y : array_like
+        Positions (m).
+    vx, vy : array_like
+        Velocities (m/s).
+    ax, ay : array_like, optional
+        Accelerations (m/s^2); both or neither.
+    yaw : array_like, optional
+        Headings (rad): where the velocity points against it the robot drives backwards.
+    source : str
+        Where the points came from (for messages).
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    TrajectoryError
+        Non-finite values, mismatched lengths or times not increasing.
     """
     from scipy.interpolate import BPoly, PPoly
     t = _array('t', t, None, source)
@@ -462,6 +547,17 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
     knot is at or after ``horizon``.  :func:`from_states` on the returned samples (position,
     velocity, acceleration, heading: exact path values) reproduces the path to round-off.
 
+    Parameters
+    ----------
+    path : Path
+        The analytic path.
+    horizon : float
+        Length of time covered (s).
+    angle : float
+        Angle (rad) its fastest harmonic turns between two knots.
+    max_knots : int
+        Most knots given.
+
     Returns
     -------
     (numpy.ndarray, TrajectorySamples)
@@ -483,13 +579,29 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
     return t_ns, TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
 
 
-def time_law(x, y, cruise_speed: float, max_accel: float, *,
+def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
              source: str = 'path') -> np.ndarray:
     """Times for untimed points: trapezoidal speed profile along the polyline's arc length.
 
     Accelerates at ``max_accel`` from rest to ``cruise_speed``, cruises, and brakes to rest
     at the last point (a triangle if the path is too short to reach the cruise speed).
     Consecutive duplicate points must be removed first.
+
+    Parameters
+    ----------
+    x, y : array_like
+        The points (m).
+    cruise_speed : float
+        Speed between the ramps (m/s), > 0.
+    max_accel : float
+        Acceleration and braking (m/s^2), > 0.
+    source : str
+        Where the points came from (for messages).
+
+    Returns
+    -------
+    numpy.ndarray
+        Times (s) from 0.
     """
     for name, v in (('cruise_speed', cruise_speed), ('max_accel', max_accel)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -518,13 +630,35 @@ def time_law(x, y, cruise_speed: float, max_accel: float, *,
     return out
 
 
-def from_poses(t, x, y, yaw, *, cruise_speed: float | None = None,
+def from_poses(t: Any, x: Any, y: Any, yaw: Any, *, cruise_speed: float | None = None,
                max_accel: float | None = None, source: str = 'path') -> Trajectory:
     """Trajectory from the poses of a nav_msgs/Path (times from its stamps).
 
     ``t`` are the poses' stamps relative to the first (s).  If all stamps are zero the
     times come from :func:`time_law` with ``cruise_speed`` and ``max_accel`` (then
     consecutive duplicate points are dropped).  The yaw decides forward/backward.
+
+    Parameters
+    ----------
+    t : array_like
+        Stamps (s) relative to the first.
+    x, y : array_like
+        Positions (m).
+    yaw : array_like
+        Headings (rad).
+    cruise_speed, max_accel : float, optional
+        The time law's speed (m/s) and acceleration (m/s^2), for unstamped poses.
+    source : str
+        Where the poses came from (for messages).
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    TrajectoryError
+        Bad values, or unstamped poses without ``cruise_speed`` and ``max_accel``.
     """
     t = _array('stamp', t, None, source)
     n = t.size
@@ -549,7 +683,7 @@ def from_poses(t, x, y, yaw, *, cruise_speed: float | None = None,
 _COLUMNS = ('t', 'x', 'y', 'yaw', 'speed')
 
 
-def _rows_to_waypoints(rows: list[dict], source: str) -> Waypoints:
+def _rows_to_waypoints(rows: list[dict[str, Any]], source: str) -> Waypoints:
     if not rows:
         raise TrajectoryError(f'{source}: no waypoints')
     cols: dict[str, list[float]] = {}
@@ -581,12 +715,26 @@ def _rows_to_waypoints(rows: list[dict], source: str) -> Waypoints:
     return Waypoints(arr['t'], arr['x'], arr['y'], arr.get('yaw'), arr.get('speed'), source)
 
 
-def read_waypoint_file(path) -> Waypoints:
+def read_waypoint_file(path: str | os.PathLike[str]) -> Waypoints:
     """Read timed waypoints from CSV (header ``t,x,y[,yaw][,speed]``) or YAML.
 
     YAML: a list of mappings ``{t: .., x: .., y: ..}`` or a mapping with key
     ``waypoints`` holding that list (optional ``frame_id``, which must be ``odom``).
     Lines starting with ``#`` in CSV are comments.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file (``.csv``, ``.yaml`` or ``.yml``).
+
+    Returns
+    -------
+    Waypoints
+
+    Raises
+    ------
+    TrajectoryError
+        The file cannot be read or parsed, or a value is bad (the message names it).
     """
     p = FsPath(path)
     source = str(p)
@@ -631,27 +779,62 @@ def read_waypoint_file(path) -> Waypoints:
     raise TrajectoryError(f'{source}: unknown waypoint file type {suffix!r}; use .csv or .yaml')
 
 
-def load_waypoints(path, *, ends: str = 'rest', smoothing: float = 0.0) -> Trajectory:
-    """Read a waypoint file (:func:`read_waypoint_file`) and build its trajectory."""
+def load_waypoints(path: str | os.PathLike[str], *, ends: str = 'rest',
+                   smoothing: float = 0.0) -> Trajectory:
+    """Read a waypoint file (:func:`read_waypoint_file`) and build its trajectory.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    ends : {'rest', 'natural'}
+        End conditions of the spline (:func:`from_waypoints`).
+    smoothing : float
+        Smoothing weight (0: interpolate the points).
+
+    Returns
+    -------
+    Trajectory
+    """
     w = read_waypoint_file(path)
     return from_waypoints(w.t, w.x, w.y, yaw=w.yaw, speed=w.speed, ends=ends,
                           smoothing=smoothing, source=w.source)
 
 
 def check_frame(frame_id: str, expected: str, source: str) -> None:
-    """Raise :class:`TrajectoryError` unless ``frame_id == expected``."""
+    """Raise :class:`TrajectoryError` unless ``frame_id == expected``.
+
+    Parameters
+    ----------
+    frame_id : str
+        The frame the points are in.
+    expected : str
+        The frame they must be in.
+    source : str
+        Where they came from (for the message).
+    """
     if frame_id != expected:
         raise TrajectoryError(f'{source}: frame_id {frame_id!r}; the trajectory must be in the '
                               f'odometry frame {expected!r} (no tf here)')
 
 
-def describe(traj: Trajectory, samples: int = 2001) -> dict:
+def describe(traj: Trajectory, samples: int = 2001) -> dict[str, Any]:
     """Summary of a bounded trajectory: points, duration, peaks and direction.
 
-    Returns a dict with ``points``, ``kind``, ``t_start``, ``t_end``, ``duration`` (s),
-    ``length`` (m, path length), ``peak_speed`` (m/s), ``peak_accel`` (m/s^2),
-    ``peak_turn_rate`` (rad/s, heading rate while moving faster than 1 cm/s),
-    ``backwards`` (fraction of the time driven in reverse), start and end pose.
+    Parameters
+    ----------
+    traj : Trajectory
+        A bounded trajectory.
+    samples : int
+        Number of samples of the peaks.
+
+    Returns
+    -------
+    dict
+        ``points``, ``kind``, ``t_start``, ``t_end``, ``duration`` (s), ``length`` (m,
+        path length), ``peak_speed`` (m/s), ``peak_accel`` (m/s^2), ``peak_turn_rate``
+        (rad/s, heading rate while moving faster than 1 cm/s), ``backwards`` (fraction of
+        the time driven in reverse), start and end pose.
     """
     if traj.is_analytic:
         raise TrajectoryError(f'{traj.source}: analytic paths are unbounded; nothing to '
