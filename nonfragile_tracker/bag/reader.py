@@ -648,11 +648,12 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
     """The reference a lockstep tracker sampled from recorded trajectory messages.
 
     Each message is converted as the tracker converts it (:mod:`msgconv`) and sampled at
-    each odometry stamp as :class:`control.follow.Follower` samples it
-    (:func:`control.follow.reference_at`); a stamp uses the latest message received no
+    each odometry stamp as :class:`control.simulation.follow.Follower` samples it
+    (:func:`control.simulation.follow.reference_at`); a stamp uses the latest message received no
     later than its odometry (the first message before that); a trajectory first followed
-    late is re-based as the Follower re-bases it (:func:`control.follow.start_offset`, the
-    tracker's default ``start_tolerance``).  :class:`TrajectoryError` if a
+    late is re-based as the Follower re-bases it
+    (:func:`control.simulation.follow.start_offset`, the tracker's default
+    ``start_tolerance``).  :class:`TrajectoryError` if a
     message cannot be converted (e.g. an untimed Path, whose times depend on the
     tracker's parameters).
     """

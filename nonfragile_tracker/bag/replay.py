@@ -2,8 +2,8 @@
 
 The recorded odometry and reference (or trajectory) messages are fed to
 :class:`~nonfragile_tracker.tracker_inputs.TrackerInputs` - the tracker node's own input
-rules, ROS-free, around the same step functions (:class:`control.loop.Tracker`,
-:class:`control.follow.Follower`) - with the tracker's parameters (:func:`replay_rules`:
+rules, ROS-free, around the same step functions (:class:`control.simulation.loop.Tracker`,
+:class:`control.simulation.follow.Follower`) - with the tracker's parameters (:func:`replay_rules`:
 its ``odom_frame``, ``max_stamp_jump``, time law, start rule and limits):
 
 * lockstep bags (most odometry stamps equal a reference stamp): fed in stamp order (the

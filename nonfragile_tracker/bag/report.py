@@ -699,7 +699,7 @@ def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | No
     ----------
     bag : path-like
         The run's bag (commands and odometry with twist).
-    certificate : control.monitor.Certificate or None
+    certificate : control.identification.monitor.Certificate or None
         What the gain is certified for (None: estimates only, every window STALE).
     params : dict
         The tracker's parameters (``predict_latency``, limits, ``monitor_*``).
@@ -707,7 +707,7 @@ def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | No
         Where the certificate came from (printed).
     step : float
         Seconds between windows.
-    settings : control.monitor.MonitorSettings, optional
+    settings : control.identification.monitor.MonitorSettings, optional
         Default: from ``params`` as the tracker node builds them.
     """
     from ..control.identification.monitor import (ERROR, STALE, MonitorSettings, estimate_latency,

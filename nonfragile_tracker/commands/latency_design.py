@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     summary = res.summary()
     print(summary)
     meta = {**res.metadata(), **record}
-    # the certificate for the tracker's monitor (control.monitor; the hold is the tracker's dt)
+    # the certificate for the tracker's monitor (control.identification.monitor; the hold is
+    # the tracker's dt)
     cert = certificate_from_design(meta, hold=0.0)
     if cert is not None:
         extra = {**extra, **cert.parameters()}

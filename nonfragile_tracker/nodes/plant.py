@@ -21,7 +21,7 @@ no queue overflows under load), and announces ``run_done/odom_count`` before
 ``run_done``.  Real time: a wall timer steps at
 ``1/dt`` with the latest command (zero after ``cmd_timeout``).  The physics,
 including command latency, actuator lag, acceleration limits and odometry latency,
-rate and noise, is :class:`control.loop.UnicyclePlant`; an odometry message carries
+rate and noise, is :class:`control.simulation.loop.UnicyclePlant`; an odometry message carries
 the stamp of its measurement.
 """
 from __future__ import annotations

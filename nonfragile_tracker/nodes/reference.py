@@ -1,11 +1,12 @@
 """``reference``: publishes the desired trajectory, and per-step samples of it.
 
 A trajectory reaches the tracker as one (transient-local) trajectory message, and the
-tracker samples it itself at each odometry stamp (:class:`control.follow.Follower`):
+tracker samples it itself at each odometry stamp (:class:`control.simulation.follow.Follower`):
 
 * a built-in analytic path (``path``, default), in lockstep: as
   trajectory_msgs/MultiDOFJointTrajectory on ``trajectory_multidof`` - knots with pose,
-  velocity and acceleration over ``[0, horizon]`` (:func:`control.trajectory.analytic_knots`:
+  velocity and acceleration over ``[0, horizon]``
+  (:func:`control.simulation.trajectory.analytic_knots`:
   spaced so that the quintic Hermite interpolant the tracker rebuilds is the exact path to
   about 1e-14 m).  In real time the built-in path goes as the samples below (exact);
 * a waypoint file (``trajectory_file``, CSV or YAML: t, x, y[, yaw][, speed]), or
@@ -145,7 +146,9 @@ def reference_settings(values: dict[str, Any]) -> ReferenceSettings:
 
 
 class ReferenceNode(AdapterNode[ReferenceSettings]):
-    """ROS adapter around :class:`control.reference.Path` and :mod:`control.trajectory`.
+    """ROS adapter around the reference paths and trajectories.
+
+    :class:`control.simulation.reference.Path` and :mod:`control.simulation.trajectory`.
 
     Parameters
     ----------

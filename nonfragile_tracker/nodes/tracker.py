@@ -13,7 +13,8 @@ stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
 loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
 commands, trajectory state and end) every ``diagnostics_period`` s (stamp time in
 lockstep, which needs no clock: the tracker has no ``/clock`` subscription there).  The law is
-:class:`control.loop.Tracker`; the gain check is :func:`control.gains.gain_from_parameters`.
+:class:`control.simulation.loop.Tracker`; the gain check is
+:func:`control.simulation.gains.gain_from_parameters`.
 
 Lockstep: a command is computed once per odom stamp, from the trajectory sampled at that
 stamp (repeats are ignored; an odometry message that arrives before the first trajectory
@@ -23,20 +24,20 @@ a command waits until the three reference parts with the odom stamp have arrived
 so a plant with odometry latency pairs each measurement with the reference of its
 measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
 ``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
-the time the command acts (:mod:`control.predictor`; the tracker's *now* is the odom
+the time the command acts (:mod:`control.simulation.predictor`; the tracker's *now* is the odom
 stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
 With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
 unknown) each command differs from the previous by at most the limit times ``dt`` and the
-predictor models the limits (:class:`control.loop.Tracker`).  Real
+predictor models the limits (:class:`control.simulation.loop.Tracker`).  Real
 time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
 
-Trajectories (:mod:`control.trajectory`): a nav_msgs/Path on ``trajectory``
+Trajectories (:mod:`control.simulation.trajectory`): a nav_msgs/Path on ``trajectory``
 (transient-local; stamps give the times, all zero: a trapezoidal time law with
 ``cruise_speed``/``max_accel``) or a trajectory_msgs/MultiDOFJointTrajectory on
 ``trajectory_multidof`` is turned into a trajectory that the tracker samples itself at
-each odometry stamp (:class:`control.follow.Follower`): no reference samples are needed
+each odometry stamp (:class:`control.simulation.follow.Follower`): no reference samples are needed
 then.  Each new valid trajectory starts a new run; an invalid one is refused with the
 reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
 trajectory's end the robot is brought to rest and the tracker says so.  In lockstep the
@@ -171,7 +172,7 @@ PARAMS = [
           'reference is further than this (m) from the robot when it starts; 0 = no check', low=0.0,
           high=1e9, read_only=True),
 ]
-#: The certificate monitor's parameters (:mod:`control.monitor`; README "Certificate monitor").
+#: The certificate monitor's parameters (:mod:`control.identification.monitor`).
 MONITOR_PARAMS = [
     Param('monitor', True, 'estimate the command-to-motion latency and lags online (a worker '
           'thread) and report them against the gain\'s certificate on /diagnostics and '
@@ -284,7 +285,9 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
 
 
 class TrackerNode(AdapterNode[TrackerSettings]):
-    """ROS adapter around :class:`control.loop.Tracker` and :class:`control.follow.Follower`.
+    """ROS adapter around the tracking law and the trajectory follower.
+
+    :class:`control.simulation.loop.Tracker` and :class:`control.simulation.follow.Follower`.
 
     Its inputs go through the rules of :mod:`nonfragile_tracker.tracker_inputs`
     (:attr:`inputs`, which holds the law and the input state).
@@ -384,7 +387,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
 
     # ------------------------------------------------------------------ certificate monitor
     def _monitor_start(self) -> None:
-        """Start the certificate monitor's worker (:class:`control.monitor.MonitorWorker`)."""
+        """Start the monitor's worker (:class:`control.identification.monitor.MonitorWorker`)."""
         m = self.config.monitor
         self.monitor: MonitorWorker | None = None
         self._monitor_last_level = -1

@@ -1,9 +1,9 @@
 """Trajectory messages <-> the core's arrays (nav_msgs/Path, MultiDOFJointTrajectory).
 
-The core (:mod:`control.trajectory`) takes arrays; this module only reads and fills
+The core (:mod:`control.simulation.trajectory`) takes arrays; this module only reads and fills
 messages.  Times are kept in integer nanoseconds relative to an *origin* stamp, so the
 tracker samples at ``(odom stamp - origin) * 1e-9`` exactly as
-:func:`control.follow.simulate_following` does.
+:func:`control.simulation.follow.simulate_following` does.
 
 nav_msgs/Path: the poses' stamps are the times (absolute, the first one is the origin);
 when every pose stamp is zero the times come from a trapezoidal time law (cruise speed,
@@ -119,8 +119,8 @@ def states_to_multidof(t_ns: Sequence[int] | np.ndarray, samples: TrajectorySamp
     """trajectory_msgs/MultiDOFJointTrajectory of timed states (one joint, the planar base).
 
     ``t_ns``: integer nanoseconds after ``origin_ns`` (the header stamp); ``samples``: a
-    :class:`~control.trajectory.TrajectorySamples` (position, velocity, acceleration in
-    ``frame`` and heading) - e.g. :func:`control.trajectory.analytic_knots`.
+    :class:`~control.simulation.trajectory.TrajectorySamples` (position, velocity, acceleration in
+    ``frame`` and heading) - e.g. :func:`control.simulation.trajectory.analytic_knots`.
     :func:`multidof_to_trajectory` turns it back into the quintic Hermite trajectory.
 
     Parameters

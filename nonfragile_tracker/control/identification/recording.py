@@ -1,7 +1,7 @@
 """Synthetic recordings of a base: the commands sent and the odometry published, in process.
 
 What ``identify`` reads from a bag, produced by the plant's step functions
-(:class:`control.loop.UnicyclePlant`, so command latency and its jitter, actuator lags,
+(:class:`control.simulation.loop.UnicyclePlant`, so command latency and its jitter, actuator lags,
 acceleration limits, stalls and odometry rate, latency and noise are the plant's), for
 tests and benchmarks of the identification without a ROS run:
 
@@ -210,7 +210,7 @@ def joystick_steps(duration: float, *, period: float = 0.05, hold: tuple[float, 
 def load_cases(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """The recording cases of a YAML file (``config/identify_cases.yaml``), by name.
 
-    Each case has ``plant`` (:class:`~control.loop.PlantConfig` fields), ``drive``
+    Each case has ``plant`` (:class:`~control.simulation.loop.PlantConfig` fields), ``drive``
     (a tracker: ``gains`` - a gain file relative to the YAML file - ``dt``,
     ``max_angular_speed``, ``path``, ``radius``, ``rate``; or a joystick: ``period``,
     ``hold``, ``v_range``, ``w_range``) and ``title``.

@@ -15,8 +15,8 @@ and its mean over the interval, both in closed form (no sub-stepping): the mean 
 moves the robot, so heading and travelled distance over the step are exact.
 
 :func:`unicycle_arc` advances a pose with constant ``(v, w)`` along the exact arc.  The
-plant (:class:`control.loop.UnicyclePlant`) and the tracker's predictor
-(:class:`control.predictor.LatencyPredictor`) both use these functions, so a predictor
+plant (:class:`control.simulation.loop.UnicyclePlant`) and the tracker's predictor
+(:class:`control.simulation.predictor.LatencyPredictor`) both use these functions, so a predictor
 that knows the plant exactly predicts it to round-off.  Plain floats; no ROS.
 """
 from __future__ import annotations

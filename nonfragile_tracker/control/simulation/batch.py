@@ -1,7 +1,8 @@
 """Batch simulation: the tracking loop (and the linear delay loop) for N cases at once.
 
-:func:`simulate_batch` runs the lockstep sequence of :func:`control.simulate.run_loop`
-with :class:`control.loop.Tracker` and :class:`control.loop.UnicyclePlant` for ``N``
+:func:`simulate_batch` runs the lockstep sequence of :func:`control.simulation.simulate.run_loop`
+with :class:`control.simulation.loop.Tracker` and
+:class:`control.simulation.loop.UnicyclePlant` for ``N``
 cases in parallel, every quantity a numpy array over cases, with the operations of the
 scalar step functions in the same order (``exact=False`` allows a few cheaper forms of
 the same values: the yaw is not sent through a quaternion, the arc's sine and cosines
@@ -10,8 +11,8 @@ to step by angle addition and evaluated afresh every 16 steps, the metrics are t
 the squared error).  Each step is a fixed sequence of whole-array operations on
 preallocated buffers: at about 1,000 cases numpy's per-call overhead dominates, so
 throughput grows with ``N``; the loop runs in the calling process (the study splits large
-batches over processes, :func:`control.study.run_study`).  Case ``i`` of a batch equals
-:func:`control.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
+batches over processes, :func:`control.simulation.study.run_study`).  Case ``i`` of a batch equals
+:func:`control.simulation.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
 round-off (the test checks 1e-12; bit for bit with ``exact=True``, about 1e-14 without,
 away from rest).
 Per case (:class:`BatchCases`; any field left ``None`` takes the base configuration's
@@ -23,10 +24,10 @@ value):
   ``Delta``: random time-varying, see :func:`sample_deltas`);
 * command latency, actuator lag and acceleration limits of ``v`` and ``w``;
 * odometry latency, rate (the tracker's period is the odometry period) and noise
-  (the per-case seed draws the same sequence as :class:`control.sensors.Odometer`);
+  (the per-case seed draws the same sequence as :class:`control.simulation.sensors.Odometer`);
 * initial pose and speed;
 * the reference: a shared path (any object with ``sample(t) -> RefSample``, e.g. a
-  :class:`control.trajectory.Trajectory`, sampled once per step) or per-case
+  :class:`control.simulation.trajectory.Trajectory`, sampled once per step) or per-case
   parameters of the analytic circle / figure eight (:class:`PathBatch`).
 
 Shared by all cases: the plant step ``dt``, the state delay ``tau`` and ``A_tau``,
@@ -35,7 +36,7 @@ the tracker's speed limits and delay compensation.  Not vectorized (refused with
 
 Per-case metrics are accumulated while running (no ``N x steps`` arrays unless
 ``record=True``).  :func:`simulate_delay_loop_batch` is
-:func:`control.simulate.simulate_delay_loop` for ``N`` matrices ``A0`` at once.
+:func:`control.simulation.simulate.simulate_delay_loop` for ``N`` matrices ``A0`` at once.
 """
 from __future__ import annotations
 
@@ -63,7 +64,7 @@ _TAU = math.tau
 
 @dataclass(frozen=True)
 class PathBatch:
-    """Per-case parameters of an analytic path (:mod:`control.reference`).
+    """Per-case parameters of an analytic path (:mod:`control.simulation.reference`).
 
     ``kind`` is ``'circle'`` or ``'figure_eight'``; each parameter is a scalar or an
     array of ``N`` values (broadcast).
@@ -77,7 +78,7 @@ class PathBatch:
     phase: Any = 0.0
 
     def path(self, i: int) -> Path:
-        """The single-run :class:`control.reference.Path` of case ``i``.
+        """The single-run :class:`control.simulation.reference.Path` of case ``i``.
 
         Parameters
         ----------
@@ -182,7 +183,7 @@ class BatchCases:
         Returns
         -------
         tuple of (PlantConfig, TrackerConfig)
-            What :func:`control.simulate.simulate_tracking` runs for case ``i``.
+            What :func:`control.simulation.simulate.simulate_tracking` runs for case ``i``.
 
         Raises
         ------
@@ -258,7 +259,7 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     if not plant.regular:
         raise BatchError('the batch simulation does not model latency jitter, stalls or a '
                          'latency schedule (cmd_latency_jitter, stalls, cmd_latency_schedule); '
-                         'run those cases with control.simulate.run_loop')
+                         'run those cases with control.simulation.simulate.run_loop')
     vals = {}
     for name in _PER_CASE:
         given = getattr(cases, name)
@@ -451,7 +452,7 @@ def _wrap(x: np.ndarray) -> np.ndarray:
 def _first_order(s: np.ndarray, c: np.ndarray, T: np.ndarray, amax: np.ndarray,
                  em1: np.ndarray, has_lag: np.ndarray, has_lim: np.ndarray, h: float
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`control.actuator.first_order_step` element-wise: ``(end, mean)``."""
+    """:func:`control.simulation.actuator.first_order_step` element-wise: ``(end, mean)``."""
     d = c - s
     end = c.copy()
     mean = c.copy()
@@ -544,13 +545,13 @@ class _Reference:
 class BatchRun:
     """Per-case results of :func:`simulate_batch` (arrays of N; SI units).
 
-    Metrics follow :func:`control.metrics.tracking_metrics` on the position error
+    Metrics follow :func:`control.simulation.metrics.tracking_metrics` on the position error
     sampled at every step: ``settling_time`` (nan: not within ``tolerance`` at the end),
     ``first_within``, ``final_error``, ``rms_error``, ``steady_error`` (max error over
     ``t >= steady_from``), ``peak_abs_v``/``peak_abs_w`` (commands), ``finite`` (False if
     the state became non-finite).  With ``record=True``, ``trace`` holds ``(steps + 1, N)``
     arrays ``t, x, y, th, speed, xd, yd, cmd_v, cmd_w, commanded`` (rows as
-    :class:`control.simulate.TrackingRun`).
+    :class:`control.simulation.simulate.TrackingRun`).
     """
 
     steps: int
@@ -589,7 +590,8 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     path : Path-like or PathBatch
         Shared reference (``sample(t)``) or per-case analytic path parameters.
     steps : int
-        Plant steps (``steps + 1`` samples, as :func:`control.simulate.simulate_tracking`).
+        Plant steps (``steps + 1`` samples, as
+        :func:`control.simulation.simulate.simulate_tracking`).
     cases : BatchCases, optional
         Per-case settings (default: one case, the base configuration).
     tolerance : float
@@ -601,7 +603,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     exact : bool
         True (default): every transcendental function evaluated as the single run does
         (the yaw through a quaternion with libm's ``atan2`` element by element, the arc's
-        sine and cosines); a case equals :func:`control.simulate.simulate_tracking` bit
+        sine and cosines); a case equals :func:`control.simulation.simulate.simulate_tracking` bit
         for bit in every configuration tested.  False: cheaper forms of the same values
         (about 3 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
         for some arguments), for statistics over many cases; their
@@ -676,7 +678,8 @@ def _check_run(tracker: TrackerConfig, steps: Any, tolerance: Any) -> None:
         raise BatchError(f'tolerance must be a finite number > 0 m, got {tolerance!r}')
 
 
-#: The per-step arrays of ``BatchRun.trace`` (rows as :class:`control.simulate.TrackingRun`).
+#: The per-step arrays of ``BatchRun.trace`` (rows as
+#: :class:`control.simulation.simulate.TrackingRun`).
 _TRACE = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
 
 
@@ -696,7 +699,7 @@ def _loop(parts: _Parts, steps: int, trace: dict[str, np.ndarray] | None
           ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`simulate_batch`'s general loop; the last error row and which cases stayed finite.
 
-    Every step in the order of :func:`control.simulate.run_loop`: the odometry due, the
+    Every step in the order of :func:`control.simulation.simulate.run_loop`: the odometry due, the
     tracker's command (cases whose odometry is due), the command sent into the plant's
     command line, the log row and metrics, then the plant's advance with the command in
     force and the next measurement.
@@ -772,7 +775,7 @@ class _Schedule:
 
 
 class _Odometry:
-    """:class:`control.sensors.Odometer` for every case: rate, latency and noise.
+    """:class:`control.simulation.sensors.Odometer` for every case: rate, latency and noise.
 
     ``ideal``: every case measures the plant's own state at every step, without noise or
     latency (nothing is buffered).  Otherwise the measurements go into a ring of
@@ -848,7 +851,7 @@ class _Odometry:
 
 
 class _BatchTracker:
-    """:meth:`control.loop.Tracker.step` for every case, its operations in the same order.
+    """:meth:`control.simulation.loop.Tracker.step` for every case, in the same order.
 
     Holds the tracker's state (its speed ``tv``, started cases, the gain in force, the
     compensation history) and the buffers of one step; :meth:`command` computes the
@@ -969,7 +972,7 @@ class _BatchTracker:
 
 
 class _CommandLine:
-    """:meth:`control.loop.UnicyclePlant.command` for every case: the command in force.
+    """:meth:`control.simulation.loop.UnicyclePlant.command` for every case: the command in force.
 
     A command sent at step ``k`` acts from ``k + cmd_latency`` steps; until a case's first
     one arrives its plant holds ``(v0, 0)``.  ``queue`` (a command every step for every
@@ -1036,7 +1039,7 @@ class _CommandLine:
 
 
 class _Actuator:
-    """:func:`control.actuator.first_order_step` of ``v`` and ``w`` for every case."""
+    """:func:`control.simulation.actuator.first_order_step` of ``v`` and ``w`` for every case."""
 
     def __init__(self, s: _Settings, dt: float):
         self.dt = dt
@@ -1121,7 +1124,7 @@ class _PlantDelay:
 
 
 class _BatchPlant:
-    """:meth:`control.loop.UnicyclePlant.advance` for every case: pose, speed, delay term.
+    """:meth:`control.simulation.loop.UnicyclePlant.advance` for every case: pose, speed, delay.
 
     ``pos`` (2, N), ``th``, the speed and rate at the end of the last step ``pv``, ``pw``
     and the velocity offset ``off`` of the delay term.  Without ``exact`` the arc's sine
@@ -1551,7 +1554,7 @@ class _Metrics:
 def _compensated(buf: np.ndarray, count: np.ndarray, L: np.ndarray,
                  terms: list[list[tuple[int, float]]], qpos: Any, qvel: Any, qacc: Any,
                  due: Any, idx: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:meth:`control.loop.Tracker._compensated_reference` for every case that is due.
+    """:meth:`control.simulation.loop.Tracker._compensated_reference` for every case that is due.
 
     ``buf`` holds per case the last ``L`` pairs ``(xi*, xi*')`` (8 rows) in a ring
     indexed by the case's call ``count``; returns ``xi*`` as position and velocity
@@ -1691,7 +1694,9 @@ def _dot4(terms: list[tuple[int, float]], z: Any) -> Any:
 
 def simulate_delay_loop_batch(A0: Any, A1: Any, tau: float, xi0: Any, duration: float,
                               dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`control.simulate.simulate_delay_loop` for N loops at once (constant history).
+    """:func:`control.simulation.simulate.simulate_delay_loop` for N loops at once.
+
+    The history before time 0 is constant.
 
     Parameters
     ----------

@@ -2,7 +2,8 @@
 
 :class:`Follower` is the one step function of a tracker that samples its trajectory
 itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
-:class:`~control.trajectory.Trajectory` at ``t`` and calls :meth:`control.loop.Tracker.step`.
+:class:`~control.simulation.trajectory.Trajectory` at ``t`` and calls
+:meth:`control.simulation.loop.Tracker.step`.
 Before the trajectory's first time the robot waits at rest (zero command).  After
 the trajectory's last time the sample holds the end point at rest; once the
 commanded speed has fallen below ``rest_speed`` the follower commands zero and stays
@@ -267,7 +268,7 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
     ``(t_k - origin_ns) * 1e-9`` as the tracker node does.  With ``limits`` the
     trajectory is first re-timed within them as the tracker node (``retime: true``) does
-    (:func:`control.limits.within_limits`).
+    (:func:`control.simulation.limits.within_limits`).
 
     Parameters
     ----------

@@ -63,7 +63,7 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
     GainFileError
         A bad shape or a non-numeric entry.
     LoopConfigError
-        A gain the tracker refuses (:func:`control.loop.validate_gain`).
+        A gain the tracker refuses (:func:`control.simulation.loop.validate_gain`).
     """
     try:
         shp = tuple(int(s) for s in shape)

@@ -15,7 +15,7 @@ the base).  The method is TOPP-RA (Pham and Pham, IEEE T-RO 2018): with ``x = s'
 ``u = s''`` on an arc-length grid every limit is linear in ``(x, u)``; a backward pass
 computes the controllable sets of ``x``, a forward pass takes the largest admissible
 ``u``, and the result is sampled into the quintic Hermite form
-(:func:`control.trajectory.from_states`).  The rows, the passes and why not the
+(:func:`control.simulation.trajectory.from_states`).  The rows, the passes and why not the
 ``toppra`` package are in the documentation: doc/theory.md, section "Re-timing within
 limits" (#topp-ra).
 """

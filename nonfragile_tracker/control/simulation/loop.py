@@ -8,9 +8,9 @@
 
 Latency as real bases have it (each optional, off by default, so the paper's plant is
 unchanged bit for bit): the plant delays commands by whole steps, passes them through
-the actuator (:mod:`control.actuator`: first-order lag, acceleration limits) and
-reports odometry late, decimated and noisy (:mod:`control.sensors`); the tracker can
-predict the state at the time its command will act (:mod:`control.predictor`).
+the actuator (:mod:`control.simulation.actuator`: first-order lag, acceleration limits) and
+reports odometry late, decimated and noisy (:mod:`control.simulation.sensors`); the tracker can
+predict the state at the time its command will act (:mod:`control.simulation.predictor`).
 
 The ROS nodes call exactly these methods, in the same order as
 :func:`nonfragile_tracker.control.simulation.simulate.simulate_tracking`, so a lockstep ROS
@@ -669,13 +669,13 @@ class Tracker:
     that the error ``e = xi - xi*`` obeys ``e' = (A + B K) e + A_tau e(t - tau)``
     exactly and the steady-state bias caused by ``A_tau xi(t - tau)`` vanishes.
 
-    Predictor (``config.predicts``; :mod:`control.predictor`): the pose measured at
+    Predictor (``config.predicts``; :mod:`control.simulation.predictor`): the pose measured at
     ``stamp`` is replaced by the pose predicted at ``t_act = stamp +
     predict_odom_latency + predict_latency`` (the time this command acts), from the
     commands already sent and the assumed actuator lag, and the reference by the
     reference at ``t_act``; the law above is evaluated there.  With a time constant
     the command is the one that takes the predicted actual speed to the law's value at
-    the end of the command interval ``dt`` (:func:`control.predictor.invert_lag`: the
+    the end of the command interval ``dt`` (:func:`control.simulation.predictor.invert_lag`: the
     compensator's next speed for ``v``, ``w`` itself for ``w``).  The compensator speed
     ``v`` is the speed at ``t_act``.  With every ``predict_*`` at 0 the law is
     today's, operation for operation.

@@ -7,7 +7,7 @@ runs stay deterministic) and the command acts from ``t_act = stamp + L_o + L_c``
 unicycle (and the actuator lag) from the measured pose through them to ``t_act``, and
 extrapolates the reference there (third order); :func:`invert_lag` is the command that brings
 a first-order actuator exactly to a target within one command interval.  The law evaluated
-on the prediction is in :class:`control.loop.Tracker`.  Plain floats.
+on the prediction is in :class:`control.simulation.loop.Tracker`.  Plain floats.
 
 The three steps and their error terms are in the documentation: doc/theory.md, section
 "Latency predictor" (#latency-predictor).

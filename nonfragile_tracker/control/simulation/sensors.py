@@ -1,6 +1,6 @@
 """Odometry as a real base delivers it: late, at a lower rate than the plant, noisy.
 
-:class:`Odometer` is called by :class:`control.loop.UnicyclePlant` once per plant step
+:class:`Odometer` is called by :class:`control.simulation.loop.UnicyclePlant` once per plant step
 ``k`` (in order).  At every ``period``-th step (``k % period == 0``) it takes a
 measurement of the true state - pose plus Gaussian noise drawn from a seeded
 ``numpy.random.Generator`` (three draws ``x, y, yaw`` per measurement, always in that

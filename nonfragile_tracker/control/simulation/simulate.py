@@ -147,7 +147,7 @@ def run_loop(plant_config: PlantConfig, steps: int,
     quaternion, as in the message) goes to ``command(measurement, yaw, k, reference(k))``, whose
     command the plant takes (after its command latency); otherwise the command in force
     is held.  ``reference(k)`` is logged with step ``k``.  Used by
-    :func:`simulate_tracking` and :func:`control.follow.simulate_following`.
+    :func:`simulate_tracking` and :func:`control.simulation.follow.simulate_following`.
 
     Parameters
     ----------
@@ -256,7 +256,7 @@ def rk4_delay_steps(out: np.ndarray, N: int, steps: int, dt: float,
     ``out[:N + 1]`` holds the initial function on ``[-N dt, 0]``; ``out[N + k + 1]`` is
     written from ``out[N + k]``.  The delayed state at the half step is the mean of the
     two neighbouring samples.  Shared by :func:`simulate_delay_loop` and the batched loop
-    (:func:`control.batch.simulate_delay_loop_batch`), so both integrate the same way.
+    (:func:`control.simulation.batch.simulate_delay_loop_batch`), so both integrate the same way.
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Robustness study: sample perturbations, latencies, lags and initial poses; run the batch.
 
 :func:`sample_study_cases` draws ``N`` cases (seeded) around a base scenario,
-:func:`run_study` runs them with :func:`control.batch.simulate_batch` (split over
+:func:`run_study` runs them with :func:`control.simulation.batch.simulate_batch` (split over
 workers when ``N`` is large: local processes or a Dask cluster, :mod:`..parallel`) and
 :func:`summarize` reports the worst case, the
 distribution of settling time and steady error, and the fraction of cases inside the
@@ -15,7 +15,8 @@ certified region:
   most its ``lag_certified_h_max``.
 
 The batch runs with ``exact=False`` (cheaper forms of the same values, 3-4 x faster; a
-case agrees with its single run to about 1e-14, see :func:`control.batch.simulate_batch`).
+case agrees with its single run to about 1e-14, see
+:func:`control.simulation.batch.simulate_batch`).
 Percentiles are numpy's (linear interpolation): settling time over the cases that
 settle, steady error over the cases that stay finite.  No ROS import.
 """
@@ -171,7 +172,7 @@ def certified_limits(design: Mapping[str, Any] | None) -> dict[str, float]:
     Parameters
     ----------
     design : mapping or None
-        The gain file's design record (:func:`control.gains.read_gain_design`; ``None``:
+        The gain file's design record (:func:`control.simulation.gains.read_gain_design`; ``None``:
         nothing recorded).
 
     Returns
@@ -280,7 +281,7 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path:
     E, F : array_like
         Perturbation structure.
     design : mapping, optional
-        The gain file's design record (:func:`control.gains.read_gain_design`).
+        The gain file's design record (:func:`control.simulation.gains.read_gain_design`).
     jobs : int, optional
         Workers, i.e. shares of the cases (default: the cores available); fewer are used
         when there are fewer than :data:`MIN_CASES_PER_JOB` cases per worker, none (this

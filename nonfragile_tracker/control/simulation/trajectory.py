@@ -2,7 +2,7 @@
 
 One type, :class:`Trajectory`, with two kinds behind it:
 
-* **analytic** - a :class:`control.reference.Path` (circle, figure eight).  ``sample(t)``
+* **analytic** - a :class:`control.simulation.reference.Path` (circle, figure eight).  ``sample(t)``
   returns exactly ``path.sample(t)`` (same floats), so lockstep runs and golden bags are
   unchanged; its time range is unbounded.
 * **piecewise polynomial** - built from timed points (a waypoint file, a nav_msgs/Path,
@@ -153,7 +153,7 @@ class Trajectory:
         Parameters
         ----------
         path : Path
-            A :mod:`control.reference` path.
+            A :mod:`control.simulation.reference` path.
 
         Returns
         -------
