@@ -51,6 +51,33 @@ def realtime_may_run(config) -> bool:
     return mark_expression_may_select(config.getoption('markexpr') or '', 'realtime', 'ros')
 
 
+def serial_run(expr: str) -> bool:
+    """Whether a run with mark expression ``expr`` must be serial: it may select real-time
+    tests together with others (``-m realtime`` alone may use two workers, see
+    :func:`pytest_cmdline_main`)."""
+    return (mark_expression_may_select(expr, 'realtime', 'ros')
+            and not mark_expression_selects_only(expr, 'realtime'))
+
+
+@functools.lru_cache(maxsize=None)
+def mark_expression_selects_only(expr: str, mark: str) -> bool:
+    """Whether ``-m expr`` is false for every test without ``mark`` (every combination of the
+    other names in ``expr`` tried); an empty or unparsable expression selects everything."""
+    if not expr.strip():
+        return False
+    from _pytest.mark.expression import Expression
+    try:
+        compiled = Expression.compile(expr)
+    except SyntaxError:
+        return False
+    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not', mark})
+    for bits in itertools.product((False, True), repeat=len(names)):
+        marks = dict(zip(names, bits), **{mark: False})
+        if compiled.evaluate(lambda name, **kwargs: marks.get(name, False)):
+            return False
+    return True
+
+
 def ros_may_run(config) -> bool:
     """Whether the ``-m`` mark expression may select a test marked ``ros``.
 
@@ -84,17 +111,20 @@ def mark_expression_may_select(expr: str, mark: str, *implied: str) -> bool:
 
 @pytest.hookimpl(tryfirst=True)        # before pytest-xdist reads the number of workers
 def pytest_cmdline_main(config):
-    """Serial run (as ``-n 0``) whenever real-time tests may run.
+    """Serial run (as ``-n 0``) whenever real-time tests may run together with others.
 
     pytest-xdist runs the tests on every core (``-n auto --dist loadfile`` in setup.cfg, whole
     modules per worker so that module fixtures are computed once), ROS tests in lockstep or
     about processes and signals included: their results do not depend on the load (each
     worker has ROS domains of its own, :func:`domain_ids`).  Real-time tests (``realtime``)
-    keep wall-clock time: they must run one after another with the machine to themselves.
+    keep wall-clock time: they must not share the machine with the CPU-bound tests.  Alone
+    (``-m realtime``, ``make test`` runs them with ``-n 2``) two of them may run at once:
+    together they keep about 0.7 of the two cores busy (nodes at 100 Hz and waits).
     (xdist's ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no
     effect, pytest-xdist issue 1386.)
     """
-    if realtime_may_run(config) and getattr(config.option, 'numprocesses', None):
+    if serial_run(config.getoption('markexpr') or '') \
+            and getattr(config.option, 'numprocesses', None):
         config.option.numprocesses = 0
 
 
@@ -112,7 +142,8 @@ def _ros_only(module_path: Path) -> bool:
 
 
 def pytest_report_header(config):
-    if realtime_may_run(config) and getattr(config.option, 'numprocesses', None) == 0:
+    if serial_run(config.getoption('markexpr') or '') \
+            and getattr(config.option, 'numprocesses', None) == 0:
         return 'real-time tests may run: one test after another (pytest-xdist off)'
     return None
 

@@ -1,13 +1,14 @@
 """How the suite itself runs (``test/conftest.py``, ``setup.cfg``): every test but the
 real-time ones on every core, whole modules per worker, each worker with ROS domains of its
-own; every run that may select real-time tests serial."""
+own; the real-time ones alone (two workers in make test); a run that may select real-time
+tests together with others serial."""
 import re
 import subprocess
 import sys
 
 import pytest
 
-from conftest import ROOT, domain_ids, mark_expression_may_select
+from conftest import ROOT, domain_ids, mark_expression_may_select, serial_run
 
 MODULES = ['test/control/test_model.py', 'test/control/test_trajectory.py']
 
@@ -71,6 +72,16 @@ def test_which_mark_expressions_may_select_ros_tests(expr, ros):
     ('', True), ('ros', True), ('realtime', True), ('slow', True), ('not slow', True),
     ('not ros', False), ('not realtime', False), ('ros and not realtime', False),
     ('not (ros or slow)', False), ('not ros or realtime', True)])
-def test_which_mark_expressions_make_the_run_serial(expr, serial):
+def test_which_mark_expressions_may_select_realtime_tests(expr, serial):
     """A real-time test is a ROS test too: ``-m "not ros"`` selects none."""
     assert mark_expression_may_select(expr, 'realtime', 'ros') is serial
+
+
+@pytest.mark.parametrize('expr, serial', [
+    ('', True), ('ros', True), ('not slow', True), ('realtime or slow', True),
+    ('realtime', False), ('realtime and slow', False), ('ros and realtime', False),
+    ('not ros', False), ('not realtime', False)])
+def test_real_time_tests_alone_may_use_the_workers(expr, serial):
+    """Serial only when real-time tests may run together with others (make test's second
+    part, ``-m realtime``, runs on two workers)."""
+    assert serial_run(expr) is serial

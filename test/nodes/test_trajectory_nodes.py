@@ -658,7 +658,7 @@ def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(t
     ov = realtime_overrides()
     ov['reference']['ros__parameters'].update(trajectory_file=str(LAP))
     ov['tracker']['ros__parameters'].update(wait_for_trajectory=True)
-    ov['plant']['ros__parameters'].update(initial_pose=[0.0, 0.0, 0.0], duration=20.0)
+    ov['plant']['ros__parameters'].update(initial_pose=[0.0, 0.0, 0.0], duration=14.0)
     params = scenario_parameters(scenario_file, gains, ov)
     env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('traj_rt_replay')))
     res = run_processes(params, tmp_path, env=env, progress=lambda s: None)
