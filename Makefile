@@ -15,11 +15,9 @@ COLCON_SETUPTOOLS := 68.1.2 79.0.1
 
 .PHONY: demo test soak docs venv bench bench-env tdcpy-env reproduce clean
 
-# --no-compile: byte-compiling every installed file (scipy, cvxpy, sphinx, dask, ...) was half
-# of the install's time (46 s -> 24 s); Python compiles the modules it uses on first import.
 $(STAMP): requirements.txt
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check --no-compile -r requirements.txt
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
 	for v in $(COLCON_SETUPTOOLS); do $(PY) -m pip install --quiet --disable-pip-version-check \
 	  --no-deps --target $(VENV)/colcon-setuptools/$$v setuptools==$$v || exit 1; done
 	$(PY) -c "import pathlib, site; pathlib.Path(site.getsitepackages()[0], 'nonfragile_tracker_dev.pth').write_text(str(pathlib.Path('.').resolve()) + '\n')"
@@ -30,13 +28,18 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m nonfragile_tracker.cli run $(if $(filter --paper,$(ARGS)),,--delay-compensation) $(ARGS)
 
-# Every test but the real-time ones on every core (pytest-xdist, whole modules per worker; ROS
-# tests in lockstep or about processes do not depend on the load, each worker has ROS domains
-# of its own), then the real-time tests alone, at most two at a time (-n 2): they run nodes
-# on the wall clock and judge timing, and together use about 0.7 of the two cores.
+# Every test but the real-time ones on one worker more than cores (pytest-xdist, whole modules
+# per worker; the ROS tests wait on processes and DDS part of the time, and in lockstep or
+# about processes they do not depend on the load; each worker has ROS domains of its own),
+# then the real-time tests alone, at most two at a time (-n 2): they run nodes on the wall
+# clock and judge timing, and together use about 0.7 of the two cores.  The package is
+# byte-compiled first: with PYTHONDONTWRITEBYTECODE set (as in CI) every node process would
+# compile it again.
 # Exit 5 (no tests) is a failure unless the other part ran tests (ARGS may select one part).
+WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -m "not realtime" test $(ARGS); a=$$?; \
+	$(PY) -m compileall -q nonfragile_tracker
+	$(PY) -m pytest -q -p no:cacheprovider -n $(WORKERS) -m "not realtime" test $(ARGS); a=$$?; \
 	$(PY) -m pytest -q -p no:cacheprovider -n 2 -m realtime test $(ARGS); b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	for rc in $$a $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
