@@ -45,37 +45,12 @@ SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_fa
                 'test_ros_lockstep'}
 
 
-def realtime_may_run(config) -> bool:
-    """Whether the ``-m`` mark expression may select a ``realtime`` test (always also ``ros``:
-    ``-m "not ros"`` selects none)."""
-    return mark_expression_may_select(config.getoption('markexpr') or '', 'realtime', 'ros')
-
-
 def serial_run(expr: str) -> bool:
     """Whether a run with mark expression ``expr`` must be serial: it may select real-time
     tests together with others (``-m realtime`` alone may use two workers, see
     :func:`pytest_cmdline_main`)."""
     return (mark_expression_may_select(expr, 'realtime', 'ros')
-            and not mark_expression_selects_only(expr, 'realtime'))
-
-
-@functools.lru_cache(maxsize=None)
-def mark_expression_selects_only(expr: str, mark: str) -> bool:
-    """Whether ``-m expr`` is false for every test without ``mark`` (every combination of the
-    other names in ``expr`` tried); an empty or unparsable expression selects everything."""
-    if not expr.strip():
-        return False
-    from _pytest.mark.expression import Expression
-    try:
-        compiled = Expression.compile(expr)
-    except SyntaxError:
-        return False
-    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not', mark})
-    for bits in itertools.product((False, True), repeat=len(names)):
-        marks = dict(zip(names, bits), **{mark: False})
-        if compiled.evaluate(lambda name, **kwargs: marks.get(name, False)):
-            return False
-    return True
+            and _may_match(expr, frozenset(), frozenset({'realtime'})))
 
 
 def ros_may_run(config) -> bool:
@@ -89,21 +64,28 @@ def ros_may_run(config) -> bool:
     return mark_expression_may_select(config.getoption('markexpr') or '', 'ros')
 
 
-@functools.lru_cache(maxsize=None)      # asked for every collected path: parse once
 def mark_expression_may_select(expr: str, mark: str, *implied: str) -> bool:
     """Whether ``-m expr`` is true for some test carrying ``mark`` and the ``implied`` marks
     (every combination of the other names in ``expr``, present or absent, is tried)."""
+    return _may_match(expr, frozenset({mark, *implied}), frozenset())
+
+
+@functools.lru_cache(maxsize=None)      # asked for every collected path: parse once
+def _may_match(expr: str, present: frozenset[str], absent: frozenset[str]) -> bool:
+    """Whether ``-m expr`` is true for some test with the ``present`` marks and without the
+    ``absent`` ones, whatever the other names in ``expr``; an empty expression, or one pytest
+    cannot parse (it reports the error itself), matches."""
     if not expr.strip():
         return True
     from _pytest.mark.expression import Expression     # pytest's own -m parser
     try:
         compiled = Expression.compile(expr)
-    except SyntaxError:                     # pytest reports the error itself
+    except SyntaxError:
         return True
-    given = {mark, *implied}
-    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not'} - given)
+    fixed = {**dict.fromkeys(present, True), **dict.fromkeys(absent, False)}
+    names = sorted(set(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - {'and', 'or', 'not'} - set(fixed))
     for bits in itertools.product((False, True), repeat=len(names)):
-        marks = dict(zip(names, bits), **dict.fromkeys(given, True))
+        marks = dict(zip(names, bits), **fixed)
         if compiled.evaluate(lambda name, **kwargs: marks.get(name, False)):
             return True
     return False
