@@ -382,7 +382,7 @@ def update_robot_file(path: str | os.PathLike[str], values: Mapping[str, Any], *
     changes = []
     for key, new in values.items():
         value = float(new) if _BY_NAME[key].kind is float else new
-        old = params.get(key)
+        old = _plain(params.get(key))
         if key in params and old == value and type(old) is type(value):
             continue
         changes.append(Change(key, None if key not in params else old, value))
@@ -402,6 +402,14 @@ def update_robot_file(path: str | os.PathLike[str], values: Mapping[str, Any], *
     finally:
         tmp.unlink(missing_ok=True)
     return changes
+
+
+def _plain(value: Any) -> Any:
+    """A ruamel scalar (``ScalarFloat``, ``ScalarString`` ...) as the builtin it stands for."""
+    for kind in (bool, float, int, str):
+        if isinstance(value, kind):
+            return kind(value)
+    return value
 
 
 def _annotate(params: Any, key: str, note: str) -> None:
