@@ -61,7 +61,9 @@ def test_the_docs_include_the_very_file_the_tests_load():
     page = (ROOT / 'doc' / 'ros-interface.md').read_text()
     assert '```{literalinclude} ../config/robot.yaml\n:language: yaml\n```' in page
     readme = (ROOT / 'README.md').read_text()
-    assert 'config/robot.yaml' in readme and 'robot:=' in readme
+    section = readme.split('\n## In a ROS 2 system\n', 1)[1].split('\n## ', 1)[0]
+    assert f'```yaml\n{SHIPPED.read_text()}```' in section         # the file, as shipped
+    assert 'robot.launch.py robot:=my_robot.yaml gains:=g.yaml' in section
 
 
 def write(tmp_path, text: str, name: str = 'robot.yaml'):
