@@ -1,7 +1,8 @@
 """The robot file: one commented file per base with what the tracker needs to know about it.
 
 The format (the shipped, commented example is ``config/robot.yaml``) is a ROS 2 parameter
-file with one section, the tracker's (``/**/tracker``, ``/tracker`` or ``tracker``)::
+file with one section, the tracker's (``/**/tracker``, ``/tracker``, ``tracker`` or a
+namespaced ``/robot1/tracker``)::
 
     /**/tracker:
       ros__parameters:
@@ -22,6 +23,9 @@ defaults and ranges against ``nodes/tracker.py``), so the file also works as
 ``--params-file``.  A key left out takes the tracker's default.  Unknown keys, other
 sections, a wrong type (an integer where ROS wants a double included) or a value out of
 range are refused with :class:`RobotFileError`, naming the file, the key and what to write.
+
+A new key is added in :data:`KEYS` and :class:`RobotConfig` (and the shipped file, with its
+comment); the tracker must declare it (``test/test_robot_file.py`` checks).
 
 Reading: :func:`load_robot_file` returns a :class:`RobotConfig`;
 :meth:`RobotConfig.parameters` is the dict of tracker parameters (``robot.launch.py``
@@ -258,7 +262,7 @@ def _section(data: Mapping[str, Any], where: str) -> Mapping[str, Any]:
     """The tracker's ``ros__parameters`` of a parsed robot file (its only section)."""
     layout = (f'a robot file has one section: /**/{NODE}: ros__parameters: {{...}} '
               '(see config/robot.yaml)')
-    others = [str(k) for k in data if node_key(str(k)) != NODE]
+    others = [str(k) for k in data if node_key(str(k)).rsplit('/', 1)[-1] != NODE]
     if others:
         raise RobotFileError(f'{where}: section(s) {", ".join(others)} not allowed: {layout}')
     sections = list(data.values())

@@ -49,6 +49,7 @@ def test_no_paper_simulation_parameter_in_the_robot_file():
 def test_every_key_is_a_declared_tracker_parameter_with_its_default_and_range():
     from nonfragile_tracker.nodes.tracker import PARAMS
     declared = {p.name: p for p in PARAMS}
+    assert RobotConfig().parameters() == {k.name: k.default for k in KEYS}
     for k in KEYS:
         assert k.name in declared, k.name
         p = declared[k.name]
@@ -118,7 +119,7 @@ def test_missing_file_and_partial_files(tmp_path):
     with pytest.raises(RobotFileError, match='cannot read robot file'):
         load_robot_file(tmp_path / 'none.yaml')
     # a key left out takes the tracker's default; /tracker and tracker are the same node
-    for key in ('tracker', '/tracker', '/**/tracker'):
+    for key in ('tracker', '/tracker', '/**/tracker', '/robot1/tracker'):
         p = write(tmp_path, yaml.safe_dump({key: {'ros__parameters': {
             'odom_topic': '/diff_drive_controller/odom', 'max_linear_accel': 0.8}}}))
         cfg = load_robot_file(p)
