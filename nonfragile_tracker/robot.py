@@ -337,8 +337,8 @@ _NOTE = re.compile(r'\s*\[[^\]]*\]\s*$')
 
 
 def update_robot_file(path: str | os.PathLike[str], values: Mapping[str, Any], *,
-                      note: str = '', template: str | os.PathLike[str] | None = None
-                      ) -> list[Change]:
+                      note: str = '', template: str | os.PathLike[str] | None = None,
+                      only_unknown: bool = False) -> list[Change]:
     """Set ``values`` in the robot file ``path``, keeping its other lines and comments.
 
     A missing ``path`` is first made from ``template`` (default: the shipped
@@ -358,6 +358,10 @@ def update_robot_file(path: str | os.PathLike[str], values: Mapping[str, Any], *
         Where the values come from, for the comment of each changed key.
     template : path-like, optional
         The file a missing ``path`` starts from.
+    only_unknown : bool, optional
+        Set a key only where the file does not know it (absent, or 0 where 0 means
+        unknown or none): a value the user wrote is kept.  Default: every key is set (the
+        CLI's ``--robot-file``: a limit the recording shows binding is what the base does).
 
     Returns
     -------
@@ -388,6 +392,8 @@ def update_robot_file(path: str | os.PathLike[str], values: Mapping[str, Any], *
         value = float(new) if _BY_NAME[key].kind is float else new
         old = _plain(params.get(key))
         if key in params and old == value and type(old) is type(value):
+            continue
+        if only_unknown and key in params and not (_BY_NAME[key].zero and old == 0):
             continue
         changes.append(Change(key, None if key not in params else old, value))
         params[key] = value

@@ -151,6 +151,13 @@ def test_update_keeps_every_other_line_and_comment(tmp_path):
     line = [x for x in p.read_text().splitlines() if 'max_linear_accel:' in x][0]
     assert line.count('[') == 1 and line.endswith('[identified from runs/b/bag]')
     assert 'max_angular_accel: 3.0' in p.read_text() and 'runs/a/bag' in p.read_text()
+    # only_unknown: a value the file knows stays, an unknown (0) one is filled in
+    update_robot_file(p, {'max_angular_accel': 0.0}, note='by hand')
+    changes = update_robot_file(p, {'max_linear_accel': 2.0, 'max_angular_accel': 2.0,
+                                    'min_turning_radius': 0.5}, only_unknown=True)
+    assert [str(c) for c in changes] == ['max_angular_accel: 0.0 -> 2.0',
+                                         'min_turning_radius: 0.0 -> 0.5']
+    assert load_robot_file(p).max_linear_accel == 0.9
 
 
 def test_update_of_a_user_file_appends_a_missing_key_and_refuses_bad_input(tmp_path):
