@@ -65,7 +65,7 @@ def _external_imports(path: Path, source: str | None = None):
 LAYERS = (
     ('foundation', {'', 'errors', 'files', 'parallel'}),
     ('control', {'control'}),
-    ('conversions', {'topics', 'msgconv', 'resources', 'scenario', 'tracker_inputs'}),
+    ('conversions', {'topics', 'msgconv', 'resources', 'scenario', 'tracker_inputs', 'robot'}),
     ('bag', {'bag'}),
     ('nodes', {'nodes'}),
     ('orchestration', {'runner', 'replayer', 'golden', 'reproduce'}),

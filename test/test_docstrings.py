@@ -41,7 +41,7 @@ CHECKED = tuple(
         'identify', 'recording', 'monitor')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
-        'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs')]
+        'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot')]
     + [f'nonfragile_tracker.bag.{m}' for m in (
         'compare', 'reader', 'writer', 'repair', 'errors', 'typestore', 'report', 'replay',
         'motion')]

@@ -183,10 +183,36 @@ def test_cli_design_from_identification_records_it(tmp_path, capsys):
     assert (params['max_linear_accel'], params['max_angular_accel']) == (1.0, 3.0)
 
 
+def test_cli_design_writes_the_identified_limits_into_the_robot_file(tmp_path, capsys):
+    """latency-design --identification --robot-file: the limits into the robot file (the
+    gain file keeps them too), the robot file's other keys and comments untouched."""
+    from dataclasses import replace
+    from nonfragile_tracker.robot import load_robot_file
+    prob = tmp_path / 'di.yaml'
+    prob.write_text(DI_PROBLEM)
+    lat = write_identification(tmp_path / 'lat.yaml', replace(
+        ident(lo=0.09, hi=0.1, period=0.02, age=(0.0, 0.0)), max_linear_accel=0.0,
+        max_angular_accel=2.5))
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text('# my base\n/**/tracker:\n  ros__parameters:\n'
+                     '    max_linear_accel: 0.7   # from the data sheet\n')
+    assert main(['latency-design', str(prob), '--identification', str(lat), '-o',
+                 str(tmp_path / 'g.yaml'), '--robot-file', str(robot)]) == 0
+    assert f'robot file {robot}: max_angular_accel: absent -> 2.5' in capsys.readouterr().out
+    cfg = load_robot_file(robot)
+    assert (cfg.max_linear_accel, cfg.max_angular_accel) == (0.7, 2.5)   # 0 = unknown: kept
+    assert robot.read_text().startswith('# my base\n') and '# from the data sheet' in \
+        robot.read_text()
+    assert f'[identified in {lat}]' in robot.read_text()
+    params = yaml.safe_load((tmp_path / 'g.yaml').read_text())['/**/tracker']['ros__parameters']
+    assert params['max_angular_accel'] == 2.5 and 'max_linear_accel' not in params
+
+
 @pytest.mark.parametrize('argv, match', [
     ([], 'either as --delay-interval'),
     (['--delay-interval', '0', '0.1', '--identification', 'X'], 'not both'),
     (['--delay-interval', '0', '0.1', '--no-predictor'], 'apply to --identification only'),
+    (['--delay-interval', '0', '0.1', '--robot-file', 'r.yaml'], 'apply to --identification'),
     (['--identification', 'missing.yaml'], 'missing.yaml'),
 ])
 def test_cli_refuses_bad_combinations(argv, match, capsys):

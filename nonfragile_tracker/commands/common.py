@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ['add_report_outputs', 'check_outputs']
+__all__ = ['add_report_outputs', 'check_outputs', 'check_robot_file', 'write_robot_file']
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -60,3 +60,58 @@ def add_report_outputs(p: argparse.ArgumentParser, json_help: str, plot_help: st
     p.add_argument('--json', metavar='OUT', help=json_help)
     p.add_argument('--plot', metavar='OUT.png', help=plot_help)
     p.add_argument('--force', action='store_true', help='overwrite --json/--plot files')
+
+
+def check_robot_file(path: str | None) -> None:
+    """Before any work: a ``--robot-file`` that exists must be a valid robot file.
+
+    One that does not exist yet will be made from the shipped ``config/robot.yaml``; its
+    directory must exist.
+
+    Parameters
+    ----------
+    path : str or None
+        The ``--robot-file`` given (``None``: none).
+
+    Raises
+    ------
+    InputError
+        The file is not a valid robot file (:class:`~nonfragile_tracker.robot.RobotFileError`)
+        or its directory does not exist.
+    """
+    if not path:
+        return
+    from ..robot import load_robot_file
+    if Path(path).exists():
+        load_robot_file(path)
+    elif not Path(path).resolve().parent.is_dir():
+        raise InputError(f'{path}: directory {Path(path).resolve().parent} does not exist')
+
+
+def write_robot_file(path: str, values: dict[str, float], note: str) -> None:
+    """Write identified values into the robot file ``path`` and say what changed.
+
+    :func:`nonfragile_tracker.robot.update_robot_file`: the other keys and the comments are
+    kept; a missing file is made from the shipped ``config/robot.yaml``.
+
+    Parameters
+    ----------
+    path : str
+        The robot file (``--robot-file``).
+    values : dict
+        Robot-file keys and values (:func:`nonfragile_tracker.robot.identified_limits`).
+    note : str
+        Where they come from (put in brackets in each changed key's comment).
+    """
+    from ..robot import update_robot_file
+    existed = Path(path).exists()
+    changes = update_robot_file(path, values, note=note)
+    head = f'robot file {path}' + ('' if existed else ' (new: a copy of the shipped '
+                                   'config/robot.yaml; edit its topics, frames and limits)')
+    if changes:
+        print(f'{head}: ' + ', '.join(map(str, changes)))
+    elif values:
+        print(f'{head}: already has ' + ', '.join(f'{k} = {v!r}' for k, v in values.items()))
+    else:
+        print(f'{head}: no acceleration limit seen to bind in the recording; nothing written '
+              '(0 = unknown stays)')

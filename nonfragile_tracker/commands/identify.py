@@ -5,7 +5,7 @@ import argparse
 import math
 from typing import TYPE_CHECKING
 
-from .common import Subparsers, check_outputs
+from .common import Subparsers, check_outputs, check_robot_file, write_robot_file
 
 if TYPE_CHECKING:
     from ..bag.motion import MotionData
@@ -30,6 +30,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from ..control.identification.identify import (identify_latency, measurement_to_command_delay,
                                     with_source, write_identification)
     check_outputs(args.force, args.output)
+    check_robot_file(args.robot_file)
     data = read_motion(args.bag, cmd_topic=args.cmd_topic, odom_topic=args.odom_topic,
                        cmd_time=args.cmd_time)
     res = identify_latency(data.commands, data.odometry, max_latency_s=args.max_latency,
@@ -85,6 +86,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.output:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
+    if args.robot_file:
+        from ..robot import identified_limits
+        write_robot_file(args.robot_file, identified_limits(res), f'identified from {args.bag}')
     from ..control.synthesis.latency_design import plan_from_identification
     if math.isfinite(res.command_period_s):
         plan = plan_from_identification(res)
@@ -156,6 +160,9 @@ def register(subparsers: Subparsers) -> None:
     p.add_argument('-o', '--output', help='identification YAML to write (e.g. latency.yaml; '
                    'never overwritten without --force)')
     p.add_argument('--force', action='store_true', help='overwrite --output if it exists')
+    p.add_argument('--robot-file', metavar='ROBOT.yaml', help='robot file to write the '
+                   'acceleration limits the recording shows binding into (its other keys and '
+                   'comments kept; made from the shipped config/robot.yaml when absent)')
     p.add_argument('--cmd-topic', default='cmd_vel', help='velocity command topic (Twist or '
                    'TwistStamped; default cmd_vel, else a namespaced one, else the one topic '
                    'of that type)')

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import Subparsers, check_outputs
+from .common import Subparsers, check_outputs, check_robot_file, write_robot_file
 
 __all__ = ['register', 'run']
 
@@ -29,16 +29,19 @@ def run(args: argparse.Namespace) -> int:
     if (args.delay_interval is None) == (args.identification is None):
         raise InputError('give the latency either as --delay-interval H_MIN H_MAX or as '
                          '--identification FILE (written by `identify BAG -o FILE`), not both')
-    if args.identification is None and (args.no_predictor or args.command_period is not None):
-        raise InputError('--no-predictor and --command-period apply to --identification only')
+    if args.identification is None and (args.no_predictor or args.command_period is not None
+                                        or args.robot_file):
+        raise InputError('--no-predictor, --command-period and --robot-file apply to '
+                         '--identification only')
+    check_robot_file(args.robot_file)
     problem = load_problem(args.problem)
     extra: dict[str, Any] = {}
     record: dict[str, Any] = {}
     lag = 0.0 if args.lag is None else args.lag
     if args.identification is not None:
         from ..control.identification.identify import read_identification
-        plan = plan_from_identification(read_identification(args.identification),
-                                        predictor=not args.no_predictor,
+        ident = read_identification(args.identification)
+        plan = plan_from_identification(ident, predictor=not args.no_predictor,
                                         command_period=args.command_period)
         print(plan.describe())
         h_min, h_max = plan.h_min, plan.h_max
@@ -67,6 +70,10 @@ def run(args: argparse.Namespace) -> int:
               + (' (with the tracker\'s predictor parameters ' + ', '.join(
                   f'{k} = {v:.4g}' for k, v in extra.items() if k.startswith('predict_'))
                  + ')' if 'predict_latency' in extra else ''))
+    if args.robot_file:
+        from ..robot import identified_limits
+        write_robot_file(args.robot_file, identified_limits(ident),
+                         f'identified in {args.identification}')
     if args.json:
         Path(args.json).write_text(json.dumps({**meta, **extra, 'K': res.K.tolist()},
                                               indent=2))
@@ -110,5 +117,9 @@ def register(subparsers: Subparsers) -> None:
     p.add_argument('-o', '--output', help='tracker gain file to write (never overwritten '
                    'without --force)')
     p.add_argument('--force', action='store_true', help='overwrite --output if it exists')
+    p.add_argument('--robot-file', metavar='ROBOT.yaml', help='with --identification: '
+                   'also write the acceleration limits it found into this robot file (other '
+                   'keys and comments kept; made from the shipped config/robot.yaml when '
+                   'absent); the gain file carries them too')
     p.add_argument('--json', help='also write the figures and K as JSON')
     p.set_defaults(func=run)

@@ -1,9 +1,9 @@
 """``tracker``: the non-fragile tracking law with K from parameters.
 
-Subscribes ``odom`` (nav_msgs/Odometry; its twist.linear.x initialises the
-compensator speed) and the trajectory topics (below; with ``wait_for_trajectory: false``
+Subscribes ``odom`` (``odom_topic``; nav_msgs/Odometry; its twist.linear.x initialises
+the compensator speed) and the trajectory topics (below; with ``wait_for_trajectory: false``
 also ``reference/pose``, ``reference/twist``, ``reference/accel``); publishes
-``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with
+``cmd_vel`` (``cmd_vel_topic``; geometry_msgs/Twist, or TwistStamped with
 ``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
 ``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
 z heading error in rad, in the reference point's frame; every step, when subscribed),
@@ -75,6 +75,7 @@ from ..control.identification.monitor import (Certificate, LatencyEstimate, Moni
 from ..control.simulation.reference import RefSample
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
 from ..msgconv import tracker_config
+from ..robot import check_topic_name
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -151,6 +152,10 @@ PARAMS = [
           'relayed trajectory, and in lockstep (the reference publishes the built-in paths as '
           'a trajectory there; `nonfragile_tracker run` and tracking.launch.py set it)',
           read_only=True),
+    Param('odom_topic', topics.ODOM, 'odometry topic to subscribe (nav_msgs/Odometry; robot '
+          'file); a remapping of it still applies', read_only=True),
+    Param('cmd_vel_topic', topics.CMD_VEL, 'velocity command topic to publish (robot file); a '
+          'remapping of it still applies', read_only=True),
     Param('enable_stamped_cmd_vel', False, 'publish cmd_vel as geometry_msgs/TwistStamped '
           '(stamp = command time, frame = base_frame; Nav2 name, Jazzy diff_drive_controller) '
           'instead of Twist', read_only=True),
@@ -212,6 +217,8 @@ class TrackerSettings:
     lockstep_subscribers: int
     stamped_cmd_vel: bool
     base_frame: str
+    odom_topic: str
+    cmd_vel_topic: str
     viz_period: float
     max_path_poses: int
     diagnostics_period: float
@@ -239,6 +246,8 @@ def tracker_settings(values: dict[str, Any]) -> TrackerSettings:
                            '--ros-args --params-file config/tracker_gains.yaml')
     require_at_least(values, 'lockstep_subscribers', 0)
     require_at_least(values, 'max_path_poses', 1)
+    for name in ('odom_topic', 'cmd_vel_topic'):
+        check_topic_name(values[name], name)
     return settings_from(TrackerSettings, values, mode=check_mode(values['mode']),
                          tracker=tracker_config(values), rules=input_rules(values),
                          stamped_cmd_vel=values['enable_stamped_cmd_vel'],
@@ -309,7 +318,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.inputs = TrackerInputs(cfg.tracker, cfg.rules, on_reject=self._on_reject,
                                     on_jump=self._on_jump)
         self.tracker: Tracker = self.inputs.tracker
-        self.create_subscription(Odometry, topics.ODOM, self._on_odom, DATA_QOS)
+        self.create_subscription(Odometry, cfg.odom_topic, self._on_odom, DATA_QOS)
         self.frame = cfg.rules.frame
         self.wait_for_trajectory = cfg.rules.wait_for_trajectory
         if not self.wait_for_trajectory:     # only then are the per-step samples read
@@ -342,7 +351,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._cmd = self._cmd_msg.twist
         else:
             self._cmd = self._cmd_msg = Twist()
-        self.pub_cmd = self.create_publisher(type(self._cmd_msg), topics.CMD_VEL, DATA_QOS)
+        self.pub_cmd = self.create_publisher(type(self._cmd_msg), cfg.cmd_vel_topic, DATA_QOS)
         self.pub_error = self.create_publisher(Vector3Stamped, topics.TRACKING_ERROR, DATA_QOS)
         self.pub_path = self.create_publisher(PathMsg, topics.TRAVELLED_PATH, DATA_QOS)
         self.pub_marker = self.create_publisher(Marker, topics.REF_MARKER, DATA_QOS)

@@ -399,6 +399,42 @@ def test_cli_identify(run20, tmp_path, capsys):
     assert 'does not exist' in capsys.readouterr().err
 
 
+def test_cli_identify_writes_the_limits_it_sees_into_the_robot_file(run20, tmp_path, capsys):
+    """identify --robot-file (issue 30): the acceleration limits a recording shows binding
+    (joystick steps on a base with 1 m/s^2 and 3 rad/s^2, config/identify_cases.yaml case ii)
+    go into the robot file, made from the shipped one; a recording without them leaves the
+    limits unknown; a bad robot file is refused before the work."""
+    from nonfragile_tracker.control.identification.recording import load_cases, record_case
+    from nonfragile_tracker.robot import load_robot_file
+    rec = record_case(load_cases(CONFIG / 'identify_cases.yaml')['ii'], seed=1, duration=20.0)
+    c, o = rec.commands, rec.odometry
+    bag = tmp_path / 'limits'
+    write_motion_bag(bag, ((c.t, c.v, c.w), (o.t, o.x, o.y, o.yaw, o.v, o.w)))
+    robot = tmp_path / 'my_robot.yaml'
+    assert main(['identify', str(bag), '--bootstrap', '50', '--robot-file', str(robot)]) == 0
+    text = capsys.readouterr().out
+    assert f'robot file {robot} (new: a copy of the shipped config/robot.yaml' in text
+    cfg = load_robot_file(robot)
+    assert cfg.max_linear_accel == pytest.approx(1.0, rel=0.05)
+    assert cfg.max_angular_accel == pytest.approx(3.0, rel=0.05)
+    assert cfg.parameters() == {**load_robot_file().parameters(),
+                                'max_linear_accel': cfg.max_linear_accel,
+                                'max_angular_accel': cfg.max_angular_accel}
+    assert robot.read_text().count(f'[identified from {bag}]') == 2
+    # a base whose limits never bind (run20: a plain lag): nothing to write, file unchanged
+    plain = tmp_path / 'plain'
+    write_motion_bag(plain, run20)
+    before = robot.read_text()
+    assert main(['identify', str(plain), '--bootstrap', '50', '--robot-file', str(robot)]) == 0
+    assert 'no acceleration limit seen to bind in the recording; nothing written' in \
+        capsys.readouterr().out
+    assert robot.read_text() == before
+    robot.write_text(before.replace('max_angular_speed: 2.0', 'max_angular_speed: 2'))
+    assert main(['identify', str(plain), '--robot-file', str(robot)]) == 2
+    err = capsys.readouterr().err
+    assert 'max_angular_speed is 2: write 2.0' in err and 'Traceback' not in err
+
+
 # ---------------------------------------------------------------------------------------------
 # Our plant (control.simulation.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
 

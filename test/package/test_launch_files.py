@@ -2,6 +2,7 @@
 arguments a ROS user expects, use every argument they declare and only those, and
 the RViz configuration they start is installed."""
 import ast
+import sys
 
 import pytest
 import yaml
@@ -33,9 +34,8 @@ def arguments(path):
     ('tracking.launch.py', {'mode', 'record', 'record_all', 'bag', 'namespace', 'gains',
                             'scenario',
                             'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
-    ('robot.launch.py', {'cmd_vel', 'odom', 'namespace', 'gains', 'scenario', 'trajectory',
-                         'trajectory_topic', 'enable_stamped_cmd_vel', 'odom_frame',
-                         'base_frame', 'use_sim_time'}),
+    ('robot.launch.py', {'robot', 'gains', 'trajectory', 'trajectory_topic', 'namespace',
+                         'use_sim_time'}),
 ])
 def test_launch_arguments(name, expected):
     tree, declared, used = arguments(LAUNCH / name)
@@ -82,14 +82,90 @@ def test_tracking_launch_gates_the_start_on_the_recorder_in_both_modes():
                                            "' == 'realtime'"])''' in text
 
 
-def test_robot_launch_starts_tracker_and_reference_with_remappable_topics():
-    tree, _, _ = arguments(LAUNCH / 'robot.launch.py')
-    exes = {kw.value.value for c in calls(tree, 'Node') for kw in c.keywords
-            if kw.arg == 'executable'}
-    assert exes == {'reference', 'tracker'}
-    remaps = [t for t in ast.walk(tree) if isinstance(t, ast.Tuple) and len(t.elts) == 2
-              and isinstance(t.elts[0], ast.Constant) and t.elts[0].value in ('cmd_vel', 'odom')]
-    assert {t.elts[0].value for t in remaps} == {'cmd_vel', 'odom'}
+class _Action:
+    """Stand-in for a launch / launch_ros class: keeps what it was made with."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class _LaunchConfiguration(_Action):
+    def perform(self, context):
+        return context[self.args[0]]
+
+
+def _stub_launch(monkeypatch):
+    """launch, launch_ros and ament_index as stand-ins (not installable here): enough to run
+    a launch file's Python and see the nodes and parameters it makes."""
+    import types
+    names = {'launch': {'LaunchDescription': _Action},
+             'launch.actions': {n: _Action for n in ('DeclareLaunchArgument', 'GroupAction',
+                                                     'OpaqueFunction')},
+             'launch.substitutions': {'LaunchConfiguration': _LaunchConfiguration},
+             'launch_ros': {}, 'launch_ros.actions': {'Node': _Action, 'PushRosNamespace': _Action},
+             'ament_index_python': {},
+             'ament_index_python.packages': {'get_package_share_directory': lambda _: str(ROOT)}}
+    for name, attrs in names.items():
+        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**attrs))
+
+
+def robot_launch(monkeypatch, **arguments):
+    """Run robot.launch.py with the stand-ins: (tracker Node, reference Node or None)."""
+    import runpy
+    _stub_launch(monkeypatch)
+    desc = runpy.run_path(str(LAUNCH / 'robot.launch.py'))['generate_launch_description']()
+    actions = desc.args[0]
+    context = {a.args[0]: a.kwargs['default_value'] for a in actions
+               if 'default_value' in a.kwargs}
+    context.update(arguments)
+    opaque = [a for a in actions if 'function' in a.kwargs]
+    assert len(opaque) == 1
+    (group,) = opaque[0].kwargs['function'](context)
+    made = {a.kwargs.get('executable'): a for a in group.args[0] if 'executable' in a.kwargs}
+    assert set(made) <= {'tracker', 'reference'}
+    return made['tracker'], made.get('reference')
+
+
+def test_robot_launch_gives_the_tracker_the_robot_file_and_no_paper_scenario(monkeypatch):
+    from nonfragile_tracker.robot import load_robot_file
+    tree = ast.parse((LAUNCH / 'robot.launch.py').read_text())
+    doc = ast.get_docstring(tree, clean=False)
+    strings = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str) and n.value != doc]
+    assert 'robot.yaml' in strings and not [t for t in strings if 'paper' in t or 'scenario' in t]
+    tracker, reference = robot_launch(monkeypatch)
+    assert reference is None                      # no trajectory source: the tracker waits
+    robot, gains, own = tracker.kwargs['parameters']
+    assert robot == load_robot_file(ROOT / 'config' / 'robot.yaml').parameters()
+    assert gains.args == ('gains',)               # the gain file, after the robot file
+    assert own == {'mode': 'realtime', 'use_sim_time': False, 'wait_for_trajectory': True}
+    assert 'remappings' not in tracker.kwargs     # the topics are the robot file's
+    # nothing of the paper's simulation reaches a robot launch
+    sim = yaml.safe_load((ROOT / 'config' / 'paper_scenario.yaml').read_text())
+    sim_only = {k for sec in sim.values() for k in sec['ros__parameters']} - set(robot) - {
+        'mode', 'max_linear_speed', 'max_angular_speed'}
+    assert {'tau', 'A_tau', 'E', 'F', 'radius', 'rate', 'path', 'dt', 'min_speed'} <= sim_only
+    assert not sim_only & (set(robot) | set(own))
+
+
+def test_robot_launch_with_a_users_robot_file_and_a_trajectory(monkeypatch, tmp_path):
+    from nonfragile_tracker.robot import RobotFileError
+    mine = tmp_path / 'my_robot.yaml'
+    mine.write_text('/**/tracker:\n  ros__parameters:\n    odom_frame: world\n'
+                    '    odom_topic: /diff_drive_controller/odom\n')
+    tracker, reference = robot_launch(monkeypatch, robot=str(mine), trajectory='lap.csv',
+                                      use_sim_time='true')
+    robot, _, own = tracker.kwargs['parameters']
+    assert robot['odom_frame'] == 'world' and robot['odom_topic'] == '/diff_drive_controller/odom'
+    assert robot['cmd_vel_topic'] == 'cmd_vel' and own['use_sim_time'] is True
+    assert reference.kwargs['parameters'] == [{
+        'mode': 'realtime', 'use_sim_time': True, 'odom_frame': 'world',
+        'trajectory_file': 'lap.csv', 'trajectory_topic': ''}]
+    _, reference = robot_launch(monkeypatch, robot=str(mine), trajectory_topic='/plan')
+    assert reference.kwargs['parameters'][0]['trajectory_topic'] == '/plan'
+    mine.write_text('/**/tracker:\n  ros__parameters:\n    max_linear_speed: 1\n')
+    with pytest.raises(RobotFileError, match='max_linear_speed is 1: write 1.0'):
+        robot_launch(monkeypatch, robot=str(mine))
 
 
 def test_rviz_config_is_installed_and_shows_the_topics():
