@@ -117,7 +117,8 @@ def boundary_starts(S: Any, count: int, seed: int = 0) -> np.ndarray:
     """
     S = np.asarray(S, float)
     d = np.random.default_rng(seed).normal(size=(count, S.shape[0]))
-    return d / np.sqrt(np.einsum('ij,jk,ik->i', d, S, d))[:, None]
+    out: np.ndarray = d / np.sqrt(np.einsum('ij,jk,ik->i', d, S, d))[:, None]
+    return out
 
 
 def reference_speeds(setup: RobotSetup, samples: int = 2000) -> tuple[float, float, float]:

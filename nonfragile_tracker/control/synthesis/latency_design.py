@@ -13,9 +13,10 @@ the fixed gain ``[K, 0]`` - by :func:`.input_delay.certify_input_delay`.  A gain
 lagged loop is not certified for ``[h_min, h_max]`` is never returned.
 
 The exact figures (true delay margin, worst spectral abscissa over ``[h_min, h_max]``)
-are for constant perturbations ``D`` in ``{0, the problem's listed perturbations, +-I}`` and
-the worst ``||D|| <= 1`` searched (:func:`perturbation_set`), and constant delays, on the loop the design is for - the lagged loop when a lag is given -
-with the problem's state delay: ``x' = A x + A_tau x(t - tau) + B (K + E D F) x(t - h)``
+are for constant perturbations ``D`` in ``{0, the problem's listed perturbations, +-I}``
+and the worst ``||D|| <= 1`` searched (:func:`perturbation_set`), and constant delays, on
+the loop the design is for - the lagged loop when a lag is given - with the problem's
+state delay: ``x' = A x + A_tau x(t - tau) + B (K + E D F) x(t - h)``
 (:func:`exact_abscissa`, a spectral discretization of the two-delay loop).  They can
 refute a certificate, never confirm one: every certified ``h_max`` is below the true
 margin.  With a lag, only the lagged loop's figures are printed (the loop without the lag

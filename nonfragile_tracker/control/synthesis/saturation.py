@@ -206,7 +206,7 @@ class SaturationCertificate:
         lim = self.limits
         acc = (f'|dv/dt| <= {lim.max_linear_accel:g} m/s^2 and ' if lim.max_linear_accel
                else '')
-        return (f'model: gain K' + (' + E Delta F, ||Delta|| <= 1' if self.delta else
+        return ('model: gain K' + (' + E Delta F, ||Delta|| <= 1' if self.delta else
                                       ' (nominal: no Delta)')
                 + f'; saturation: the tracker\'s separate clamps {acc}|w| <= '
                 f'{lim.max_angular_speed:g} rad/s at |v| >= V = {lim.min_speed:.4g} m/s (kept: '
@@ -251,6 +251,8 @@ def _first_solve(Acl: np.ndarray, B: np.ndarray, K: np.ndarray, Ad: np.ndarray,
     top = Acl @ W + W @ Acl.T + R
     cons = [W >> margin * np.eye(n), R >> margin * np.eye(n), s >= margin]
     incl = [[W, W @ K.T - Z.T], [K @ W - Z, np.eye(m)]]
+    eps: Any
+    mu: Any
     if E is not None and F is not None:
         eps = cp.Variable()
         mu = cp.Variable()
@@ -284,7 +286,8 @@ def _first_solve(Acl: np.ndarray, B: np.ndarray, K: np.ndarray, Ad: np.ndarray,
     Wv = 0.5 * (W.value + W.value.T)
     P = np.linalg.inv(Wv)
     P = 0.5 * (P + P.T)
-    Rv = 0.5 * (R.value + R.value.T)
+    Rs = np.asarray(R.value, float)
+    Rv = 0.5 * (Rs + Rs.T)
     Qv = P @ Rv @ P
     point = {'P': P, 'Q': 0.5 * (Qv + Qv.T), 'G': np.asarray(Z.value, float) @ P,
              't': 1.0 / float(s.value),
@@ -310,6 +313,8 @@ def _second_solve(Acl: np.ndarray, B: np.ndarray, K: np.ndarray, Ad: np.ndarray,
     cons = [P >> margin * np.eye(n), Q >> margin * np.eye(n)]
     G = Gt / t
     incl = [[P, K.T - G.T], [K - G, np.eye(m)]]
+    eps: Any
+    mu: Any
     if E is not None and F is not None:
         eps = cp.Variable()
         mu = cp.Variable()
