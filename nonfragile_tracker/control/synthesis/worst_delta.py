@@ -19,9 +19,9 @@ import numpy as np
 __all__ = ['extreme_deltas', 'project_to_ball', 'worst_delta']
 
 #: Angles of the grids on the extreme points (rotations, reflections, unit directions).
-SAMPLES = 24
+SAMPLES = 16
 #: Most evaluations of the local refinement.
-REFINE_EVALUATIONS = 80
+REFINE_EVALUATIONS = 48
 
 
 def project_to_ball(D: np.ndarray) -> np.ndarray:
