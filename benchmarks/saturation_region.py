@@ -11,7 +11,8 @@ own tracking loop (unicycle plant with the paper's state delay, 150 ms command l
 on the certified boundary, with Delta = 0 and Delta = -I; converged: the position error over
 the last 10 % of 40 s below 1 % of the start's size.  Then the smallest failing multiple of
 the boundary found by doubling and bisection along ``--directions`` directions (up to
-512 x).  Prints one block per gain.
+``--max-scale``, default 16384 x: position errors of tens of metres; a start far out
+"fails" when it has not converged within the 40 s).  Prints one block per gain.
 """
 import argparse
 import sys
@@ -39,7 +40,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--starts', type=int, default=100)
     ap.add_argument('--directions', type=int, default=12)
-    ap.add_argument('--max-scale', type=float, default=512.0)
+    ap.add_argument('--max-scale', type=float, default=16384.0)
     args = ap.parse_args()
     p = load_problem(ROOT / 'config' / 'paper_problem.yaml')
     setup = RobotSetup(circle(), p.A_tau, p.tau, cmd_latency=0.15, lag=0.05, duration=40.0)
