@@ -134,3 +134,53 @@ def test_cli_analyse_prints_the_model_and_the_radius_or_the_refusal(capsys, pape
     assert main(args + ['--min-speed', '0.005']) == 0
     out = capsys.readouterr().out
     assert 'NO radius certified: speed premise |v| >= V: no cruise speed given' in out
+
+
+def test_every_sampled_delta_satisfies_the_nominal_conditions(paper):
+    """Petersen's step checked without it: for sampled ||Delta|| <= 1 (rotations,
+    reflections, rank one, scaled) the decrease LMI with K + E Delta F is negative and the
+    ellipsoid lies where ||(K + E Delta F - G) e|| <= l."""
+    from nonfragile_tracker.control.synthesis.worst_delta import extreme_deltas
+    p, K, _, cert = paper
+    P, Q, G, t, lev = cert.P, cert.Q, cert.G, cert.t, cert.limits.level
+    rng = np.random.default_rng(0)
+    deltas = extreme_deltas(2, 2, samples=12)
+    deltas += [np.outer(a, b) / np.linalg.norm(a) / np.linalg.norm(b)
+               for a, b in rng.normal(size=(8, 2, 2))]
+    for D in deltas + [0.5 * D for D in deltas]:
+        KD = K + p.E @ D @ p.F
+        Acl = p.A + p.B @ KD
+        L = np.block([[Acl.T @ P + P @ Acl + Q, P @ p.A_tau, -P @ p.B + t * G.T],
+                      [p.A_tau.T @ P, -Q, np.zeros((4, 2))],
+                      [-p.B.T @ P + t * G, np.zeros((2, 4)), -2 * t * np.eye(2)]])
+        assert np.linalg.eigvalsh(0.5 * (L + L.T))[-1] < 0
+        H = KD - G
+        assert np.linalg.eigvalsh(H @ np.linalg.inv(P) @ H.T)[-1] <= lev ** 2 * (1 + 1e-9)
+
+
+def test_the_trackers_clamps_satisfy_the_sector_condition_at_any_heading(paper):
+    """The scalar-multiplier sector inequality psi'(psi - G e) <= 0 for the tracker's own
+    clamps (|a| <= A tangential, |w| <= W at a speed |v| >= V), sampled over the certified
+    ellipsoid, headings, speeds, Delta and reference accelerations ||u_d|| <= d."""
+    p, K, _, cert = paper
+    lim = cert.limits
+    A_lim, W = 0.004, lim.max_angular_speed        # a tangential clamp above u_max binds too
+    rng = np.random.default_rng(1)
+    L = np.linalg.cholesky(np.linalg.inv(cert.P))
+    worst, clamped = -np.inf, 0
+    for _ in range(4000):
+        z = rng.normal(size=4)
+        e = L @ (z / np.linalg.norm(z) * rng.uniform() ** 0.25)      # in E(P, 1)
+        th, v = rng.uniform(0, 2 * np.pi), lim.min_speed * (1 + 2 * rng.uniform())
+        D = np.linalg.svd(rng.normal(size=(2, 2)))[0]
+        ud = rng.normal(size=2)
+        ud *= lim.max_reference_accel * rng.uniform() / np.linalg.norm(ud)
+        u = ud + (K + p.E @ D @ p.F) @ e
+        t_, n_ = np.array([np.cos(th), np.sin(th)]), np.array([-np.sin(th), np.cos(th)])
+        a = np.clip(u @ t_, -max(A_lim, lim.u_max), max(A_lim, lim.u_max))
+        w = np.clip((u @ n_) / v, -W, W)
+        applied = a * t_ + v * w * n_
+        psi = (u - ud) - (applied - ud)
+        clamped += bool(np.any(psi != 0))
+        worst = max(worst, float(psi @ (psi - cert.G @ e)))
+    assert worst <= 1e-15 and clamped > 400         # the clamps bind in many samples
