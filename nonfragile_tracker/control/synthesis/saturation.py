@@ -213,7 +213,9 @@ class SaturationCertificate:
                 f'||e_v|| <= {lim.speed_error:.4g} m/s below the cruise speed '
                 f'{lim.cruise_speed:g} m/s), any heading; reference acceleration <= '
                 f'{lim.max_reference_accel:g} m/s^2; delay: constant state delay tau = '
-                f'{self.tau:g} s (delay-independent), NO command latency, NO actuator lag; '
+                f'{self.tau:g} s (delay-independent'
+                + ('; the tracker follows the delay-consistent reference' if self.tau > 0
+                   else '') + '), NO command latency, NO actuator lag; '
                 'initial set: constant history e0 with e0\'(P + tau Q) e0 <= 1')
 
 
