@@ -68,7 +68,7 @@ LAYERS = (
     ('conversions', {'topics', 'msgconv', 'resources', 'scenario', 'tracker_inputs', 'robot'}),
     ('bag', {'bag'}),
     ('nodes', {'nodes'}),
-    ('orchestration', {'runner', 'replayer', 'golden', 'reproduce'}),
+    ('orchestration', {'runner', 'replayer', 'golden', 'reproduce', 'region_check'}),
     ('top', {'commands', 'cli'}),
 )
 #: The ROS client library and the message packages of the ROS 2 wheels.

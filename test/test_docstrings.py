@@ -33,7 +33,8 @@ CHECKED = tuple(
        for part in ('synthesis', 'simulation', 'identification')]
     + [f'nonfragile_tracker.control.synthesis.{m}' for m in (
         'delay', 'analysis', 'design', 'problem', 'sdp', 'certificate', 'search', 'lmi',
-        'delay_dependent', 'input_delay', 'latency_design', 'saturation', 'sweep')]
+        'delay_dependent', 'input_delay', 'latency_design', 'saturation', 'sweep',
+        'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
         'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains')]
@@ -41,7 +42,8 @@ CHECKED = tuple(
         'identify', 'recording', 'monitor')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
-        'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot')]
+        'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot',
+        'region_check')]
     + [f'nonfragile_tracker.bag.{m}' for m in (
         'compare', 'reader', 'writer', 'repair', 'errors', 'typestore', 'report', 'replay',
         'motion')]

@@ -153,39 +153,43 @@ def cmd_design(args: argparse.Namespace) -> int:
 
 
 def _add_saturation_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group('saturation certificate (region of attraction with |w|, |dv/dt| '
-                             'limits; generalized sector condition)')
+    g = p.add_argument_group('saturation certificate (region of attraction under the tracker\'s '
+                             'clamps, the speed premise kept; generalized sector condition)')
+    g.add_argument('--cruise-speed', type=positive_float, metavar='VC',
+                   help='smallest speed of the reference the tracker follows (m/s); gives the '
+                   'certificate')
     g.add_argument('--min-speed', type=positive_float, metavar='V',
-                   help='smallest |v| along the motion (m/s); gives the certificate')
+                   help='|v| kept along every certified trajectory (m/s; default: the V with the '
+                   'largest radius); without --cruise-speed the certificate is refused')
     g.add_argument('--max-angular-speed', type=positive_float, default=2.0, metavar='W',
-                   help='|w| limit (rad/s, default 2, the tracker\'s default)')
+                   help='the tracker\'s |w| clamp (rad/s, default 2, the tracker\'s default)')
     g.add_argument('--max-linear-accel', type=float, default=0.0, metavar='A',
-                   help='|dv/dt| limit (m/s^2; 0 = unknown)')
+                   help='the tracker\'s |dv/dt| clamp (m/s^2; 0 = none)')
     g.add_argument('--reference-accel', type=float, default=0.0, metavar='D',
-                   help='largest component of the reference acceleration (m/s^2)')
-    g.add_argument('--check-simulation', action='store_true',
-                   help='simulate the saturated loop from starts inside and just outside '
-                   'the certified radius')
+                   help='largest ||u_d|| of the reference (m/s^2, Euclidean norm)')
+    g.add_argument('--speed-floor', type=positive_float, default=1e-3, metavar='VF',
+                   help='the tracker\'s min_speed (m/s, default 0.001)')
+    g.add_argument('--max-linear-speed', type=positive_float, default=1.0, metavar='VMAX',
+                   help='the tracker\'s |v| clamp (m/s, default 1)')
+    g.add_argument('--nominal-saturation', action='store_true',
+                   help='certify the nominal gain only (default: with ||Delta|| <= 1 via the '
+                   'problem\'s E, F)')
 
 
 def _saturation_text(args: argparse.Namespace, problem: Problem, K: ArrayLike) -> str:
-    """The saturation certificate of ``K`` when --min-speed is given ('' otherwise)."""
-    if getattr(args, 'min_speed', None) is None:
+    """The saturation certificate of ``K`` (or its refusal) when asked for ('' otherwise)."""
+    if getattr(args, 'cruise_speed', None) is None and getattr(args, 'min_speed', None) is None:
         return ''
-    from ..control.synthesis.saturation import (SaturationLimits, check_by_simulation,
-                                                format_saturation, saturation_certificate)
-    lim = SaturationLimits(args.max_angular_speed, args.min_speed, args.max_linear_accel,
-                           args.reference_accel)
-    K = np.asarray(K, float)
-    cert = saturation_certificate(problem.A, problem.B, K, problem.A_tau, problem.tau, lim)
-    text = format_saturation(cert)
-    if cert.verified and args.check_simulation:
-        c = check_by_simulation(cert, problem.A, problem.B, K, problem.A_tau)
-        text += (f'\n  simulation (saturated loop, 20 s): inside ({c.inside_radius * 1e3:.3g} mm)'
-                 f' {c.inside_converged} of {c.inside_total} converge; just outside '
-                 f'({c.outside_radius * 1e3:.3g} mm) {c.outside_converged} of '
-                 f'{c.outside_total}')
-    return text
+    from ..control.synthesis.saturation import (SaturationLimits, format_saturation,
+                                                saturation_certificate)
+    lim = SaturationLimits(args.max_angular_speed, args.min_speed or 0.0, args.max_linear_accel,
+                           args.reference_accel, args.cruise_speed or 0.0, args.speed_floor,
+                           args.max_linear_speed)
+    nominal = args.nominal_saturation
+    cert = saturation_certificate(problem.A, problem.B, np.asarray(K, float), problem.A_tau,
+                                  problem.tau, lim, E=None if nominal else problem.E,
+                                  F=None if nominal else problem.F)
+    return format_saturation(cert)
 
 
 def cmd_delay_dependent(args: argparse.Namespace) -> int:

@@ -164,7 +164,7 @@ def test_exact_figures_include_the_state_delay_and_cover_the_interval():
     p = delayed_problem()
     K = np.array([[-2.0, -2.5]])
     margin, at_max, worst = exact_figures(p, K, 0.05, 0.2, samples=5)
-    A1s = [p.B @ (K + p.E @ D @ p.F) for D in perturbation_set(p)]
+    A1s = [p.B @ (K + p.E @ D @ p.F) for D in perturbation_set(p, K, 0.2)]
     # a root on the imaginary axis at the margin for the worst D, none just below it
     ab = [exact_abscissa(p.A, p.A_tau, p.tau, A1, margin + 2e-4) for A1 in A1s]
     assert max(ab) >= 0

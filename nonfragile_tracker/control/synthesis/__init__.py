@@ -47,8 +47,8 @@ __all__ = [
     'closed_loop_matrix', 'delay_margin', 'fragility_margin', 'FragilityResult', 'is_stable',
     'rightmost_roots', 'RootsResult', 'spectral_abscissa', 'worst_case_abscissa',
     # saturation
-    'check_by_simulation', 'format_saturation', 'saturation_certificate', 'SaturationLimits',
-    'simulate_saturated', 'verify_saturation',
+    'format_saturation', 'premise_failure', 'saturation_certificate', 'SaturationLimits',
+    'verify_saturation',
     # sweep
     'design_point', 'pareto_front', 'plot_sweep', 'records_for_json', 'run_sweep', 'sweep_points',
     'sweep_table', 'SweepPoint',
@@ -73,8 +73,8 @@ if TYPE_CHECKING:
     from .delay import (closed_loop_matrix, delay_margin, fragility_margin, FragilityResult,
                         is_stable, rightmost_roots, RootsResult, spectral_abscissa,
                         worst_case_abscissa)
-    from .saturation import (check_by_simulation, format_saturation, saturation_certificate,
-                             SaturationLimits, simulate_saturated, verify_saturation)
+    from .saturation import (format_saturation, premise_failure, saturation_certificate,
+                             SaturationLimits, verify_saturation)
     from .sweep import (design_point, pareto_front, plot_sweep, records_for_json, run_sweep,
                         sweep_points, sweep_table, SweepPoint)
 else:

@@ -14,8 +14,9 @@ lagged loop is not certified for ``[h_min, h_max]`` is never returned.
 
 The exact figures (true delay margin, worst spectral abscissa over ``[h_min, h_max]``)
 are for constant perturbations ``D`` in ``{0, the problem's listed perturbations, +-I}``
-and constant delays, on the loop the design is for - the lagged loop when a lag is given -
-with the problem's state delay: ``x' = A x + A_tau x(t - tau) + B (K + E D F) x(t - h)``
+and the worst ``||D|| <= 1`` searched (:func:`perturbation_set`), and constant delays, on
+the loop the design is for - the lagged loop when a lag is given - with the problem's
+state delay: ``x' = A x + A_tau x(t - tau) + B (K + E D F) x(t - h)``
 (:func:`exact_abscissa`, a spectral discretization of the two-delay loop).  They can
 refute a certificate, never confirm one: every certified ``h_max`` is below the true
 margin.  With a lag, only the lagged loop's figures are printed (the loop without the lag
@@ -182,13 +183,23 @@ def lagged_problem(problem: Problem, lag: float) -> Problem:
                    options=dict(problem.options))
 
 
-def perturbation_set(problem: Problem) -> list[np.ndarray]:
-    """``D = 0``, the problem's listed perturbations and ``+-I`` (when ``E, F`` allow).
+def perturbation_set(problem: Problem, K: np.ndarray | None = None,
+                     h: float | None = None) -> list[np.ndarray]:
+    """``D = 0``, the listed perturbations, ``+-I`` and, given ``K``, the worst ``D`` searched.
+
+    With ``K``, the worst ``||D||_2 <= 1`` found by :func:`.worst_delta.worst_delta` (the
+    extreme points of the ball for ``D``'s shape, then a local search) is added: the one
+    with the smallest one-delay margin (``A_tau`` left out) and, given ``h``, the one with
+    the largest abscissa of the two-delay loop at ``h``.
 
     Parameters
     ----------
     problem : Problem
         Its ``E``, ``F`` and ``perturbations``.
+    K : numpy.ndarray, optional
+        The gain the figures are of (the searched worst cases depend on it).
+    h : float, optional
+        The input delay (s) at which the worst abscissa is searched.
 
     Returns
     -------
@@ -199,6 +210,15 @@ def perturbation_set(problem: Problem) -> list[np.ndarray]:
     out = [np.zeros((q, p))] + [np.asarray(D, float) for D in problem.perturbations.values()]
     if q == p:
         out += [np.eye(q), -np.eye(q)]
+    if K is not None:
+        from .worst_delta import worst_delta
+        B, E, F = problem.B, problem.E, problem.F
+        out.append(worst_delta(lambda D: -min(delay_margin(problem.A, B @ (K + E @ D @ F)), 1e3),
+                               q, p, extra=out)[1])
+        if h is not None:
+            out.append(worst_delta(lambda D: exact_abscissa(
+                problem.A, problem.A_tau, problem.tau, B @ (K + E @ D @ F), float(h)),
+                q, p, extra=out)[1])
     return out
 
 
@@ -322,7 +342,7 @@ def exact_figures(problem: Problem, K: np.ndarray, h_min: float, h_max: float, *
     """
     hs = np.linspace(h_min, h_max, max(2, int(samples)))
     margins, at_max, worst = [], [], []
-    for D in perturbation_set(problem):
+    for D in perturbation_set(problem, K, h_max):
         A1 = problem.B @ (K + problem.E @ D @ problem.F)
         ab = [exact_abscissa(problem.A, problem.A_tau, problem.tau, A1, float(h)) for h in hs]
         at_max.append(ab[-1])
@@ -501,7 +521,7 @@ def latency_figures(problem: Problem, K: Any, *, tol: float = 2e-3, h_hi: float 
     """
     K = problem.gain(K)
     margin = min(delay_margin(problem.A, problem.B @ (K + problem.E @ D @ problem.F))
-                 for D in perturbation_set(problem))
+                 for D in perturbation_set(problem, K))
     cert = certified_input_delay_of_gain(problem, K, 0.0, tol=tol, h_hi=h_hi)
     return {'certified_latency': float(cert), 'true_latency_margin': float(margin)}
 
