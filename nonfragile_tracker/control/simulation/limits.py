@@ -49,7 +49,7 @@ TOLERANCE = 0.01
 ITERATIONS = 4
 #: The first pass of :func:`retime` times the accelerations at this fraction of their
 #: limits (the quintic interpolation between 20 ms knots adds up to about 4 %).
-HEADROOM = 0.96
+HEADROOM = 0.95
 #: Largest distance (m) of the re-timed path from the trajectory's points (:func:`fit_path`).
 PATH_TOLERANCE = 1e-3
 #: A plan that stays within ``tolerance / 2`` of one place this long (s) rests there, and
@@ -444,7 +444,10 @@ class PathPiece:
         return r, p_s, p_ss, kappa, dkappa
 
     def speed_cap(self, s: Any) -> np.ndarray:
-        """The planned speed (m/s) at arc lengths ``s`` (linear between the points).
+        """The planned speed (m/s) at arc lengths ``s``.
+
+        Its square is linear between the points (constant acceleration: a speed linear in
+        the arc length would take infinitely long to leave rest).
 
         Parameters
         ----------
@@ -455,7 +458,7 @@ class PathPiece:
         -------
         numpy.ndarray
         """
-        return np.interp(np.asarray(s, float), self.s_pts, self.cap)
+        return np.sqrt(np.interp(np.asarray(s, float), self.s_pts, self.cap ** 2))
 
 
 @dataclass(frozen=True)
@@ -774,7 +777,7 @@ def _passes(limits: Limits, grid: _Grid, smooth: int) -> np.ndarray:
 
 
 def retime(traj: Trajectory, limits: Limits, *, ds: float = 0.005, knot_step: float = 0.02,
-           step: float = 1e-3, smooth: int = 5,
+           step: float = 1e-3, smooth: int = 1,
            tolerance: float = PATH_TOLERANCE) -> Retimed:
     """The trajectory along the same path, timed within ``limits`` (never faster than planned).
 
