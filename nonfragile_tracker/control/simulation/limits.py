@@ -388,8 +388,12 @@ class Retimed:
         names = ', '.join(r.name for r in self.before.violations)
         spans = '; '.join(f'{a:.2f}-{b:.2f} s' for a, b in self.slowed[:6])
         more = f' (+{len(self.slowed) - 6} more)' if len(self.slowed) > 6 else ''
+        where = (f'slower than planned during {spans}{more}' if spans else
+                 'nowhere more than 1 % slower than planned')
+        path = '' if self.path is None else (
+            f'; path within {self.path.deviation * 1e3:.2f} mm of the points')
         return (f're-timed for {names}: duration {self.duration_before:.3f} s -> '
-                f'{self.duration_after:.3f} s, slower than planned during {spans}{more}')
+                f'{self.duration_after:.3f} s, {where}{path}')
 
 
 @dataclass(frozen=True)
@@ -553,9 +557,10 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     length, as smooth as the tolerance allows (:func:`_smooth_fit`): continuous curvature,
     bounded ``dkappa/ds``, whatever the sampling - uniform in time or in space, uneven, a
     final point appended a few milliseconds after the one before.  The planned speed at
-    each point is the chord over the time between the points (the larger of the two
-    around it); where the plan rests (within ``tolerance / 2`` for :data:`REST_DWELL` s or
-    longer), at the ends and at cusps it is the plan's speed there (at rest: 0).
+    each point is the slope there of the parabola ``s(t)`` through it and its neighbours
+    (chords over the times between them: exact for a constant acceleration); where the
+    plan rests (within ``tolerance / 2`` for :data:`REST_DWELL` s or longer), at the ends
+    and at cusps it is the plan's speed there (at rest: 0).
 
     Parameters
     ----------
@@ -596,7 +601,9 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     gap = t[first[1:]] - t[last[:-1]]
     v = chord / gap
     cap = np.empty(k)
-    cap[1:-1] = 0.5 * (v[1:] + v[:-1])
+    # the speed at each point: derivative of the parabola s(t) through it and its
+    # neighbours (exact for a constant acceleration, however the points are spaced)
+    cap[1:-1] = (v[:-1] * gap[1:] + v[1:] * gap[:-1]) / (gap[1:] + gap[:-1])
     v0, v1 = traj.evaluate([traj.t_start, traj.t_end]).vx, traj.evaluate(
         [traj.t_start, traj.t_end]).vy
     cap[0], cap[-1] = math.hypot(v0[0], v1[0]), math.hypot(v0[1], v1[1])
