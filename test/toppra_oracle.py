@@ -19,14 +19,16 @@ from nonfragile_tracker.control.simulation.limits import Limits, PathFit, PathPi
 logging.getLogger('toppra').setLevel(logging.WARNING)
 
 
-def piece_duration(piece: PathPiece, limits: Limits, *, step: float = 0.004) -> float:
-    """toppra's time-optimal duration (s) of one piece, from and to the planned end speeds."""
+def piece_duration(piece: PathPiece, limits: Limits, span: tuple[float, float], *,
+                   step: float = 0.004) -> float:
+    """toppra's time-optimal duration (s) of a span of a piece, from and to the planned
+    speeds at its ends."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
-    L = piece.length
-    n = max(int(np.ceil(L / step)), 10)
-    ss = np.linspace(0.0, L, n + 1)
+    s0, L = span
+    n = max(int(np.ceil((L - s0) / step)), 10)
+    ss = np.linspace(s0, L, n + 1)
     path = ta.SplineInterpolator(ss, ss.reshape(-1, 1))
 
     def curvature(q):
@@ -59,7 +61,7 @@ def piece_duration(piece: PathPiece, limits: Limits, *, step: float = 0.004) -> 
 
         cons.append(constraint.SecondOrderConstraint(inv_dyn, lambda q: F, lambda q: g, 1))
     inst = algo.TOPPRA(cons, path, gridpoints=ss, solver_wrapper='seidel')
-    v0 = float(vlim(0.0)[0, 1])
+    v0 = float(vlim(s0)[0, 1])
     v1 = float(vlim(L)[0, 1])
     _, sd, _ = inst.compute_parameterization(v0, v1)
     sd = np.asarray(sd, float)
@@ -69,5 +71,6 @@ def piece_duration(piece: PathPiece, limits: Limits, *, step: float = 0.004) -> 
 
 
 def duration(path: PathFit, limits: Limits, *, step: float = 0.004) -> float:
-    """toppra's time-optimal duration (s) of a fitted path (pieces meet at rest)."""
-    return sum(piece_duration(p, limits, step=step) for p in path.pieces)
+    """toppra's time-optimal duration (s) of a fitted path (pieces and spans meet at rest)."""
+    return sum(piece_duration(p, limits, span, step=step) for p in path.pieces
+               for span in p.spans())

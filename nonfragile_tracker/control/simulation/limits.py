@@ -61,6 +61,13 @@ CUSP_ANGLE = 0.75 * math.pi
 MAX_GRID = 8_000
 #: Most smoothing-spline fits of the search for the smoothest path within the tolerance.
 FIT_ITERATIONS = 8
+#: Length (m) by which a fitted piece is continued beyond its ends (natural spline ends).
+EXTEND = 0.1
+#: Least time (s) between the points the planned speed at a point is taken from.
+SPEED_GAP = 0.1
+#: Time (s) the re-timed trajectory rests at a stop or a cusp (two knots at rest: the
+#: motion between them stays below MOVING_SPEED).
+REST_KNOT = 1e-3
 #: Names of the limits, as the tracker's parameters spell them.
 LIMIT_NAMES = ('max_linear_speed', 'max_linear_accel', 'max_angular_speed',
                'max_angular_accel', 'min_turning_radius')
@@ -447,6 +454,17 @@ class PathPiece:
         p_ss = (r2 * sig[:, None] - r1 * (dot / sig)[:, None]) / sig[:, None] ** 3
         return r, p_s, p_ss, kappa, dkappa
 
+    def spans(self) -> list[tuple[float, float]]:
+        """Arc-length spans between the places the plan rests (timed from rest to rest).
+
+        Returns
+        -------
+        list of (float, float)
+        """
+        stops = self.s_pts[1:-1][self.cap[1:-1] == 0.0].tolist()
+        edges = [0.0, *stops, self.length]
+        return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
     def speed_cap(self, s: Any) -> np.ndarray:
         """The planned speed (m/s) at arc lengths ``s``.
 
@@ -497,29 +515,62 @@ def _clusters(x: np.ndarray, y: np.ndarray, radius: float) -> list[tuple[int, in
     return out
 
 
+def _extended(u: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """``u, P`` continued beyond both ends by :data:`EXTEND` m of their own curvature.
+
+    A smoothing spline's ends are *natural* (zero second derivative): a path that starts or
+    ends on an arc would have its curvature pulled to 0 there, and overshoot before it.
+    Ten points continue each end along the parabola fitted (per coordinate, in ``u``) to
+    the last :data:`EXTEND` m; they only shape the fit.  Returns the extended arrays and
+    the index of the first original point.
+    """
+    out_u, out_P = [u], [P]
+    steps = EXTEND * np.arange(1, 11) / 10
+    for side in (-1, 1):
+        ref = u[0] if side < 0 else u[-1]
+        near = np.abs(u - ref) <= EXTEND
+        if near.sum() < 3:
+            near = np.zeros(u.size, bool)
+            near[:3] = side < 0
+            near[-3:] = side > 0
+        du = u[near] - ref
+        coef = [np.polyfit(du, P[near, j], 2) for j in range(2)]
+        ue = side * steps[::side]                  # ascending, outside [u0, u_end]
+        pe = np.column_stack([np.polyval(c, ue) for c in coef])
+        if side < 0:
+            out_u.insert(0, ref + ue)
+            out_P.insert(0, pe)
+        else:
+            out_u.append(ref + ue)
+            out_P.append(pe)
+    return np.concatenate(out_u), np.concatenate(out_P), steps.size
+
+
 def _smooth_fit(u: np.ndarray, P: np.ndarray, owner: np.ndarray, pts: np.ndarray,
                 tolerance: float) -> tuple[Any, float]:
     """The smoothest cubic smoothing spline of ``P(u)`` with every point within tolerance.
 
     The weights are the points' spacing (the fit does not depend on how densely a stretch
-    was sampled); the ends weigh 100 times more (the start and the goal stay put).  The
-    penalty ``lam`` is searched in log-log steps (the largest residual grows about like
-    ``sqrt(lam)``); each point's distance to the curve is at most its residual
-    ``|P(u_owner) - point|`` (its cluster's parameter).
+    was sampled); the ends weigh 100 times more (the start and the goal stay put); beyond
+    them the points are continued (:func:`_extended`).  The penalty ``lam`` is searched in
+    log-log steps (the largest residual grows about like ``sqrt(lam)``); each point's
+    distance to the curve is at most its residual ``|P(u_owner) - point|`` (its cluster's
+    parameter).
     """
     from scipy.interpolate import make_interp_spline, make_smoothing_spline
     m = u.size
     if m < 5:
         spl = make_interp_spline(u, P, k=min(3, m - 1))
         return spl, float(np.hypot(*(spl(u)[owner] - pts).T).max())
-    du = np.diff(u)
+    ux, Px, i0 = _extended(u, P)
+    du = np.diff(ux)
     w = np.concatenate([[du[0]], 0.5 * (du[1:] + du[:-1]), [du[-1]]])
     w = w / w.mean()
-    w[0] = w[-1] = 100.0
+    w[i0] = w[i0 + m - 1] = 100.0
     spacing = float(u[-1] / (m - 1))
 
     def fit(lam: float) -> tuple[Any, float]:
-        spl = make_smoothing_spline(u, P, w=w, lam=lam)
+        spl = make_smoothing_spline(ux, Px, w=w, lam=lam)
         return spl, float(np.hypot(*(spl(u)[owner] - pts).T).max())
 
     lam = 0.03 ** 4 / spacing
@@ -557,8 +608,8 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     length, as smooth as the tolerance allows (:func:`_smooth_fit`): continuous curvature,
     bounded ``dkappa/ds``, whatever the sampling - uniform in time or in space, uneven, a
     final point appended a few milliseconds after the one before.  The planned speed at
-    each point is the slope there of the parabola ``s(t)`` through it and its neighbours
-    (chords over the times between them: exact for a constant acceleration); where the
+    each point is the slope there of the parabola ``s(t)`` through it and the points
+    :data:`SPEED_GAP` s before and after (exact for a constant acceleration); where the
     plan rests (within ``tolerance / 2`` for :data:`REST_DWELL` s or longer), at the ends
     and at cusps it is the plan's speed there (at rest: 0).
 
@@ -601,9 +652,19 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     gap = t[first[1:]] - t[last[:-1]]
     v = chord / gap
     cap = np.empty(k)
-    # the speed at each point: derivative of the parabola s(t) through it and its
-    # neighbours (exact for a constant acceleration, however the points are spaced)
-    cap[1:-1] = (v[:-1] * gap[1:] + v[1:] * gap[:-1]) / (gap[1:] + gap[:-1])
+    # the speed at each point: slope of the parabola s(t) through it and the points
+    # SPEED_GAP s before and after it (exact for a constant acceleration, however the
+    # points are spaced; a duplicate logged 1 ms later is not a neighbour: its noise
+    # over 1 ms would be a large speed)
+    S = np.concatenate([[0.0], np.cumsum(chord)])
+    t_in, t_out = t[first], t[last]
+    j = np.arange(1, k - 1)
+    jm = np.minimum(np.searchsorted(t_out, t_in[j] - SPEED_GAP, side='right') - 1, j - 1)
+    jp = np.maximum(np.searchsorted(t_in, t_out[j] + SPEED_GAP, side='left'), j + 1)
+    jm, jp = np.maximum(jm, 0), np.minimum(jp, k - 1)
+    g1, g2 = t_in[j] - t_out[jm], t_in[jp] - t_out[j]
+    v1, v2 = (S[j] - S[jm]) / g1, (S[jp] - S[j]) / g2
+    cap[1:-1] = (v1 * g2 + v2 * g1) / (g1 + g2)
     v0, v1 = traj.evaluate([traj.t_start, traj.t_end]).vx, traj.evaluate(
         [traj.t_start, traj.t_end]).vy
     cap[0], cap[-1] = math.hypot(v0[0], v1[0]), math.hypot(v0[1], v1[1])
@@ -653,10 +714,11 @@ class _Grid:
     xmax: np.ndarray
 
     @classmethod
-    def of(cls, piece: PathPiece, limits: Limits, h: float) -> '_Grid':
-        """The piece at spacing about ``h`` (m), with the speed rows in ``xmax``."""
-        n = max(int(math.ceil(piece.length / h)), 4)
-        s = np.linspace(0.0, piece.length, n + 1)
+    def of(cls, piece: PathPiece, limits: Limits, h: float, span: tuple[float, float]
+           ) -> '_Grid':
+        """``span`` of the piece at spacing about ``h`` (m), with the speed rows in ``xmax``."""
+        n = max(int(math.ceil((span[1] - span[0]) / h)), 4)
+        s = np.linspace(span[0], span[1], n + 1)
         p, p_s, p_ss, kappa, dkappa = piece.evaluate(s)
         cap = piece.speed_cap(s)
         xmax = cap ** 2
@@ -862,8 +924,9 @@ def time_optimal_duration(path: PathFit, limits: Limits, *, ds: float = 0.005,
     """
     T = 0.0
     for piece in path.pieces:
-        g = _Grid.of(piece, limits, max(ds, path.length / MAX_GRID))
-        T += float(_durations(np.sqrt(_passes(limits, g, smooth)), g.h, '').sum())
+        for span in piece.spans():
+            g = _Grid.of(piece, limits, max(ds, path.length / MAX_GRID), span)
+            T += float(_durations(np.sqrt(_passes(limits, g, smooth)), g.h, '').sum())
     return T
 
 
@@ -883,7 +946,10 @@ def _timed(traj: Trajectory, path: PathFit, limits: Limits, *, h: float, knot_st
     acceleration ``u`` is constant, so ``s(t)``, ``s'`` and ``s''`` are exact at any time.
     The knots every ``knot_step`` seconds get position ``p(s)``, velocity ``p_s s'`` and
     acceleration ``p_ss s'^2 + p_s s''`` (the quintic Hermite form,
-    :func:`control.simulation.trajectory.from_states`); pieces meet at rest at cusps.
+    :func:`control.simulation.trajectory.from_states`).  At a cusp and where the plan
+    rests the timing stops: two knots :data:`REST_KNOT` s apart, at rest, each with its
+    side's acceleration (one knot with a mean acceleration would swing the velocity's
+    direction around the stop).
     """
     t0 = traj.t_start
     T_all: list[np.ndarray] = []
@@ -891,31 +957,31 @@ def _timed(traj: Trajectory, path: PathFit, limits: Limits, *, h: float, knot_st
     dirs: list[np.ndarray] = []
     spans: list[tuple[float, float]] = []
     for piece in path.pieces:
-        g = _Grid.of(piece, limits, h)
-        xs = _passes(limits, g, smooth)
-        sd = np.sqrt(xs)
-        tg = t0 + np.concatenate([[0.0], np.cumsum(_durations(sd, g.h, traj.source))])
-        u = (xs[1:] - xs[:-1]) / (2 * g.h)
-        m = max(int(math.ceil((tg[-1] - tg[0]) / knot_step)), 2)
-        tk = np.linspace(tg[0], tg[-1], m + 1)
-        i = np.clip(np.searchsorted(tg, tk, side='right') - 1, 0, u.size - 1)
-        tau = tk - tg[i]
-        sk = np.clip(g.s[i] + sd[i] * tau + 0.5 * u[i] * tau ** 2, 0.0, piece.length)
-        sdk = np.maximum(sd[i] + u[i] * tau, 0.0)
-        sddk = u[i]
-        sk[-1], sdk[-1] = piece.length, sd[-1]
-        p, p_s, p_ss, _, _ = piece.evaluate(sk)
-        vel = p_s * sdk[:, None]
-        acc = p_ss * (sdk ** 2)[:, None] + p_s * sddk[:, None]
-        if T_all:                          # a cusp: one knot, at rest, mean acceleration
-            rows[-1][-1, 4:6] = 0.5 * (rows[-1][-1, 4:6] + acc[0])
-            tk, p, vel, acc = tk[1:], p[1:], vel[1:], acc[1:]
-        T_all.append(tk)
-        rows.append(np.column_stack([p, vel, acc]))
-        dirs.append(np.full(tk.size, piece.direction))
-        slow = (g.cap > 1.01 * sd) & (g.cap > MOVING_SPEED)
-        spans += _slowed_spans(slow, tg)
-        t0 = float(tg[-1])
+        for span in piece.spans():
+            if T_all:                      # a stop or a cusp: at rest for REST_KNOT s
+                t0 += REST_KNOT
+            g = _Grid.of(piece, limits, h, span)
+            xs = _passes(limits, g, smooth)
+            sd = np.sqrt(xs)
+            tg = t0 + np.concatenate([[0.0], np.cumsum(_durations(sd, g.h, traj.source))])
+            u = (xs[1:] - xs[:-1]) / (2 * g.h)
+            m = max(int(math.ceil((tg[-1] - tg[0]) / knot_step)), 2)
+            tk = np.linspace(tg[0], tg[-1], m + 1)
+            i = np.clip(np.searchsorted(tg, tk, side='right') - 1, 0, u.size - 1)
+            tau = tk - tg[i]
+            sk = np.clip(g.s[i] + sd[i] * tau + 0.5 * u[i] * tau ** 2, span[0], span[1])
+            sdk = np.maximum(sd[i] + u[i] * tau, 0.0)
+            sddk = u[i]
+            sk[-1], sdk[-1] = span[1], sd[-1]
+            p, p_s, p_ss, _, _ = piece.evaluate(sk)
+            vel = p_s * sdk[:, None]
+            acc = p_ss * (sdk ** 2)[:, None] + p_s * sddk[:, None]
+            T_all.append(tk)
+            rows.append(np.column_stack([p, vel, acc]))
+            dirs.append(np.full(tk.size, piece.direction))
+            slow = (g.cap > 1.01 * sd) & (g.cap > MOVING_SPEED)
+            spans += _slowed_spans(slow, tg)
+            t0 = float(tg[-1])
     tk = np.concatenate(T_all)
     R = np.concatenate(rows)
     new = Trajectory(pp=_quintic_hermite(tk, R), knots=tk, direction=np.concatenate(dirs),
