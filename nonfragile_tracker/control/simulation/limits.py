@@ -480,7 +480,8 @@ class PathPiece:
         -------
         numpy.ndarray
         """
-        return np.sqrt(np.interp(np.asarray(s, float), self.s_pts, self.cap ** 2))
+        out: np.ndarray = np.sqrt(np.interp(np.asarray(s, float), self.s_pts, self.cap ** 2))
+        return out
 
 
 @dataclass(frozen=True)
@@ -931,11 +932,13 @@ def time_optimal_duration(path: PathFit, limits: Limits, *, ds: float = 0.005,
 
 
 def _durations(sd: np.ndarray, h: float, source: str) -> np.ndarray:
+    """Time of each grid step at the squared speeds' roots ``sd`` (error if one stops)."""
     both = sd[1:] + sd[:-1]
     if np.any(both <= 0):
         raise TrajectoryError(f'{source}: the path cannot be timed within the limits (it '
                               'would have to stop inside); check the limits')
-    return 2 * h / both
+    out: np.ndarray = 2 * h / both
+    return out
 
 
 def _timed(traj: Trajectory, path: PathFit, limits: Limits, *, h: float, knot_step: float,
