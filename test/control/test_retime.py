@@ -213,3 +213,31 @@ def test_fit_refuses_what_does_not_move():
     tr = from_waypoints([0.0, 1.0, 2.0], [0.0, 1e-4, 2e-4], [0.0, 0.0, 0.0], source='still')
     with pytest.raises(TrajectoryError, match='does not move'):
         fit_path(tr)
+
+
+@pytest.mark.parametrize('n', [2, 3, 5, 9])
+def test_the_planned_speed_is_the_plans_however_sparse_the_points(n):
+    """Timed by the plan's speed alone (no limits), the fitted path takes the planned time
+    (within 1 %): between sparse waypoints the speed the plan reaches is reconstructed
+    (rest to rest over one interval: twice the mean); and re-timed within the base's
+    limits a 2 m in 1 s plan meets them."""
+    from nonfragile_tracker.control.simulation.limits import time_optimal_duration
+    t = np.linspace(0.0, 1.0, n)
+    tr = from_waypoints(t, np.linspace(0.0, 2.0, n), 0.3 * np.sin(np.linspace(0.0, 2.0, n)))
+    path = fit_path(tr)
+    assert time_optimal_duration(path, Limits()) == pytest.approx(tr.duration, rel=0.01)
+    r = retime(tr, BASE)
+    assert r.after.ok and check(r.trajectory, BASE, tolerance=0.01).ok
+    # 2 m from rest to rest at <= 1 m/s and 1 m/s^2 (0.95 timed): at least 3 s, not much more
+    assert 3.0 <= r.duration_after <= 3.2
+
+
+@pytest.mark.parametrize('name', ['rectangle', 'lap'])
+def test_the_plan_alone_keeps_the_planned_time(name):
+    """Dense files too: the uniformly time-sampled rectangle (22.10 s) and the lap with
+    points every 5 cm along the path (21.78 s)."""
+    from nonfragile_tracker.control.simulation.limits import time_optimal_duration
+    tr = (traj_of(pf.sample(pf.rounded_rectangle())) if name == 'rectangle' else
+          load_waypoints(CONFIG / 'trajectories' / 'line_arc_lap.csv'))
+    assert time_optimal_duration(fit_path(tr), Limits()) == pytest.approx(tr.duration,
+                                                                         rel=0.002)
