@@ -559,7 +559,8 @@ def _smooth_fit(u: np.ndarray, P: np.ndarray, owner: np.ndarray, pts: np.ndarray
     """The smoothest cubic smoothing spline of ``P(u)`` with every point within tolerance.
 
     The weights are the points' spacing (the fit does not depend on how densely a stretch
-    was sampled); the ends weigh 100 times more (the start and the goal stay put); beyond
+    was sampled); the ends weigh 10^6 times more (the start and the goal stay put to
+    ~10 nm: pieces meeting at a cusp meet there); beyond
     them the points are continued (:func:`_extended`).  The penalty ``lam`` is searched in
     log-log steps (the largest residual grows about like ``sqrt(lam)``); each point's
     distance to the curve is at most its residual ``|P(u_owner) - point|`` (its cluster's
@@ -574,7 +575,7 @@ def _smooth_fit(u: np.ndarray, P: np.ndarray, owner: np.ndarray, pts: np.ndarray
     du = np.diff(ux)
     w = np.concatenate([[du[0]], 0.5 * (du[1:] + du[:-1]), [du[-1]]])
     w = w / w.mean()
-    w[i0] = w[i0 + m - 1] = 100.0
+    w[i0] = w[i0 + m - 1] = 1e6
     spacing = float(u[-1] / (m - 1))
 
     def fit(lam: float) -> tuple[Any, float]:
@@ -1019,6 +1020,8 @@ def _timed(traj: Trajectory, path: PathFit, limits: Limits, *, h: float, knot_st
             p, p_s, p_ss, _, _ = piece.evaluate(sk)
             vel = p_s * sdk[:, None]
             acc = p_ss * (sdk ** 2)[:, None] + p_s * sddk[:, None]
+            if rows:                       # the rest knots at one place
+                p[0] = rows[-1][-1, 0:2]
             T_all.append(tk)
             rows.append(np.column_stack([p, vel, acc]))
             dirs.append(np.full(tk.size, piece.direction))
