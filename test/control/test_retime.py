@@ -20,8 +20,9 @@ import pytest
 
 import planner_files as pf
 from conftest import CONFIG
-from nonfragile_tracker.control.simulation.limits import (PATH_TOLERANCE, Limits, check,
-                                                          fit_path, retime, within_limits)
+from nonfragile_tracker.control.simulation.limits import (HEADROOM, PATH_TOLERANCE, Limits,
+                                                          check, fit_path, retime,
+                                                          time_optimal_duration, within_limits)
 from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.control.simulation.trajectory import (Trajectory, from_waypoints,
                                                               load_waypoints)
@@ -151,7 +152,9 @@ def test_a_rest_is_kept_and_near_duplicates_are_not():
     rest = traj_of(pf.sample(pf.rounded_rectangle(), rest=(8.0, 1.0)), 'rest')
     dup = traj_of(pf.sample(pf.rounded_rectangle(), duplicates=20), 'duplicates')
     for tr, stops in ((rest, 1), (dup, 0)):
-        new = retime(tr, BASE).trajectory
+        r = retime(tr, BASE)
+        assert r.after.ok
+        new = r.trajectory
         t = np.arange(new.t_start, new.t_end, 0.005)
         s = new.evaluate(t)
         slow = np.hypot(s.vx, s.vy) < 0.02
@@ -181,6 +184,9 @@ def test_a_cusp_splits_the_path_and_stops_there():
     assert math.hypot(new.sample(t_cusp).vx, new.sample(t_cusp).vy) < 1e-9
     assert check(new, BASE, tolerance=0.01).ok
     assert new._dir[0] == 1.0 and new._dir[-1] == -1.0
+    # one pass: no limit had to be tightened beyond the headroom (the stop is clean)
+    assert r.used.max_angular_accel == pytest.approx(BASE.max_angular_accel * HEADROOM)
+    assert r.duration_after <= 1.01 * time_optimal_duration(r.path, BASE)
 
 
 def test_analytic_and_unlimited_trajectories_pass_unchanged():
@@ -221,7 +227,6 @@ def test_the_planned_speed_is_the_plans_however_sparse_the_points(n):
     (within 1 %): between sparse waypoints the speed the plan reaches is reconstructed
     (rest to rest over one interval: twice the mean); and re-timed within the base's
     limits a 2 m in 1 s plan meets them."""
-    from nonfragile_tracker.control.simulation.limits import time_optimal_duration
     t = np.linspace(0.0, 1.0, n)
     tr = from_waypoints(t, np.linspace(0.0, 2.0, n), 0.3 * np.sin(np.linspace(0.0, 2.0, n)))
     path = fit_path(tr)
@@ -236,7 +241,6 @@ def test_the_planned_speed_is_the_plans_however_sparse_the_points(n):
 def test_the_plan_alone_keeps_the_planned_time(name):
     """Dense files too: the uniformly time-sampled rectangle (22.10 s) and the lap with
     points every 5 cm along the path (21.78 s)."""
-    from nonfragile_tracker.control.simulation.limits import time_optimal_duration
     tr = (traj_of(pf.sample(pf.rounded_rectangle())) if name == 'rectangle' else
           load_waypoints(CONFIG / 'trajectories' / 'line_arc_lap.csv'))
     assert time_optimal_duration(fit_path(tr), Limits()) == pytest.approx(tr.duration,
