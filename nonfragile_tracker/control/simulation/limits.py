@@ -7,20 +7,13 @@ so ``min_turning_radius = L / tan(delta_max)``; De Luca, Oriolo and Samson, LNCI
 A value of 0 means *unknown / none*: not checked.
 
 :func:`check` samples a bounded trajectory and returns, per limit, the peak, its time and
-place, the margin and the first violation.  :func:`retime` gives a trajectory along the
-same path whose timing satisfies the limits at the cost they demand: the path is taken
-from the points' geometry (:func:`fit_path`: a smoothing spline within
-:data:`PATH_TOLERANCE` of every point, whatever the sampling, so duplicates, rests and a
-goal appended a few milliseconds after the last sample do not create curvature spikes),
-and the timing is the time-optimal parameterization ``s(t)`` of that path under the
-limits and the planner's own speed at each place (it never drives faster than the plan).
-The method is TOPP-RA (Pham and Pham, IEEE T-RO 2018): with ``x = s'^2`` and ``u = s''``
-on an arc-length grid every limit is linear in ``(x, u)``; a backward pass computes the
-controllable sets of ``x`` (in closed form: :func:`_passes`), a forward pass takes the
-largest admissible ``u``, and the result is sampled into the quintic Hermite form.  The
-rows, the passes and the independent check against the ``toppra`` package (a test-only
-dependency) are in the documentation: doc/theory.md, section "Re-timing within limits"
-(#topp-ra).
+place, the margin and the first violation.  :func:`retime` re-times it at the cost the
+limits demand: the path from the points' geometry (:func:`fit_path`: a smoothing spline
+within :data:`PATH_TOLERANCE` of every point, whatever the sampling), then the
+time-optimal ``s(t)`` on it under the limits and the plan's own speed (TOPP-RA, Pham and
+Pham 2018, closed-form passes: :func:`_passes`), checked again to 1 %.  The fit, the rows,
+the passes and the check against ``toppra`` (test-only) are derived in doc/theory.md,
+section "Re-timing within limits" (#topp-ra).
 """
 from __future__ import annotations
 
