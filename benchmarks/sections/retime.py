@@ -112,7 +112,8 @@ def bench_retime(cfg, table: Table, raw: dict) -> None:
                               'deviation_m': r.path.deviation if r.path else 0.0,
                               'peaks_after': {rep.name: rep.peak for rep in again.reports}}
         peaks = (f"{fmt(again['max_linear_accel'].peak)} m/s^2, "
-                 f"{fmt(again['max_angular_accel'].peak)} rad/s^2")
+                 f"{fmt(again['max_angular_accel'].peak)} rad/s^2, turn rate "
+                 f"{fmt(again['max_angular_speed'].peak)} rad/s")
         table.add(f'R.{k}', f'lap time (s, 4 digits in the detail), {name}',
                   r.duration_after, 's',
                   f'planned {fmt(tr.duration, 4)} s; today {fmt(t_today, 4)} s; toppra '
