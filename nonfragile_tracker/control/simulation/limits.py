@@ -330,7 +330,8 @@ def refuse_tight_turns(traj: Trajectory, limits: Limits, *, step: float = 1e-3,
     limits : Limits
         The robot's limits (``min_turning_radius`` 0: nothing to refuse).
     step : float
-        Arc-length step (m) of the curvature's samples is ``step`` times 5 m/s (5 mm).
+        Sampling step (s) of the checks; the fitted path's curvature is sampled every
+        ``5 * step`` m (5 mm).
     path : PathFit, optional
         The fitted path (default: :func:`fit_path` of ``traj``).
 
@@ -408,7 +409,8 @@ class PathPiece:
     ``spline`` is the cubic smoothing spline of ``(x, y)`` over the chord parameter ``u``;
     ``u_tab``/``s_tab`` tabulate the arc length ``s(u)`` (``s`` maps to ``u`` by
     interpolation); ``s_pts``, ``t_pts`` and ``cap`` are the arc length, the planned time
-    and the planned speed (the cap of the re-timing) at the points it was fitted to;
+    and the planned speed (the cap of the re-timing) at the points it was fitted to (and
+    in the middle of the intervals where the plan is faster than at their ends);
     ``direction`` is +1 forwards, -1 backwards; ``deviation`` the largest distance (m) of
     the trajectory's points from the curve.
     """
