@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..control.simulation.limits import LIMIT_NAMES, Limits, check, retime
+from ..control.simulation.limits import LIMIT_NAMES, PATH_TOLERANCE, Limits, check, retime
 from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 from .common import Subparsers
@@ -58,6 +58,10 @@ def register(subparsers: Subparsers) -> None:
     c.add_argument('--limits', nargs='+', type=_limit, default=[], metavar='NAME=VALUE',
                    help='the base\'s limits, the tracker\'s parameter names: '
                    f'{", ".join(LIMIT_NAMES)} (SI units; 0 or absent = not checked)')
+    c.add_argument('--path-tolerance', type=float, default=PATH_TOLERANCE, metavar='M',
+                   help='with --limits: largest distance (m) of the re-timed path from the '
+                   f'file\'s points (default {PATH_TOLERANCE:g}: the smoothing that takes the '
+                   'path from the points\' geometry; raise it for noisy recorded paths)')
     c.add_argument('-o', '--output', default=None,
                    help='with --limits: write the re-timed trajectory as a waypoint CSV '
                    '(t, x, y, yaw, speed in equal steps of at most 5 ms: read back, it '
@@ -88,13 +92,16 @@ def cmd_check(args: argparse.Namespace) -> int:
         if args.output:
             raise InputError('--output needs --limits (it writes the re-timed trajectory)')
         return 0
+    if not (args.path_tolerance > 0 and args.path_tolerance < float('inf')):
+        raise InputError(f'--path-tolerance must be a distance > 0 m, got '
+                         f'{args.path_tolerance!r}')
     limits = Limits(**dict(args.limits))
     result = check(traj, limits)
     print('limits (accelerations: mean over 20 ms):')
     for rep in result.reports:
         print(f'  {rep.describe()}')
     try:
-        r = retime(traj, limits)
+        r = retime(traj, limits, tolerance=args.path_tolerance)
     except TrajectoryError as exc:
         print(f'refused: {exc}')
         return 1

@@ -245,3 +245,19 @@ def test_the_plan_alone_keeps_the_planned_time(name):
           load_waypoints(CONFIG / 'trajectories' / 'line_arc_lap.csv'))
     assert time_optimal_duration(fit_path(tr), Limits()) == pytest.approx(tr.duration,
                                                                          rel=0.002)
+
+
+def test_cli_path_tolerance(tmp_path, capsys):
+    """`--path-tolerance M` bounds the re-timed path's distance from the points (a noisy
+    recorded path needs more than 1 mm); a value <= 0 exits 2 naming the option."""
+    import re
+    from nonfragile_tracker.cli import main
+    src = pf.write_csv(pf.sample(pf.rounded_rectangle()), tmp_path / 'rect.csv')
+    for tol in (0.001, 0.003):
+        assert main(['trajectory', 'check', str(src), '--limits', 'max_angular_accel=3',
+                     '--path-tolerance', str(tol)]) == 1
+        mm = float(re.search(r'path within ([0-9.]+) mm', capsys.readouterr().out).group(1))
+        assert 0.5 * tol * 1e3 < mm <= tol * 1e3
+    assert main(['trajectory', 'check', str(src), '--limits', 'max_angular_accel=3',
+                 '--path-tolerance', '0']) == 2
+    assert '--path-tolerance' in capsys.readouterr().err
