@@ -158,3 +158,22 @@ def write_csv(rows: dict[str, np.ndarray], path: str | Path) -> Path:
         lines.append(','.join(f'{rows[k][i]:.6f}' for k in ('t', 'x', 'y', 'yaw', 'speed')))
     p.write_text('\n'.join(lines) + '\n')
     return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python test/planner_files.py DIR``: write the issue's two files into DIR."""
+    import argparse
+    ap = argparse.ArgumentParser(description='write the rounded rectangle and the backwards S '
+                                 'as a logger writes them (0.05 s, goal appended 4 ms later)')
+    ap.add_argument('dir')
+    args = ap.parse_args(argv)
+    out = Path(args.dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, rows in (('rectangle.csv', sample(rounded_rectangle())),
+                       ('s_backwards.csv', sample(s_curve(), speed=0.3, backwards=True))):
+        print(write_csv(rows, out / name))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
