@@ -9,7 +9,9 @@ With the base's limits (1 m/s, 1 m/s^2, 2 rad/s, 3 rad/s^2) each is re-timed by
 :func:`control.simulation.limits.retime` today (the module as of commit ``BEFORE``, loaded
 from git) and now, beside toppra's time-optimal duration on the now-fitted geometry
 (``test/toppra_oracle.py``; toppra 0.6.10, test-only).  Then the wall and CPU time of a
-re-timing of a 63.7 s trajectory (three laps of the rectangle, 1,275 points).
+re-timing of a 63.7 s trajectory (three laps of the rectangle, 1,275 points), and the
+rectangle and the S followed in process on issue 23's base as planned, re-timed today and
+now (R.8).
 
     .venv/bin/python benchmarks/run.py --only retime
     .venv/bin/python benchmarks/sections/retime.py [--quick]      # this section alone
@@ -153,7 +155,66 @@ def bench_retime(cfg, table: Table, raw: dict) -> None:
     table.add('R.7', 're-timing of the same, CPU time (= wall time on an idle core)',
               c['median'], 's', f"{spread(c)}; the wall time above is this stretched by the "
               f"machine's load", '', target='retime_60s')
+    out['tracking'] = _tracking(table, before)
     raw['retime'] = out
+
+
+def _tracking(table: Table, before) -> dict:
+    """R.8: the files followed in process on issue 23's base (config/line_arc_scenario.yaml:
+    40 ms latency, 50 ms lags, 1 m/s^2 and 3 rad/s^2 in the plant; no odometry noise) with
+    the shipped gain and the scenario's predictor: as planned, re-timed today, re-timed now.
+    Error: position against the (re-timed) reference while it is active."""
+    import math
+
+    import numpy as np
+    import yaml
+
+    from nonfragile_tracker.control.simulation.follow import simulate_following
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.limits import Limits, within_limits
+    from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+    sc = yaml.safe_load((ROOT / 'config' / 'line_arc_scenario.yaml').read_text())
+    pl, tp = sc['/**/plant']['ros__parameters'], sc['/**/tracker']['ros__parameters']
+    K = read_gain_file(ROOT / 'config' / 'tracker_gains.yaml')
+    pred = {k: tp[k] for k in ('predict_latency', 'predict_odom_latency', 'predict_lag_v',
+                               'predict_lag_w')}
+    lim = Limits.from_values(tp)
+    out: dict = {}
+    all_cases = cases()
+    for k, name in enumerate(('rectangle 3 x 1.5 m, 0.05 s + goal',
+                              'S backwards, 0.05 s + goal'), 1):
+        traj = all_cases[name]
+        cells = []
+        for variant in ('plan', 'today', 'now'):
+            if variant == 'plan':
+                f = traj
+            elif variant == 'today':
+                if before is None:
+                    cells.append('today -')
+                    continue
+                f = before.retime(traj, before.Limits(**lim.__dict__)).trajectory
+            else:
+                f = within_limits(traj, lim)[0]
+            s0 = f.sample(f.t_start)
+            pc = PlantConfig(dt=pl['dt'], cmd_latency=pl['cmd_latency'], lag_v=pl['lag_v'],
+                             lag_w=pl['lag_w'], max_linear_accel=pl['max_linear_accel'],
+                             max_angular_accel=pl['max_angular_accel'],
+                             odom_rate=pl['odom_rate'], odom_noise=(0.0, 0.0, 0.0),
+                             x0=s0.x, y0=s0.y, th0=s0.heading)
+            tc = TrackerConfig(K=K, dt=tp['dt'], max_linear_speed=tp['max_linear_speed'],
+                               max_angular_speed=tp['max_angular_speed'], **pred)
+            run = simulate_following(pc, tc, f, int(round((f.t_end + 3.0) / pc.dt)))
+            act = (run.t >= f.t_start) & (run.t <= f.t_end)
+            e = run.error[act]
+            rms, mx = math.sqrt(float(np.mean(e * e))), float(e.max())
+            out[f'{name} {variant}'] = {'duration': f.duration, 'rms': rms, 'max': mx}
+            cells.append(f'{variant} {fmt(f.duration, 4)} s: {fmt(rms * 1e3)} / '
+                         f'{fmt(mx * 1e3)} mm')
+        now = out.get(f'{name} now', {})
+        table.add(f'R.8.{k}', f'followed on issue 23\'s base, {name}: RMS (max)',
+                  now.get('rms', math.nan) * 1e3, 'mm', '; '.join(cells),
+                  'shipped gain, scenario predictor, no noise')
+    return out
 
 
 def main(argv=None) -> int:
