@@ -398,8 +398,11 @@ class Retimed:
                  'nowhere more than 1 % slower than planned')
         path = '' if self.path is None else (
             f'; path within {self.path.deviation * 1e3:.2f} mm of the points')
+        still = '; '.join(f'{r.name} {r.peak:.4g} {_UNITS[r.name]}'
+                          for r in self.after.violations)
+        still = f'; STILL EXCEEDS {still} after {ITERATIONS} passes' if still else ''
         return (f're-timed for {names}: duration {self.duration_before:.3f} s -> '
-                f'{self.duration_after:.3f} s, {where}{path}')
+                f'{self.duration_after:.3f} s, {where}{path}{still}')
 
 
 @dataclass(frozen=True)
