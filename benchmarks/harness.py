@@ -47,6 +47,10 @@ TARGETS = {
     'synthesis_n32': ('<=', 10.0, 's'),
     # issue 22: latency within one plant step (jitter: range covers it), lags within 20 %
     'identify_case': ('>=', 1.0, '(1 = every seed met)'),
+    # issue 30 item 3: re-timing within 1.1x of time-optimal, limits met to 1 %, < 0.2 s
+    'retime_optimal': ('<=', 1.1, 'x toppra'),
+    'retime_limits': ('<=', 1.01, 'x limit'),
+    'retime_60s': ('<', 0.2, 's'),
 }
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..control.simulation.limits import LIMIT_NAMES, Limits, check, retime
+from ..control.simulation.limits import LIMIT_NAMES, PATH_TOLERANCE, Limits, check, retime
 from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 from .common import Subparsers
@@ -19,7 +19,10 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from ..control.simulation.trajectory import Trajectory
 
-__all__ = ['register', 'cmd_check']
+__all__ = ['register', 'cmd_check', 'CSV_STEP']
+
+#: Longest time step (s) of the re-timed waypoints ``-o`` writes.
+CSV_STEP = 0.005
 
 
 def _limit(text: str) -> tuple[str, float]:
@@ -55,9 +58,14 @@ def register(subparsers: Subparsers) -> None:
     c.add_argument('--limits', nargs='+', type=_limit, default=[], metavar='NAME=VALUE',
                    help='the base\'s limits, the tracker\'s parameter names: '
                    f'{", ".join(LIMIT_NAMES)} (SI units; 0 or absent = not checked)')
+    c.add_argument('--path-tolerance', type=float, default=PATH_TOLERANCE, metavar='M',
+                   help='with --limits: largest distance (m) of the re-timed path from the '
+                   f'file\'s points (default {PATH_TOLERANCE:g}: the smoothing that takes the '
+                   'path from the points\' geometry; raise it for noisy recorded paths)')
     c.add_argument('-o', '--output', default=None,
                    help='with --limits: write the re-timed trajectory as a waypoint CSV '
-                   '(t, x, y, yaw, speed at 20 ms knots)')
+                   '(t, x, y, yaw, speed in equal steps of at most 5 ms: read back, it '
+                   'is within the limits)')
     c.set_defaults(func=cmd_check)
 
 
@@ -84,13 +92,16 @@ def cmd_check(args: argparse.Namespace) -> int:
         if args.output:
             raise InputError('--output needs --limits (it writes the re-timed trajectory)')
         return 0
+    if not (args.path_tolerance > 0 and args.path_tolerance < float('inf')):
+        raise InputError(f'--path-tolerance must be a distance > 0 m, got '
+                         f'{args.path_tolerance!r}')
     limits = Limits(**dict(args.limits))
     result = check(traj, limits)
     print('limits (accelerations: mean over 20 ms):')
     for rep in result.reports:
         print(f'  {rep.describe()}')
     try:
-        r = retime(traj, limits)
+        r = retime(traj, limits, tolerance=args.path_tolerance)
     except TrajectoryError as exc:
         print(f'refused: {exc}')
         return 1
@@ -107,8 +118,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def _write_csv(traj: Trajectory, path: str) -> None:
     import numpy as np
-    t = np.arange(traj.t_start, traj.t_end, 0.02)
-    t = np.append(t, traj.t_end)
+    # equal steps of at most 5 ms to the end: the cubic spline a waypoint file is read
+    # into then keeps the re-timed accelerations (through 20 ms steps it overshoots the
+    # angular acceleration by ~18 % where a limit switches on, through 5 ms by < 1 %); no
+    # short last step (a spline through a point a few ms after the one before curls);
+    # positions to the nanometre (micrometres at 5 ms would be acceleration noise)
+    t = np.linspace(traj.t_start, traj.t_end, int(np.ceil(traj.duration / CSV_STEP)) + 1)
     s = traj.evaluate(t)
     seg = np.clip(np.searchsorted(traj.knots, t, side='right') - 1, 0, len(traj.knots) - 2)
     sign = np.where(traj._dir[seg] < 0, -1.0, 1.0)
@@ -116,4 +131,4 @@ def _write_csv(traj: Trajectory, path: str) -> None:
         f.write(f'# {traj.source}: re-timed within the limits by `trajectory check -o`\n')
         f.write('t,x,y,yaw,speed\n')
         for row in zip(t, s.x, s.y, s.heading, sign * np.hypot(s.vx, s.vy)):
-            f.write(','.join(f'{v:.6f}' for v in row) + '\n')
+            f.write(','.join(f'{v:.9f}' for v in row) + '\n')

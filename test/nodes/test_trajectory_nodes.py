@@ -595,10 +595,15 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
                 assert 'min_turning_radius = 0.5 m' in note and 'curvature' in note
             else:
                 note = tracker.last_retime
-                assert tracker.inputs.follower.trajectory.t_end > lap.t_end + 0.1   # re-timed
+                # re-timed (within the base's angular acceleration the lap costs ~10 ms)
+                assert tracker.inputs.follower.trajectory.source.endswith('(re-timed)')
+                assert tracker.inputs.follower.trajectory.t_end > lap.t_end
                 assert f'{v.violated_value:.4g}' in note
             assert f'VIOLATES {name} = {value:g}' in note or name == 'min_turning_radius'
-            assert f'{v.violated_at:.3f} s' in note
+            if name == 'min_turning_radius':     # the fitted path's place and planned time
+                assert 'first above the limit at t = ' in note and ' at (' in note
+            else:
+                assert f'{v.violated_at:.3f} s' in note
         finally:
             tracker.destroy_node()
     test.destroy_node()
