@@ -68,6 +68,7 @@ import numpy as np
 import yaml
 
 from ...errors import InputError
+from ..validate import as_finite_float
 from .errors import (IdentificationError, NotEnoughDataError, InsufficientExcitationError,
                      PoorFitError, IdentificationFileError)
 
@@ -248,16 +249,6 @@ class Identification:
         if not (math.isfinite(lo) and math.isfinite(hi)):
             return self.latency_interval_s
         return (min(lo, self.latency_low_s), max(hi, self.latency_high_s))
-
-    @property
-    def tau_v_interval_s(self) -> tuple[float, float]:
-        """(low, high) of the linear-speed time constant's interval (s)."""
-        return (self.tau_v_low_s, self.tau_v_high_s)
-
-    @property
-    def tau_w_interval_s(self) -> tuple[float, float]:
-        """(low, high) of the angular-speed time constant's interval (s)."""
-        return (self.tau_w_low_s, self.tau_w_high_s)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1734,12 +1725,8 @@ def _text(where: str, key: str, value: Any) -> str:
 
 
 def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or value < 0 or (positive and value == 0):
-        need = '> 0' if positive else '>= 0'
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a finite number '
-                                      f'{need}, got {value!r}')
-    return float(value)
+    return as_finite_float(value, f'{where}: {FILE_KEY}.{key}', low=0.0,
+                           low_inclusive=not positive, error=IdentificationFileError)
 
 
 def _pair(where: str, key: str, value: Any, point: float) -> tuple[float, float]:
