@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import os
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,7 +43,8 @@ from .typestore import jazzy_typestore
 __all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
            'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
            'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag', 'bag_location',
-           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
+           'mcap_is_complete', 'resolve_topics',
+           'pick_topic', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
            'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -354,9 +355,9 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
                    namespace: str | None = None) -> dict[str, str]:
     """Map logical topic names to the stored topics (absent names are left out).
 
-    With ``namespace`` (``'/robot1'``) a relative name ``n`` is looked up as
-    ``/robot1/n``; without it, as stored (``n``), as ``/n``, or under the
-    namespace that matches the most logical names of :data:`topics.TYPES`.
+    A relative name ``n`` is looked up in ``namespace`` (``'/robot1'``: as ``/robot1/n``;
+    the root: as stored, ``n``, or as ``/n``); without one, in the namespace that holds
+    the most logical names of :data:`topics.TYPES` (ties: the shorter, then the first).
     Absolute names (``/clock``) are looked up as they are.
 
     Parameters
@@ -376,15 +377,23 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
     """
     avail = set(available)
     names = list(names)
-    if namespace is not None:
-        ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
-        out = {}
-        for n in names:
-            for cand in ((n,) if n.startswith('/') else (f'{ns}/{n}', n if not ns else None)):
-                if cand and cand in avail:
-                    out[n] = cand
-                    break
-        return out
+    if namespace is None:
+        namespace = _namespace_scores(avail)[0][0]
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    out = {}
+    for n in names:
+        for cand in ((n,) if n.startswith('/') else (f'{ns}/{n}', n if not ns else None)):
+            if cand and cand in avail:
+                out[n] = cand
+                break
+    return out
+
+
+def _namespace_scores(avail: Iterable[str]) -> list[tuple[str, int]]:
+    """Namespaces by how many logical names of :data:`topics.TYPES` they hold, most first.
+
+    Ties: the shorter, then the first in name order; the root alone when none match.
+    """
     score: dict[str, int] = {}
     for n in topics.TYPES:
         if n.startswith('/'):
@@ -393,9 +402,76 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
             found = _namespace_of(t, n)
             if found is not None and (found == '' or found.startswith('/')):
                 score[found] = score.get(found, 0) + 1
-    best = sorted(score, key=lambda s: (-score[s], len(s)))
-    ns = best[0] if best else ''
-    return resolve_topics(avail, names, ns)
+    return sorted(score.items(), key=lambda s: (-s[1], len(s[0]), s[0])) or [('', 0)]
+
+
+def _describe(by_type: Mapping[str, str]) -> str:
+    return ', '.join(f'{t} ({ty})' for t, ty in sorted(by_type.items())) or 'no topics'
+
+
+def pick_topic(available: Mapping[str, str], name: str, types: Iterable[str], *, role: str,
+               option: str, by_type: bool = True, namespace: str | None = None) -> str:
+    """The stored topic for ``name``, of one of ``types`` (the rule of bag report and identify).
+
+    ``name`` is looked up as :func:`resolve_topics` does (in ``namespace``, or in the
+    namespace guessed from the whole bag, so a report and an identification of one bag
+    read the same topics), then at the root; if it is absent and ``by_type``, the one
+    topic of an accepted type is taken.  A tie of namespaces holding ``name``, a wrong
+    type, several topics of the type or none raises :class:`MissingTopicsError` naming the
+    topics the bag has and ``option``.
+
+    Parameters
+    ----------
+    available : mapping of str to str
+        Stored topic -> message type.
+    name : str
+        Requested name (``cmd_vel``, ``/robot1/odom``).
+    types : iterable of str
+        Accepted message types.
+    role, option : str
+        For the messages: what the topic is (``'velocity commands'``) and the CLI
+        option that sets it (``'--cmd-topic'``).
+    by_type : bool
+        Fall back to the one topic of an accepted type when ``name`` is absent.
+    namespace : str, optional
+        The namespace of a relative ``name``; guessed when ``None``.
+
+    Returns
+    -------
+    str
+    """
+    types = tuple(types)
+    want = ' or '.join(types)
+    found = resolve_topics(available, [name], namespace).get(name)
+    if found is None:
+        found = resolve_topics(available, [name], '').get(name)
+    if found is not None and namespace is None and not name.startswith('/'):
+        scores = _namespace_scores(available)
+        tied = [s for s, n in scores if n == scores[0][1]]
+        matching = sorted(m for s in tied for m in resolve_topics(available, [name], s).values())
+        if len(matching) > 1:
+            raise MissingTopicsError(
+                f'{role}: several topics match {name!r}: {", ".join(matching)}; choose one '
+                f'with {option}', [name])
+    if found is not None:
+        if available[found] not in types:
+            raise MissingTopicsError(
+                f'{role}: topic {found} has type {available[found]}, expected {want}; pass '
+                f'the right topic with {option} (the bag has {_describe(available)})', [name])
+        return found
+    if by_type:
+        good = sorted(t for t, ty in available.items() if ty in types)
+        if len(good) == 1:
+            return good[0]
+        if len(good) > 1:
+            raise MissingTopicsError(
+                f'{role}: the bag has no topic {name!r} and several of type {want}: '
+                f'{", ".join(good)}; choose one with {option}', [name])
+    raise MissingTopicsError(
+        f'{role}: the bag has no topic {name!r}' + (f' and none of type {want}' if by_type
+                                                    else '') +
+        f'; it has {_describe(available)}. Record {name} ({want}) or name the topic with '
+        f'{option}', [name])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -157,8 +157,9 @@ def register(subparsers: Subparsers) -> None:
                    'never overwritten without --force)')
     p.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     p.add_argument('--cmd-topic', default='cmd_vel', help='velocity command topic (Twist or '
-                   'TwistStamped; default cmd_vel, else a namespaced one, else the one topic '
-                   'of that type)')
+                   'TwistStamped; default cmd_vel, looked up as bag report does: in the '
+                   'namespace holding most of the run topics, else at the root, else the one '
+                   'topic of that type)')
     p.add_argument('--odom-topic', default='odom', help='odometry topic (nav_msgs/Odometry; '
                    'default odom, found as for --cmd-topic)')
     p.add_argument('--cmd-time', choices=['auto', 'receive', 'stamp'], default='auto',

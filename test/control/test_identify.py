@@ -18,7 +18,7 @@ from rclpy.serialization import serialize_message
 
 from conftest import CONFIG, DATA
 from nonfragile_tracker.bag.motion import read_motion
-from nonfragile_tracker.bag.reader import MissingTopicsError
+from nonfragile_tracker.bag.reader import MissingTopicsError, resolve_topics
 from nonfragile_tracker.bag.writer import BagWriter
 from nonfragile_tracker.cli import main
 from nonfragile_tracker.control.identification.identify import (CommandSamples,
@@ -359,6 +359,31 @@ def test_bag_twist_stamped_by_header_stamp_and_namespace(run20, tmp_path):
     assert_recovers(res, 0.1, 0.05, 0.05)
     recv = read_motion(bag, cmd_time='receive')
     assert np.allclose(recv.commands.t, run20[0][0] + 0.3, atol=1e-9)
+
+
+def test_identify_and_bag_report_read_the_same_topics_of_one_bag(run20, tmp_path):
+    """A robot's topics under /robot1 and a stray /odom at the root (another node's): the
+    identification used to take the root's /odom (exact name first) with /robot1/cmd_vel,
+    the bag report /robot1/odom (namespace of most topics).  One rule now: /robot1."""
+    bag = tmp_path / 'mixed'
+    write_motion_bag(bag, run20, ns='/robot1',
+                     extra={'/odom': 'nav_msgs/msg/Odometry',
+                            '/robot1/reference/pose': 'geometry_msgs/msg/PoseStamped'})
+    data = read_motion(bag)
+    assert (data.cmd_topic, data.odom_topic) == ('/robot1/cmd_vel', '/robot1/odom')
+    stored = ['/robot1/cmd_vel', '/robot1/odom', '/odom', '/robot1/reference/pose']
+    assert resolve_topics(stored, ['cmd_vel', 'odom']) == {'cmd_vel': '/robot1/cmd_vel',
+                                                           'odom': '/robot1/odom'}
+    # two robots, equally recorded: no guess, the option to choose
+    twins = tmp_path / 'twins'
+    write_motion_bag(twins, run20, ns='/robot1', extra={'/robot2/odom': 'nav_msgs/msg/Odometry',
+                                                        '/robot2/cmd_vel':
+                                                        'geometry_msgs/msg/Twist'})
+    with pytest.raises(MissingTopicsError, match="several topics match 'cmd_vel': "
+                       '/robot1/cmd_vel, /robot2/cmd_vel; choose one with --cmd-topic'):
+        read_motion(twins)
+    chosen = read_motion(twins, cmd_topic='/robot1/cmd_vel', odom_topic='/robot1/odom')
+    assert (chosen.cmd_topic, chosen.odom_topic) == ('/robot1/cmd_vel', '/robot1/odom')
 
 
 def test_bag_topics_by_type_and_errors(run20, tmp_path):
