@@ -33,7 +33,7 @@ from .. import topics
 from ..errors import InputError
 from ..control.identification.identify import CommandSamples, OdometrySamples
 from ..control.simulation.loop import quaternion_to_yaw
-from .reader import MissingTopicsError, NotABagError, open_reader, pick_topic
+from .reader import MissingTopicsError, BagError, open_reader, pick_topic
 from .typestore import jazzy_typestore
 
 if TYPE_CHECKING:
@@ -94,7 +94,7 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
     ------
     MissingTopicsError
         A topic is absent, ambiguous or of the wrong type.
-    NotABagError, BagNotFoundError, BagTruncatedError
+    BagError, BagNotFoundError
         As :func:`nonfragile_tracker.bag.reader.open_reader`.
     """
     if cmd_time not in ('auto', 'receive', 'stamp'):
@@ -143,8 +143,8 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
                                   float(odom.twist.twist.linear.x),
                                   float(odom.twist.twist.angular.z)))
         except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
-            raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
-                               'damaged - try `nonfragile_tracker bag repair`') from None
+            raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                           'damaged - try `nonfragile_tracker bag repair`') from None
     finally:
         reader.close()
 

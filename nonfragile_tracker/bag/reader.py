@@ -36,16 +36,14 @@ from ..control.simulation.follow import REST_SPEED, START_TOLERANCE, start_offse
 from ..control.simulation.loop import quaternion_to_yaw
 from ..control.simulation.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
-from .errors import (BagError, BagNotFoundError, BagTruncatedError, MissingTopicsError,
-                     NotABagError)
+from .errors import (BagNotFoundError, MissingTopicsError,
+                     BagError)
 from .typestore import jazzy_typestore
 
-__all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
-           'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
-           'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag', 'bag_location',
-           'mcap_is_complete', 'resolve_topics',
-           'pick_topic', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
-           'MCAP_MAGIC']
+__all__ = ['BagError', 'BagNotFoundError', 'MissingTopicsError', 'PoseSeries', 'ReferenceSeries',
+           'CommandSeries', 'RunData', 'BagData', 'read_bag', 'read_messages', 'open_reader',
+           'check_bag', 'bag_location', 'mcap_is_complete', 'resolve_topics', 'pick_topic',
+           'typestore_for', 'fast_fields', 'RUN_TOPICS', 'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
@@ -205,7 +203,7 @@ def bag_location(path: str | os.PathLike[str]) -> Path:
     ------
     BagNotFoundError
         If ``path`` does not exist.
-    NotABagError
+    BagError
         If it is a file without the ``.mcap`` suffix.
     """
     p = Path(path)
@@ -213,8 +211,8 @@ def bag_location(path: str | os.PathLike[str]) -> Path:
         raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
                                'recorder created (it holds metadata.yaml and a .mcap file)')
     if p.is_file() and p.suffix != '.mcap':
-        raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that '
-                           'holds metadata.yaml and the .mcap file (or a .mcap file)')
+        raise BagError(f'{p} is a file, not a bag directory; pass the directory that '
+                       'holds metadata.yaml and the .mcap file (or a .mcap file)')
     return p
 
 
@@ -237,27 +235,26 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
     ------
     BagNotFoundError
         If ``path`` does not exist.
-    NotABagError
+    BagError
         If it is neither a bag directory nor an MCAP file (or holds several MCAP files
         without metadata.yaml).
-    BagTruncatedError
         If an MCAP file was not closed (``bag repair`` recovers it).
     """
     p = bag_location(path)
     if p.is_file():
         if not mcap_is_complete(p):
-            raise BagTruncatedError(
+            raise BagError(
                 f'{p} is not a complete MCAP file (no MCAP magic at both ends: truncated or not '
                 f'MCAP). Run `nonfragile_tracker bag repair {p}` to recover what it holds.')
         return p
     meta = p / 'metadata.yaml'
     mcaps = sorted(p.glob('*.mcap'))
     if not meta.exists() and not mcaps:
-        raise NotABagError(f'{p} is not a rosbag2 bag: it holds neither metadata.yaml nor a '
-                           '.mcap file')
+        raise BagError(f'{p} is not a rosbag2 bag: it holds neither metadata.yaml nor a '
+                       '.mcap file')
     for m in mcaps:
         if not mcap_is_complete(m):
-            raise BagTruncatedError(
+            raise BagError(
                 f'{m} is truncated: it has no MCAP summary/end magic, so the recorder did not '
                 f'close it (killed?). Run `nonfragile_tracker bag repair {p}` to recover the '
                 f'complete chunks into {p}_repaired, then read that bag.')
@@ -265,8 +262,8 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
         return p
     if len(mcaps) == 1:
         return mcaps[0]
-    raise NotABagError(f'{p} has no metadata.yaml and {len(mcaps)} .mcap files; run '
-                       f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
+    raise BagError(f'{p} has no metadata.yaml and {len(mcaps)} .mcap files; run '
+                   f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
 
 
 def open_reader(path: str | os.PathLike[str]) -> Reader:
@@ -285,7 +282,7 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
     Raises
     ------
     BagError
-        As :func:`check_bag`, or :class:`NotABagError` when rosbags cannot open it.
+        As :func:`check_bag`, or :class:`BagError` when rosbags cannot open it.
     """
     target = check_bag(path)
     try:
@@ -299,7 +296,7 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
         elif 'missing' in str(exc):
             hint = '; metadata.yaml names storage files that are not there'
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {msg}{hint}') from None
+        raise BagError(f'{path} cannot be read as a rosbag2 bag: {msg}{hint}') from None
     return reader
 
 
@@ -321,7 +318,7 @@ def typestore_for(reader: Reader) -> Typestore:
 
     Raises
     ------
-    NotABagError
+    BagError
         If a stored definition cannot be parsed.
     """
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -335,8 +332,8 @@ def typestore_for(reader: Reader) -> Typestore:
         try:
             own.register(get_types_from_msg(text, msgtype))
         except Exception as exc:  # noqa: BLE001 - rosbags raises several parser errors
-            raise NotABagError(f'message type {msgtype} is not a ROS 2 Jazzy type and its '
-                               f'definition stored in the bag cannot be parsed ({exc})') from None
+            raise BagError(f'message type {msgtype} is not a ROS 2 Jazzy type and its '
+                           f'definition stored in the bag cannot be parsed ({exc})') from None
     return own
 
 
@@ -836,8 +833,8 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
             topic = topic_map.get(logical)
             ok = (expected,) if isinstance(expected, str) else expected
             if topic is not None and by_topic[topic].msgtype not in ok:
-                raise NotABagError(f'topic {topic} in {path} has type '
-                                   f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
+                raise BagError(f'topic {topic} in {path} has type '
+                               f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
         pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
         role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
                                           topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
@@ -910,9 +907,9 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
                     target[stamp] = row
         except (ReaderError, ValueError, IndexError, KeyError, AssertionError,
                 struct.error, UnicodeDecodeError) as exc:
-            raise NotABagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
-                               f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
-                               'repair`') from None
+            raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
+                           f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
+                           'repair`') from None
         msgtypes = {t: c.msgtype for t, c in by_topic.items()}
         offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
                    if isinstance(c.ext, ConnectionExtRosbag2)}

@@ -65,17 +65,11 @@ ERRORS = {
                                                         'input_delay', 'latency_design']),
                   'SolverFailure': (RuntimeError, 4, ['lmi', 'sdp']),
                   'CertificateError': (RuntimeError, 4, ['lmi', 'delay_dependent'])},
-    'simulation': {'SingularSpeedError': (ValueError, 2, ['model']),
-                   'PathError': (ValueError, 2, ['reference']),
+    'simulation': {'PathError': (ValueError, 2, ['reference']),
                    'TrajectoryError': (ValueError, 2, ['trajectory', 'limits']),
                    'LoopConfigError': (ValueError, 2, ['loop', 'gains']),
-                   'GainFileError': (ValueError, 2, ['gains']),
                    'BatchError': (ValueError, 2, ['batch', 'study'])},
     'identification': {'IdentificationError': (ValueError, 2, ['identify']),
-                       'NotEnoughDataError': (ValueError, 2, ['identify']),
-                       'InsufficientExcitationError': (ValueError, 2, ['identify']),
-                       'PoorFitError': (ValueError, 2, ['identify']),
-                       'IdentificationFileError': (ValueError, 2, ['identify']),
                        'MonitorError': (ValueError, 2, ['monitor'])},
 }
 
@@ -96,12 +90,7 @@ def test_each_part_has_its_errors_under_the_root_error(part):
 
 
 def test_the_subclass_order_of_the_errors():
-    from nonfragile_tracker.control.identification.errors import (IdentificationError,
-                                                                  PoorFitError)
-    from nonfragile_tracker.control.simulation.errors import GainFileError, LoopConfigError
     from nonfragile_tracker.control.synthesis.errors import (CertificateError, InfeasibleError,
                                                              LmiError, SolverFailure)
     assert all(issubclass(c, LmiError) for c in (InfeasibleError, SolverFailure,
                                                  CertificateError))
-    assert issubclass(GainFileError, LoopConfigError)
-    assert issubclass(PoorFitError, IdentificationError)
