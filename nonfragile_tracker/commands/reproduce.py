@@ -1,4 +1,4 @@
-"""``reproduce``: the paper's Section IV into an output directory (and, asked, ``doc/reproduction/``)."""
+"""``reproduce``: the paper's Section IV into an output directory (and ``doc/reproduction/``)."""
 from __future__ import annotations
 
 import argparse
@@ -68,8 +68,8 @@ def register(subparsers: Subparsers) -> None:
     r.add_argument('--out', default='runs/reproduction', help='output directory')
     r.add_argument('--force', action='store_true', help='write into a non-empty --out')
     r.add_argument('--docs', nargs='?', const='', default=None, metavar='DIR',
-                   help='also refresh DIR/paper_reproduction.* (default DIR: doc/reproduction/ of the '
-                   'source checkout; required when the package is installed)')
+                   help='also refresh DIR/paper_reproduction.* (default DIR: doc/reproduction/ '
+                   'of the source checkout; required when the package is installed)')
     r.add_argument('--duration', type=positive_float, default=60.0,
                    help='simulated s of the ROS run')
     r.add_argument('--no-ros', action='store_true', help='skip the ROS run (no Fig. 6)')
