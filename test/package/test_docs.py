@@ -180,3 +180,31 @@ def test_full_docs_build_without_warnings(tmp_path):
     missing = {m for m in modules if f'id="module-{m}"' not in api}
     assert not missing, sorted(missing)
     assert len(modules) >= 60
+
+
+def _github_slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading (lower case, punctuation dropped, - for space)."""
+    text = re.sub(r'[^\w\- ]', '', heading.strip().lower().replace('`', ''))
+    return text.replace(' ', '-')
+
+
+def test_links_between_pages_work_on_github_too():
+    """A link ``page.md#anchor`` must name a heading of that page by GitHub's rule, not only
+    a Sphinx label (``(label)=``) that GitHub does not know; relative .md paths only."""
+    pages = [ROOT / 'README.md', *sorted(DOC.rglob('*.md'))]
+    anchors = {}
+    for page in pages:
+        seen: dict[str, int] = {}
+        text = re.sub(r'^```.*?^```', '', page.read_text(), flags=re.MULTILINE | re.DOTALL)
+        for heading in re.findall(r'^#{1,6} (.+)$', text, flags=re.MULTILINE):
+            slug = _github_slug(heading)
+            anchors.setdefault(page, set()).add(slug if slug not in seen else
+                                                f'{slug}-{seen[slug]}')
+            seen[slug] = seen.get(slug, 0) + 1
+    bad = []
+    for page in pages:
+        for path, anchor in re.findall(r'\]\(([^)\s#]*)#([^)\s]+)\)', page.read_text()):
+            target = (page.parent / path).resolve() if path else page
+            if target.suffix == '.md' and anchor not in anchors.get(target, set()):
+                bad.append(f'{page.relative_to(ROOT)}: {path}#{anchor}')
+    assert not bad, bad
