@@ -223,7 +223,7 @@ def test_tests_and_benchmarks_use_the_new_control_paths():
     :data:`OLD_PATHS_ON_PURPOSE`)."""
     stems = '|'.join(sorted({n.rpartition('.')[2] for n, p in MODULES.items()
                              if control_part(n) and p.name != '__init__.py'}))
-    old = re.compile(rf'nonfragile_tracker[./]control[./]({stems})\b')
+    old = re.compile(rf'nonfragile_tracker[./]control(?:[./]| import )({stems})\b')
     root = PKG.parent
     bad = [f'{path.relative_to(root)}:{text[:m.start()].count(chr(10)) + 1}: {m[0]}'
            for folder in ('test', 'benchmarks') for path in sorted((root / folder).rglob('*.py'))
