@@ -36,8 +36,7 @@ from ..control.simulation.follow import REST_SPEED, START_TOLERANCE, start_offse
 from ..control.simulation.loop import quaternion_to_yaw
 from ..control.simulation.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
-from .errors import (BagNotFoundError, MissingTopicsError,
-                     BagError)
+from .errors import BagError, BagNotFoundError, MissingTopicsError
 from .typestore import jazzy_typestore
 
 __all__ = ['BagError', 'BagNotFoundError', 'MissingTopicsError', 'PoseSeries', 'ReferenceSeries',
