@@ -25,7 +25,7 @@ root_doc = 'index'
 # module into this directory; api/ documents every module already, so the stubs are ignored
 exclude_patterns = ['_build', 'modules.rst', 'nonfragile_tracker.rst', 'nonfragile_tracker.*.rst']
 myst_enable_extensions = ['dollarmath', 'amsmath', 'deflist', 'colon_fence']
-myst_heading_anchors = 3
+myst_heading_anchors = 4
 
 # every reference must resolve: a broken one is a warning, and the suite builds with -W
 nitpicky = False

@@ -1,23 +1,9 @@
 """``nonfragile_tracker``: the package's one command-line entry point (argparse only).
 
-Sub-commands::
-
-    synthesize PROBLEM [-o GAINS] [--nominal] [--gain-bound K]   Theorem 1 -> tracker gain file
-    design PROBLEM --objective decay|scale|min-norm [--norm N]    optimized Theorem 1 gains
-    delay-dependent PROBLEM [--delay H | --max-delay]             descriptor-method design
-    identify BAG [-o latency.yaml]                                command latency and actuator lag
-    latency-design PROBLEM --delay-interval H_MIN H_MAX [--lag T]  gain certified for a latency
-    sweep PROBLEM [--latency LO HI]... [--lag T...] [--executor dask]  design grid, Pareto front
-    analyse PROBLEM (--gains FILE | --paper)                      certificates, abscissae, margins
-    margins PROBLEM (--gains FILE | --paper)                      fragility margins only
-    run [options]                                                 the main job (see --help)
-    study GAINS [--cases N] [--latency LO HI] [--json OUT]        robustness study (batch)
-    bag report|repair DIR                                         bag tools
-    reproduce [--out DIR] [--docs [DIR]]                          the paper's Section IV
-    golden [--write]                                              re-run the golden scenarios
-
-Exit codes: 0 ok, 1 golden bags differ (or an internal error), 2 bad input, 3 infeasible
-LMI, 4 solver or verification failure, 5 run failure, 130 interrupted.
+:func:`build_parser` collects every command module's sub-commands (:data:`COMMANDS`); the
+top-level ``--help`` lists them all with a line each (:data:`DESCRIPTION`, :data:`EPILOG`),
+and every command's ``--help`` shows each option's default.  :func:`main` maps errors to
+the exit codes of :mod:`nonfragile_tracker.errors`.
 """
 from __future__ import annotations
 
@@ -38,6 +24,16 @@ TYPE_CHECKING = False            # typing.TYPE_CHECKING without importing typing
 if TYPE_CHECKING:
     import argparse
 
+#: The top-level ``--help``: what the package does (plain text; the commands follow).
+DESCRIPTION = ('Non-fragile trajectory tracking for differential-drive and car-like bases on '
+               'ROS 2 Jazzy: design gains certified for gain perturbations and command '
+               'latency, run the tracker, identify a base, and record, report, compare and '
+               'replay runs.  Every command has its own --help.')
+#: After the commands in the top-level ``--help``.
+EPILOG = ('exit codes: 0 ok; 1 a check found differences or violations (golden, bag '
+          'compare/replay, trajectory check) or an internal error; 2 bad input; 3 infeasible '
+          'LMI; 4 solver or verification failure; 5 run failure; 130 interrupted')
+
 #: The command modules (under ``nonfragile_tracker.commands``), in ``--help`` order; each
 #: exposes ``register(subparsers)``.  Imported by :func:`build_parser`.
 COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'study', 'trajectory',
@@ -53,11 +49,19 @@ def build_parser() -> argparse.ArgumentParser:
     """
     import argparse
     import importlib
-    p = argparse.ArgumentParser(prog='nonfragile_tracker', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest='command', required=True)
+    formatter = importlib.import_module(f'{__package__}.commands.common').HelpFormatter
+    p = argparse.ArgumentParser(prog='nonfragile_tracker', description=DESCRIPTION,
+                                epilog=EPILOG, formatter_class=formatter)
+    sub = p.add_subparsers(dest='command', required=True, title='commands',
+                           metavar='COMMAND')
     for name in COMMANDS:
         importlib.import_module(f'{__package__}.commands.{name}').register(sub)
+    parsers = [p]
+    while parsers:                  # every command's --help shows its options' defaults
+        parser = parsers.pop()
+        parser.formatter_class = formatter
+        parsers += [c for a in parser._actions if isinstance(a, argparse._SubParsersAction)
+                    for c in a.choices.values()]
     return p
 
 

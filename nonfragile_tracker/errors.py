@@ -17,13 +17,9 @@ Each part of the package keeps its own errors in its ``errors`` module, under th
 ``LoopConfigError(InputError)`` ... in ``control/simulation/errors.py``,
 ``IdentificationError(InputError)`` ... in ``control/identification/errors.py``,
 ``BagError(InputError)`` in ``bag/errors.py``); :func:`exit_code` is the one place that
-maps an exception to a process exit code.  The LMI errors were defined here: this module is
-the package's foundation and may not import the control core, so importing them from here
-raises an ``ImportError`` naming their new module.  No ROS import here.
+maps an exception to a process exit code.  No ROS import here.
 """
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 __all__ = ['NonfragileError', 'InputError', 'RunError', 'exit_code', 'EXIT_OK', 'EXIT_DIFFERENT',
            'EXIT_BAD_INPUT', 'EXIT_INFEASIBLE', 'EXIT_SOLVER', 'EXIT_RUN', 'EXIT_INTERRUPTED']
@@ -82,30 +78,3 @@ def exit_code(exc: BaseException) -> int:
         return EXIT_BAD_INPUT
     return 1
 
-
-#: Error classes that moved to a part of the control core -> their module now.
-MOVED = {name: 'nonfragile_tracker.control.synthesis.errors'
-         for name in ('LmiError', 'InfeasibleError', 'SolverFailure', 'CertificateError')}
-
-
-if not TYPE_CHECKING:        # for type checkers the moved names are simply not here
-    def __getattr__(name: str) -> object:
-        """A moved error class: an ``ImportError`` naming its module (PEP 562).
-
-        Parameters
-        ----------
-        name : str
-            The attribute asked for.
-
-        Raises
-        ------
-        ImportError
-            For a name of :data:`MOVED` (``from nonfragile_tracker.errors import
-            InfeasibleError`` shows where to import it from).
-        AttributeError
-            For any other name.
-        """
-        if name in MOVED:
-            raise ImportError(f'{name} moved to {MOVED[name]}: import it from there '
-                              f'(or from {MOVED[name].rpartition(".")[0]})', name=__name__)
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -52,10 +52,6 @@ SCENARIOS = {
 }
 
 
-class GoldenError(InputError):
-    """A golden run cannot be set up (no place for its bags, a bad scenario file)."""
-
-
 def data_dir() -> Path | None:
     """``test/data`` of the source checkout, or None when the package is installed."""
     root = source_root()
@@ -93,13 +89,13 @@ def golden_bag(name: str, out: Path | None = None) -> Path:
 
     Raises
     ------
-    GoldenError
+    InputError
         Without ``out`` when the package is installed (no source tree).
     """
     base = Path(out) if out is not None else data_dir()
     if base is None:
-        raise GoldenError(f'no place for the golden bag of {name!r}: the package is installed, '
-                          'so pass --out DIR (it never writes into an installed package)')
+        raise InputError(f'no place for the golden bag of {name!r}: the package is installed, '
+                         'so pass --out DIR (it never writes into an installed package)')
     return base / f'golden_{name}'
 
 
@@ -130,7 +126,7 @@ def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict[str,
 
     Raises
     ------
-    GoldenError
+    InputError
         If a file is missing or is not a ROS 2 parameter file.
     """
     from .runner import scenario_parameters
@@ -138,12 +134,12 @@ def scenario_params(scenario: Scenario, duration: float = DURATION) -> dict[str,
     gains = scenario.gains if scenario.gains is not None else golden_gains()
     for f in (path, gains):
         if not Path(f).is_file():
-            raise GoldenError(f'scenario {scenario.name!r}: file {f} does not exist')
+            raise InputError(f'scenario {scenario.name!r}: file {f} does not exist')
     try:
         return scenario_parameters(Path(path), Path(gains), _overrides(scenario, duration))
     except (yaml.YAMLError, AttributeError, TypeError) as exc:
-        raise GoldenError(f'scenario {scenario.name!r}: {path} or {gains} is not a ROS 2 '
-                          f'parameter file ({exc})') from None
+        raise InputError(f'scenario {scenario.name!r}: {path} or {gains} is not a ROS 2 '
+                         f'parameter file ({exc})') from None
 
 
 def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Scenario:
@@ -163,16 +159,16 @@ def scenario_from_file(path: str | Path, gains: str | Path | None = None) -> Sce
 
     Raises
     ------
-    GoldenError
+    InputError
         If the file does not exist or its name is not usable for a bag.
     """
     p = Path(path)
     if not p.is_file():
-        raise GoldenError(f'scenario file {p} does not exist')
+        raise InputError(f'scenario file {p} does not exist')
     name = p.stem
     if not name.replace('_', '').replace('-', '').isalnum():
-        raise GoldenError(f'scenario file name {p.name!r}: use letters, digits, - and _ '
-                          '(the golden bag is named golden_<stem>)')
+        raise InputError(f'scenario file name {p.name!r}: use letters, digits, - and _ '
+                         '(the golden bag is named golden_<stem>)')
     return Scenario(name, f'scenario file {p}', path=p,
                     gains=Path(gains) if gains is not None else None)
 
@@ -202,7 +198,7 @@ def run_scenario(scenario: Scenario, run_dir: Path, *, composed: bool = False,
 
     Raises
     ------
-    GoldenError
+    InputError
         If the scenario's files are missing or malformed.
     RunError
         If a node fails (the end of its log is in the message) or no bag is recorded.
@@ -253,7 +249,7 @@ def check_golden(scenarios: list[Scenario], *, out: Path | None = None, write: b
 
     Raises
     ------
-    GoldenError
+    InputError
         For a user scenario without ``out``, or no place for a golden bag.
     RunError
         If a run fails.
@@ -261,9 +257,9 @@ def check_golden(scenarios: list[Scenario], *, out: Path | None = None, write: b
     from .bag.compare import compare_bags, format_differences
     own = [sc.name for sc in scenarios if sc.path is not None]
     if own and out is None:
-        raise GoldenError(f'scenario(s) {", ".join(own)} come from your files: say where their '
-                          'golden bags live with --out DIR (only the package\'s own scenarios '
-                          'default to its source tree)')
+        raise InputError(f'scenario(s) {", ".join(own)} come from your files: say where their '
+                         'golden bags live with --out DIR (only the package\'s own scenarios '
+                         'default to its source tree)')
     targets = [(sc, golden_bag(sc.name, out)) for sc in scenarios]   # fail early: no place
     changed = 0
     with tempfile.TemporaryDirectory() as tmp:

@@ -14,9 +14,6 @@ not the robot's timing.
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -34,7 +31,7 @@ from .bag.typestore import jazzy_typestore
 from .errors import RunError
 from .resources import config_dir
 from .nodes.common import DATA_QOS
-from .runner import isolated_env, scenario_parameters, write_parameter_file
+from .runner import NodeProcess, isolated_env, scenario_parameters, write_parameter_file
 from .tracker_inputs import TrackerInputs
 
 __all__ = ['replay_over_dds']
@@ -105,11 +102,8 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
     RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
     with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
         pfile = write_parameter_file(scenario_parameters(params, gains), Path(tmp) / 'p.yaml')
-        cmd = [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', 'tracker', '--ros-args',
-               '--params-file', str(pfile), '-p', f'mode:={mode}', '-p',
-               f'input_timeout:={NO_WATCHDOG}']
-        log = open(Path(tmp) / 'tracker.log', 'w+')
-        proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
+        proc = NodeProcess('tracker', pfile, Path(tmp) / 'tracker.log', env,
+                           ['-p', f'mode:={mode}', '-p', f'input_timeout:={NO_WATCHDOG}'])
         ctx = rclpy.Context()
         rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
         node = rclpy.create_node('bag_replayer', context=ctx)
@@ -123,9 +117,9 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
             end = time.monotonic() + timeout
             while not pred():
                 if proc.poll() is not None:
-                    log.seek(0)
-                    raise RunError(f'the tracker node exited ({proc.returncode}) during the '
-                                   f'replay; its log:\n{log.read()[-2000:]}')
+                    raise RunError(f'the tracker node exited ({proc.poll()}) during the '
+                                   f'replay; its log:\n'
+                                   f'{proc.log.read_text(errors="replace")[-2000:]}')
                 if time.monotonic() > end:
                     raise RunError(f'replay over DDS: no {what} within {timeout} s')
                 ex.spin_once(timeout_sec=0.005)
@@ -169,13 +163,7 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
         finally:
             node.destroy_node()
             rclpy.try_shutdown(context=ctx)
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
-            log.close()
+            proc.stop()
+            proc.close()
     return finish_replay(bag, plan, commands, expected=expected, atol=atol, rtol=rtol,
                          max_differences=max_differences, via='over DDS (tracker node)')

@@ -3,7 +3,7 @@
 ``nonfragile_tracker reproduce --out DIR`` computes every number and figure of
 the report into ``DIR`` (``reproduction.json``, ``paper_reproduction.md``, PNGs);
 ``--docs [DIR]`` also refreshes ``DIR/paper_reproduction.md`` and its JSON (default
-``docs/`` of a source checkout), which are committed and checked against a fresh
+``doc/reproduction/`` of a source checkout), which are committed and checked against a fresh
 computation by the tests.  This module is library code: it writes only into the
 directories its caller names.
 """
@@ -417,9 +417,9 @@ def write_report(res: dict[str, Any], out: Path) -> str:
 def write_docs(res: dict[str, Any], out: Path, docs: Path) -> Path:
     """Copy the report of ``res`` (figures from ``out``) into the explicit directory ``docs``.
 
-    ``docs/paper_reproduction.md`` and ``docs/paper_reproduction.json`` are the
-    committed copies the tests check; the caller chooses ``docs`` (the command
-    defaults to ``docs/`` of a source checkout and requires it when installed).
+    ``doc/reproduction/paper_reproduction.md`` and its ``.json`` are the committed copies
+    the tests check; the caller chooses ``docs`` (the command defaults to
+    ``doc/reproduction/`` of a source checkout and requires it when installed).
 
     Parameters
     ----------

@@ -361,7 +361,85 @@ REALTIME_START_WAIT_S = 30.0
 STOP_WAIT_S = 10.0
 
 
-def _wait_for_line(log: Path, text: str, proc: subprocess.Popen[str], timeout: float) -> bool:
+class NodeProcess:
+    """One node in a process of its own (``nodes.entry``), its output in a log file.
+
+    The one lifecycle of the runner's nodes and the replayer's tracker: started with a
+    parameter file; :meth:`interrupt` (SIGINT, as Ctrl-C), :meth:`wait`, and :meth:`stop`,
+    which interrupts, waits and - for a node that does not end - writes its stacks to its
+    log before killing it (:func:`kill_with_stacks`).
+
+    Parameters
+    ----------
+    name : str
+        The node (``tracker``, ``plant``, ...), run by ``python -m nonfragile_tracker.nodes.entry``.
+    params_file : pathlib.Path
+        Its ROS 2 parameter file.
+    log : pathlib.Path
+        Its output (stdout and stderr), written from the start.
+    env : mapping
+        Its environment (:func:`isolated_env`).
+    extra : sequence of str, optional
+        More ``--ros-args`` (``-p name:=value``).
+    """
+
+    def __init__(self, name: str, params_file: Path, log: Path, env: Mapping[str, str],
+                 extra: Sequence[str] = ()) -> None:
+        self.name, self.log = name, log
+        self._out = open(log, 'w')
+        self.proc = subprocess.Popen(
+            [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args',
+             '--params-file', str(params_file), *extra],
+            env=env, stdout=self._out, stderr=subprocess.STDOUT, text=True)
+
+    def poll(self) -> int | None:
+        """Its exit code, None while it runs."""
+        return self.proc.poll()
+
+    def interrupt(self) -> None:
+        """SIGINT (a node's clean shutdown), if it still runs."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+
+    def wait(self, timeout: float) -> bool:
+        """Whether it ended within ``timeout`` s.
+
+        Parameters
+        ----------
+        timeout : float
+            Seconds to wait.
+        """
+        try:
+            self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return False
+        return True
+
+    def stop(self, timeout: float | None = None) -> bool:
+        """SIGINT, then wait; a node still running is killed after dumping its stacks.
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Seconds to wait after SIGINT (default :data:`STOP_WAIT_S`).
+
+        Returns
+        -------
+        bool
+            True if it ended on its own, False if it was killed.
+        """
+        self.interrupt()
+        if self.wait(STOP_WAIT_S if timeout is None else timeout):
+            return True
+        kill_with_stacks(self.proc)
+        return False
+
+    def close(self) -> None:
+        """Close this side of its log file (after it has ended)."""
+        self._out.close()
+
+
+def _wait_for_line(log: Path, text: str, proc: NodeProcess, timeout: float) -> bool:
     """Wait until ``log`` contains ``text`` (True), ``proc`` exits or ``timeout`` s pass."""
     end = time.monotonic() + timeout
     while time.monotonic() < end and proc.poll() is None:
@@ -440,18 +518,12 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
     """
     env = isolated_env(env)
     params_file = write_parameter_file(with_horizon(params), run_dir / 'params.yaml')
-    py = sys.executable
-    procs: dict[str, subprocess.Popen[str]] = {}
-    logs: dict[str, IO[str]] = {}
+    procs: dict[str, NodeProcess] = {}
     bag = run_dir / 'bag' if record else None
     t0 = time.monotonic()
 
     def start(name: str, extra: Sequence[str] = ()) -> None:
-        cmd = [py, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args', '--params-file',
-               str(params_file), *extra]
-        logs[name] = open(run_dir / f'{name}.log', 'w')
-        procs[name] = subprocess.Popen(cmd, env=env, stdout=logs[name],
-                                       stderr=subprocess.STDOUT, text=True)
+        procs[name] = NodeProcess(name, params_file, run_dir / f'{name}.log', env, extra)
 
     def report_plant(reader: IO[str], final: bool = False) -> None:
         for line in reader.readlines():
@@ -469,26 +541,23 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
                 [] if realtime else ['-p', 'use_sim_time:=true'])
             extra += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in names) + ']']
             start('recorder', extra)
-        def lockstep_args(node: str) -> list[str]:
-            return _ros_args(hand.get(node, {}))
-
-        start('tracker', lockstep_args('tracker'))
+        start('tracker', _ros_args(hand.get('tracker', {})))
         if realtime and record:
             # the real-time plant steps and the reference's time runs from their start:
             # let the recorder subscribe first, then start both together
             _wait_for_line(run_dir / 'recorder.log', 'recording', procs['recorder'],
                            REALTIME_START_WAIT_S)
-        start('reference', lockstep_args('reference'))
-        start('plant', lockstep_args('plant'))
+        start('reference', _ros_args(hand.get('reference', {})))
+        start('plant', _ros_args(hand.get('plant', {})))
         plant = procs['plant']
         with open(run_dir / 'plant.log') as reader:
             while plant.poll() is None:
                 report_plant(reader)
                 # the recorder closes its bag and exits 0 right after run_done, which can be
                 # before the plant's last poll here: that is the end of the run, not a death
-                dead = {n: p.returncode for n, p in procs.items()
+                dead = {n: p.poll() for n, p in procs.items()
                         if n != 'plant' and p.poll() is not None
-                        and not (n == 'recorder' and p.returncode == 0)}
+                        and not (n == 'recorder' and p.poll() == 0)}
                 if dead:
                     progress(f'[runner] node(s) exited early: {dead}; stopping the run '
                              f'(logs in {run_dir})')
@@ -500,32 +569,22 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
             report_plant(reader)
         if plant.poll() is not None and record and realtime:
             time.sleep(REALTIME_TAIL_S)          # the last messages in flight, then stop
-            procs['recorder'].send_signal(signal.SIGINT)
-            try:
-                procs['recorder'].wait(timeout=30)
-            except subprocess.TimeoutExpired:
+            procs['recorder'].interrupt()
+            if not procs['recorder'].wait(30):
                 progress('[runner] the recorder did not stop within 30 s of SIGINT; '
                          'killing it')          # the finally below kills it
-        elif plant.poll() is not None and record:
-            try:
-                procs['recorder'].wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                procs['recorder'].send_signal(signal.SIGINT)
-                procs['recorder'].wait(timeout=30)
+        elif plant.poll() is not None and record and not procs['recorder'].wait(30):
+            procs['recorder'].interrupt()
+            procs['recorder'].wait(30)
     finally:
+        for p in procs.values():
+            p.interrupt()
         for name, p in procs.items():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for name, p in procs.items():
-            try:
-                p.wait(timeout=STOP_WAIT_S)
-            except subprocess.TimeoutExpired:
-                kill_with_stacks(p)
+            if not p.stop():
                 progress(f'[runner] {name} did not exit within {STOP_WAIT_S:g} s of SIGINT; '
-                         f'killed it (its stacks are in {run_dir / (name + ".log")})')
-        for fh in logs.values():
-            fh.close()
-    codes = {name: p.returncode for name, p in procs.items()}
+                         f'killed it (its stacks are in {p.log})')
+            p.close()
+    codes = {name: p.poll() for name, p in procs.items()}
     steps = int(round(params['plant']['ros__parameters'].get('duration', 60.0)
                       / params['plant']['ros__parameters'].get('dt', 0.01)))
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)

@@ -207,8 +207,7 @@ def test_the_part_check_fails_on_a_planted_import(module, line, words):
 
 def test_every_internal_import_names_an_existing_module():
     """No module imports a path that is no module of today's tree (for example an old flat
-    ``control.loop``, now ``control.simulation.loop``: it resolves only through the
-    deprecation alias, which is for users' scripts)."""
+    ``control.loop``, now ``control.simulation.loop``)."""
     bad = [(name, mod, line) for name, path in MODULES.items()
            for mod, _, line in _imports(name, path, False)
            if mod not in MODULES and mod.rpartition('.')[0] not in MODULES]
@@ -224,7 +223,7 @@ def test_tests_and_benchmarks_use_the_new_control_paths():
     :data:`OLD_PATHS_ON_PURPOSE`)."""
     stems = '|'.join(sorted({n.rpartition('.')[2] for n, p in MODULES.items()
                              if control_part(n) and p.name != '__init__.py'}))
-    old = re.compile(rf'nonfragile_tracker[./]control[./]({stems})\b')
+    old = re.compile(rf'nonfragile_tracker[./]control(?:[./]| import )({stems})\b')
     root = PKG.parent
     bad = [f'{path.relative_to(root)}:{text[:m.start()].count(chr(10)) + 1}: {m[0]}'
            for folder in ('test', 'benchmarks') for path in sorted((root / folder).rglob('*.py'))
@@ -233,9 +232,9 @@ def test_tests_and_benchmarks_use_the_new_control_paths():
     assert bad == []
 
 
-#: Files that name the old flat paths on purpose: the test of the aliases, and the benchmark
-#: that reads identify.py of an old commit (git show of its path then).
-OLD_PATHS_ON_PURPOSE = {'test/control/test_control_aliases.py', 'benchmarks/sections/identify.py'}
+#: Files that name the old flat paths on purpose: the benchmark that reads identify.py of an
+#: old commit (git show of its path then).
+OLD_PATHS_ON_PURPOSE = {'benchmarks/sections/identify.py'}
 
 
 def test_every_module_is_seen():

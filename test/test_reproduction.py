@@ -1,4 +1,4 @@
-"""The committed reproduction report (docs/) matches a fresh computation.
+"""The committed reproduction report (doc/reproduction/) matches a fresh computation.
 
 The fresh computation is the ``reproduce`` command's, ROS run of Fig. 6 included (three
 node processes in lockstep and their bag): the tests that use it are marked ``ros``.  The
@@ -19,7 +19,7 @@ from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
 
-DOCS = ROOT / 'docs'
+DOCS = ROOT / 'doc' / 'reproduction'
 
 
 @pytest.fixture(scope='module')

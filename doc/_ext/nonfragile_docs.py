@@ -66,11 +66,20 @@ def _range(param: Any) -> str:
     return f'[{low}, {high}]'
 
 
+def declared_parameters(node: str) -> list[Any]:
+    """Every parameter ``node`` declares: its module's ``PARAMS`` and then each other
+    module-level list named ``*_PARAMS`` (the tracker's ``MONITOR_PARAMS``), in source order."""
+    from nonfragile_tracker.nodes.common import Param
+    module = importlib.import_module(NODE_MODULES[node])
+    names = ['PARAMS'] + [n for n, v in vars(module).items() if n.endswith('_PARAMS')
+                          and isinstance(v, list) and v and all(isinstance(p, Param) for p in v)]
+    return [p for n in names for p in getattr(module, n)]
+
+
 def parameter_rows(node: str) -> list[list[str]]:
     """Rows (name, type, default, range, read-only, description) of ``node``'s table."""
-    module = importlib.import_module(NODE_MODULES[node])
     return [[p.name, _type_name(p), _default(p), _range(p), 'yes' if p.read_only else '',
-             p.description] for p in module.PARAMS]
+             p.description] for p in declared_parameters(node)]
 
 
 def _table(header: list[str], rows: list[list[str]], widths: list[int]) -> nodes.table:

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 from .compare import (Comparison, Difference, Tolerance, compare_bags, compare_messages,
                       format_differences, parse_tolerance)
-from .errors import (BagError, BagExistsError, BagNotFoundError, BagTruncatedError,
-                     InvalidRunNameError, MissingTopicsError, NotABagError, NothingToRepairError,
-                     RepairError, ToleranceError)
+from .errors import BagError, BagExistsError, BagNotFoundError, MissingTopicsError
 from .reader import (BagData, CommandSeries, PoseSeries, ReferenceSeries, RunData, read_bag,
                      read_messages)
 from .repair import RepairResult, repair_bag
@@ -35,11 +33,9 @@ from .replay import ReplayResult, format_replay, replay
 from .report import Report, TimingMetrics, bag_report, format_report
 from .writer import BagWriter, default_qos, make_qos, new_run_dir
 
-__all__ = ['BagError', 'BagExistsError', 'BagNotFoundError', 'BagTruncatedError',
-           'InvalidRunNameError', 'MissingTopicsError', 'NotABagError', 'RepairError',
-           'NothingToRepairError', 'ToleranceError', 'BagWriter', 'new_run_dir', 'make_qos',
-           'default_qos', 'BagData', 'RunData', 'PoseSeries', 'ReferenceSeries',
-           'CommandSeries', 'read_bag', 'read_messages', 'RepairResult', 'repair_bag', 'Report',
-           'TimingMetrics', 'bag_report', 'format_report', 'Comparison', 'Difference',
-           'Tolerance', 'compare_bags', 'compare_messages', 'format_differences',
+__all__ = ['BagError', 'BagExistsError', 'BagNotFoundError', 'MissingTopicsError', 'BagWriter',
+           'new_run_dir', 'make_qos', 'default_qos', 'BagData', 'RunData', 'PoseSeries',
+           'ReferenceSeries', 'CommandSeries', 'read_bag', 'read_messages', 'RepairResult',
+           'repair_bag', 'Report', 'TimingMetrics', 'bag_report', 'format_report', 'Comparison',
+           'Difference', 'Tolerance', 'compare_bags', 'compare_messages', 'format_differences',
            'parse_tolerance', 'ReplayResult', 'replay', 'format_replay']

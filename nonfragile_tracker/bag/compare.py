@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 
 from .reader import open_reader, typestore_for
-from .errors import BagError, ToleranceError
+from .errors import BagError
 
-__all__ = ['Difference', 'Comparison', 'TopicSummary', 'Tolerance', 'ToleranceError',
+__all__ = ['Difference', 'Comparison', 'TopicSummary', 'Tolerance', 'BagError',
            'flatten', 'parse_tolerance', 'compare_bags', 'compare_messages',
            'format_differences', 'read_topic_messages', 'ALIGNMENTS']
 
@@ -95,24 +95,24 @@ def parse_tolerance(spec: str) -> tuple[str, str, Tolerance]:
 
     Raises
     ------
-    ToleranceError
+    BagError
         If the rule is malformed or a tolerance is not a finite number >= 0.
     """
     if not isinstance(spec, str) or '=' not in spec:
-        raise ToleranceError(f'tolerance {spec!r} is not TOPIC.FIELD=ABS[,REL] (e.g. '
-                             '/odom.pose.pose.position.x=1e-3 or cmd_vel=1e-6,1e-3)')
+        raise BagError(f'tolerance {spec!r} is not TOPIC.FIELD=ABS[,REL] (e.g. '
+                       '/odom.pose.pose.position.x=1e-3 or cmd_vel=1e-6,1e-3)')
     key, _, value = spec.partition('=')
     topic, _, fld = key.strip().partition('.')
     if not topic:
-        raise ToleranceError(f'tolerance {spec!r} names no topic (TOPIC.FIELD=ABS[,REL])')
+        raise BagError(f'tolerance {spec!r} names no topic (TOPIC.FIELD=ABS[,REL])')
     parts = [p.strip() for p in value.split(',')]
     try:
         nums = [float(p) for p in parts]
     except ValueError:
-        raise ToleranceError(f'tolerance {spec!r}: {value!r} is not ABS or ABS,REL (numbers '
-                             '>= 0)') from None
+        raise BagError(f'tolerance {spec!r}: {value!r} is not ABS or ABS,REL (numbers '
+                       '>= 0)') from None
     if len(nums) not in (1, 2) or not all(math.isfinite(n) and n >= 0 for n in nums):
-        raise ToleranceError(f'tolerance {spec!r}: give ABS or ABS,REL as finite numbers >= 0')
+        raise BagError(f'tolerance {spec!r}: give ABS or ABS,REL as finite numbers >= 0')
     if topic != '*' and not topic.startswith('/'):
         topic = '/' + topic
     return topic, fld or '*', Tolerance(nums[0], nums[1] if len(nums) == 2 else 0.0)
@@ -379,7 +379,6 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
     ------
     BagError
         For a bad ``max_differences``, ``time_tolerance`` or alignment.
-    ToleranceError
         For a malformed tolerance rule.
     """
     rules = _Rules(Tolerance(atol, rtol), (parse_tolerance(r) if isinstance(r, str) else r

@@ -10,18 +10,18 @@ bag of this package or of any robot:
 * odometry: ``nav_msgs/msg/Odometry`` from any node, timed by its header stamp
   (the measurement time), with pose and body twist.
 
-Topics: ``cmd_topic`` / ``odom_topic`` are looked up as stored (``/cmd_vel``),
-with a leading slash, then as a namespaced topic ending in the name
-(``/robot1/cmd_vel``); if a *default* name is absent, the one topic of the right
-type is taken.  More than one candidate, a wrong type or nothing at all raises
-:class:`MissingTopicsError` (a :class:`BagError`) naming the topics the bag has.
+Topics: ``cmd_topic`` / ``odom_topic`` are found by
+:func:`nonfragile_tracker.bag.reader.pick_topic`, the rule ``bag report`` uses too (in
+the namespace that holds most of the package's topics, ``/robot1/cmd_vel``, else at the
+root); if a *default* name is absent, the one topic of the right type is taken.  More
+than one candidate, a wrong type or nothing at all raises :class:`MissingTopicsError` (a
+:class:`BagError`) naming the topics the bag has.
 No ROS (rclpy) import; rosbags only.
 """
 from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -33,7 +33,7 @@ from .. import topics
 from ..errors import InputError
 from ..control.identification.identify import CommandSamples, OdometrySamples
 from ..control.simulation.loop import quaternion_to_yaw
-from .reader import MissingTopicsError, NotABagError, open_reader
+from .reader import MissingTopicsError, BagError, open_reader, pick_topic
 from .typestore import jazzy_typestore
 
 if TYPE_CHECKING:
@@ -42,7 +42,7 @@ if TYPE_CHECKING:
         geometry_msgs__msg__TwistStamped as TwistStampedMsg
     from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as OdometryMsg
 
-__all__ = ['MotionData', 'read_motion', 'pick_topic', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
+__all__ = ['MotionData', 'read_motion', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
            'CMD_TYPES', 'ODOM_TYPES']
 
 TWIST = 'geometry_msgs/msg/Twist'
@@ -72,61 +72,6 @@ class MotionData:
     duplicates: int
 
 
-def _describe(by_type: dict[str, str]) -> str:
-    return ', '.join(f'{t} ({ty})' for t, ty in sorted(by_type.items())) or 'no topics'
-
-
-def pick_topic(available: dict[str, str], name: str, types: Iterable[str], *, role: str,
-               option: str, by_type: bool = True) -> str:
-    """The stored topic for ``name`` (see the module docstring for the rules).
-
-    Parameters
-    ----------
-    available : dict
-        Stored topic -> message type.
-    name : str
-        Requested name (``cmd_vel``, ``/robot1/odom``).
-    types : iterable of str
-        Accepted message types.
-    role, option : str
-        For the messages: what the topic is (``'velocity commands'``) and the CLI
-        option that sets it (``'--cmd-topic'``).
-    by_type : bool
-        Fall back to the one topic of an accepted type when ``name`` is absent.
-    """
-    types = tuple(types)
-    want = ' or '.join(types)
-    stripped = name.strip('/')
-    exact = [t for t in (name, '/' + stripped) if t in available]
-    cands = exact[:1] or sorted(t for t in available
-                                if t.endswith('/' + stripped) and t != name)
-    if cands:
-        good = [t for t in cands if available[t] in types]
-        if not good:
-            raise MissingTopicsError(
-                f'{role}: topic {cands[0]} has type {available[cands[0]]}, expected {want}; '
-                f'pass the right topic with {option} (the bag has {_describe(available)})',
-                [name])
-        if len(good) > 1:
-            raise MissingTopicsError(
-                f'{role}: several topics match {name!r}: {", ".join(good)}; choose one with '
-                f'{option}', [name])
-        return good[0]
-    if by_type:
-        good = sorted(t for t, ty in available.items() if ty in types)
-        if len(good) == 1:
-            return good[0]
-        if len(good) > 1:
-            raise MissingTopicsError(
-                f'{role}: the bag has no topic {name!r} and several of type {want}: '
-                f'{", ".join(good)}; choose one with {option}', [name])
-    raise MissingTopicsError(
-        f'{role}: the bag has no topic {name!r}' + (f' and none of type {want}' if by_type
-                                                    else '') +
-        f'; it has {_describe(available)}. Record {name} ({want}) or name the topic with '
-        f'{option}', [name])
-
-
 def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL,
                 odom_topic: str = topics.ODOM, cmd_time: str = 'auto') -> MotionData:
     """Read velocity commands and odometry of a bag for :func:`identify_latency`.
@@ -149,7 +94,7 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
     ------
     MissingTopicsError
         A topic is absent, ambiguous or of the wrong type.
-    NotABagError, BagNotFoundError, BagTruncatedError
+    BagError, BagNotFoundError
         As :func:`nonfragile_tracker.bag.reader.open_reader`.
     """
     if cmd_time not in ('auto', 'receive', 'stamp'):
@@ -198,8 +143,8 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
                                   float(odom.twist.twist.linear.x),
                                   float(odom.twist.twist.angular.z)))
         except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
-            raise NotABagError(f'{path}: a message cannot be read ({exc}); the bag is '
-                               'damaged - try `nonfragile_tracker bag repair`') from None
+            raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                           'damaged - try `nonfragile_tracker bag repair`') from None
     finally:
         reader.close()
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import os
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,15 +36,13 @@ from ..control.simulation.follow import REST_SPEED, START_TOLERANCE, start_offse
 from ..control.simulation.loop import quaternion_to_yaw
 from ..control.simulation.trajectory import TrajectoryError
 from ..msgconv import multidof_to_trajectory, path_to_trajectory
-from .errors import (BagError, BagNotFoundError, BagTruncatedError, MissingTopicsError,
-                     NotABagError)
+from .errors import BagError, BagNotFoundError, MissingTopicsError
 from .typestore import jazzy_typestore
 
-__all__ = ['BagError', 'BagNotFoundError', 'NotABagError', 'BagTruncatedError',
-           'MissingTopicsError', 'PoseSeries', 'ReferenceSeries', 'CommandSeries', 'RunData',
-           'BagData', 'read_bag', 'read_messages', 'open_reader', 'check_bag', 'bag_location',
-           'mcap_is_complete', 'resolve_topics', 'typestore_for', 'fast_fields', 'RUN_TOPICS',
-           'MCAP_MAGIC']
+__all__ = ['BagError', 'BagNotFoundError', 'MissingTopicsError', 'PoseSeries', 'ReferenceSeries',
+           'CommandSeries', 'RunData', 'BagData', 'read_bag', 'read_messages', 'open_reader',
+           'check_bag', 'bag_location', 'mcap_is_complete', 'resolve_topics', 'pick_topic',
+           'typestore_for', 'fast_fields', 'RUN_TOPICS', 'MCAP_MAGIC']
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: Logical topics a tracking run needs (odom may be replaced by pose).
@@ -204,7 +202,7 @@ def bag_location(path: str | os.PathLike[str]) -> Path:
     ------
     BagNotFoundError
         If ``path`` does not exist.
-    NotABagError
+    BagError
         If it is a file without the ``.mcap`` suffix.
     """
     p = Path(path)
@@ -212,8 +210,8 @@ def bag_location(path: str | os.PathLike[str]) -> Path:
         raise BagNotFoundError(f'bag directory {p} does not exist; pass the directory the '
                                'recorder created (it holds metadata.yaml and a .mcap file)')
     if p.is_file() and p.suffix != '.mcap':
-        raise NotABagError(f'{p} is a file, not a bag directory; pass the directory that '
-                           'holds metadata.yaml and the .mcap file (or a .mcap file)')
+        raise BagError(f'{p} is a file, not a bag directory; pass the directory that '
+                       'holds metadata.yaml and the .mcap file (or a .mcap file)')
     return p
 
 
@@ -236,27 +234,26 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
     ------
     BagNotFoundError
         If ``path`` does not exist.
-    NotABagError
+    BagError
         If it is neither a bag directory nor an MCAP file (or holds several MCAP files
         without metadata.yaml).
-    BagTruncatedError
         If an MCAP file was not closed (``bag repair`` recovers it).
     """
     p = bag_location(path)
     if p.is_file():
         if not mcap_is_complete(p):
-            raise BagTruncatedError(
+            raise BagError(
                 f'{p} is not a complete MCAP file (no MCAP magic at both ends: truncated or not '
                 f'MCAP). Run `nonfragile_tracker bag repair {p}` to recover what it holds.')
         return p
     meta = p / 'metadata.yaml'
     mcaps = sorted(p.glob('*.mcap'))
     if not meta.exists() and not mcaps:
-        raise NotABagError(f'{p} is not a rosbag2 bag: it holds neither metadata.yaml nor a '
-                           '.mcap file')
+        raise BagError(f'{p} is not a rosbag2 bag: it holds neither metadata.yaml nor a '
+                       '.mcap file')
     for m in mcaps:
         if not mcap_is_complete(m):
-            raise BagTruncatedError(
+            raise BagError(
                 f'{m} is truncated: it has no MCAP summary/end magic, so the recorder did not '
                 f'close it (killed?). Run `nonfragile_tracker bag repair {p}` to recover the '
                 f'complete chunks into {p}_repaired, then read that bag.')
@@ -264,8 +261,8 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
         return p
     if len(mcaps) == 1:
         return mcaps[0]
-    raise NotABagError(f'{p} has no metadata.yaml and {len(mcaps)} .mcap files; run '
-                       f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
+    raise BagError(f'{p} has no metadata.yaml and {len(mcaps)} .mcap files; run '
+                   f'`nonfragile_tracker bag repair {p}` to merge them into one bag')
 
 
 def open_reader(path: str | os.PathLike[str]) -> Reader:
@@ -284,7 +281,7 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
     Raises
     ------
     BagError
-        As :func:`check_bag`, or :class:`NotABagError` when rosbags cannot open it.
+        As :func:`check_bag`, or :class:`BagError` when rosbags cannot open it.
     """
     target = check_bag(path)
     try:
@@ -298,7 +295,7 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
         elif 'missing' in str(exc):
             hint = '; metadata.yaml names storage files that are not there'
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise NotABagError(f'{path} cannot be read as a rosbag2 bag: {msg}{hint}') from None
+        raise BagError(f'{path} cannot be read as a rosbag2 bag: {msg}{hint}') from None
     return reader
 
 
@@ -320,7 +317,7 @@ def typestore_for(reader: Reader) -> Typestore:
 
     Raises
     ------
-    NotABagError
+    BagError
         If a stored definition cannot be parsed.
     """
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -334,8 +331,8 @@ def typestore_for(reader: Reader) -> Typestore:
         try:
             own.register(get_types_from_msg(text, msgtype))
         except Exception as exc:  # noqa: BLE001 - rosbags raises several parser errors
-            raise NotABagError(f'message type {msgtype} is not a ROS 2 Jazzy type and its '
-                               f'definition stored in the bag cannot be parsed ({exc})') from None
+            raise BagError(f'message type {msgtype} is not a ROS 2 Jazzy type and its '
+                           f'definition stored in the bag cannot be parsed ({exc})') from None
     return own
 
 
@@ -354,9 +351,9 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
                    namespace: str | None = None) -> dict[str, str]:
     """Map logical topic names to the stored topics (absent names are left out).
 
-    With ``namespace`` (``'/robot1'``) a relative name ``n`` is looked up as
-    ``/robot1/n``; without it, as stored (``n``), as ``/n``, or under the
-    namespace that matches the most logical names of :data:`topics.TYPES`.
+    A relative name ``n`` is looked up in ``namespace`` (``'/robot1'``: as ``/robot1/n``;
+    the root: as stored, ``n``, or as ``/n``); without one, in the namespace that holds
+    the most logical names of :data:`topics.TYPES` (ties: the shorter, then the first).
     Absolute names (``/clock``) are looked up as they are.
 
     Parameters
@@ -376,15 +373,23 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
     """
     avail = set(available)
     names = list(names)
-    if namespace is not None:
-        ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
-        out = {}
-        for n in names:
-            for cand in ((n,) if n.startswith('/') else (f'{ns}/{n}', n if not ns else None)):
-                if cand and cand in avail:
-                    out[n] = cand
-                    break
-        return out
+    if namespace is None:
+        namespace = _namespace_scores(avail)[0][0]
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    out = {}
+    for n in names:
+        for cand in ((n,) if n.startswith('/') else (f'{ns}/{n}', n if not ns else None)):
+            if cand and cand in avail:
+                out[n] = cand
+                break
+    return out
+
+
+def _namespace_scores(avail: Iterable[str]) -> list[tuple[str, int]]:
+    """Namespaces by how many logical names of :data:`topics.TYPES` they hold, most first.
+
+    Ties: the shorter, then the first in name order; the root alone when none match.
+    """
     score: dict[str, int] = {}
     for n in topics.TYPES:
         if n.startswith('/'):
@@ -393,9 +398,76 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
             found = _namespace_of(t, n)
             if found is not None and (found == '' or found.startswith('/')):
                 score[found] = score.get(found, 0) + 1
-    best = sorted(score, key=lambda s: (-score[s], len(s)))
-    ns = best[0] if best else ''
-    return resolve_topics(avail, names, ns)
+    return sorted(score.items(), key=lambda s: (-s[1], len(s[0]), s[0])) or [('', 0)]
+
+
+def _describe(by_type: Mapping[str, str]) -> str:
+    return ', '.join(f'{t} ({ty})' for t, ty in sorted(by_type.items())) or 'no topics'
+
+
+def pick_topic(available: Mapping[str, str], name: str, types: Iterable[str], *, role: str,
+               option: str, by_type: bool = True, namespace: str | None = None) -> str:
+    """The stored topic for ``name``, of one of ``types`` (the rule of bag report and identify).
+
+    ``name`` is looked up as :func:`resolve_topics` does (in ``namespace``, or in the
+    namespace guessed from the whole bag, so a report and an identification of one bag
+    read the same topics), then at the root; if it is absent and ``by_type``, the one
+    topic of an accepted type is taken.  A tie of namespaces holding ``name``, a wrong
+    type, several topics of the type or none raises :class:`MissingTopicsError` naming the
+    topics the bag has and ``option``.
+
+    Parameters
+    ----------
+    available : mapping of str to str
+        Stored topic -> message type.
+    name : str
+        Requested name (``cmd_vel``, ``/robot1/odom``).
+    types : iterable of str
+        Accepted message types.
+    role, option : str
+        For the messages: what the topic is (``'velocity commands'``) and the CLI
+        option that sets it (``'--cmd-topic'``).
+    by_type : bool
+        Fall back to the one topic of an accepted type when ``name`` is absent.
+    namespace : str, optional
+        The namespace of a relative ``name``; guessed when ``None``.
+
+    Returns
+    -------
+    str
+    """
+    types = tuple(types)
+    want = ' or '.join(types)
+    found = resolve_topics(available, [name], namespace).get(name)
+    if found is None:
+        found = resolve_topics(available, [name], '').get(name)
+    if found is not None and namespace is None and not name.startswith('/'):
+        scores = _namespace_scores(available)
+        tied = [s for s, n in scores if n == scores[0][1]]
+        matching = sorted(m for s in tied for m in resolve_topics(available, [name], s).values())
+        if len(matching) > 1:
+            raise MissingTopicsError(
+                f'{role}: several topics match {name!r}: {", ".join(matching)}; choose one '
+                f'with {option}', [name])
+    if found is not None:
+        if available[found] not in types:
+            raise MissingTopicsError(
+                f'{role}: topic {found} has type {available[found]}, expected {want}; pass '
+                f'the right topic with {option} (the bag has {_describe(available)})', [name])
+        return found
+    if by_type:
+        good = sorted(t for t, ty in available.items() if ty in types)
+        if len(good) == 1:
+            return good[0]
+        if len(good) > 1:
+            raise MissingTopicsError(
+                f'{role}: the bag has no topic {name!r} and several of type {want}: '
+                f'{", ".join(good)}; choose one with {option}', [name])
+    raise MissingTopicsError(
+        f'{role}: the bag has no topic {name!r}' + (f' and none of type {want}' if by_type
+                                                    else '') +
+        f'; it has {_describe(available)}. Record {name} ({want}) or name the topic with '
+        f'{option}', [name])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -760,8 +832,8 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
             topic = topic_map.get(logical)
             ok = (expected,) if isinstance(expected, str) else expected
             if topic is not None and by_topic[topic].msgtype not in ok:
-                raise NotABagError(f'topic {topic} in {path} has type '
-                                   f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
+                raise BagError(f'topic {topic} in {path} has type '
+                               f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
         pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
         role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
                                           topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
@@ -834,9 +906,9 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
                     target[stamp] = row
         except (ReaderError, ValueError, IndexError, KeyError, AssertionError,
                 struct.error, UnicodeDecodeError) as exc:
-            raise NotABagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
-                               f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
-                               'repair`') from None
+            raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
+                           f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
+                           'repair`') from None
         msgtypes = {t: c.msgtype for t, c in by_topic.items()}
         offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
                    if isinstance(c.ext, ConnectionExtRosbag2)}

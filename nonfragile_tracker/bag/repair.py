@@ -15,7 +15,7 @@ rebuilt the same way (nothing is lost), and so is an MCAP written by another
 recorder (e.g. the ``mcap`` writer, any profile) given as a directory or as the
 ``.mcap`` file: its channels with CDR messages and ``ros2msg`` schemas become bag
 topics (others are skipped and named).  A complete, readable bag is refused
-(:class:`NothingToRepairError`).
+(:class:`BagError`).
 """
 from __future__ import annotations
 
@@ -34,12 +34,11 @@ from rosbags.interfaces import Qos
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
-from .reader import MCAP_MAGIC, NotABagError, bag_location, mcap_is_complete, open_reader
-from .errors import BagError, BagExistsError, NothingToRepairError, RepairError
+from .errors import BagError, BagExistsError
+from .reader import MCAP_MAGIC, bag_location, mcap_is_complete, open_reader
 from .writer import BagWriter
 
-__all__ = ['RepairError', 'NothingToRepairError', 'McapScan', 'RepairResult', 'scan_mcap',
-           'repair_bag']
+__all__ = ['BagError', 'McapScan', 'RepairResult', 'scan_mcap', 'repair_bag']
 
 _RECORD_HEADER = 9          # opcode (1 byte) + record length (uint64)
 
@@ -89,7 +88,7 @@ def scan_mcap(path: str | os.PathLike[str]) -> McapScan:
 
     Raises
     ------
-    NotABagError
+    BagError
         If the file does not start with the MCAP magic.
     """
     p = Path(path)
@@ -99,7 +98,7 @@ def scan_mcap(path: str | os.PathLike[str]) -> McapScan:
         scan.problem = f'file is {len(data)} bytes: the recorder died before writing anything'
         return scan
     if data[:len(MCAP_MAGIC)] != MCAP_MAGIC:
-        raise NotABagError(f'{p} is not an MCAP file (no MCAP magic at the start)')
+        raise BagError(f'{p} is not an MCAP file (no MCAP magic at the start)')
     pos = len(MCAP_MAGIC)
     scan.valid_bytes = pos
     in_summary = False
@@ -218,14 +217,13 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
 
     Raises
     ------
-    BagNotFoundError, NotABagError
+    BagNotFoundError, BagError
         If there is no MCAP file to repair.
-    NothingToRepairError
+    BagError
         If the bag is complete.
+        If no ROS 2 data can be recovered (or a topic has two types).
     BagExistsError
         If ``out`` exists.
-    RepairError
-        If no ROS 2 data can be recovered (or a topic has two types).
     """
     src = bag_location(path)
     if src.is_file():
@@ -235,12 +233,12 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
         mcaps = sorted(src.glob('*.mcap'))
         default_out = src.with_name(src.name + '_repaired')
     if not mcaps:
-        raise NotABagError(f'{src} holds no .mcap file; there is nothing to repair (only MCAP '
-                           'bags can be repaired)')
+        raise BagError(f'{src} holds no .mcap file; there is nothing to repair (only MCAP '
+                       'bags can be repaired)')
     if src.is_dir() and (src / 'metadata.yaml').exists() \
             and all(mcap_is_complete(m) for m in mcaps) and _opens(src):
-        raise NothingToRepairError(f'{src} is complete (closed MCAP and metadata.yaml); nothing '
-                                   'to repair - read it directly')
+        raise BagError(f'{src} is complete (closed MCAP and metadata.yaml); nothing '
+                       'to repair - read it directly')
     dst = Path(out) if out is not None else default_out
     if dst.exists():
         raise BagExistsError(f'repair output {dst} exists already; it is never overwritten. '
@@ -260,19 +258,19 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
             msgdef = schema.data.decode('utf-8', errors='replace')
             prev = channels.get(ch.topic)
             if prev is not None and prev[0] != schema.name:
-                raise RepairError(f'topic {ch.topic} appears with two types, {prev[0]} and '
-                                  f'{schema.name}; this tool writes one type per topic')
+                raise BagError(f'topic {ch.topic} appears with two types, {prev[0]} and '
+                               f'{schema.name}; this tool writes one type per topic')
             if prev is None or (prev[1] is None and _offered_qos(ch) is not None):
                 channels[ch.topic] = (schema.name, _offered_qos(ch), msgdef)
     total = sum(len(s.messages) for s in scans)
     if not channels and foreign:
-        raise RepairError(f'{src} holds no ROS 2 data: {", ".join(sorted(foreign.values()))}; '
-                          'only MCAP channels with cdr messages and ros2msg schemas can be '
-                          'written into a rosbag2 bag')
+        raise BagError(f'{src} holds no ROS 2 data: {", ".join(sorted(foreign.values()))}; '
+                       'only MCAP channels with cdr messages and ros2msg schemas can be '
+                       'written into a rosbag2 bag')
     if not channels and total == 0:
         why = '; '.join(f'{s.path.name}: {s.problem or "no chunk was complete"}' for s in scans)
-        raise RepairError(f'nothing recoverable in {src}: no complete chunk was written before '
-                          f'the recorder stopped ({why})')
+        raise BagError(f'nothing recoverable in {src}: no complete chunk was written before '
+                       f'the recorder stopped ({why})')
     counts: dict[str, int] = {}
     orphans = 0
     writer = BagWriter(dst)

@@ -36,12 +36,12 @@ from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
 from .. import topics
-from .errors import BagError, BagExistsError, InvalidRunNameError
+from .errors import BagExistsError, BagError
 from .typestore import jazzy_typestore
 
-__all__ = ['BagError', 'BagExistsError', 'InvalidRunNameError', 'BagWriter', 'make_qos',
-           'default_qos', 'qos_to_dicts', 'new_run_dir', 'jazzy_typestore', 'BAG_VERSION',
-           'DEFAULT_CHUNK_SIZE', 'DEFAULT_FLUSH_PERIOD', 'INFINITE_NS']
+__all__ = ['BagError', 'BagExistsError', 'BagWriter', 'make_qos', 'default_qos', 'qos_to_dicts',
+           'new_run_dir', 'jazzy_typestore', 'BAG_VERSION', 'DEFAULT_CHUNK_SIZE',
+           'DEFAULT_FLUSH_PERIOD', 'INFINITE_NS']
 
 #: rosbag2 metadata version written (ROS 2 Jazzy).
 BAG_VERSION: Final = 9
@@ -213,10 +213,10 @@ def qos_to_dicts(profiles: Sequence[Qos]) -> list[dict[str, Any]]:
 
 def _check_run_name(name: str) -> str:
     if not isinstance(name, str) or not name.strip():
-        raise InvalidRunNameError(f'run name must be a non-empty string, got {name!r}')
+        raise BagError(f'run name must be a non-empty string, got {name!r}')
     seps = {'/', '\\', os.sep} | ({os.altsep} if os.altsep else set())
     if any(s in name for s in seps) or '..' in name or '\x00' in name or name == '.':
-        raise InvalidRunNameError(
+        raise BagError(
             f'run name {name!r} is not a plain directory name: it must not contain a path '
             "separator, '..' or NUL (a run directory never leaves its root). Use e.g. "
             "'circle_tau02'.")
@@ -246,9 +246,8 @@ def new_run_dir(root: str | os.PathLike[str], name: str | None = None) -> Path:
 
     Raises
     ------
-    InvalidRunNameError
-        For a name with a path separator or ``..``.
     BagError
+        For a name with a path separator or ``..``.
         If no free name is found.
     """
     base = _check_run_name(name) if name is not None \

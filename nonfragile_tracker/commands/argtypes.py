@@ -70,17 +70,19 @@ nonnegative_int = _at_least(_integer, 0, False, 'an integer', 'nonnegative_int',
                             'An integer >= 0 (a seed).')
 
 
-def add_executor_arguments(p: argparse.ArgumentParser) -> None:
+def add_executor_arguments(p: argparse.ArgumentParser, workers: str = '--workers') -> None:
     """``--executor local|dask`` and ``--scheduler ADDRESS`` (:mod:`..parallel`).
 
     Parameters
     ----------
     p : argparse.ArgumentParser
         The sub-command's parser.
+    workers : str, optional
+        The command's option for the number of processes (named in the help).
     """
     p.add_argument('--executor', choices=['local', 'dask'], default='local',
                    help='where the work runs: local processes (default) or Dask distributed '
                    '(optional dependency: pip install dask distributed)')
     p.add_argument('--scheduler', metavar='ADDRESS',
                    help='with --executor dask: a running scheduler, e.g. tcp://host:8786 '
-                   '(default: a local cluster of --jobs/--workers processes)')
+                   f'(default: a local cluster of {workers} processes)')

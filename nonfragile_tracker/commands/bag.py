@@ -129,7 +129,7 @@ def register(subparsers: Subparsers) -> None:
 
     rep = bs.add_parser('report', help='metrics, timing and PNG plots of a recorded run '
                         '(lockstep or real time, ours or another system\'s)')
-    rep.add_argument('bag')
+    rep.add_argument('bag', help='rosbag2 bag directory or MCAP file of a run')
     rep.add_argument('--out', help='directory for the plots (default: <bag>_report)')
     rep.add_argument('--force', action='store_true', help='replace existing plots')
     rep.add_argument('--no-plots', action='store_true', help='text report only')
@@ -148,8 +148,8 @@ def register(subparsers: Subparsers) -> None:
 
     cmp = bs.add_parser('compare', help='compare two runs field by field (exit 0 equal, '
                         '1 different, 2 unreadable)')
-    cmp.add_argument('expected')
-    cmp.add_argument('actual')
+    cmp.add_argument('expected', help='the reference bag (e.g. a golden bag)')
+    cmp.add_argument('actual', help='the bag to check against it')
     cmp.add_argument('--tol', action='append', metavar='TOPIC.FIELD=ABS[,REL]',
                      help='tolerance of a topic, field, field prefix or glob (repeatable), '
                      'e.g. /odom.pose.pose.position=1e-3 or cmd_vel=1e-6,1e-3')
@@ -163,7 +163,7 @@ def register(subparsers: Subparsers) -> None:
 
     rp = bs.add_parser('replay', help='feed the recorded odometry and reference to a fresh '
                        'tracker and compare its commands with the recorded ones')
-    rp.add_argument('bag')
+    rp.add_argument('bag', help='a recorded run (a real-time bag, or a lockstep one)')
     rp.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml)')
     rp.add_argument('--params', help='scenario/parameter file with a tracker section '
                     '(default config/paper_scenario.yaml)')
@@ -175,6 +175,6 @@ def register(subparsers: Subparsers) -> None:
 
     rr = bs.add_parser('repair', help='recover a bag whose recorder died without closing it, '
                        'or an MCAP from another recorder without metadata.yaml')
-    rr.add_argument('bag')
+    rr.add_argument('bag', help='the bag directory or .mcap file to recover')
     rr.add_argument('--out', help='repaired bag directory (default <bag>_repaired)')
     rr.set_defaults(func=cmd_repair)

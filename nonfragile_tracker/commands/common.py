@@ -11,7 +11,8 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ['add_report_outputs', 'check_outputs', 'check_robot_file', 'write_robot_file']
+__all__ = ['add_report_outputs', 'check_outputs', 'check_robot_file', 'HelpFormatter',
+           'write_robot_file']
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -20,6 +21,22 @@ if TYPE_CHECKING:
     Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]
 else:
     Subparsers = argparse._SubParsersAction
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """The ``--help`` of every command: an option's default is shown unless its help says it.
+
+    ``(default: X)`` is appended to the help of an option whose default is a value (not
+    None, a flag's bool or an empty list) and whose help does not already name its default.
+    """
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ''
+        d = action.default
+        if (not action.option_strings or 'default' in text or d is None
+                or isinstance(d, bool) or d is argparse.SUPPRESS or d == []):
+            return text
+        return text + ' (default: %(default)s)'
 
 
 def check_outputs(force: bool, *outputs: str | None) -> None:

@@ -164,8 +164,9 @@ def register(subparsers: Subparsers) -> None:
                    'acceleration limits the recording shows binding into (its other keys and '
                    'comments kept; made from the shipped config/robot.yaml when absent)')
     p.add_argument('--cmd-topic', default='cmd_vel', help='velocity command topic (Twist or '
-                   'TwistStamped; default cmd_vel, else a namespaced one, else the one topic '
-                   'of that type)')
+                   'TwistStamped; default cmd_vel, looked up as bag report does: in the '
+                   'namespace holding most of the run topics, else at the root, else the one '
+                   'topic of that type)')
     p.add_argument('--odom-topic', default='odom', help='odometry topic (nav_msgs/Odometry; '
                    'default odom, found as for --cmd-topic)')
     p.add_argument('--cmd-time', choices=['auto', 'receive', 'stamp'], default='auto',

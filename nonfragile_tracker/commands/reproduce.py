@@ -1,4 +1,4 @@
-"""``reproduce``: the paper's Section IV into an output directory (and, asked, ``docs/``)."""
+"""``reproduce``: the paper's Section IV into an output directory (and ``doc/reproduction/``)."""
 from __future__ import annotations
 
 import argparse
@@ -12,7 +12,7 @@ __all__ = ['register', 'cmd_reproduce']
 
 
 def _docs_dir(value: str | None) -> Path:
-    """Where ``--docs`` writes: the given directory, else ``docs/`` of a source checkout.
+    """Where ``--docs`` writes: the given directory, else ``doc/reproduction/`` of a checkout.
 
     Raises
     ------
@@ -27,7 +27,7 @@ def _docs_dir(value: str | None) -> Path:
     if root is None:
         raise InputError('--docs without a directory needs a source checkout (the installed '
                          'package is never written into); give one: --docs DIR')
-    return root / 'docs'
+    return root / 'doc' / 'reproduction'
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -68,8 +68,8 @@ def register(subparsers: Subparsers) -> None:
     r.add_argument('--out', default='runs/reproduction', help='output directory')
     r.add_argument('--force', action='store_true', help='write into a non-empty --out')
     r.add_argument('--docs', nargs='?', const='', default=None, metavar='DIR',
-                   help='also refresh DIR/paper_reproduction.* (default DIR: docs/ of the '
-                   'source checkout; required when the package is installed)')
+                   help='also refresh DIR/paper_reproduction.* (default DIR: doc/reproduction/ '
+                   'of the source checkout; required when the package is installed)')
     r.add_argument('--duration', type=positive_float, default=60.0,
                    help='simulated s of the ROS run')
     r.add_argument('--no-ros', action='store_true', help='skip the ROS run (no Fig. 6)')

@@ -167,7 +167,7 @@ def register(subparsers: Subparsers) -> None:
                    help='the zero steady-state error law (delay-consistent reference)')
     p.add_argument('--jobs', type=positive_int, default=None,
                    help='worker processes (default: the cores available)')
-    add_executor_arguments(p)
+    add_executor_arguments(p, '--jobs')
     add_report_outputs(p, json_help='write the summary and every case as JSON',
                        plot_help='write a PNG of the distributions')
     p.set_defaults(func=cmd_study)

@@ -83,7 +83,8 @@ def register(subparsers: Subparsers) -> None:
                    help='objectives (default: decay)')
     p.add_argument('--predictor', choices=['both', 'on', 'off'], default='both',
                    help='designs with the predictor at the low end of the latency (on: the '
-                   'residual is certified), without it (off), or both (default)')
+                   'residual is certified), without it (off), or both (default; an interval '
+                   'starting at 0 is designed once, the two being the same design)')
     p.add_argument('--command-period', type=positive_float, default=0.02,
                    help="the tracker's command period in s (default 0.02)")
     p.add_argument('--workers', type=positive_int, default=None,

@@ -248,7 +248,7 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
     else:
         print(format_analysis(rows))
     for r in rows:
-        sat = _saturation_text(args, problem, r.K)
+        sat = '' if margins_only else _saturation_text(args, problem, r.K)
         if sat:
             print(f'{r.name}: {sat}')
     if getattr(args, 'tracking', False):
@@ -290,41 +290,53 @@ def register(subparsers: Subparsers) -> None:
 
     d = subparsers.add_parser('design', help='optimized Theorem 1 gain (decay rate, perturbation '
                        'scale, smallest norm)')
-    d.add_argument('problem')
-    d.add_argument('--objective', choices=['decay', 'scale', 'min-norm'], required=True)
+    d.add_argument('problem', help='problem YAML (e.g. config/paper_problem.yaml)')
+    d.add_argument('--objective', choices=['decay', 'scale', 'min-norm'], required=True,
+                   help='decay: the largest certified decay rate; scale: the largest '
+                   'perturbation scale; min-norm: the smallest ||K||_2 (within --norm)')
     d.add_argument('--norm', type=positive_float,
                    help='||K||_2 budget (default options.gain_bound)')
     d.add_argument('--nominal', action='store_true', help='nominal condition (no E, F)')
     d.add_argument('-o', '--output', help='tracker gain file to write')
-    d.add_argument('--force', action='store_true')
+    d.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     _add_saturation_args(d)
     d.set_defaults(func=cmd_design)
 
     dd = subparsers.add_parser('delay-dependent', help='delay-dependent design (Fridman-Shaked '
                         'descriptor method) and the largest certified delay')
-    dd.add_argument('problem')
+    dd.add_argument('problem', help='problem YAML (e.g. config/harder_delay_problem.yaml)')
     g = dd.add_mutually_exclusive_group()
     g.add_argument('--delay', type=positive_float,
                    help='delay to certify (default: problem tau)')
     g.add_argument('--max-delay', action='store_true', help='bisect for h_max')
     dd.add_argument('--gain-bound', type=positive_float,
                     help='||K||_2 bound (default options.gain_bound)')
-    dd.add_argument('--nominal', action='store_true')
+    dd.add_argument('--nominal', action='store_true', help='nominal design (no E, F terms)')
     dd.add_argument('-o', '--output', help='tracker gain file to write')
-    dd.add_argument('--force', action='store_true')
+    dd.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     dd.set_defaults(func=cmd_delay_dependent)
 
-    for name, margins_only, helptext in (
-            ('analyse', False, 'certify a gain, delay-loop abscissae, fragility margins'),
-            ('margins', True, 'measured and certified fragility margins of a gain')):
-        a = subparsers.add_parser(name, help=helptext)
-        a.add_argument('problem', help='problem YAML')
-        a.add_argument('--gains', action='append', help='tracker gain file (repeatable)')
-        a.add_argument('--paper', action='store_true', help="include the paper's printed gains")
-        a.add_argument('--no-margins', action='store_true', help='skip the margin searches')
-        a.add_argument('--tracking', action='store_true',
-                       help='also simulate the paper scenario with each gain (with and without '
-                       'delay compensation)')
-        a.add_argument('--json', help='also write the results as JSON')
-        _add_saturation_args(a)
-        a.set_defaults(func=lambda args, m=margins_only: cmd_analyse(args, m))
+    a = subparsers.add_parser(
+        'analyse', help='certify a gain, delay-loop abscissae, fragility margins',
+        description='Certify each gain (Theorem 1 with its E, F), the abscissae of the delay '
+        'loop, and the measured and certified fragility margins; optionally the tracking on '
+        'the paper circle and a saturation certificate.')
+    a.add_argument('problem', help='problem YAML (e.g. config/paper_problem.yaml)')
+    a.add_argument('--gains', action='append', help='tracker gain file (repeatable)')
+    a.add_argument('--paper', action='store_true', help="include the paper's printed gains")
+    a.add_argument('--no-margins', action='store_true', help='skip the margin searches')
+    a.add_argument('--tracking', action='store_true',
+                   help='also simulate the paper scenario with each gain (with and without '
+                   'delay compensation)')
+    a.add_argument('--json', help='also write the results as JSON')
+    _add_saturation_args(a)
+    a.set_defaults(func=cmd_analyse)
+    m = subparsers.add_parser(
+        'margins', help='measured and certified fragility margins of a gain',
+        description='Only the fragility margins of each gain: the largest perturbation '
+        'scale measured on the loop and the one Theorem 1 certifies, with ||K||_2.')
+    m.add_argument('problem', help='problem YAML (e.g. config/paper_problem.yaml)')
+    m.add_argument('--gains', action='append', help='tracker gain file (repeatable)')
+    m.add_argument('--paper', action='store_true', help="include the paper's printed gains")
+    m.add_argument('--json', help='also write the results as JSON')
+    m.set_defaults(func=lambda args: cmd_analyse(args, True), no_margins=False)

@@ -50,7 +50,7 @@ def register(subparsers: Subparsers) -> None:
     c = sub.add_parser('check', help='build the trajectory of a waypoint file (CSV or YAML: '
                        't, x, y[, yaw][, speed]) and print its summary; with --limits the '
                        'margin of each limit and what re-timing changes')
-    c.add_argument('file')
+    c.add_argument('file', help='waypoint file: CSV or YAML rows t, x, y[, yaw][, speed]')
     c.add_argument('--smoothing', type=float, default=0.0,
                    help='0 interpolates (cubic spline); > 0 smoothing spline penalty')
     c.add_argument('--ends', choices=['rest', 'natural'], default='rest',

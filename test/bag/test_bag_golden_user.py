@@ -10,7 +10,7 @@ from nonfragile_tracker import cli, golden
 
 def test_golden_refuses_to_write_into_an_installed_package(monkeypatch, capsys):
     monkeypatch.setattr(golden, 'source_root', lambda: None)
-    with pytest.raises(golden.GoldenError, match='package is installed, so pass --out'):
+    with pytest.raises(golden.InputError, match='package is installed, so pass --out'):
         golden.golden_bag('paper')
     assert cli.main(['golden']) == 2
     assert 'never writes into an installed package' in capsys.readouterr().err

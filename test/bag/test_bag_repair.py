@@ -12,10 +12,9 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import breakup_chunk
 from test_bag_writer_reader import RUN, TYPES, run_messages, simulated_run
 
-from nonfragile_tracker.bag.reader import (BagNotFoundError, BagTruncatedError, read_bag,
-                                           read_messages)
-from nonfragile_tracker.bag.repair import (NothingToRepairError, RepairError, repair_bag,
-                                           scan_mcap)
+from nonfragile_tracker.bag.errors import BagError
+from nonfragile_tracker.bag.reader import BagNotFoundError, read_bag, read_messages
+from nonfragile_tracker.bag.repair import repair_bag, scan_mcap
 from nonfragile_tracker.bag.writer import BagExistsError, BagWriter, make_qos
 
 
@@ -58,11 +57,11 @@ def test_cuts_recover_every_complete_chunk(tmp_path, source):
                    ends[-2] + 1, ends[-1], len(data) - 9, len(data) - 1})
     for cut in cuts:
         cbag = _cut_copy(tmp_path, data, cut)
-        with pytest.raises(BagTruncatedError, match='bag repair'):
+        with pytest.raises(BagError, match='bag repair'):
             read_bag(cbag)
         expected = sum(n for end, n in chunks if end <= cut)
         if cut < ends[0]:                       # not even the first chunk is complete
-            with pytest.raises(RepairError, match='nothing recoverable'):
+            with pytest.raises(BagError, match='nothing recoverable'):
                 repair_bag(cbag)
             continue
         res = repair_bag(cbag)
@@ -112,12 +111,12 @@ def test_missing_metadata_with_complete_mcap(tmp_path, source):
 
 def test_repair_errors(tmp_path, source):
     bag, msgs, data, chunks, _ = source
-    with pytest.raises(NothingToRepairError, match='nothing to repair'):
+    with pytest.raises(BagError, match='nothing to repair'):
         repair_bag(bag)
     with pytest.raises(BagNotFoundError, match='does not exist'):
         repair_bag(tmp_path / 'nope')
     early = _cut_copy(tmp_path, data, 40)                   # before the first chunk ends
-    with pytest.raises(RepairError, match='nothing recoverable'):
+    with pytest.raises(BagError, match='nothing recoverable'):
         repair_bag(early)
     cbag = _cut_copy(tmp_path, data, chunks[1][0])
     (tmp_path / 'taken').mkdir()

@@ -10,7 +10,7 @@ from conftest import ROOT, unique_domain_id
 
 def _example():
     spec = importlib.util.spec_from_file_location(
-        'user_regression_example', ROOT / 'docs' / 'user_regression_example.py')
+        'user_regression_example', ROOT / 'doc' / 'user_regression_example.py')
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

@@ -86,9 +86,9 @@ FILE_SLOTS = [
     ['design', '{}', '--objective', 'min-norm'],
     ['delay-dependent', '{}', '--max-delay'],
     ['analyse', '{}', '--paper', '--no-margins'],
-    ['margins', '{}', '--paper', '--no-margins'],
+    ['margins', '{}', '--paper'],
     ['analyse', PAPER, '--gains', '{}', '--no-margins'],
-    ['margins', PAPER, '--gains', '{}', '--no-margins'],
+    ['margins', PAPER, '--gains', '{}'],
     ['run', '--scenario', '{}', '--no-record'],
     ['run', '--gains', '{}', '--no-record'],
 ]

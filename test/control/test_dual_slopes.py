@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from nonfragile_tracker.control import input_delay
+from nonfragile_tracker.control.synthesis import input_delay
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
 

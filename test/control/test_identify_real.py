@@ -20,7 +20,7 @@ import pytest
 from conftest import CONFIG
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.control.identification.identify import (CommandSamples, OdometrySamples,
-                                                                PoorFitError,
+                                                                IdentificationError,
                                                                 commands_follow_odometry,
                                                                 identify_latency,
                                                                 read_identification,
@@ -257,7 +257,7 @@ def test_refusal_of_unrelated_odometry_names_it_without_harmful_advice():
     """Odometry of another run: refused, naming topics/clock; no 'raise max_tau_s'."""
     a = record_case(CASES['ii'], seed=1, duration=20.0)
     b = record_case(CASES['ii'], seed=2, duration=20.0)
-    with pytest.raises(PoorFitError) as err:
+    with pytest.raises(IdentificationError) as err:
         identify_latency(a.commands, b.odometry, bootstrap=50)
     msg = str(err.value)
     assert 'max_tau' not in msg and 'raise' not in msg

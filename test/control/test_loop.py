@@ -125,6 +125,10 @@ def test_paths():
         make_path('square')
     with pytest.raises(PathError, match='radius must be > 0'):
         circle(radius=0.0)
+    with pytest.raises(PathError, match='path parameter rate: expected a number, got True'):
+        circle(rate=True)
+    with pytest.raises(PathError, match='center_x: expected a finite number'):
+        circle(center_x=float('nan'))
 
 
 def test_step_time_is_integer_nanoseconds():

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.simulation.model import (SingularSpeedError,
+from nonfragile_tracker.control.simulation.model import (InputError,
                                                          double_integrator_model, inputs_from_u,
                                                          u_from_inputs, xi_from_state)
 
@@ -43,7 +43,7 @@ def test_linearization_is_exact_along_a_trajectory():
 
 
 def test_singularity_is_reported():
-    with pytest.raises(SingularSpeedError, match='determinant v'):
+    with pytest.raises(InputError, match='determinant v'):
         inputs_from_u(0.0, 0.0, 1.0, 1.0)
-    with pytest.raises(SingularSpeedError, match='0.0005'):
+    with pytest.raises(InputError, match='0.0005'):
         inputs_from_u(0.0, 5e-4, 1.0, 1.0, min_speed=1e-3)

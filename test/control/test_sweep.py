@@ -41,11 +41,16 @@ def serial():
 def test_grid_is_every_combination_in_order():
     pts = sweep_points([(0.0, 0.03), (0.1, 0.15)], lags=[0.0, 0.05], gain_bounds=[3.0, 5.0],
                        objectives=['decay', 'max-delay'], predictors=[False, True])
-    assert len(pts) == 2 * 2 * 2 * 2 * 2
+    # [0, 0.03]: the predictor removes nothing, one design without it; [0.1, 0.15]: both
+    assert len(pts) == 2 * 2 * 2 * 1 + 2 * 2 * 2 * 2
     assert pts[0] == SweepPoint((0.0, 0.03), 0.0, 3.0, 'decay', False)
-    assert pts[1] == SweepPoint((0.0, 0.03), 0.0, 3.0, 'decay', True)
+    assert pts[1] == SweepPoint((0.0, 0.03), 0.0, 3.0, 'max-delay', False)
+    assert pts[8] == SweepPoint((0.1, 0.15), 0.0, 3.0, 'decay', False)
+    assert pts[9] == SweepPoint((0.1, 0.15), 0.0, 3.0, 'decay', True)
     assert pts[-1] == SweepPoint((0.1, 0.15), 0.05, 5.0, 'max-delay', True)
-    for bad in ([(0.2, 0.1)], [(0.0, float('nan'))], [(0.0,)]):
+    assert sweep_points([(0.0, 0.1)], predictors=[True]) == [
+        SweepPoint((0.0, 0.1), 0.0, None, 'decay', True)]
+    for bad in ([(0.2, 0.1)], [(0.0, float('nan'))], [(0.0,)], [(True, 0.1)]):
         with pytest.raises(InputError):
             sweep_points(bad)
     with pytest.raises(InputError, match='objective'):

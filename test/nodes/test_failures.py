@@ -133,3 +133,32 @@ def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
         sim = simulate_tracking(paper_plant_config(), TrackerConfig(K=K, perturbation=pert), circle(), 500)
         assert bags[name].counts['/odom'] == 501
         np.testing.assert_allclose(bags[name].run.pose.x, sim.x, atol=1e-9)
+
+
+def test_a_node_process_stops_on_sigint_and_a_hung_one_is_killed_with_its_stacks(tmp_path):
+    """runner.NodeProcess, the lifecycle of the runner's nodes and the replayer's tracker:
+    SIGINT ends a running node cleanly (exit 0); a node that does not end within the wait
+    is asked for its stacks (SIGUSR1) and killed."""
+    env = runner.isolated_env(dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('nodeproc'))))
+    pfile = runner.write_parameter_file(params(5.0), tmp_path / 'p.yaml')
+    nodes = [runner.NodeProcess('tracker', pfile, tmp_path / f'{name}.log', env)
+             for name in ('clean', 'hung')]
+    try:
+        for node in nodes:
+            end = time.monotonic() + 60
+            while 'tracker' not in node.log.read_text() and time.monotonic() < end:
+                assert node.poll() is None, node.log.read_text()
+                time.sleep(0.1)
+        clean, hung = nodes
+        assert clean.stop(timeout=30) and clean.poll() == 0, clean.log.read_text()
+        # a stopped node ends neither on SIGINT nor on SIGUSR1: killed after the wait
+        os.kill(hung.proc.pid, signal.SIGSTOP)
+        start = time.monotonic()
+        assert not hung.stop(timeout=1.0)
+        assert hung.poll() == -signal.SIGKILL and time.monotonic() - start < 10
+    finally:
+        for node in nodes:
+            if node.poll() is None:
+                node.proc.kill()
+                node.proc.wait()
+            node.close()

@@ -78,8 +78,11 @@ def test_every_node_has_its_generated_parameter_table():
     # the rows are the declarations themselves: same names, in order, same descriptions
     from nonfragile_tracker.nodes import tracker
     rows = nonfragile_docs.parameter_rows('tracker')
-    assert [r[0] for r in rows] == [p.name for p in tracker.PARAMS]
-    assert [r[5] for r in rows] == [p.description for p in tracker.PARAMS]
+    declared = tracker.PARAMS + tracker.MONITOR_PARAMS           # what the node binds
+    assert [r[0] for r in rows] == [p.name for p in declared]
+    assert [r[5] for r in rows] == [p.description for p in declared]
+    assert {'monitor', 'monitor_window', 'monitor_adapt', 'certified_residual',
+            'certified_lag'} <= {r[0] for r in rows}
     by_name = {r[0]: r for r in rows}
     # type, default, range, read-only as declared (tracker.PARAMS: dt low=1e-6, high=10)
     assert by_name['dt'][1:5] == ['double', '0.01', '[1e-06, 10]', 'yes']
@@ -131,11 +134,13 @@ def test_pages_build_without_warnings(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stderr.strip() == '', proc.stderr
     for page in ('index', 'getting-started', 'tutorial', 'cli', 'ros-interface', 'bags',
-                 'study', 'safety', 'theory', 'developing', 'reproduction', 'limits'):
+                 'study', 'safety', 'theory', 'developing', 'reproduction/paper_reproduction',
+                 'limits', 'troubleshooting'):
         assert (out / f'{page}.html').is_file(), page
     ros = (out / 'ros-interface.html').read_text()
     # generated tables: one row per declaration of every node
-    for name in ('predict_latency', 'lockstep_lead', 'chunk_size', 'display_points'):
+    for name in ('predict_latency', 'lockstep_lead', 'chunk_size', 'display_points',
+                 'monitor_window', 'certified_residual'):
         assert f'<code class="docutils literal notranslate"><span class="pre">{name}' in ros
     cli = (out / 'cli.html').read_text()
     assert cli.count('usage: nonfragile_tracker') == len(re.findall(
@@ -175,3 +180,31 @@ def test_full_docs_build_without_warnings(tmp_path):
     missing = {m for m in modules if f'id="module-{m}"' not in api}
     assert not missing, sorted(missing)
     assert len(modules) >= 60
+
+
+def _github_slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading (lower case, punctuation dropped, - for space)."""
+    text = re.sub(r'[^\w\- ]', '', heading.strip().lower().replace('`', ''))
+    return text.replace(' ', '-')
+
+
+def test_links_between_pages_work_on_github_too():
+    """A link ``page.md#anchor`` must name a heading of that page by GitHub's rule, not only
+    a Sphinx label (``(label)=``) that GitHub does not know; relative .md paths only."""
+    pages = [ROOT / 'README.md', *sorted(DOC.rglob('*.md'))]
+    anchors = {}
+    for page in pages:
+        seen: dict[str, int] = {}
+        text = re.sub(r'^```.*?^```', '', page.read_text(), flags=re.MULTILINE | re.DOTALL)
+        for heading in re.findall(r'^#{1,6} (.+)$', text, flags=re.MULTILINE):
+            slug = _github_slug(heading)
+            anchors.setdefault(page, set()).add(slug if slug not in seen else
+                                                f'{slug}-{seen[slug]}')
+            seen[slug] = seen.get(slug, 0) + 1
+    bad = []
+    for page in pages:
+        for path, anchor in re.findall(r'\]\(([^)\s#]*)#([^)\s]+)\)', page.read_text()):
+            target = (page.parent / path).resolve() if path else page
+            if target.suffix == '.md' and anchor not in anchors.get(target, set()):
+                bad.append(f'{page.relative_to(ROOT)}: {path}#{anchor}')
+    assert not bad, bad

@@ -11,13 +11,11 @@ the uncertainty and what is done about real recordings are in the documentation:
 doc/theory.md, section "Latency identification" (#latency-identification).
 
 Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
-too few samples or too short an overlap of commands and odometry
-(:class:`NotEnoughDataError`), a channel whose command hardly varies
-(:class:`InsufficientExcitationError`), a model that explains less than half of the
-measured variation or an estimate at a search limit (:class:`PoorFitError`, whose
-message names the likely cause: a base that does not reach the commanded speeds, an
-odometry unrelated to the commands, or a response that is not a lag; it never advises
-widening a search limit that would only fit a wrong model).
+too few samples or too short an overlap of commands and odometry, a channel whose command
+hardly varies, a model that explains less than half of the measured variation or an
+estimate at a search limit (the message names the likely cause: a base that does not
+reach the commanded speeds, an odometry unrelated to the commands, or a response that is
+not a lag; it never advises widening a search limit that would only fit a wrong model).
 
 The file the latency-aware design reads (:func:`write_identification`,
 :func:`read_identification`)::
@@ -68,15 +66,13 @@ import numpy as np
 import yaml
 
 from ...errors import InputError
-from .errors import (IdentificationError, NotEnoughDataError, InsufficientExcitationError,
-                     PoorFitError, IdentificationFileError)
+from ..validate import as_finite_float
+from .errors import IdentificationError
 
-__all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
-           'PoorFitError', 'IdentificationFileError', 'CommandSamples', 'OdometrySamples',
-           'Identification', 'identify_latency', 'write_identification', 'read_identification',
+__all__ = ['IdentificationError', 'CommandSamples', 'OdometrySamples', 'Identification',
+           'identify_latency', 'write_identification', 'read_identification',
            'read_identification_text', 'with_source', 'measurement_to_command_delay',
-           'commands_follow_odometry', 'MIN_EVENTS',
-           'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
+           'commands_follow_odometry', 'MIN_EVENTS', 'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
 
 #: Top-level key of the identification file.
 FILE_KEY = 'identification'
@@ -248,16 +244,6 @@ class Identification:
         if not (math.isfinite(lo) and math.isfinite(hi)):
             return self.latency_interval_s
         return (min(lo, self.latency_low_s), max(hi, self.latency_high_s))
-
-    @property
-    def tau_v_interval_s(self) -> tuple[float, float]:
-        """(low, high) of the linear-speed time constant's interval (s)."""
-        return (self.tau_v_low_s, self.tau_v_high_s)
-
-    @property
-    def tau_w_interval_s(self) -> tuple[float, float]:
-        """(low, high) of the angular-speed time constant's interval (s)."""
-        return (self.tau_w_low_s, self.tau_w_high_s)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -853,13 +839,11 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
 
     Raises
     ------
-    NotEnoughDataError
+    IdentificationError
         Fewer than :data:`MIN_ODOM_SAMPLES` odometry samples overlap the commands
         (after the first ``max_latency_s``), or the overlap is too short for
         :data:`MIN_BLOCKS` bootstrap blocks.
-    InsufficientExcitationError
         A channel's command varies less than ``min_excitation``.
-    PoorFitError
         The model explains less than :data:`MIN_R2` of a channel's measured
         variance, or an estimate lies at a search limit.
     InputError
@@ -943,13 +927,13 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
             source: str, window_s: float) -> _Data:
     """Sort the samples, choose each channel's source and keep the measurements fitted.
 
-    Raises :class:`NotEnoughDataError` for too few commands or odometry samples or too
+    Raises :class:`IdentificationError` for too few commands or odometry samples or too
     short an overlap, :class:`InputError` for non-finite values or a missing twist.
     """
     # -- commands
     if len(commands) < 10:
-        raise NotEnoughDataError(f'the run has {len(commands)} velocity commands; at least 10 '
-                                 'are needed (record cmd_vel while the robot moves)')
+        raise IdentificationError(f'the run has {len(commands)} velocity commands; at least 10 '
+                                  'are needed (record cmd_vel while the robot moves)')
     order = _check_times('command t', commands.t)
     tc = commands.t[order]
     cmd = {'v': commands.v[order], 'w': commands.w[order]}
@@ -969,8 +953,8 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
         raise InputError('odometry poses have non-finite values')
     twist = {'v': None if o.v is None else o.v[idx], 'w': None if o.w is None else o.w[idx]}
     if to.size < MIN_ODOM_SAMPLES:
-        raise NotEnoughDataError(f'the run has {to.size} odometry samples; at least '
-                                 f'{MIN_ODOM_SAMPLES} are needed')
+        raise IdentificationError(f'the run has {to.size} odometry samples; at least '
+                                  f'{MIN_ODOM_SAMPLES} are needed')
     odom_period = float(np.median(np.diff(to)))
     odom_rate = 1.0 / odom_period
 
@@ -999,7 +983,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
     meas = {c: measurement(c) for c in _CHANNELS}
     n_used = {c: meas[c][3].size for c in _CHANNELS}
     if min(n_used.values()) < MIN_ODOM_SAMPLES:
-        raise NotEnoughDataError(
+        raise IdentificationError(
             f'only {min(n_used.values())} odometry samples lie between {max_latency_s:g} s '
             f'after the first command and the last command (t = {tc[0]:.3f} ... {tc[-1]:.3f} '
             f's; odometry {to[0]:.3f} ... {to[-1]:.3f} s); at least {MIN_ODOM_SAMPLES} are '
@@ -1010,7 +994,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
     block_len = float(np.clip(duration / 20.0, 0.25, 2.0))
     n_blocks = int(duration // block_len) + 1
     if duration < MIN_BLOCKS * block_len:
-        raise NotEnoughDataError(
+        raise IdentificationError(
             f'commands and odometry overlap for {duration:.2f} s after the first '
             f'{max_latency_s:g} s; at least {MIN_BLOCKS * 0.25:g} s are needed for the '
             'uncertainty (block bootstrap): record a longer run')
@@ -1020,7 +1004,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
 
 def _check_excitation(data: _Data, max_latency_s: float,
                       min_excitation: tuple[float, float]) -> None:
-    """Refuse a channel whose commands hardly vary (:class:`InsufficientExcitationError`).
+    """Refuse a channel whose commands hardly vary (:class:`IdentificationError`).
 
     The commands over the fitted span and the latency range before it are looked at.
     """
@@ -1031,7 +1015,7 @@ def _check_excitation(data: _Data, max_latency_s: float,
         ptp = float(np.ptp(u)) if u.size else 0.0
         changes = int(np.count_nonzero(np.diff(u))) if u.size > 1 else 0
         if ptp < lo or changes < 3:
-            raise InsufficientExcitationError(
+            raise IdentificationError(
                 f'the {_NAMES[c]} command hardly varies in the fitted span ({t_begin:.2f} ... '
                 f'{t_end:.2f} s): peak-to-peak {ptp:.3g} {_UNITS[c]} (need >= {lo:g}), '
                 f'{changes} changes; its lag and the latency cannot be seen. Record a run that '
@@ -1408,7 +1392,7 @@ def _check_quality(fit: _Fit, excluded: list[tuple[float, float]], max_latency_s
                    max_tau_s: float) -> _Quality:
     """Gains, residuals, R^2 and binding fractions of the final fit.
 
-    Refuses a poor fit or an estimate at a search limit (:class:`PoorFitError`).
+    Refuses a poor fit or an estimate at a search limit (:class:`IdentificationError`).
     """
     data, chans, pos, tau_hat = fit.data, fit.chans, fit.pos, fit.tau_hat
     tc = data.tc
@@ -1426,16 +1410,16 @@ def _check_quality(fit: _Fit, excluded: list[tuple[float, float]], max_latency_s
 
     for c in _CHANNELS:
         if r2[c] < MIN_R2:
-            raise PoorFitError(_poor_fit_cause(c, r2[c], data.use[c], chans[c], data.cmd[c],
-                                               fit.accel[c], excluded_s))
+            raise IdentificationError(_poor_fit_cause(c, r2[c], data.use[c], chans[c],
+                                                      data.cmd[c], fit.accel[c], excluded_s))
     if pos >= fit.d_max - 0.5:
-        raise PoorFitError(f'the latency estimate is at the search limit {max_latency_s:g} s: '
-                           'either the latency is longer (raise max_latency_s, --max-latency) '
-                           'or the odometry does not respond to these commands (another '
-                           'robot, another clock)')
+        raise IdentificationError(f'the latency estimate is at the search limit '
+                                  f'{max_latency_s:g} s: either the latency is longer (raise '
+                                  'max_latency_s, --max-latency) or the odometry does not '
+                                  'respond to these commands (another robot, another clock)')
     for c in _CHANNELS:
         if tau_hat[c] >= 0.999 * max_tau_s:
-            raise PoorFitError(
+            raise IdentificationError(
                 f'the {_NAMES[c]} time constant reaches the search limit {max_tau_s:g} s: the '
                 f'measured {_NAMES[c]} does not follow the commands through a lag. Real '
                 'actuator lags are tens of milliseconds; a fit this slow means something the '
@@ -1728,29 +1712,25 @@ def _accel_from(result: Identification) -> str:
 
 def _text(where: str, key: str, value: Any) -> str:
     if not isinstance(value, str):
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a string, got '
-                                      f'{value!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.{key} must be a string, got '
+                                  f'{value!r}')
     return value
 
 
 def _number(where: str, key: str, value: Any, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or value < 0 or (positive and value == 0):
-        need = '> 0' if positive else '>= 0'
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a finite number '
-                                      f'{need}, got {value!r}')
-    return float(value)
+    return as_finite_float(value, f'{where}: {FILE_KEY}.{key}', low=0.0,
+                           low_inclusive=not positive, error=IdentificationError)
 
 
 def _pair(where: str, key: str, value: Any, point: float) -> tuple[float, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} must be a list [low, high] '
-                                      f'of two numbers, got {value!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.{key} must be a list [low, high] '
+                                  f'of two numbers, got {value!r}')
     lo = _number(where, f'{key}[0]', value[0])
     hi = _number(where, f'{key}[1]', value[1])
     if not lo <= point <= hi:
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.{key} = [{lo:g}, {hi:g}] must '
-                                      f'contain the estimate {point:g} (low <= value <= high)')
+        raise IdentificationError(f'{where}: {FILE_KEY}.{key} = [{lo:g}, {hi:g}] must '
+                                  f'contain the estimate {point:g} (low <= value <= high)')
     return lo, hi
 
 
@@ -1770,30 +1750,30 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
 
     Raises
     ------
-    IdentificationFileError
+    IdentificationError
         The text is not YAML, has no ``identification`` mapping, or a field is missing or
         out of range, or unknown (the message names it).
     """
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise IdentificationFileError(f'{where} is not valid YAML: {exc}') from None
+        raise IdentificationError(f'{where} is not valid YAML: {exc}') from None
     if not isinstance(data, dict) or not isinstance(data.get(FILE_KEY), dict):
-        raise IdentificationFileError(f'{where}: expected a mapping with the key {FILE_KEY!r} '
-                                      '(written by `nonfragile_tracker identify BAG -o FILE`)')
+        raise IdentificationError(f'{where}: expected a mapping with the key {FILE_KEY!r} '
+                                  '(written by `nonfragile_tracker identify BAG -o FILE`)')
     d = data[FILE_KEY]
     missing = [k for k in _FIELDS if k not in d]
     if missing:
-        raise IdentificationFileError(f'{where}: {FILE_KEY} lacks the field(s) '
-                                      f'{", ".join(missing)}')
+        raise IdentificationError(f'{where}: {FILE_KEY} lacks the field(s) '
+                                  f'{", ".join(missing)}')
     unknown = sorted(set(map(str, d)) - set(_FIELDS) - set(_OPTIONAL))
     if unknown:
-        raise IdentificationFileError(f'{where}: {FILE_KEY} has unknown field(s) '
-                                      f'{", ".join(unknown)}; known: '
-                                      f'{", ".join(_FIELDS + _OPTIONAL)}')
+        raise IdentificationError(f'{where}: {FILE_KEY} has unknown field(s) '
+                                  f'{", ".join(unknown)}; known: '
+                                  f'{", ".join(_FIELDS + _OPTIONAL)}')
     if not isinstance(d['source'], str):
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.source must be a string (the bag '
-                                      f'path), got {d["source"]!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.source must be a string (the bag '
+                                  f'path), got {d["source"]!r}')
     lat = _number(where, 'latency_s', d['latency_s'])
     lat_lo, lat_hi = _pair(where, 'latency_interval_s', d['latency_interval_s'], lat)
     tv = _number(where, 'tau_v_s', d['tau_v_s'])
@@ -1803,12 +1783,12 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
     rate = _number(where, 'odom_rate_hz', d['odom_rate_hz'], positive=True)
     n = d['samples']
     if isinstance(n, bool) or not isinstance(n, int) or n <= 0:
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.samples must be a positive '
-                                      f'integer, got {n!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.samples must be a positive '
+                                  f'integer, got {n!r}')
     rr = d['residual_rms']
     if not isinstance(rr, dict) or set(rr) != {'v', 'w'}:
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.residual_rms must be a mapping '
-                                      f'{{v: ..., w: ...}}, got {rr!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.residual_rms must be a mapping '
+                                  f'{{v: ..., w: ...}}, got {rr!r}')
     rv = _number(where, 'residual_rms.v', rr['v'])
     rw = _number(where, 'residual_rms.w', rr['w'])
     period = (_number(where, 'command_period_s', d['command_period_s'], positive=True)
@@ -1817,8 +1797,8 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
     if 'command_age_s' in d:
         a = d['command_age_s']
         if not isinstance(a, (list, tuple)) or len(a) != 2:
-            raise IdentificationFileError(f'{where}: {FILE_KEY}.command_age_s must be a list '
-                                          f'[low, high] of two numbers, got {a!r}')
+            raise IdentificationError(f'{where}: {FILE_KEY}.command_age_s must be a list '
+                                      f'[low, high] of two numbers, got {a!r}')
         age = _pair(where, 'command_age_s', a, _number(where, 'command_age_s[0]', a[0]))
     rng = (math.nan, math.nan)
     if 'latency_range_s' in d:
@@ -1826,8 +1806,8 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
     _text(where, 'accel_limits_from', d.get('accel_limits_from', ''))
     driven = d.get('commands_follow_odometry')
     if driven is not None and not isinstance(driven, bool):
-        raise IdentificationFileError(f'{where}: {FILE_KEY}.commands_follow_odometry must be '
-                                      f'true or false, got {driven!r}')
+        raise IdentificationError(f'{where}: {FILE_KEY}.commands_follow_odometry must be '
+                                  f'true or false, got {driven!r}')
     return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
                           rv, rw, source=d['source'], command_period_s=period,
                           command_age_low_s=age[0], command_age_high_s=age[1],
@@ -1857,7 +1837,7 @@ def read_identification(path: str | os.PathLike[str]) -> Identification:
 
     Raises
     ------
-    IdentificationFileError
+    IdentificationError
         Naming the field that is missing, unknown, of the wrong type, negative,
         non-finite, or an interval that does not contain its estimate.
     FileNotFoundError
@@ -1865,8 +1845,8 @@ def read_identification(path: str | os.PathLike[str]) -> Identification:
     """
     p = Path(path)
     if p.is_dir():
-        raise IdentificationFileError(f'{p} is a directory; pass the identification YAML file '
-                                      '(e.g. latency.yaml written by `identify -o`)')
+        raise IdentificationError(f'{p} is a directory; pass the identification YAML file '
+                                  '(e.g. latency.yaml written by `identify -o`)')
     return read_identification_text(p.read_text(), str(p))
 
 

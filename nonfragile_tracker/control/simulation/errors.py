@@ -4,23 +4,16 @@ All are bad input (:class:`nonfragile_tracker.errors.InputError`, a ``ValueError
 CLI exits 2), each message naming the setting and what to do::
 
     InputError
-    +-- SingularSpeedError      the linearizing map at (or too near) v = 0
     +-- PathError               unknown path name or invalid path parameter
     +-- TrajectoryError         a trajectory cannot be built from the given points
-    +-- LoopConfigError         a plant or tracker setting is invalid
-    |   +-- GainFileError       a gain file or gain parameter is malformed
+    +-- LoopConfigError         a plant, tracker or gain setting (a gain file) is invalid
     +-- BatchError              a batch setting is invalid or not supported
 """
 from __future__ import annotations
 
 from ...errors import InputError
 
-__all__ = ['SingularSpeedError', 'PathError', 'TrajectoryError', 'LoopConfigError',
-           'GainFileError', 'BatchError']
-
-
-class SingularSpeedError(InputError):
-    """Raised when the linearizing map is evaluated at (or too near) ``v = 0``."""
+__all__ = ['PathError', 'TrajectoryError', 'LoopConfigError', 'BatchError']
 
 
 class PathError(InputError):
@@ -35,15 +28,10 @@ class TrajectoryError(InputError):
 
 
 class LoopConfigError(InputError):
-    """A plant or tracker setting is invalid; the message names the setting."""
+    """A plant, tracker or gain setting is invalid; the message names it.
 
-
-class GainFileError(LoopConfigError):
-    """A gain file or gain parameter is malformed; the message says which and why.
-
-    A bad gain is a bad tracker configuration: :func:`~.loop.validate_gain`'s
-    ``LoopConfigError`` passes through :func:`~.gains.gain_from_parameters` unchanged and
-    the tracker node catches ``LoopConfigError`` for both.
+    A bad gain file is a bad tracker configuration: the tracker node catches
+    ``LoopConfigError`` for both.
     """
 
 

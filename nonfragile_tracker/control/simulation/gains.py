@@ -34,9 +34,9 @@ import yaml
 
 from ...files import read_yaml
 from .loop import validate_gain
-from .errors import GainFileError, LoopConfigError
+from .errors import LoopConfigError
 
-__all__ = ['GainFileError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
+__all__ = ['LoopConfigError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
            'read_gain_file', 'read_gain_design', 'TRACKER_NODE', 'DESIGN_SECTION']
 
 TRACKER_NODE = 'tracker'
@@ -60,22 +60,21 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
 
     Raises
     ------
-    GainFileError
-        A bad shape or a non-numeric entry.
     LoopConfigError
+        A bad shape or a non-numeric entry.
         A gain the tracker refuses (:func:`control.simulation.loop.validate_gain`).
     """
     try:
         shp = tuple(int(s) for s in shape)
     except (TypeError, ValueError):
-        raise GainFileError(f'K_shape must be two integers [rows, cols], got {shape!r}') from None
+        raise LoopConfigError(f'K_shape must be two integers [rows, cols], got {shape!r}') from None
     if len(shp) != 2 or min(shp) <= 0:
-        raise GainFileError(f'K_shape must be two positive integers [rows, cols], got {shape!r}')
+        raise LoopConfigError(f'K_shape must be two positive integers [rows, cols], got {shape!r}')
     if isinstance(flat, (str, bytes)) or not hasattr(flat, '__len__'):
-        raise GainFileError(f'K must be a list of numbers (row-major), got {flat!r}')
+        raise LoopConfigError(f'K must be a list of numbers (row-major), got {flat!r}')
     for i, val in enumerate(flat):
         if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)):
-            raise GainFileError(f'K[{i}] is {val!r}; every entry must be a number')
+            raise LoopConfigError(f'K[{i}] is {val!r}; every entry must be a number')
     return validate_gain(list(flat), shape=shp)
 
 
@@ -107,8 +106,8 @@ def _design_value(key: str, value: Any) -> Any:
         return [float(v) for v in value]
     if isinstance(value, (list, tuple)) and value and all(isinstance(v, str) for v in value):
         return list(value)
-    raise GainFileError(f'design record {key!r}: {value!r} is not a number, string, bool or '
-                        'a non-empty list of numbers or strings')
+    raise LoopConfigError(f'design record {key!r}: {value!r} is not a number, string, bool or '
+                          'a non-empty list of numbers or strings')
 
 
 def write_gain_file(path: str | os.PathLike[str], K: Any, *, comment: str = '',
@@ -167,15 +166,15 @@ def read_gain_file(path: str | os.PathLike[str], node: str = TRACKER_NODE) -> np
 
     Raises
     ------
-    GainFileError
+    LoopConfigError
         The file cannot be read, has no such section or ``K``, or ``K`` is invalid.
     """
     path = Path(path)
-    data = read_yaml(path, 'gain file', error=GainFileError)
+    data = read_yaml(path, 'gain file', error=LoopConfigError)
     if not isinstance(data, dict):
         got = 'an empty file' if data is None else f'a {type(data).__name__}'
-        raise GainFileError(f'{path}: expected a ROS 2 parameter file with a "{node}" section, '
-                            f'got {got}')
+        raise LoopConfigError(f'{path}: expected a ROS 2 parameter file with a "{node}" section, '
+                              f'got {got}')
     for key in (f'/**/{node}', node, f'/{node}', '/**'):
         section = data.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict) \
@@ -184,8 +183,8 @@ def read_gain_file(path: str | os.PathLike[str], node: str = TRACKER_NODE) -> np
             try:
                 return gain_from_parameters(params['K'], params.get('K_shape', (2, 4)))
             except LoopConfigError as exc:        # add the file's name
-                raise GainFileError(f'{path}: {exc}') from None
-    raise GainFileError(f'{path}: no {node}.ros__parameters.K found')
+                raise LoopConfigError(f'{path}: {exc}') from None
+    raise LoopConfigError(f'{path}: no {node}.ros__parameters.K found')
 
 
 def read_gain_design(path: str | os.PathLike[str]) -> dict[str, Any] | None:
@@ -202,20 +201,20 @@ def read_gain_design(path: str | os.PathLike[str]) -> dict[str, Any] | None:
 
     Raises
     ------
-    GainFileError
+    LoopConfigError
         The file cannot be read, is not YAML, or the record is not a mapping.
     """
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except OSError as exc:
-        raise GainFileError(f'{path}: cannot read gain file ({exc.strerror})') from None
+        raise LoopConfigError(f'{path}: cannot read gain file ({exc.strerror})') from None
     except yaml.YAMLError as exc:
-        raise GainFileError(f'{path}: not valid YAML ({exc})') from None
+        raise LoopConfigError(f'{path}: not valid YAML ({exc})') from None
     section = data.get(DESIGN_SECTION) if isinstance(data, dict) else None
     if not isinstance(section, dict):
         return None
     params = section.get('ros__parameters')
     if not isinstance(params, dict):
-        raise GainFileError(f'{path}: section {DESIGN_SECTION!r} has no ros__parameters mapping')
+        raise LoopConfigError(f'{path}: section {DESIGN_SECTION!r} has no ros__parameters mapping')
     return dict(params)

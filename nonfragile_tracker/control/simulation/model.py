@@ -7,7 +7,7 @@ of double integrators ``xi' = A xi + B u`` of eq. (4) (Oriolo, De Luca,
 Vendittelli, IEEE TCST 10(6), 2002).  The map ``(a, w) -> u`` has the decoupling
 matrix ``[[cos th, -v sin th], [sin th, v cos th]]`` whose determinant is ``v``:
 it cannot be inverted at ``v = 0``; :func:`inputs_from_u` raises
-:class:`SingularSpeedError` there instead of dividing by zero.
+:class:`InputError` there instead of dividing by zero.
 
 Everything here is plain numpy / math; no ROS.
 """
@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SingularSpeedError
+from ...errors import InputError
 from ..validate import StateInputShape
 
 __all__ = [
-    'SingularSpeedError', 'LinearizedModel', 'double_integrator_model',
+    'LinearizedModel', 'double_integrator_model',
     'xi_from_state', 'u_from_inputs', 'inputs_from_u',
 ]
 
@@ -135,12 +135,12 @@ def inputs_from_u(th: float, v: float, u1: float, u2: float,
 
     Raises
     ------
-    SingularSpeedError
+    InputError
         When ``|v| <= min_speed`` (and always at ``v = 0``); the tracker applies its
         documented speed floor before calling.
     """
     if not abs(v) > min_speed:
-        raise SingularSpeedError(
+        raise InputError(
             f'linearizing map is singular: |v| = {abs(v):.3g} m/s <= {min_speed:.3g} m/s; '
             'the decoupling matrix has determinant v. Apply a speed floor or start with v != 0.')
     c, s = math.cos(th), math.sin(th)

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, NamedTuple
 
+from ..validate import as_finite_float
 from .errors import PathError
 
 __all__ = ['RefSample', 'Path', 'circle', 'figure_eight', 'make_path', 'PATHS', 'PathError']
@@ -66,9 +67,7 @@ class Path:
 
 
 def _finite(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise PathError(f'path parameter {name} must be a finite number, got {value!r}')
-    return float(value)
+    return as_finite_float(value, f'path parameter {name}', error=PathError)
 
 
 def _path_params(radius: Any, rate: Any, center_x: Any, center_y: Any, phase: Any

@@ -35,6 +35,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ...errors import InputError
+from ..validate import as_finite_float
 from .errors import InfeasibleError, LmiError
 from ...parallel import map_tasks
 from .latency_design import OBJECTIVES, delay_interval, design_for_latency
@@ -58,17 +59,6 @@ class SweepPoint:
     predictor: bool                   # the tracker predicts L_lo (residual certified)
 
 
-def _num(x: Any, name: str, *, positive: bool = False) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise InputError(f'{name} must be a number, got {x!r}') from None
-    if not math.isfinite(v) or v < 0 or (positive and v == 0):
-        raise InputError(f'{name} must be a finite number {"> 0" if positive else ">= 0"}, '
-                         f'got {x!r}')
-    return v
-
-
 def sweep_points(latencies: Iterable[Sequence[float]], lags: Iterable[float] = (0.0,),
                  gain_bounds: Iterable[float | None] = (None,),
                  objectives: Iterable[str] = ('decay',),
@@ -86,7 +76,8 @@ def sweep_points(latencies: Iterable[Sequence[float]], lags: Iterable[float] = (
     objectives : iterable of str
         ``'decay'`` and/or ``'max-delay'``.
     predictors : iterable of bool
-        Without (False) and/or with (True) the predictor.
+        Without (False) and/or with (True) the predictor.  For an interval starting at 0
+        the predictor has nothing to remove: the two are one design, made once (without).
 
     Raises
     ------
@@ -97,12 +88,13 @@ def sweep_points(latencies: Iterable[Sequence[float]], lags: Iterable[float] = (
     for pair in latencies:
         if len(pair) != 2:
             raise InputError(f'a latency interval is two numbers LO HI, got {pair!r}')
-        lo, hi = _num(pair[0], 'latency'), _num(pair[1], 'latency')
+        lo, hi = (as_finite_float(x, 'latency', low=0.0) for x in pair)
         if lo > hi:
             raise InputError(f'latency interval needs LO <= HI, got [{lo:g}, {hi:g}]')
         lat.append((lo, hi))
-    lag_v = [_num(x, 'lag') for x in lags]
-    bounds = [None if b is None else _num(b, 'gain bound', positive=True) for b in gain_bounds]
+    lag_v = [as_finite_float(x, 'lag', low=0.0) for x in lags]
+    bounds = [None if b is None else as_finite_float(b, 'gain bound', low=0.0, low_inclusive=False)
+              for b in gain_bounds]
     objs = list(objectives)
     bad = [o for o in objs if o not in OBJECTIVES]
     if bad:
@@ -114,7 +106,8 @@ def sweep_points(latencies: Iterable[Sequence[float]], lags: Iterable[float] = (
     if empty:
         raise InputError(f'the sweep grid has no {empty[0]} value')
     return [SweepPoint(latency=la, lag=lg, gain_bound=b, objective=o, predictor=pr)
-            for la, lg, b, o, pr in itertools.product(lat, lag_v, bounds, objs, preds)]
+            for la, lg, b, o, pr in itertools.product(lat, lag_v, bounds, objs, preds)
+            if not (pr and la[0] == 0 and False in preds)]
 
 
 def _task(task: tuple[Problem, SweepPoint, float, float]) -> dict[str, Any]:
@@ -197,7 +190,7 @@ def run_sweep(problem: Problem, points: Sequence[SweepPoint], *,
         As in :func:`..parallel.map_tasks` (``'local'`` processes by default, ``'dask'``,
         or a ``concurrent.futures.Executor``).
     """
-    T = _num(command_period, 'command period', positive=True)
+    T = as_finite_float(command_period, 'command period', low=0.0, low_inclusive=False)
     tasks = [(problem, p, T, float(tol)) for p in points]
     if isinstance(executor, str) and executor == 'local':
         # forked workers inherit what this process imported: cvxpy once here (about 0.7 s

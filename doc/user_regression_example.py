@@ -2,7 +2,7 @@
 
 Copy this file into your own test directory and point the four paths below at your files
 (environment variables, or edit the defaults).  As shipped it runs against the package's
-own paper scenario and golden bag, so ``pytest docs/user_regression_example.py`` works in a
+own paper scenario and golden bag, so ``pytest doc/user_regression_example.py`` works in a
 source checkout.
 
 * ``MY_ROBOT_BAG`` - a bag of a run (your robot in real time, or a lockstep simulation);
