@@ -62,7 +62,8 @@ from .errors import TrajectoryError
 __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
            'from_waypoints', 'from_states', 'from_poses', 'load_waypoints',
            'read_waypoint_file', 'time_law', 'check_frame', 'describe', 'Waypoints',
-           'analytic_knots', 'KNOT_ANGLE', 'MAX_KNOTS']
+           'analytic_knots', 'analytic_knot_times', 'path_samples', 'KNOT_ANGLE',
+           'MAX_KNOTS']
 
 #: Points a curve needs: the spline's order and clamped ends need at least 2 distinct times.
 MIN_POINTS = 2
@@ -471,6 +472,33 @@ def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *
     return Trajectory(pp=pp, knots=knots, direction=direction, source=source, kind=kind)
 
 
+class _Pieces:
+    """A piecewise polynomial in scipy's ``PPoly`` layout, evaluated with numpy.
+
+    ``c`` of shape ``(k + 1, m, 2)`` (highest power first), breakpoints ``x`` (``m + 1``);
+    ``pieces(t, nu)`` is the ``nu``-th derivative at ``t`` like ``PPoly(c, x)(t, nu)``
+    (each point in the interval starting at or before it, the end ones extrapolated).
+    :func:`from_states` needs nothing else of scipy: importing ``scipy.interpolate``
+    costs 0.5-1 s, most of the reference node's start-up.
+    """
+
+    def __init__(self, c: np.ndarray, x: np.ndarray):
+        self.c = c
+        self.x = x
+
+    def __call__(self, t: Any, nu: int = 0) -> np.ndarray:
+        """The ``nu``-th derivative at ``t`` (shape ``t.shape + (2,)``)."""
+        t = np.asarray(t, dtype=float)
+        c, k = self.c, self.c.shape[0] - 1
+        i = np.clip(np.searchsorted(self.x, t, side='right') - 1, 0, c.shape[1] - 1)
+        s = (t - self.x[i])[..., None]
+        out = np.zeros(t.shape + c.shape[2:])
+        for j in range(k + 1 - nu):            # Horner over the derivative's coefficients
+            power = k - j
+            out = out * s + math.perm(power, nu) * c[j, i]
+        return out
+
+
 def _hermite_coefficients(t: np.ndarray, p: np.ndarray, v: np.ndarray,
                           a: np.ndarray | None) -> np.ndarray:
     """Power-basis coefficients (highest first, shape ``(k + 1, n - 1)``) of the Hermite
@@ -526,7 +554,6 @@ def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: An
     TrajectoryError
         Non-finite values, mismatched lengths or times not increasing.
     """
-    from scipy.interpolate import PPoly
     t = _array('t', t, None, source)
     n = t.size
     x = _array('x', x, n, source)
@@ -544,7 +571,7 @@ def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: An
     # 48,000 knots of an hour of the reference's analytic path, in a node's start-up)
     c = np.stack([_hermite_coefficients(t, x, vx, ax if have_acc else None),
                   _hermite_coefficients(t, y, vy, ay if have_acc else None)], axis=-1)
-    pp = PPoly(c, t)
+    pp = _Pieces(c, t)
     direction = _direction(vx, vy, yaw, None, n)
     return Trajectory(pp=pp, knots=t, direction=direction, source=source,
                       kind='quintic Hermite' if have_acc else 'cubic Hermite')
@@ -585,6 +612,30 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
     (numpy.ndarray, TrajectorySamples)
         Knot times in integer nanoseconds from the path's time 0, and the exact samples.
     """
+    t_ns = analytic_knot_times(path, horizon, angle=angle, max_knots=max_knots)
+    return t_ns, path_samples(path, t_ns)
+
+
+def analytic_knot_times(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
+                        max_knots: int = MAX_KNOTS) -> np.ndarray:
+    """The knot times of :func:`analytic_knots` (integer ns), without sampling the path.
+
+    Parameters
+    ----------
+    path : Path
+        The analytic path.
+    horizon : float
+        Length of time covered (s).
+    angle : float
+        Angle (rad) its fastest harmonic turns between two knots.
+    max_knots : int
+        Most knots given.
+
+    Returns
+    -------
+    numpy.ndarray
+        Knot times in integer nanoseconds from the path's time 0.
+    """
     if not (math.isfinite(horizon) and horizon > 0):
         raise TrajectoryError(f'{path.name}: horizon must be a finite time > 0 s, got {horizon!r}')
     speed = abs(float(path.params.get('rate', 0.0))) * path.harmonic
@@ -596,9 +647,26 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
         raise TrajectoryError(f'{path.name}: {n + 1} knots needed for a horizon of {horizon} s '
                               f'at rate {path.params.get("rate")} rad/s (at most {max_knots}); '
                               'shorten the horizon')
-    t_ns = np.arange(n + 1, dtype=np.int64) * step_ns
-    rows = np.array([path.sample(float(t)) for t in t_ns * 1e-9]).reshape(-1, 8)
-    return t_ns, TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
+    return np.arange(n + 1, dtype=np.int64) * step_ns
+
+
+def path_samples(path: Path, t_ns: Any) -> TrajectorySamples:
+    """The exact samples of an analytic path at integer-nanosecond times.
+
+    Parameters
+    ----------
+    path : Path
+        The analytic path.
+    t_ns : array_like of int
+        Times [ns] from the path's time 0.
+
+    Returns
+    -------
+    TrajectorySamples
+    """
+    t = np.asarray(t_ns, dtype=np.int64) * 1e-9
+    rows = np.array([path.sample(s) for s in t.tolist()]).reshape(-1, 8)
+    return TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
 
 
 def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
