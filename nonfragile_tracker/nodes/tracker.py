@@ -63,6 +63,7 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Ve
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterType
+from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
@@ -74,7 +75,7 @@ from ..control.identification.monitor import (Certificate, LatencyEstimate, Moni
                                               certificate_from_parameters, evaluate)
 from ..control.simulation.reference import RefSample
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
-from ..msgconv import tracker_config
+from ..msgconv import multidof_from_cdr, tracker_config
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -326,8 +327,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
+        # raw: the CDR bytes, read with numpy (multidof_from_cdr) - rclpy's deserialization
+        # of an hour's 48,000 knots is one C call of about 2 s in which no signal is acted on
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
-                                 self._on_multidof, LATCHED_QOS)
+                                 self._on_multidof, LATCHED_QOS, raw=True)
         # lockstep needs no clock: a command answers an odom stamp, and the time law of an
         # untimed Path starts at the latest odom stamp (no /clock subscription per step)
         self.commands = 0
@@ -547,8 +550,13 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             return None
         return int(self.get_clock().now().nanoseconds)
 
-    def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
-        self._new_trajectory(msg, 'multidof', topics.TRAJECTORY_MULTIDOF)
+    def _on_multidof(self, raw: bytes) -> None:
+        # the compact form (one transform, velocity, acceleration per point: the
+        # reference's, a planner's of one base) as arrays; any other layout deserialized
+        msg = multidof_from_cdr(raw)
+        self._new_trajectory(msg if msg is not None else
+                             deserialize_message(raw, MultiDOFJointTrajectory),
+                             'multidof', topics.TRAJECTORY_MULTIDOF)
 
     def _on_odom(self, msg: Odometry) -> None:
         if self.mode == 'lockstep' and \
