@@ -75,7 +75,7 @@ from ..control.identification.monitor import (Certificate, LatencyEstimate, Moni
                                               certificate_from_parameters, evaluate)
 from ..control.simulation.reference import RefSample
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
-from ..msgconv import multidof_from_cdr, tracker_config
+from ..msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -285,6 +285,18 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
                          adapt=values['monitor_adapt'], settings=settings, certificate=cert)
 
 
+#: Lockstep: a trajectory of more points is built and re-timed in the worker thread, its
+#: callback waiting for it with a look for a stop signal every 50 ms (``_stoppable``).
+SYNC_POINTS = 2000
+
+
+def _points(msg: Any) -> int:
+    """Points of a trajectory message (nav_msgs/Path, MultiDOFJointTrajectory, arrays)."""
+    if isinstance(msg, MultiDOFArrays):
+        return int(msg.t_ns.size)
+    return len(getattr(msg, 'points', None) or getattr(msg, 'poses', None) or ())
+
+
 class TrackerNode(AdapterNode[TrackerSettings]):
     """ROS adapter around the tracking law and the trajectory follower.
 
@@ -468,7 +480,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         """
         mon = getattr(self, 'monitor', None)
         if mon is not None:
-            mon.stop()
+            # not waited for long: the node ends within a second of a stop signal (an
+            # estimate importing scipy.signal took seconds under load); the thread only
+            # computes, and the process ends without waiting for daemon threads
+            mon.stop(timeout=0.1)
         pool = getattr(self, '_pool', None)
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
@@ -497,22 +512,63 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         source = f'topic {self.resolve_topic_name(topic)}'
         inputs = self.inputs
         try:
-            traj, origin = inputs.build(msg, kind, source, now_ns=self._now_ns())
-            if inputs.rules.retime and self.mode == 'realtime' and not traj.is_analytic:
-                # real time: check and re-time in a worker thread (a second or two for a
-                # lap); odometry keeps being answered meanwhile, and the new trajectory
-                # starts at the first odometry after it is ready (re-based if late)
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
-                fut = self._pool.submit(inputs.retime, traj)
-                fut.add_done_callback(lambda f: self._retimed.append((f, origin, source)))
-                return
-            traj, note = inputs.retime(traj)
+            if self.mode == 'lockstep':
+                # a long trajectory is built and re-timed in the worker thread, waited for
+                # here: a stop signal ends the wait at once (an hour's trajectory takes
+                # about a second to check and re-time, several under load, and a callback
+                # is never interrupted); the result is the same as built here.  A short
+                # one (milliseconds) is built right here: with a worker thread busy during
+                # a callback, rclpy 7.1.6's EventsExecutor lost every other message in a
+                # test that makes a new executor per spin (test_trajectory_nodes)
+                long = _points(msg) > SYNC_POINTS
+                got = self._stoppable(self._build_and_retime, msg, kind, source) if long \
+                    else self._build_and_retime(msg, kind, source)
+                if got is None:
+                    return                      # stopping: the spin ends next
+                traj, origin, note = got
+            else:
+                traj, origin = inputs.build(msg, kind, source, now_ns=self._now_ns())
+                if inputs.rules.retime and not traj.is_analytic:
+                    # real time: check and re-time in a worker thread (a second or two for
+                    # a lap); odometry keeps being answered meanwhile, and the new
+                    # trajectory starts at the first odometry after it is ready (re-based
+                    # if late)
+                    if self._pool is None:
+                        self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+                    fut = self._pool.submit(inputs.retime, traj)
+                    fut.add_done_callback(
+                        lambda f: self._retimed.append((f, origin, source)))
+                    return
+                traj, note = inputs.retime(traj)
             self._note_retime(note, source)
         except TrajectoryError as exc:
             return inputs.refuse(str(exc))
         self._adopt(traj, origin, source)
         self._answer(inputs.compute())     # a pose not yet answered gets its command now
+
+    def _build_and_retime(self, msg: Any, kind: str, source: str
+                          ) -> tuple[Trajectory, int, str]:
+        """Lockstep: the trajectory of a message, re-timed, its origin and the note."""
+        traj, origin = self.inputs.build(msg, kind, source, now_ns=self._now_ns())
+        traj, note = self.inputs.retime(traj)
+        return traj, origin, note
+
+    def _stoppable(self, work: Any, *args: Any) -> Any:
+        """``work(*args)`` in the worker thread; None if a stop signal comes first.
+
+        Waited for in slices of 50 ms, each followed by a look at :attr:`stopping`; an
+        exception of ``work`` is raised here.  An abandoned ``work`` finishes on its own
+        (it only computes) and its result is dropped.
+        """
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+        fut = self._pool.submit(work, *args)
+        while True:
+            try:
+                return fut.result(timeout=0.05)
+            except TimeoutError:
+                if self.stopping:
+                    return None
 
     def _note_retime(self, note: str, source: str) -> None:
         if note:

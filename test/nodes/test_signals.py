@@ -203,7 +203,8 @@ def launch_stop_trial(run_dir: Path, env: dict, moment: float, seed: int) -> dic
     an hour: 48,001 knots) as launch starts them, each its console entry's process; the
     terminal's SIGINT to the group, launch's own SIGINT to each node right after, and
     launch's escalation: SIGTERM to a node alive :data:`LAUNCH_SIGTERM_TIMEOUT` s after,
-    SIGKILL as long again after that.  The signal waits until every node's entry module
+    SIGKILL as long again after that.  A node still alive near :data:`STOP_TARGET` gets
+    SIGUSR1 (its stacks into its log, which a failure shows).  The signal waits until every node's entry module
     has its handlers (:func:`_catches_sigterm`; before them, tens of ms of the
     interpreter's own start-up, Python's default SIGINT action applies).
 
@@ -218,6 +219,7 @@ def launch_stop_trial(run_dir: Path, env: dict, moment: float, seed: int) -> dic
     launch = Launch(run_dir, 'lockstep', env, scenario='latency_scenario.yaml')
     exits: dict[str, float] = {}
     escalated: list[str] = []
+    dumped: list[str] = []
     try:
         while time.monotonic() < launch.t_start + moment or not all(
                 p.poll() is not None or _catches_sigterm(p.pid) for p in launch.procs.values()):
@@ -229,6 +231,9 @@ def launch_stop_trial(run_dir: Path, env: dict, moment: float, seed: int) -> dic
             for name, p in launch.procs.items():
                 if name not in exits and p.poll() is not None:
                     exits[name] = now
+                elif name not in exits and name not in dumped and now > 0.8 * STOP_TARGET:
+                    dumped.append(name)                # where it is: stacks in its log
+                    p.send_signal(signal.SIGUSR1)
                 elif name not in exits and name not in escalated and \
                         now > LAUNCH_SIGTERM_TIMEOUT:
                     escalated.append(name)             # launch: 'escalating to SIGTERM'

@@ -492,10 +492,12 @@ class _Pieces:
         c, k = self.c, self.c.shape[0] - 1
         i = np.clip(np.searchsorted(self.x, t, side='right') - 1, 0, c.shape[1] - 1)
         s = (t - self.x[i])[..., None]
-        out = np.zeros(t.shape + c.shape[2:])
-        for j in range(k + 1 - nu):            # Horner over the derivative's coefficients
-            power = k - j
-            out = out * s + math.perm(power, nu) * c[j, i]
+        if nu > k:
+            return np.zeros(t.shape + c.shape[2:])
+        out: np.ndarray = math.perm(k, nu) * c[0][i]
+        for j in range(1, k + 1 - nu):          # Horner over the derivative's coefficients
+            out *= s
+            out += math.perm(k - j, nu) * c[j][i]
         return out
 
 
