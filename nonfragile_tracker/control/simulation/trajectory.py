@@ -667,8 +667,12 @@ def path_samples(path: Path, t_ns: Any) -> TrajectorySamples:
     TrajectorySamples
     """
     t = np.asarray(t_ns, dtype=np.int64) * 1e-9
-    rows = np.array([path.sample(s) for s in t.tolist()]).reshape(-1, 8)
-    return TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
+    f = path.kinematics
+    rows = np.fromiter((v for s in t.tolist() for v in f(s)), float, 6 * t.size).reshape(-1, 6)
+    x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
+    # Path.sample's heading rule over all times (numpy's arctan2)
+    heading = np.where(vx * vx + vy * vy > 1e-24, np.arctan2(vy, vx), path.rest_heading)
+    return TrajectorySamples(t, x, y, vx, vy, ax, ay, heading)
 
 
 def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
