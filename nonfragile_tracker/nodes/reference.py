@@ -10,7 +10,8 @@ tracker samples it itself at each odometry stamp (:class:`control.simulation.fol
   spaced so that the quintic Hermite interpolant the tracker rebuilds is the exact path to
   about 1e-14 m; published as its CDR bytes, :func:`msgconv.multidof_cdr`, made in a
   fraction of a second also for an hour's 48,000 knots, with a check for a stop signal
-  between the pieces of the work).  In real time the built-in path goes as the samples below (exact);
+  between the pieces of the work).  In real time the built-in path goes as the samples
+  below (exact);
 * a waypoint file (``trajectory_file``, CSV or YAML: t, x, y[, yaw][, speed]), or
 * a nav_msgs/Path relayed from ``trajectory_topic`` (e.g. a planner's output): as
   nav_msgs/Path on ``trajectory`` (poses at the knots, stamped origin + t).  With a relay

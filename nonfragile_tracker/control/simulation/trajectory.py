@@ -503,10 +503,13 @@ class _Pieces:
 
 def _hermite_coefficients(t: np.ndarray, p: np.ndarray, v: np.ndarray,
                           a: np.ndarray | None) -> np.ndarray:
-    """Power-basis coefficients (highest first, shape ``(k + 1, n - 1)``) of the Hermite
-    interpolant matching ``p, v`` (cubic) or ``p, v, a`` (quintic) at both ends of each
-    interval - what ``PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ...))`` gives
-    (to round-off), in closed form over all intervals at once."""
+    """Power-basis coefficients of the Hermite interpolant, all intervals at once.
+
+    Highest power first, shape ``(k + 1, n - 1)``: the cubic matching ``p, v`` or the
+    quintic matching ``p, v, a`` at both ends of each interval - what
+    ``PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ...))`` gives (to round-off),
+    in closed form.
+    """
     h = np.diff(t)
     dp = np.diff(p)
     v0, v1 = v[:-1], v[1:]
