@@ -73,8 +73,12 @@ def _import_node(name: str) -> Any:
             return importlib.import_module(f'nonfragile_tracker.nodes.{name}')
         finally:
             catch_stop_signals()            # only noted again from here on
-    except _StopImport:
-        return None
+    except BaseException:
+        # _StopImport, or what an extension module's initialisation made of it (an
+        # ImportError or SystemError around it): any failure once a stop was requested
+        if stop_requested():
+            return None
+        raise
 
 
 def catch_stop_signals() -> None:

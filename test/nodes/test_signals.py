@@ -256,7 +256,7 @@ def _launch_stop_failures(results: list[dict], limit: float) -> list:
         words = {n: w for n, w in ((n, _bad(text)) for n, text in r['logs'].items()) if w}
         if slow or r['escalated'] or words or any(c != 0 for c in r['codes'].values()):
             bad.append((round(r['moment'], 2), slow, r['escalated'], r['codes'], words,
-                        {n: r['logs'][n][-1200:] for n in (words or slow or NODES)}))
+                        {n: r['logs'][n][-3000:] for n in (words or slow or NODES)}))
     return bad
 
 
@@ -282,7 +282,13 @@ def test_ctrl_c_under_launch_ends_every_node_at_once(tmp_path, ros_env):
     for r in results:
         print(f'Ctrl-C {r["moment"]:.2f} s after launch: ' + ', '.join(
             f'{n} {t:.2f}' for n, t in sorted(r['exit'].items())) + ' s', file=sys.stderr)
-    assert not _launch_stop_failures(results, STOP_TARGET if SOAK else LAUNCH_SIGTERM_TIMEOUT)
+    failures = _launch_stop_failures(results, STOP_TARGET if SOAK else LAUNCH_SIGTERM_TIMEOUT)
+    for moment, slow, escalated, codes, words, logs in failures:      # the whole story
+        print(f'FAILED: Ctrl-C {moment} s after launch: slow {slow}, escalated {escalated}, '
+              f'codes {codes}, {words}', file=sys.stderr)
+        for name, text in logs.items():
+            print(f'--- {name}\n{text}', file=sys.stderr)
+    assert not failures, [f[:5] for f in failures]
 
 
 def _catches_sigterm(pid: int) -> bool:
