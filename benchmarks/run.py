@@ -45,10 +45,12 @@ from sections.recorder import bench_recorder  # noqa: E402
 from sections.retime import bench_retime  # noqa: E402
 from sections.scaling import bench_scaling  # noqa: E402
 from sections.simulation import bench_simulation  # noqa: E402
+from sections.stop import bench_stop  # noqa: E402
 from sections.synthesis import bench_synthesis, worker_cold, worker_growth  # noqa: E402
 
 SECTIONS = ('synthesis', 'scaling', 'delay', 'tdcpy', 'simulation', 'batch', 'lockstep',
-            'realtime', 'recorder', 'quality', 'identify', 'fleet', 'design', 'retime')
+            'realtime', 'recorder', 'quality', 'identify', 'fleet', 'design', 'retime',
+            'stop')
 
 
 def cpu_seconds() -> float:
@@ -121,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
                  ('identify', lambda: bench_identify(cfg, table, raw)),
                  ('fleet', lambda: bench_fleet(cfg, table, raw, domain, tmp)),
                  ('design', lambda: bench_design(cfg, table, raw)),
-                 ('retime', lambda: bench_retime(cfg, table, raw))]
+                 ('retime', lambda: bench_retime(cfg, table, raw)),
+                 ('stop', lambda: bench_stop(cfg, table, raw, domain, tmp))]
         for name, fn in steps:
             if name not in only:
                 continue

@@ -33,7 +33,7 @@ from ..tracker_inputs import MODES as TRACKER_MODES
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
 from .entry import arm_exit_deadline, catch_stop_signals, ignore_stop_signals, stop_requested
 # the nodes' errors (nodes/errors.py, ROS-free), where the nodes have always imported them
-from .errors import StartupError
+from .errors import StartupError, StartupStopped
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
@@ -466,6 +466,17 @@ class AdapterNode(Node, Generic[C]):
             ns = time.time_ns()                     # rcutils' console format
             print(f'[{level.upper()}] [{ns // 10**9}.{ns % 10**9:09d}] [{self.get_name()}]: '
                   f'{text}', file=sys.stderr)
+
+    def check_stop(self) -> None:
+        """Raise :class:`StartupStopped` if a stop signal came (or the context is down).
+
+        For long start-up work (the constructor runs before the spin, where nothing else
+        acts on a signal): called between its pieces, each well under a second, so the
+        node ends within a second of SIGINT/SIGTERM at any moment of its start-up
+        (:func:`run` ends the process with 0).
+        """
+        if self.stopping:
+            raise StartupStopped(f'{self.get_name()}: stop signal during start-up')
 
     # ------------------------------------------------------------------ ending
     def drain(self) -> None:

@@ -23,7 +23,7 @@ import importlib
 import os
 import signal
 import sys
-from typing import Sequence
+from typing import Any, Sequence
 
 #: The node modules a process can run.
 NODES = ('reference', 'plant', 'tracker', 'recorder')
@@ -37,6 +37,48 @@ _node_process = False        # set by main(): this process is a node started thr
 
 def _note(signum: int, frame: object) -> None:
     _received.append(signum)
+
+
+class _StopImport(BaseException):
+    """A stop signal while the node module is imported (:func:`_import_node`).
+
+    A BaseException, like KeyboardInterrupt: an ``except Exception`` in the imported
+    libraries' own import-time code does not swallow it.
+    """
+
+
+def _stop_import(signum: int, frame: object) -> None:
+    _received.append(signum)
+    raise _StopImport
+
+
+def _import_node(name: str) -> Any:
+    """The node module, or None when a stop signal came before or during its import.
+
+    Importing numpy, rclpy, scipy, rosbags takes 0.3-0.5 s on a quiet machine and several
+    seconds on a busy one (``ros2 launch`` starts every node at once); a signal only
+    noted meanwhile was acted on after the whole import (the nodes ended 3-8 s after
+    Ctrl-C).  During the import SIGINT and SIGTERM raise instead: Python runs the
+    handler between two bytecodes of whatever module is being imported, so the import
+    stops there.  Nothing outside the process exists yet (no rclpy, no file), and the
+    caller leaves with ``os._exit`` without the interpreter's finalization of the
+    half-imported modules.
+    """
+    if stop_requested():
+        return None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _stop_import)
+    try:
+        try:
+            return importlib.import_module(f'nonfragile_tracker.nodes.{name}')
+        finally:
+            catch_stop_signals()            # only noted again from here on
+    except BaseException:
+        # _StopImport, or what an extension module's initialisation made of it (an
+        # ImportError or SystemError around it): any failure once a stop was requested
+        if stop_requested():
+            return None
+        raise
 
 
 def catch_stop_signals() -> None:
@@ -175,8 +217,8 @@ def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) ->
     Returns
     -------
     int
-        2 for an unknown node, 0 when stopped before the node started; otherwise the
-        process ends with the node's exit code (``os._exit``) and does not return.
+        2 for an unknown node; otherwise the process ends with the node's exit code
+        (``os._exit``; 0 when stopped before the node started) and does not return.
     """
     global _node_process
     catch_stop_signals()
@@ -186,10 +228,11 @@ def main(name: str, args: list[str] | None = None, noted: Sequence[int] = ()) ->
     if name not in NODES:
         print(f'[FATAL] unknown node {name!r}; one of {", ".join(NODES)}', file=sys.stderr)
         return 2
-    module = importlib.import_module(f'nonfragile_tracker.nodes.{name}')
-    if stop_requested():
+    module = _import_node(name)
+    if module is None or stop_requested():
         ignore_stop_signals()
-        return 0
+        _flush_output()
+        os._exit(0)                         # (no finalization of a half-done import)
     code = int(module.main(args) or 0)
     ignore_stop_signals()
     # the node has closed its bag, destroyed itself and shut rclpy down: leave without the

@@ -10,10 +10,21 @@ the classes are importable (and catchable) without rclpy.  They stay importable 
 """
 from __future__ import annotations
 
-from ..errors import InputError
+from ..errors import InputError, NonfragileError
 
-__all__ = ['StartupError']
+__all__ = ['StartupError', 'StartupStopped']
 
 
 class StartupError(InputError):
     """A node cannot start with its parameters; the message says which and why."""
+
+
+class StartupStopped(NonfragileError):
+    """A stop signal came while a node was starting: it ends its start-up (exit code 0).
+
+    Raised by :meth:`~nonfragile_tracker.nodes.common.AdapterNode.check_stop` between the
+    pieces of a long start-up (the reference's trajectory of an hour); ``run`` ends the
+    process with 0 as for any signal during start-up.
+    """
+
+    exit_code = 0

@@ -63,6 +63,7 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Ve
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterType
+from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
@@ -74,7 +75,7 @@ from ..control.identification.monitor import (Certificate, LatencyEstimate, Moni
                                               certificate_from_parameters, evaluate)
 from ..control.simulation.reference import RefSample
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
-from ..msgconv import tracker_config
+from ..msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
 from ..robot import check_topic_name
 from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
                               input_rules, stale_inputs)
@@ -293,6 +294,18 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
                          adapt=values['monitor_adapt'], settings=settings, certificate=cert)
 
 
+#: Lockstep: a trajectory of more points is built and re-timed in the worker thread, its
+#: callback waiting for it with a look for a stop signal every 50 ms (``_stoppable``).
+SYNC_POINTS = 2000
+
+
+def _points(msg: Any) -> int:
+    """Points of a trajectory message (nav_msgs/Path, MultiDOFJointTrajectory, arrays)."""
+    if isinstance(msg, MultiDOFArrays):
+        return int(msg.t_ns.size)
+    return len(getattr(msg, 'points', None) or getattr(msg, 'poses', None) or ())
+
+
 class TrackerNode(AdapterNode[TrackerSettings]):
     """ROS adapter around the tracking law and the trajectory follower.
 
@@ -335,8 +348,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
         self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
+        # raw: the CDR bytes, read with numpy (multidof_from_cdr) - rclpy's deserialization
+        # of an hour's 48,000 knots is one C call of about 2 s in which no signal is acted on
         self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
-                                 self._on_multidof, LATCHED_QOS)
+                                 self._on_multidof, LATCHED_QOS, raw=True)
         # lockstep needs no clock: a command answers an odom stamp, and the time law of an
         # untimed Path starts at the latest odom stamp (no /clock subscription per step)
         self.commands = 0
@@ -474,7 +489,10 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         """
         mon = getattr(self, 'monitor', None)
         if mon is not None:
-            mon.stop()
+            # not waited for long: the node ends within a second of a stop signal (an
+            # estimate importing scipy.signal took seconds under load); the thread only
+            # computes, and the process ends without waiting for daemon threads
+            mon.stop(timeout=0.1)
         pool = getattr(self, '_pool', None)
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
@@ -503,22 +521,63 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         source = f'topic {self.resolve_topic_name(topic)}'
         inputs = self.inputs
         try:
-            traj, origin = inputs.build(msg, kind, source, now_ns=self._now_ns())
-            if inputs.rules.retime and self.mode == 'realtime' and not traj.is_analytic:
-                # real time: check and re-time in a worker thread (a second or two for a
-                # lap); odometry keeps being answered meanwhile, and the new trajectory
-                # starts at the first odometry after it is ready (re-based if late)
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
-                fut = self._pool.submit(inputs.retime, traj)
-                fut.add_done_callback(lambda f: self._retimed.append((f, origin, source)))
-                return
-            traj, note = inputs.retime(traj)
+            if self.mode == 'lockstep':
+                # a long trajectory is built and re-timed in the worker thread, waited for
+                # here: a stop signal ends the wait at once (an hour's trajectory takes
+                # about a second to check and re-time, several under load, and a callback
+                # is never interrupted); the result is the same as built here.  A short
+                # one (milliseconds) is built right here: with a worker thread busy during
+                # a callback, rclpy 7.1.6's EventsExecutor lost every other message in a
+                # test that makes a new executor per spin (test_trajectory_nodes)
+                long = _points(msg) > SYNC_POINTS
+                got = self._stoppable(self._build_and_retime, msg, kind, source) if long \
+                    else self._build_and_retime(msg, kind, source)
+                if got is None:
+                    return                      # stopping: the spin ends next
+                traj, origin, note = got
+            else:
+                traj, origin = inputs.build(msg, kind, source, now_ns=self._now_ns())
+                if inputs.rules.retime and not traj.is_analytic:
+                    # real time: check and re-time in a worker thread (a second or two for
+                    # a lap); odometry keeps being answered meanwhile, and the new
+                    # trajectory starts at the first odometry after it is ready (re-based
+                    # if late)
+                    if self._pool is None:
+                        self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+                    fut = self._pool.submit(inputs.retime, traj)
+                    fut.add_done_callback(
+                        lambda f: self._retimed.append((f, origin, source)))
+                    return
+                traj, note = inputs.retime(traj)
             self._note_retime(note, source)
         except TrajectoryError as exc:
             return inputs.refuse(str(exc))
         self._adopt(traj, origin, source)
         self._answer(inputs.compute())     # a pose not yet answered gets its command now
+
+    def _build_and_retime(self, msg: Any, kind: str, source: str
+                          ) -> tuple[Trajectory, int, str]:
+        """Lockstep: the trajectory of a message, re-timed, its origin and the note."""
+        traj, origin = self.inputs.build(msg, kind, source, now_ns=self._now_ns())
+        traj, note = self.inputs.retime(traj)
+        return traj, origin, note
+
+    def _stoppable(self, work: Any, *args: Any) -> Any:
+        """``work(*args)`` in the worker thread; None if a stop signal comes first.
+
+        Waited for in slices of 50 ms, each followed by a look at :attr:`stopping`; an
+        exception of ``work`` is raised here.  An abandoned ``work`` finishes on its own
+        (it only computes) and its result is dropped.
+        """
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix='retime')
+        fut = self._pool.submit(work, *args)
+        while True:
+            try:
+                return fut.result(timeout=0.05)
+            except TimeoutError:
+                if self.stopping:
+                    return None
 
     def _note_retime(self, note: str, source: str) -> None:
         if note:
@@ -556,8 +615,13 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             return None
         return int(self.get_clock().now().nanoseconds)
 
-    def _on_multidof(self, msg: MultiDOFJointTrajectory) -> None:
-        self._new_trajectory(msg, 'multidof', topics.TRAJECTORY_MULTIDOF)
+    def _on_multidof(self, raw: bytes) -> None:
+        # the compact form (one transform, velocity, acceleration per point: the
+        # reference's, a planner's of one base) as arrays; any other layout deserialized
+        msg = multidof_from_cdr(raw)
+        self._new_trajectory(msg if msg is not None else
+                             deserialize_message(raw, MultiDOFJointTrajectory),
+                             'multidof', topics.TRAJECTORY_MULTIDOF)
 
     def _on_odom(self, msg: Odometry) -> None:
         if self.mode == 'lockstep' and \

@@ -54,3 +54,26 @@ def test_resting_path_and_limits():
         analytic_knots(make_path('circle', rate=1.0), 1e6)
     with pytest.raises(TrajectoryError, match='horizon must be a finite time'):
         analytic_knots(path, float('nan'))
+
+
+@pytest.mark.parametrize('accelerations', [True, False])
+def test_hermite_pieces_are_scipys_to_round_off(accelerations):
+    """from_states builds the Hermite pieces in closed form (no scipy.interpolate import):
+    the polynomials of scipy's BPoly.from_derivatives, evaluated alike (PPoly) with every
+    derivative, on uneven knots of very different lengths."""
+    from scipy.interpolate import BPoly, PPoly
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.01, 2.0, 60))
+    x, vx, ax, y, vy, ay = rng.normal(size=(6, 60))
+    traj = from_states(t, x, y, vx, vy, ax if accelerations else None,
+                       ay if accelerations else None)
+    times = np.concatenate([t, rng.uniform(t[0] - 1.0, t[-1] + 1.0, 2000)])
+    for p, v, a, col in ((x, vx, ax, 0), (y, vy, ay, 1)):
+        ys = np.column_stack([p, v, a] if accelerations else [p, v])
+        ref = PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ys))
+        scale = np.abs(ref.c).max(axis=0) + 1.0
+        assert np.all(np.abs(traj._pp.c[..., col] - ref.c) <= 1e-12 * scale)
+        for nu in range(4):                       # limits.py reads the jerk (nu = 3)
+            want = ref(times, nu)
+            assert np.allclose(traj._pp(times, nu)[:, col], want, rtol=1e-11,
+                               atol=1e-11 * np.abs(want).max())

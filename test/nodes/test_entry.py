@@ -107,3 +107,47 @@ def test_run_ends_a_stuck_teardown_after_sigint_with_0(ros_env):
     code, out = _node_with_stuck_shutdown(ros_env, stop_after=4.0)
     assert code == 0, out
     assert 'started;' in out and 'Timeout (0:00:00.800000)!' in out and 'Traceback' not in out
+
+
+# a node module whose import takes 30 s (numpy, rclpy, scipy ... on a busy machine: seconds)
+_SLOW_IMPORT = '''
+import importlib.abc, importlib.util, sys, time
+
+class Slow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def find_spec(self, name, path, target=None):
+        if name == 'nonfragile_tracker.nodes.reference':
+            return importlib.util.spec_from_loader(name, self)
+    def create_module(self, spec):
+        return None
+    def exec_module(self, module):
+        print('importing', flush=True)
+        t_end = time.monotonic() + 30.0
+        while time.monotonic() < t_end:     # bytecodes (a long import) ...
+            time.sleep(0.05)                # ... and C calls
+        module.main = lambda args: 9
+
+sys.meta_path.insert(0, Slow())
+from nonfragile_tracker.nodes import entry
+sys.exit(entry.main('reference', ['reference']))
+'''
+
+
+def test_a_stop_signal_ends_the_node_module_import_at_once():
+    """Ctrl-C while the node module is still importing (issue 30: ``ros2 launch`` start
+    every node at once, and the imports took seconds; the signal was acted on after them):
+    the import stops where it is, the process ends with 0, no traceback."""
+    proc = subprocess.Popen([sys.executable, '-c', _SLOW_IMPORT], cwd=ROOT, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        assert proc.stdout.readline().strip() == 'importing'
+        proc.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        code = proc.wait(30)
+        took = time.monotonic() - t0
+        out = proc.stdout.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == 0 and 'Traceback' not in out, out
+    assert took < 10                # 30 s if the import ran to its end (a few ms here)

@@ -864,9 +864,18 @@ class MonitorWorker:
                                             daemon=True)
             self._thread.start()
 
-    def stop(self) -> None:
-        """Stop the thread and wait for it (at most one estimate)."""
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the thread and wait for it (at most one estimate) up to ``timeout`` s.
+
+        An estimate still running then ends on its own (the thread is a daemon and only
+        computes; the first estimate imports ``scipy.signal``, seconds on a busy machine).
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Longest wait (s).
+        """
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=5.0)
+            self._thread.join(timeout=timeout)
             self._thread = None

@@ -46,6 +46,25 @@ class Path:
     #: Highest multiple of ``rate`` among the path's harmonics (sampling density).
     harmonic: int = 1
 
+    def kinematics(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """``(x, y, vx, vy, ax, ay)`` at time ``t`` [s]: :meth:`sample` without the heading.
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+
+        Returns
+        -------
+        tuple of 6 float
+        """
+        return self._fn(t)
+
+    @property
+    def rest_heading(self) -> float:
+        """Heading [rad] where the path is at rest (the parameterization's tangent)."""
+        return self._heading0
+
     def sample(self, t: float) -> RefSample:
         """Position, velocity, acceleration and heading of the path at time ``t``.
 

@@ -62,7 +62,8 @@ from .errors import TrajectoryError
 __all__ = ['TrajectoryError', 'Trajectory', 'TrajectorySamples',
            'from_waypoints', 'from_states', 'from_poses', 'load_waypoints',
            'read_waypoint_file', 'time_law', 'check_frame', 'describe', 'Waypoints',
-           'analytic_knots', 'KNOT_ANGLE', 'MAX_KNOTS']
+           'analytic_knots', 'analytic_knot_times', 'path_samples', 'KNOT_ANGLE',
+           'MAX_KNOTS']
 
 #: Points a curve needs: the spline's order and clamped ends need at least 2 distinct times.
 MIN_POINTS = 2
@@ -130,13 +131,13 @@ class Trajectory:
             knots = cast(np.ndarray, knots)            # given with pp by the factories
             direction = cast(np.ndarray, direction)
             # scalar fast path: local power-basis coefficients, highest power first
-            self._bp = [float(b) for b in knots]
+            self._bp = np.asarray(knots, float).tolist()
             c = np.asarray(pp.c)                 # shape (k+1, segments, 2)
-            self._cx = [tuple(map(float, c[:, i, 0])) for i in range(c.shape[1])]
-            self._cy = [tuple(map(float, c[:, i, 1])) for i in range(c.shape[1])]
+            self._cx = list(map(tuple, c[:, :, 0].T.tolist()))
+            self._cy = list(map(tuple, c[:, :, 1].T.tolist()))
             self._knots = np.asarray(knots, float)
             self._dir = np.asarray(direction, float)
-            self._dir_list = [float(d) for d in self._dir]
+            self._dir_list = self._dir.tolist()
             self.t_start = float(knots[0])
             self.t_end = float(knots[-1])
             self._start = self._eval_scalar(self.t_start, 0)
@@ -471,6 +472,60 @@ def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *
     return Trajectory(pp=pp, knots=knots, direction=direction, source=source, kind=kind)
 
 
+class _Pieces:
+    """A piecewise polynomial in scipy's ``PPoly`` layout, evaluated with numpy.
+
+    ``c`` of shape ``(k + 1, m, 2)`` (highest power first), breakpoints ``x`` (``m + 1``);
+    ``pieces(t, nu)`` is the ``nu``-th derivative at ``t`` like ``PPoly(c, x)(t, nu)``
+    (each point in the interval starting at or before it, the end ones extrapolated).
+    :func:`from_states` needs nothing else of scipy: importing ``scipy.interpolate``
+    costs 0.5-1 s, most of the reference node's start-up.
+    """
+
+    def __init__(self, c: np.ndarray, x: np.ndarray):
+        self.c = c
+        self.x = x
+
+    def __call__(self, t: Any, nu: int = 0) -> np.ndarray:
+        """The ``nu``-th derivative at ``t`` (shape ``t.shape + (2,)``)."""
+        t = np.asarray(t, dtype=float)
+        c, k = self.c, self.c.shape[0] - 1
+        i = np.clip(np.searchsorted(self.x, t, side='right') - 1, 0, c.shape[1] - 1)
+        s = (t - self.x[i])[..., None]
+        if nu > k:
+            return np.zeros(t.shape + c.shape[2:])
+        out: np.ndarray = math.perm(k, nu) * c[0][i]
+        for j in range(1, k + 1 - nu):          # Horner over the derivative's coefficients
+            out *= s
+            out += math.perm(k - j, nu) * c[j][i]
+        return out
+
+
+def _hermite_coefficients(t: np.ndarray, p: np.ndarray, v: np.ndarray,
+                          a: np.ndarray | None) -> np.ndarray:
+    """Power-basis coefficients of the Hermite interpolant, all intervals at once.
+
+    Highest power first, shape ``(k + 1, n - 1)``: the cubic matching ``p, v`` or the
+    quintic matching ``p, v, a`` at both ends of each interval - what
+    ``PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ...))`` gives (to round-off),
+    in closed form.
+    """
+    h = np.diff(t)
+    dp = np.diff(p)
+    v0, v1 = v[:-1], v[1:]
+    if a is None:
+        c3 = (-2.0 * dp + (v0 + v1) * h) / h**3
+        c2 = (3.0 * dp - (2.0 * v0 + v1) * h) / h**2
+        return np.stack([c3, c2, v0, p[:-1]])
+    a0, a1 = a[:-1], a[1:]
+    h2 = h * h
+    c5 = (12.0 * dp - 6.0 * (v0 + v1) * h + (a1 - a0) * h2) / (2.0 * h2 * h2 * h)
+    c4 = (-30.0 * dp + (16.0 * v0 + 14.0 * v1) * h + (3.0 * a0 - 2.0 * a1) * h2) \
+        / (2.0 * h2 * h2)
+    c3 = (20.0 * dp - (12.0 * v0 + 8.0 * v1) * h + (a1 - 3.0 * a0) * h2) / (2.0 * h2 * h)
+    return np.stack([c5, c4, c3, 0.5 * a0, v0, p[:-1]])
+
+
 def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: Any = None,
                 yaw: Any = None, *, source: str = 'trajectory') -> Trajectory:
     """C2 trajectory matching given positions, velocities (and accelerations) at each time.
@@ -504,7 +559,6 @@ def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: An
     TrajectoryError
         Non-finite values, mismatched lengths or times not increasing.
     """
-    from scipy.interpolate import BPoly, PPoly
     t = _array('t', t, None, source)
     n = t.size
     x = _array('x', x, n, source)
@@ -517,12 +571,12 @@ def from_states(t: Any, x: Any, y: Any, vx: Any, vy: Any, ax: Any = None, ay: An
         ay = _array('ay', ay, n, source)
     yaw = None if yaw is None else _array('yaw', yaw, n, source)
     _check_times(t, source)
-    cols = []
-    for p, v, a in ((x, vx, ax), (y, vy, ay)):
-        ys = np.column_stack([p, v, a]) if have_acc else np.column_stack([p, v])
-        cols.append(PPoly.from_bernstein_basis(BPoly.from_derivatives(t, ys)))
-    c = np.stack([cols[0].c, cols[1].c], axis=-1)
-    pp = PPoly(c, t)
+    # the Hermite pieces in closed form, all intervals at once (scipy's
+    # BPoly.from_derivatives builds them one interval at a time in Python: 4 s for the
+    # 48,000 knots of an hour of the reference's analytic path, in a node's start-up)
+    c = np.stack([_hermite_coefficients(t, x, vx, ax if have_acc else None),
+                  _hermite_coefficients(t, y, vy, ay if have_acc else None)], axis=-1)
+    pp = _Pieces(c, t)
     direction = _direction(vx, vy, yaw, None, n)
     return Trajectory(pp=pp, knots=t, direction=direction, source=source,
                       kind='quintic Hermite' if have_acc else 'cubic Hermite')
@@ -563,6 +617,30 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
     (numpy.ndarray, TrajectorySamples)
         Knot times in integer nanoseconds from the path's time 0, and the exact samples.
     """
+    t_ns = analytic_knot_times(path, horizon, angle=angle, max_knots=max_knots)
+    return t_ns, path_samples(path, t_ns)
+
+
+def analytic_knot_times(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
+                        max_knots: int = MAX_KNOTS) -> np.ndarray:
+    """The knot times of :func:`analytic_knots` (integer ns), without sampling the path.
+
+    Parameters
+    ----------
+    path : Path
+        The analytic path.
+    horizon : float
+        Length of time covered (s).
+    angle : float
+        Angle (rad) its fastest harmonic turns between two knots.
+    max_knots : int
+        Most knots given.
+
+    Returns
+    -------
+    numpy.ndarray
+        Knot times in integer nanoseconds from the path's time 0.
+    """
     if not (math.isfinite(horizon) and horizon > 0):
         raise TrajectoryError(f'{path.name}: horizon must be a finite time > 0 s, got {horizon!r}')
     speed = abs(float(path.params.get('rate', 0.0))) * path.harmonic
@@ -574,9 +652,30 @@ def analytic_knots(path: Path, horizon: float, *, angle: float = KNOT_ANGLE,
         raise TrajectoryError(f'{path.name}: {n + 1} knots needed for a horizon of {horizon} s '
                               f'at rate {path.params.get("rate")} rad/s (at most {max_knots}); '
                               'shorten the horizon')
-    t_ns = np.arange(n + 1, dtype=np.int64) * step_ns
-    rows = np.array([path.sample(float(t)) for t in t_ns * 1e-9]).reshape(-1, 8)
-    return t_ns, TrajectorySamples(*(rows[:, i].copy() for i in range(8)))
+    return np.arange(n + 1, dtype=np.int64) * step_ns
+
+
+def path_samples(path: Path, t_ns: Any) -> TrajectorySamples:
+    """The exact samples of an analytic path at integer-nanosecond times.
+
+    Parameters
+    ----------
+    path : Path
+        The analytic path.
+    t_ns : array_like of int
+        Times [ns] from the path's time 0.
+
+    Returns
+    -------
+    TrajectorySamples
+    """
+    t = np.asarray(t_ns, dtype=np.int64) * 1e-9
+    f = path.kinematics
+    rows = np.fromiter((v for s in t.tolist() for v in f(s)), float, 6 * t.size).reshape(-1, 6)
+    x, y, vx, vy, ax, ay = (rows[:, i].copy() for i in range(6))
+    # Path.sample's heading rule over all times (numpy's arctan2)
+    heading = np.where(vx * vx + vy * vy > 1e-24, np.arctan2(vy, vx), path.rest_heading)
+    return TrajectorySamples(t, x, y, vx, vy, ax, ay, heading)
 
 
 def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
