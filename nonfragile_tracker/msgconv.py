@@ -295,7 +295,7 @@ class MultiDOFArrays:
     t_ns: np.ndarray
     x: np.ndarray
     y: np.ndarray
-    quaternion: np.ndarray          #: (n, 4): x, y, z, w
+    quaternion: np.ndarray          #: the orientations, one row (x, y, z, w) per point
     vel: np.ndarray
     acc: np.ndarray
     counts: np.ndarray
