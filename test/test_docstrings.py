@@ -52,7 +52,7 @@ CHECKED = tuple(
         'study', 'trajectory', 'bag', 'reproduce', 'golden')]
     + [f'nonfragile_tracker.nodes.{m}' for m in (
         'trajectory_io', 'entry', 'errors', 'common', 'plant', 'reference', 'tracker',
-        'recorder')])
+        'recorder', 'workarounds')])
 
 
 def _defined_in(obj: object, module: str) -> bool:
