@@ -39,7 +39,7 @@ CHECKED = tuple(
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
         'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
-        'identify', 'recording', 'monitor')]
+        'identify', 'lag_fit', 'records', 'recording', 'monitor')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
         'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot',
