@@ -33,7 +33,8 @@ CHECKED = tuple(
        for part in ('synthesis', 'simulation', 'identification')]
     + [f'nonfragile_tracker.control.synthesis.{m}' for m in (
         'delay', 'analysis', 'design', 'problem', 'sdp', 'certificate', 'search', 'lmi',
-        'delay_dependent', 'input_delay', 'latency_design', 'saturation', 'sweep',
+        'delay_dependent', 'input_delay', 'input_delay_certificate',
+        'latency_design', 'saturation', 'sweep',
         'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
