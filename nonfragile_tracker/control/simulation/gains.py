@@ -177,25 +177,20 @@ def gain_from_file_data(data: Any, path: str | os.PathLike[str],
                         node: str = TRACKER_NODE) -> np.ndarray:
     """``K`` from a parameter file's parsed content (:func:`read_gain_file` after the read).
 
-    For a caller that has read the file already for its other parameters.
+    For a caller that has read the file already for its other parameters; the result and
+    the :class:`LoopConfigError` for a content without ``K`` are those of
+    :func:`read_gain_file`.
 
     Parameters
     ----------
     data : object
         The file's YAML content.
-    path : str or os.PathLike
-        The file, named in the errors.
-    node : str
-        The node section to read (a ``/**`` section also counts).
+    path, node
+        The file (named in the errors) and the section, as in :func:`read_gain_file`.
 
     Returns
     -------
     numpy.ndarray
-
-    Raises
-    ------
-    LoopConfigError
-        The content has no such section or ``K``, or ``K`` is invalid.
     """
     if not isinstance(data, dict):
         got = 'an empty file' if data is None else f'a {type(data).__name__}'
