@@ -29,9 +29,8 @@ from .bag.replay import (REF_INDEX, ReplayResult, finish_replay, load_tracker_pa
 from .bag.errors import BagError
 from .bag.typestore import jazzy_typestore
 from .errors import RunError
-from .resources import config_dir
 from .nodes.common import DATA_QOS
-from .runner import NodeProcess, isolated_env, scenario_parameters, write_parameter_file
+from .runner import NodeProcess, isolated_env, write_parameter_file
 from .tracker_inputs import TrackerInputs
 
 __all__ = ['replay_over_dds']
@@ -86,8 +85,7 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
     RunError
         If the node dies or stays silent.
     """
-    gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
-    params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
+    # the files read once: the node gets these values (the in-process prediction's too)
     config, values = load_tracker_parameters(gains, params)     # bad files: exit 2 first
     events = read_replay_events(bag, namespace=namespace)
     if any(e.kind == 'trajectory' for e in events):
@@ -101,7 +99,8 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
     ts = jazzy_typestore()
     RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
     with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
-        pfile = write_parameter_file(scenario_parameters(params, gains), Path(tmp) / 'p.yaml')
+        pfile = write_parameter_file({'tracker': {'ros__parameters': values}},
+                                     Path(tmp) / 'p.yaml')
         proc = NodeProcess('tracker', pfile, Path(tmp) / 'tracker.log', env,
                            ['-p', f'mode:={mode}', '-p', f'input_timeout:={NO_WATCHDOG}'])
         ctx = rclpy.Context()

@@ -306,7 +306,7 @@ def identified_limits(ident: Identification) -> dict[str, float]:
     ----------
     ident : Identification
         From ``identify`` (:func:`~.control.identification.identify.identify_latency` or
-        :func:`~.control.identification.identify.read_identification`).
+        :func:`~.control.identification.records.read_identification`).
 
     Returns
     -------

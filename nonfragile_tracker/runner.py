@@ -26,8 +26,6 @@ from . import topics
 from .errors import InputError
 from .files import node_key, read_yaml
 
-NODES = ('tracker', 'reference', 'plant')
-
 
 def isolated_env(base: dict[str, Any] | None = None) -> dict[str, Any]:
     """Environment for a run: localhost discovery and a domain id of our own, unless set.
@@ -256,7 +254,7 @@ def lockstep_parameters(record: bool, samples: bool = True) -> dict[str, dict[st
 
 
 #: The reference's per-step sample topics (published in lockstep only when recorded).
-SAMPLE_TOPICS = (topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
+_SAMPLE_TOPICS = (topics.REF_POSE, topics.REF_TWIST, topics.REF_ACCEL)
 
 
 def recorded_topics(params: dict[str, Any], recorder_topics: Sequence[str] | None = None,
@@ -287,7 +285,7 @@ def recorded_topics(params: dict[str, Any], recorder_topics: Sequence[str] | Non
     configured = params.get('recorder', {}).get('ros__parameters', {}).get('topics')
     if configured:
         return [str(t) for t in configured]
-    if record_all or is_realtime(params):
+    if record_all or _is_realtime(params):
         return list(topics.TYPES)
     return list(topics.LEAN_TOPICS)
 
@@ -304,7 +302,7 @@ def records_samples(names: Sequence[str]) -> bool:
     -------
     bool
     """
-    return any(str(n).lstrip('/') in SAMPLE_TOPICS for n in names)
+    return any(str(n).lstrip('/') in _SAMPLE_TOPICS for n in names)
 
 
 def _ros_args(values: dict[str, Any]) -> list[str]:
@@ -326,24 +324,6 @@ class RunResult:
     steps: int
 
 
-def new_run_dir(root: Path, name: str | None) -> Path:
-    """A new, unique run directory under ``root`` (``bag.writer.new_run_dir``).
-
-    Parameters
-    ----------
-    root : pathlib.Path
-        The parent folder.
-    name : str or None
-        The directory's name (a time stamp when ``None``).
-
-    Returns
-    -------
-    pathlib.Path
-    """
-    from .bag.writer import new_run_dir as _new
-    return _new(root, name)
-
-
 def _doubles(value: Any) -> Any:
     """Lists mixing ints and floats are written as doubles (rcl rejects mixed sequences)."""
     if isinstance(value, dict):
@@ -354,9 +334,9 @@ def _doubles(value: Any) -> Any:
 
 
 #: Real time: how long the recorder keeps recording after the plant has finished (s).
-REALTIME_TAIL_S = 0.3
+_REALTIME_TAIL_S = 0.3
 #: Real time: longest wait for the recorder to start before the plant is started (s).
-REALTIME_START_WAIT_S = 30.0
+_REALTIME_START_WAIT_S = 30.0
 #: How long a node may take to exit after the runner's SIGINT before it is killed (s).
 STOP_WAIT_S = 10.0
 
@@ -452,7 +432,7 @@ def _wait_for_line(log: Path, text: str, proc: NodeProcess, timeout: float) -> b
     return False
 
 
-def is_realtime(params: dict[str, Any]) -> bool:
+def _is_realtime(params: dict[str, Any]) -> bool:
     """True if the plant of ``params`` runs in ``mode: realtime``.
 
     Parameters
@@ -531,7 +511,7 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
             if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
                 progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
 
-    realtime = is_realtime(params)
+    realtime = _is_realtime(params)
     names = recorded_topics(params, recorder_topics, record_all)
     hand = realtime_handshake(record) if realtime else \
         lockstep_parameters(record, records_samples(names))
@@ -546,7 +526,7 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
             # the real-time plant steps and the reference's time runs from their start:
             # let the recorder subscribe first, then start both together
             _wait_for_line(run_dir / 'recorder.log', 'recording', procs['recorder'],
-                           REALTIME_START_WAIT_S)
+                           _REALTIME_START_WAIT_S)
         start('reference', _ros_args(hand.get('reference', {})))
         start('plant', _ros_args(hand.get('plant', {})))
         plant = procs['plant']
@@ -568,7 +548,7 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
                 time.sleep(0.05)
             report_plant(reader)
         if plant.poll() is not None and record and realtime:
-            time.sleep(REALTIME_TAIL_S)          # the last messages in flight, then stop
+            time.sleep(_REALTIME_TAIL_S)          # the last messages in flight, then stop
             procs['recorder'].interrupt()
             if not procs['recorder'].wait(30):
                 progress('[runner] the recorder did not stop within 30 s of SIGINT; '
@@ -693,7 +673,7 @@ def run_composed(params: dict[str, Any], run_dir: Path | None, *, record: bool =
     bag = None
     names = recorded_topics(params, recorder_topics, record_all)
     # real time in one process: no start gate (the nodes share one executor)
-    hand = {} if is_realtime(params) else lockstep_parameters(record, records_samples(names))
+    hand = {} if _is_realtime(params) else lockstep_parameters(record, records_samples(names))
     try:
         if record:
             from .nodes.recorder import Recorder

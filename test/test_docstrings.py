@@ -33,13 +33,14 @@ CHECKED = tuple(
        for part in ('synthesis', 'simulation', 'identification')]
     + [f'nonfragile_tracker.control.synthesis.{m}' for m in (
         'delay', 'analysis', 'design', 'problem', 'sdp', 'certificate', 'search', 'lmi',
-        'delay_dependent', 'input_delay', 'latency_design', 'saturation', 'sweep',
+        'delay_dependent', 'input_delay', 'input_delay_certificate',
+        'latency_design', 'saturation', 'sweep',
         'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
         'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
-        'identify', 'recording', 'monitor')]
+        'identify', 'lag_fit', 'records', 'recording', 'monitor')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
         'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot',
@@ -52,7 +53,7 @@ CHECKED = tuple(
         'study', 'trajectory', 'bag', 'reproduce', 'golden')]
     + [f'nonfragile_tracker.nodes.{m}' for m in (
         'trajectory_io', 'entry', 'errors', 'common', 'plant', 'reference', 'tracker',
-        'recorder')])
+        'recorder', 'workarounds')])
 
 
 def _defined_in(obj: object, module: str) -> bool:

@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from .. import topics
-from ..control.simulation.gains import read_gain_file
+from ..control.simulation.gains import gain_from_file_data
 from ..control.simulation.loop import Command, TrackerConfig
 from ..files import node_key
 from ..msgconv import stamp_ns, tracker_config
@@ -276,7 +276,7 @@ def _agrees_twist(a: Any, b: Any, atol: float) -> bool:
                 and abs(ta.angular.z - tb.angular.z) <= atol)
 
 
-def _param_section(path: Path) -> dict[str, Any]:
+def _read_parameter_file(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(Path(path).read_text()) or {}
     except OSError as exc:
@@ -285,6 +285,10 @@ def _param_section(path: Path) -> dict[str, Any]:
         raise BagError(f'{path} is not valid YAML: {exc}') from None
     if not isinstance(data, dict):
         raise BagError(f'{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)')
+    return data
+
+
+def _tracker_section(data: dict[str, Any]) -> dict[str, Any]:
     for key, section in data.items():
         if node_key(str(key)) in ('tracker', '**') and isinstance(section, dict):
             return dict(section.get('ros__parameters') or {})
@@ -321,12 +325,14 @@ def load_tracker_parameters(gains: str | os.PathLike[str] | None = None,
     gains = Path(gains) if gains is not None else config_dir() / 'tracker_gains.yaml'
     params = Path(params) if params is not None else config_dir() / 'paper_scenario.yaml'
     values = dict(TRACKER_DEFAULTS)
-    values.update(_param_section(params))
+    values.update(_tracker_section(_read_parameter_file(params)))
     # the gain file's tracker section overrides the parameter file, as in a run
     # (`run --gains`, scenario_parameters): a latency-design gain file carries the
-    # predictor parameters its gain was designed with
-    values.update({k: v for k, v in _param_section(gains).items() if k not in ('K', 'K_shape')})
-    K = read_gain_file(gains)
+    # predictor parameters its gain was designed with.  Read once: K from the same content
+    gain_file = _read_parameter_file(gains)
+    values.update({k: v for k, v in _tracker_section(gain_file).items()
+                   if k not in ('K', 'K_shape')})
+    K = gain_from_file_data(gain_file or None, gains)       # (empty: None, as read)
     values['K'] = [float(v) for v in np.asarray(K).ravel()]
     values['K_shape'] = list(np.asarray(K).shape)
     return tracker_config(values), values

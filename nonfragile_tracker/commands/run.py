@@ -34,6 +34,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         The parsed command line of ``run``.
     """
     from .. import runner
+    from ..bag.writer import new_run_dir
     from ..control.simulation.gains import read_gain_file
     from ..resources import config_dir
     if args.paper and (args.gains or args.delay_compensation):
@@ -75,7 +76,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             ov['plant']['ros__parameters']['duration'] = round(traj.t_end + 3.0, 2)
     params = runner.scenario_parameters(scenario, gains, ov)
     read_gain_file(gains)           # refuse a bad gain before starting anything (exit 2)
-    run_dir = runner.new_run_dir(Path(args.out), args.name)
+    run_dir = new_run_dir(Path(args.out), args.name)
     record = not args.no_record
     dur = params['plant']['ros__parameters'].get('duration')
     print(f'run directory: {run_dir}')

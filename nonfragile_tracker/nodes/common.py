@@ -6,7 +6,6 @@ flow) and the Jazzy shutdown pattern.  No control math lives here.
 """
 from __future__ import annotations
 
-import contextlib
 import gc
 import os
 import sys
@@ -31,7 +30,9 @@ from rclpy.timer import Timer
 from .. import topics
 from ..tracker_inputs import MODES as TRACKER_MODES
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
-from .entry import arm_exit_deadline, catch_stop_signals, ignore_stop_signals, stop_requested
+from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
+# the workarounds of rclpy 7.1.6 / Fast DDS 2.14 faults, each with the condition to drop it
+from .workarounds import arm_exit_deadline, end_executor, guard_shutdown_race, spin_until
 # the nodes' errors (nodes/errors.py, ROS-free), where the nodes have always imported them
 from .errors import StartupError, StartupStopped
 from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
@@ -216,22 +217,6 @@ def freeze_startup_objects() -> None:
     gc.freeze()
 
 
-def spin_until(executor: Executor, done: Callable[[], bool], period: float = 0.1) -> None:
-    """Spin with a finite timeout (the EventsExecutor needs one) until ``done()``.
-
-    Parameters
-    ----------
-    executor : rclpy.executors.Executor
-        With the nodes added.
-    done : callable
-        Ends the spin when it returns True (checked between spins).
-    period : float, optional
-        Timeout (s) of each spin.
-    """
-    while executor.context.ok() and not done():
-        executor.spin_once(timeout_sec=period)
-
-
 def overrides(**values: Any) -> list[Parameter]:
     """Parameter overrides from values: ``XNode(parameter_overrides=overrides(dt=0.02))``.
 
@@ -377,18 +362,6 @@ class AdapterNode(Node, Generic[C]):
         """
 
     # ------------------------------------------------------------------ guarded callbacks
-    def _guarded(self, callback: Callable[..., Any]) -> Callable[..., Any]:
-        context = self.context
-
-        def guarded(*args: Any) -> Any:
-            try:
-                return callback(*args)
-            except Exception:
-                if context.ok():
-                    raise
-                return None           # the context was shut down under this callback: done
-        return guarded
-
     def create_subscription(self, msg_type: Any, topic: str, callback: Callable[..., Any],
                             *args: Any, **kwargs: Any) -> Subscription:
         """rclpy's, with the callback guarded against a shutdown under it.
@@ -408,7 +381,8 @@ class AdapterNode(Node, Generic[C]):
         -------
         rclpy.subscription.Subscription
         """
-        return super().create_subscription(msg_type, topic, self._guarded(callback),
+        return super().create_subscription(msg_type, topic,
+                                           guard_shutdown_race(self.context, callback),
                                            *args, **kwargs)
 
     def create_timer(self, timer_period_sec: float, callback: Callable[..., Any],
@@ -428,7 +402,8 @@ class AdapterNode(Node, Generic[C]):
         -------
         rclpy.timer.Timer
         """
-        return super().create_timer(timer_period_sec, self._guarded(callback), *args, **kwargs)
+        return super().create_timer(timer_period_sec,
+                                    guard_shutdown_race(self.context, callback), *args, **kwargs)
 
     # ------------------------------------------------------------------ logging
     @property
@@ -495,18 +470,7 @@ def _tear_down(context: Context, node: AdapterNode[Any] | None,
                executor: Executor | None) -> None:
     """Executor, node and rclpy shut down (after the node's own clean-up)."""
     if executor is not None:
-        # unregister the node's callbacks while the executor lives (idempotent after a
-        # context shutdown, which does the same): an EventsExecutor destroyed with
-        # callbacks still registered aborts ('Destroying callback manager with
-        # callbacks remaining')
-        with contextlib.suppress(Exception):
-            if node is not None:
-                executor.remove_node(node)
-            executor.shutdown()
-        # never destroyed: rclpy 7.1.6's EventsExecutor can still abort in its destructor
-        # after a signal right after start (1 in ~30, also before this package's signal
-        # handling); the process entry (nodes/entry.main) then leaves with os._exit
-        _ENDED_EXECUTORS.append(executor)
+        end_executor(executor, node)                # (workarounds: kept alive)
     if node is not None:
         node.destroy_node()                         # (close() again: a no-op)
     try:
@@ -519,9 +483,6 @@ def _tear_down(context: Context, node: AdapterNode[Any] | None,
 def _fatal(text: str) -> int:
     print(f'[FATAL] {text}', file=sys.stderr)
     return 2
-
-
-_ENDED_EXECUTORS: list[Executor] = []
 
 
 class _MissedStop:
@@ -561,7 +522,7 @@ def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = Non
     one (5: lockstep abort), 2 when it refuses to start (a :class:`StartupError` or other
     ``ValueError``, a bad parameter, arguments rcl cannot parse) with a ``[FATAL]`` line, 1
     after an unexpected error (its traceback printed before the tear-down).  The same code
-    ends the process if the DDS tear-down hangs (:func:`entry.arm_exit_deadline`).
+    ends the process if the DDS tear-down hangs (:func:`workarounds.arm_exit_deadline`).
 
     Signals: rclpy's own handlers (installed by ``rclpy.init`` for SIGINT and SIGTERM)
     shut the context down from rclpy's signal thread; the executor then raises
@@ -576,7 +537,7 @@ def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = Non
     :mod:`entry`, the imports): a signal there ends the process with 0 before or right
     after the node is built, instead of being lost.
     Exceptions that are only the consequence of the shutdown racing the main thread
-    (rclpy 7.1: ros2/rclpy#1352, fixed upstream after Jazzy) are not reported.
+    (rclpy 7.1: ros2/rclpy#1352, see :mod:`workarounds`) are not reported.
 
     Parameters
     ----------
@@ -642,7 +603,7 @@ def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = Non
             code = failed if failed is not None else \
                 int(node.exit_code or 0) if node is not None else 0
             # the DDS tear-down below can deadlock inside Fast DDS 2.14 (see
-            # entry.arm_exit_deadline): past the deadline the process ends with this code
+            # workarounds.arm_exit_deadline): past the deadline the process ends with this code
             arm_exit_deadline(code)
             _tear_down(context, node, executor)
     return code

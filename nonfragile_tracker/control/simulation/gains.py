@@ -170,7 +170,28 @@ def read_gain_file(path: str | os.PathLike[str], node: str = TRACKER_NODE) -> np
         The file cannot be read, has no such section or ``K``, or ``K`` is invalid.
     """
     path = Path(path)
-    data = read_yaml(path, 'gain file', error=LoopConfigError)
+    return gain_from_file_data(read_yaml(path, 'gain file', error=LoopConfigError), path, node)
+
+
+def gain_from_file_data(data: Any, path: str | os.PathLike[str],
+                        node: str = TRACKER_NODE) -> np.ndarray:
+    """``K`` from a parameter file's parsed content (:func:`read_gain_file` after the read).
+
+    For a caller that has read the file already for its other parameters; the result and
+    the :class:`LoopConfigError` for a content without ``K`` are those of
+    :func:`read_gain_file`.
+
+    Parameters
+    ----------
+    data : object
+        The file's YAML content.
+    path, node
+        The file (named in the errors) and the section, as in :func:`read_gain_file`.
+
+    Returns
+    -------
+    numpy.ndarray
+    """
     if not isinstance(data, dict):
         got = 'an empty file' if data is None else f'a {type(data).__name__}'
         raise LoopConfigError(f'{path}: expected a ROS 2 parameter file with a "{node}" section, '

@@ -118,22 +118,6 @@ class Limits:
         """
         return cls(**{n: float(values.get(n, 0.0) or 0.0) for n in LIMIT_NAMES})
 
-    def scaled(self, factor: float) -> 'Limits':
-        """Rate limits times ``factor`` (headroom for the feedback); the radius unchanged.
-
-        Parameters
-        ----------
-        factor : float
-            Scale of the speed and acceleration limits.
-
-        Returns
-        -------
-        Limits
-        """
-        return Limits(self.max_linear_speed * factor, self.max_linear_accel * factor,
-                      self.max_angular_speed * factor, self.max_angular_accel * factor,
-                      self.min_turning_radius)
-
 
 @dataclass(frozen=True)
 class LimitReport:
