@@ -1,0 +1,162 @@
+"""The tracker's step from the odometry stamps: the interval that passed and the period.
+
+A robot's odometry comes at 20-100 Hz, with jitter, dropped and bunched messages; a
+controller that integrates with a constant it was told, instead of the time that passed,
+tracks badly when the constant is wrong and nothing says so.  :class:`PeriodEstimator`
+takes the time of each step (the odometry stamp) and gives
+
+* the interval since the previous step (:meth:`PeriodEstimator.observe`), in whole
+  nanoseconds as ROS stamps are, so that a constant period gives the same interval to
+  the bit at every step (lockstep runs and the batch simulation agree exactly);
+* the period, the lower median of the last :data:`WINDOW` positive intervals
+  (:attr:`PeriodEstimator.period`): a dropped message (one interval of two periods), a
+  bunched pair (a short and a long one) or jitter leave it where it is, a lasting change
+  of the rate moves it within half a window;
+* a report when the period moves by more than :data:`CHANGE` from the one last reported
+  (:meth:`PeriodEstimator.rate_change`) and the comparison with a period set by hand
+  (:func:`period_disagreement`).
+
+Stamps only, never a clock: lockstep runs stay deterministic.  Plain floats; no ROS.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'PeriodEstimator', 'period_disagreement', 'interval_ns']
+
+#: Number of recent intervals whose median is the period.
+WINDOW = 9
+#: Intervals longer than this (s) are garbage, not a period (ignored).
+MAX_INTERVAL = 1e6
+#: Relative change of the period (or disagreement with a set one) that is reported.
+CHANGE = 0.2
+
+
+def interval_ns(t0: float, t1: float) -> int:
+    """``t1 - t0`` (s) in whole nanoseconds (stamps are integer nanoseconds).
+
+    Parameters
+    ----------
+    t0, t1 : float
+        Two times (s).
+
+    Returns
+    -------
+    int
+    """
+    return int(round((t1 - t0) * 1e9))
+
+
+class PeriodEstimator:
+    """Interval since the previous step and the robust period of a stream of stamps.
+
+    Parameters
+    ----------
+    window : int
+        Number of recent intervals whose (lower) median is the period.
+    """
+
+    def __init__(self, window: int = WINDOW):
+        if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+            raise ValueError(f'window must be an integer >= 1, got {window!r}')
+        self.window = window
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the stamps and intervals seen."""
+        self._last: float | None = None
+        self._intervals: deque[int] = deque(maxlen=self.window)
+        self._period_ns = 0
+        self._reported_ns = 0
+
+    def observe(self, t: float) -> float | None:
+        """Take the time ``t`` (s) of a step; the interval since the previous one (s).
+
+        A non-positive interval (a repeated or earlier stamp, a bunched message in the
+        same nanosecond) returns 0.0 and does not count for the period; the first call
+        (or the first after :meth:`reset`) returns None.  Non-finite times and times more
+        than :data:`MAX_INTERVAL` away from the previous one are ignored (None).
+
+        Parameters
+        ----------
+        t : float
+            Time of the step (s; the odometry stamp).
+
+        Returns
+        -------
+        float or None
+        """
+        if not math.isfinite(t):
+            return None
+        last = self._last
+        if last is None:
+            self._last = t
+            return None
+        if not abs(t - last) <= MAX_INTERVAL:
+            return None
+        n = interval_ns(last, t)
+        if n <= 0:
+            return 0.0
+        self._last = t
+        iv = self._intervals
+        iv.append(n)
+        self._period_ns = sorted(iv)[(len(iv) - 1) // 2]
+        if not self._reported_ns and len(iv) == self.window:
+            self._reported_ns = self._period_ns
+        return n * 1e-9
+
+    @property
+    def period(self) -> float | None:
+        """The period (s): lower median of the recent intervals; None before the first."""
+        return self._period_ns * 1e-9 if self._period_ns else None
+
+    @property
+    def settled(self) -> bool:
+        """True once a whole window of intervals has been seen."""
+        return len(self._intervals) == self.window
+
+    def rate_change(self, tol: float = CHANGE) -> tuple[float, float] | None:
+        """``(before, now)`` (s) once the period moved by more than ``tol`` from the last report.
+
+        The first settled period is the reference; a change is reported once (the new
+        period becomes the reference).
+
+        Parameters
+        ----------
+        tol : float
+            Relative change reported.
+
+        Returns
+        -------
+        (float, float) or None
+        """
+        ref, now = self._reported_ns, self._period_ns
+        if not ref or not self.settled or abs(now - ref) <= tol * ref:
+            return None
+        self._reported_ns = now
+        return ref * 1e-9, now * 1e-9
+
+
+def period_disagreement(set_dt: float, measured: float | None, tol: float = CHANGE
+                        ) -> str | None:
+    """What is wrong when a step set by hand disagrees with the measured period, else None.
+
+    Parameters
+    ----------
+    set_dt : float
+        The step set by hand (s; 0: none, nothing to compare).
+    measured : float or None
+        The measured odometry period (s; None: not known yet).
+    tol : float
+        Relative disagreement reported.
+
+    Returns
+    -------
+    str or None
+    """
+    if not set_dt or not measured or abs(set_dt - measured) <= tol * measured:
+        return None
+    return (f'dt = {set_dt:g} s is set but the odometry period is {measured:.4f} s '
+            f'({1.0 / measured:.1f} Hz): the compensator integrates over the wrong step; '
+            'set dt to 0 (the step from the odometry stamps)')
