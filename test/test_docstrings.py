@@ -36,7 +36,7 @@ CHECKED = tuple(
         'delay_dependent', 'input_delay', 'latency_design', 'saturation', 'sweep')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
-        'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains')]
+        'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains', 'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
         'identify', 'recording', 'monitor')]
     + [f'nonfragile_tracker.{m}' for m in (

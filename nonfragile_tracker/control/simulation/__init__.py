@@ -1,7 +1,8 @@
 """Simulation: the step functions the nodes run, and the in-process loops over them.
 
 The unicycle and its linearization (:mod:`.model`), the actuator, sensor and latency
-models (:mod:`.actuator`, :mod:`.sensors`, :mod:`.predictor`), paths and timed
+models (:mod:`.actuator`, :mod:`.sensors`, :mod:`.predictor`), the tracker's step from the
+odometry stamps (:mod:`.timing`), paths and timed
 trajectories within limits (:mod:`.reference`, :mod:`.trajectory`, :mod:`.limits`), the
 plant and tracker step functions (:mod:`.loop`, :mod:`.follow`) and the gain file they
 read (:mod:`.gains`), and the loops that run them in process, one case or many at once
@@ -46,7 +47,9 @@ __all__ = [
     'Command', 'delay_steps', 'odometry_period_steps', 'PlantConfig', 'quaternion_to_yaw',
     'Tracker', 'TrackerConfig', 'UnicyclePlant', 'validate_gain', 'yaw_to_quaternion',
     # simulate
-    'run_loop', 'simulate_delay_loop', 'simulate_tracking',
+    'report_override', 'run_loop', 'simulate_delay_loop', 'simulate_tracking',
+    # timing
+    'PeriodEstimator', 'period_disagreement',
     # batch
     'BatchCases', 'PathBatch', 'perturbation_schedule', 'sample_deltas', 'simulate_batch',
     'simulate_delay_loop_batch',
@@ -74,7 +77,8 @@ if TYPE_CHECKING:
                          start_offset, START_TOLERANCE, trajectory_time)
     from .loop import (Command, delay_steps, odometry_period_steps, PlantConfig, quaternion_to_yaw,
                        Tracker, TrackerConfig, UnicyclePlant, validate_gain, yaw_to_quaternion)
-    from .simulate import run_loop, simulate_delay_loop, simulate_tracking
+    from .simulate import report_override, run_loop, simulate_delay_loop, simulate_tracking
+    from .timing import PeriodEstimator, period_disagreement
     from .batch import (BatchCases, PathBatch, perturbation_schedule, sample_deltas, simulate_batch,
                         simulate_delay_loop_batch)
     from .study import plot_study, run_study, StudySpec

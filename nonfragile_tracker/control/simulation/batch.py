@@ -260,8 +260,9 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise BatchError(f'number of cases must be an integer >= 1, got {n!r}')
     if not plant.regular:
-        raise BatchError('the batch simulation does not model latency jitter, stalls or a '
-                         'latency schedule (cmd_latency_jitter, stalls, cmd_latency_schedule); '
+        raise BatchError('the batch simulation does not model latency or odometry jitter, '
+                         'stalls or a latency schedule (cmd_latency_jitter, odom_jitter, stalls, '
+                         'cmd_latency_schedule); '
                          'run those cases with control.simulation.simulate.run_loop')
     vals = {}
     for name in _PER_CASE:

@@ -204,7 +204,9 @@ class PlantConfig:
     ``max_linear_accel`` (m/s^2), ``max_angular_accel`` (rad/s^2) (0 = unlimited),
     ``odom_latency`` (s: the measurement of step ``k`` is published at ``k + d`` with
     the stamp of step ``k``), ``odom_rate`` (Hz, 0 = every step), ``odom_noise``
-    (standard deviations of x, y (m) and yaw (rad)) and ``noise_seed``.
+    (standard deviations of x, y (m) and yaw (rad)), ``noise_seed`` and ``odom_jitter``
+    (s: each odometry measurement is taken up to this early or late, uniformly over the
+    whole steps within it, and stamped with that true time; below half the odometry period).
     ``cmd_latency_schedule`` (flat ``[t_1, L_1, t_2, L_2, ...]``, times increasing, s):
     from ``t_i`` on a command received acts ``L_i`` later (``cmd_latency`` before
     ``t_1``); a command that would act no later than one received before it replaces
@@ -238,6 +240,7 @@ class PlantConfig:
     cmd_latency_schedule: tuple[float, ...] = ()
     cmd_latency_jitter: float = 0.0
     stalls: tuple[tuple[float, float], ...] = ()
+    odom_jitter: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
@@ -247,14 +250,18 @@ class PlantConfig:
             if not math.isfinite(getattr(self, name)):
                 raise LoopConfigError(f'{name} must be finite, got {getattr(self, name)!r}')
         for name in ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
-                     'odom_latency', 'odom_rate', 'cmd_latency_jitter'):
+                     'odom_latency', 'odom_rate', 'cmd_latency_jitter', 'odom_jitter'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
-        for name in ('cmd_latency', 'odom_latency', 'cmd_latency_jitter'):
+        for name in ('cmd_latency', 'odom_latency', 'cmd_latency_jitter', 'odom_jitter'):
             try:
                 delay_steps(getattr(self, name), self.dt)
             except LoopConfigError as exc:
                 raise LoopConfigError(f'{name}: {exc}') from None
-        odometry_period_steps(self.odom_rate, self.dt)
+        period = odometry_period_steps(self.odom_rate, self.dt)[0]
+        if 2 * delay_steps(self.odom_jitter, self.dt)[0] >= period:
+            raise LoopConfigError(f'odom_jitter ({self.odom_jitter} s) must be below half the '
+                                  f'odometry period ({period * self.dt:g} s) so that the '
+                                  'measurements stay in order; use a smaller jitter or a finer dt')
         noise = tuple(self.odom_noise) if not isinstance(self.odom_noise, str) else ()
         if len(noise) != 3:
             raise LoopConfigError('odom_noise needs 3 standard deviations [x (m), y (m), '
@@ -270,8 +277,9 @@ class PlantConfig:
 
     @property
     def regular(self) -> bool:
-        """True without jitter, stalls or a latency schedule: what the batch simulation models."""
-        return not (self.cmd_latency_jitter or self.stalls or self.cmd_latency_schedule)
+        """True without jitter (command or odometry), stalls or a latency schedule (batch's)."""
+        return not (self.cmd_latency_jitter or self.stalls or self.cmd_latency_schedule
+                    or self.odom_jitter)
 
     @property
     def stall_steps(self) -> tuple[tuple[int, int], ...]:
@@ -306,7 +314,8 @@ class PlantConfig:
         """The odometry model (latency, period, noise, seed) of this configuration."""
         return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
                              odometry_period_steps(self.odom_rate, self.dt)[0],
-                             self.odom_noise, int(self.noise_seed))
+                             self.odom_noise, int(self.noise_seed),
+                             delay_steps(self.odom_jitter, self.dt)[0])
 
 
 def _stalls(value: Any) -> tuple[tuple[float, float], ...]:

@@ -23,7 +23,8 @@ from .reference import Path, RefSample
 from .sensors import OdometrySample
 from .timing import period_disagreement
 
-__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'report_override', 'DelayRun', 'simulate_delay_loop',
+__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'report_override',
+           'DelayRun', 'simulate_delay_loop',
            'rk4_delay_steps',
            'steps_for_duration']
 
