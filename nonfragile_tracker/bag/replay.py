@@ -58,7 +58,7 @@ __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
 TRACKER_DEFAULTS: dict[str, Any] = {
-    'K_shape': [2, 4], 'dt': 0.01, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
+    'K_shape': [2, 4], 'dt': 0.0, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
