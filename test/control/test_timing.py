@@ -164,3 +164,25 @@ def test_plant_odometry_jitter_is_seeded_in_order_and_validated():
     assert abs(d.mean() - 0.02) < 1e-3
     with pytest.raises(LoopConfigError, match='odom_jitter'):
         PlantConfig(dt=0.01, odom_rate=50.0, odom_jitter=0.01)
+
+
+def test_gaps_do_not_count_but_a_dropped_rate_is_followed():
+    """A 1 s gap (a stalled driver) leaves the 10 ms period; 100 Hz -> 20 Hz (five times
+    the period: gaps at first) is the new period after half a window, reported once."""
+    est = PeriodEstimator()
+    for t in stamps(10_000_000, 20):
+        est.observe(t)
+    t = 1.0 + 19 * 0.01
+    assert est.observe(t + 1.0) == pytest.approx(1.0) and est.period == 0.01
+    t += 1.0
+    for i in range(1, 4):                    # 100 Hz again after the gap
+        assert est.observe(t + i * 0.01) == pytest.approx(0.01) and est.period == 0.01
+    t += 3 * 0.01
+    periods, changes = [], []
+    for i in range(1, 20):
+        est.observe(t + i * 0.05)
+        periods.append(est.period)
+        changes.append(est.rate_change())
+    assert periods[:WINDOW // 2] == [0.01] * (WINDOW // 2)
+    assert periods[WINDOW // 2] == 0.05 and periods[-1] == 0.05
+    assert [c for c in changes if c] == [(0.01, 0.05)]

@@ -11,7 +11,9 @@ takes the time of each step (the odometry stamp) and gives
 * the period, the lower median of the last :data:`WINDOW` positive intervals
   (:attr:`PeriodEstimator.period`): a dropped message (one interval of two periods), a
   bunched pair (a short and a long one) or jitter leave it where it is, a lasting change
-  of the rate moves it within half a window;
+  of the rate moves it within half a window; an interval above :data:`GAP_FACTOR` periods
+  is a gap (a stalled driver, a stamp jump), not counted - unless more than half a window
+  of them come in a row: then the rate has dropped and they are the new period's;
 * a report when the period moves by more than :data:`CHANGE` from the one last reported
   (:meth:`PeriodEstimator.rate_change`) and the comparison with a period set by hand
   (:func:`period_disagreement`).
@@ -23,11 +25,13 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'PeriodEstimator', 'period_disagreement',
+__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR', 'PeriodEstimator', 'period_disagreement',
            'interval_ns']
 
 #: Number of recent intervals whose median is the period.
 WINDOW = 9
+#: An interval above this many periods is a gap, not counted in the period.
+GAP_FACTOR = 4.0
 #: Intervals longer than this (s) are garbage, not a period (ignored).
 MAX_INTERVAL = 1e6
 #: Relative change of the period (or disagreement with a set one) that is reported.
@@ -68,6 +72,7 @@ class PeriodEstimator:
         """Forget the stamps and intervals seen."""
         self._last: float | None = None
         self._intervals: deque[int] = deque(maxlen=self.window)
+        self._gaps: list[int] = []             # gaps in a row (not counted yet)
         self._period_ns = 0
         self._reported_ns = 0
 
@@ -101,7 +106,15 @@ class PeriodEstimator:
             return 0.0
         self._last = t
         iv = self._intervals
-        iv.append(n)
+        if self._period_ns and n > GAP_FACTOR * self._period_ns:
+            self._gaps.append(n)
+            if len(self._gaps) <= self.window // 2:
+                return n * 1e-9                # a gap: passed, not a period
+            iv.clear()                         # the rate dropped: these are its intervals
+            iv.extend(self._gaps)
+        else:
+            iv.append(n)
+        self._gaps.clear()
         self._period_ns = sorted(iv)[(len(iv) - 1) // 2]
         if not self._reported_ns and len(iv) == self.window:
             self._reported_ns = self._period_ns
