@@ -51,8 +51,11 @@ def test_period_is_robust_to_jitter_drops_and_bunching():
         if i > 3 * WINDOW:
             got.append(est.period)
     assert max(abs(p - 0.02) for p in got) <= 0.004          # within the jitter of 20 ms
-    assert est.observe(5.0) == 0.0                           # a stamp going back: nothing
-    assert est.observe(math.nan) is None and est.observe(1e300) is None
+    p = est.period
+    assert est.observe(float(t[-1])) == 0.0                  # the same stamp: nothing passed
+    assert est.observe(5.0) is None and est.period == p      # a new time base: the period stays
+    assert est.observe(5.02) == pytest.approx(0.02)
+    assert est.observe(math.nan) is None and est.observe(1e300) is None and est.period == p
 
 
 def test_a_changed_rate_is_reported_once_with_both_periods():

@@ -776,11 +776,14 @@ class Tracker:
         return self.config.dt or (self.timing.period or 0.0)
 
     def step(self, x: float, y: float, th: float, ref: RefSample,
-             measured_speed: float | None = None, stamp: float | None = None) -> Command:
+             measured_speed: float | None = None, stamp: float | None = None,
+             stamp_ns: int | None = None) -> Command:
         """One command from a measured pose and a reference sample.
 
         The pose ``(x, y, th)`` is measured at ``stamp`` (s; default ``ref.t``); the
-        reference sample may be of any time (the predictor extrapolates it).
+        reference sample may be of any time (the predictor extrapolates it).  ``stamp_ns``
+        (the message's stamp in integer nanoseconds, ``stamp`` to within 0.5 ns) times the
+        interval exactly.
 
         Parameters
         ----------
@@ -794,6 +797,8 @@ class Tracker:
             Measured speed (m/s): starts the compensator at the first step.
         stamp : float, optional
             Measurement time (s).
+        stamp_ns : int, optional
+            Measurement time (ns), the same as ``stamp``: the interval's exact clock.
 
         Returns
         -------
@@ -801,7 +806,8 @@ class Tracker:
         """
         c = self.config
         t_meas = ref.t if stamp is None else float(stamp)
-        passed = self.timing.observe(t_meas)
+        passed = (self.timing.observe(t_meas) if stamp_ns is None
+                  else self.timing.observe_ns(int(stamp_ns)))
         if c.dt:
             passed = h = c.dt
         else:

@@ -70,7 +70,7 @@ class PeriodEstimator:
 
     def reset(self) -> None:
         """Forget the stamps and intervals seen."""
-        self._last: float | None = None
+        self._last: int | None = None          # ns
         self._intervals: deque[int] = deque(maxlen=self.window)
         self._gaps: list[int] = []             # gaps in a row (not counted yet)
         self._period_ns = 0
@@ -79,10 +79,9 @@ class PeriodEstimator:
     def observe(self, t: float) -> float | None:
         """Take the time ``t`` (s) of a step; the interval since the previous one (s).
 
-        A non-positive interval (a repeated or earlier stamp, a bunched message in the
-        same nanosecond) returns 0.0 and does not count for the period; the first call
-        (or the first after :meth:`reset`) returns None.  Non-finite times and times more
-        than :data:`MAX_INTERVAL` away from the previous one are ignored (None).
+        :meth:`observe_ns` of ``t`` in whole nanoseconds (non-finite or absurd times are
+        ignored: None).  A stamp of a ROS message is better given as its integer
+        nanoseconds: at today's epoch a time in float seconds is only good to 0.24 us.
 
         Parameters
         ----------
@@ -93,18 +92,36 @@ class PeriodEstimator:
         -------
         float or None
         """
-        if not math.isfinite(t):
+        if not (math.isfinite(t) and abs(t) < 1e12):
             return None
+        return self.observe_ns(int(round(t * 1e9)))
+
+    def observe_ns(self, t_ns: int) -> float | None:
+        """Take the time ``t_ns`` (ns) of a step; the interval since the previous one (s).
+
+        A repeated time (a message in the same nanosecond) returns 0.0; the first call (or
+        the first after :meth:`reset`), an earlier time or one more than
+        :data:`MAX_INTERVAL` later (another time base: a new trajectory's time) return None
+        and restart the intervals from ``t_ns``; neither counts for the period, which stays.
+
+        Parameters
+        ----------
+        t_ns : int
+            Time of the step (ns; the odometry stamp).
+
+        Returns
+        -------
+        float or None
+        """
         last = self._last
+        self._last = t_ns
         if last is None:
-            self._last = t
             return None
-        if not abs(t - last) <= MAX_INTERVAL:
-            return None
-        n = interval_ns(last, t)
-        if n <= 0:
+        n = t_ns - last
+        if n == 0:
             return 0.0
-        self._last = t
+        if n < 0 or n > MAX_INTERVAL * 1e9:
+            return None                        # a new time base: the period stays
         iv = self._intervals
         if self._period_ns and n > GAP_FACTOR * self._period_ns:
             self._gaps.append(n)
