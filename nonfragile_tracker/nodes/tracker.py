@@ -28,8 +28,8 @@ the time the command acts (:mod:`control.simulation.predictor`; the tracker's *n
 stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
 With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
 unknown) each command differs from the previous by at most the limit times the time since
-the previous one and the predictor models the limits (:class:`control.simulation.loop.Tracker`).  Real
-time: a command per pose with the latest reference; if pose or reference is
+the previous one and the predictor models the limits
+(:class:`control.simulation.loop.Tracker`).  Real time: a command per pose with the latest reference; if pose or reference is
 older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
 once, and re-initialises its compensator when fresh data returns.
 

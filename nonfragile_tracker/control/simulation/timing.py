@@ -25,8 +25,8 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR', 'PeriodEstimator', 'period_disagreement',
-           'interval_ns']
+__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR', 'PeriodEstimator',
+           'period_disagreement', 'interval_ns']
 
 #: Number of recent intervals whose median is the period.
 WINDOW = 9
