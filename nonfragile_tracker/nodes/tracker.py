@@ -29,9 +29,9 @@ stamp plus ``predict_odom_latency``, never a clock, so lockstep stays determinis
 With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
 unknown) each command differs from the previous by at most the limit times the time since
 the previous one and the predictor models the limits
-(:class:`control.simulation.loop.Tracker`).  Real time: a command per pose with the latest reference; if pose or reference is
-older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
-once, and re-initialises its compensator when fresh data returns.
+(:class:`control.simulation.loop.Tracker`).  Real time: a command per pose with the latest
+reference; if pose or reference is older than ``input_timeout`` the tracker publishes a stop
+(zero Twist), says so once, and re-initialises its compensator when fresh data returns.
 
 Trajectories (:mod:`control.simulation.trajectory`): a nav_msgs/Path on ``trajectory``
 (transient-local; stamps give the times, all zero: a trapezoidal time law with
