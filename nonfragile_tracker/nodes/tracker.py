@@ -584,7 +584,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             gap = (s - last) * 1e-9
             self._odom_intervals += 1
             self._odom_interval_sum += gap
-            period = self.tracker.config.dt or self.tracker.timing.period
+            period = self.tracker.timing.period       # measured, whatever dt says
             if period and gap > 1.5 * period:
                 self.deadline_misses += 1
         if self._retimed and self.pub_cmd.get_subscription_count() >= \
