@@ -23,8 +23,10 @@ value):
   (``S = 1``: constant; ``S = 2``: periodic switching; ``S`` large with random
   ``Delta``: random time-varying, see :func:`sample_deltas`);
 * command latency, actuator lag and acceleration limits of ``v`` and ``w``;
-* odometry latency, rate (the tracker's period is the odometry period) and noise
-  (the per-case seed draws the same sequence as :class:`control.simulation.sensors.Odometer`);
+* odometry latency, rate (the tracker's step is the odometry period, as the tracker
+  measures it from the stamps; a ``dt`` override is used as set and warned about when it
+  disagrees, as the tracker node reports it) and noise (the per-case seed draws the same
+  sequence as :class:`control.simulation.sensors.Odometer`);
 * initial pose and speed;
 * the reference: a shared path (any object with ``sample(t) -> RefSample``, e.g. a
   :class:`control.simulation.trajectory.Trajectory`, sampled once per step) or per-case
