@@ -5,7 +5,7 @@ controller that integrates with a constant it was told, instead of the time that
 tracks badly when the constant is wrong and nothing says so.  :class:`PeriodEstimator`
 takes the time of each step (the odometry stamp) and gives
 
-* the interval since the previous step (:meth:`PeriodEstimator.observe`), in whole
+* the interval since the previous step (:meth:`PeriodEstimator.observe_ns`), in whole
   nanoseconds as ROS stamps are, so that a constant period gives the same interval to
   the bit at every step (lockstep runs and the batch simulation agree exactly);
 * the period, the lower median of the last :data:`WINDOW` positive intervals
@@ -26,7 +26,7 @@ import math
 from collections import deque
 
 __all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR', 'PeriodEstimator',
-           'period_disagreement', 'interval_ns']
+           'period_disagreement']
 
 #: Number of recent intervals whose median is the period.
 WINDOW = 9
@@ -36,21 +36,6 @@ GAP_FACTOR = 4.0
 MAX_INTERVAL = 1e6
 #: Relative change of the period (or disagreement with a set one) that is reported.
 CHANGE = 0.2
-
-
-def interval_ns(t0: float, t1: float) -> int:
-    """``t1 - t0`` (s) in whole nanoseconds (stamps are integer nanoseconds).
-
-    Parameters
-    ----------
-    t0, t1 : float
-        Two times (s).
-
-    Returns
-    -------
-    int
-    """
-    return int(round((t1 - t0) * 1e9))
 
 
 class PeriodEstimator:
