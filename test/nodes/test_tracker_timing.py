@@ -97,3 +97,22 @@ def test_the_default_measures_the_period_and_reports_a_change_once(make_node):
     assert int(vals['deadline misses']) <= 5            # until the median moves (half a window)
     st, _ = status(node)
     assert 'changed' not in st.message and st.level == b'\x00'       # reported once
+
+
+def test_the_monitor_is_stale_while_the_robot_rests_after_its_trajectory(make_node):
+    """Issue 30 item 5, in the node: an estimate that would WARN (a lag of 100 ms against
+    the certified 41 ms) gives STALE once the trajectory is finished (at rest)."""
+    from types import SimpleNamespace
+
+    from nonfragile_tracker.control.identification.monitor import LatencyEstimate
+    node = make_node(monitor=True, certified_residual=[0.0, 0.15], certified_lag=0.041,
+                     monitor_period=100.0)
+    node.monitor.latest = LatencyEstimate(True, '', t_end=10.0, latency=0.1,
+                                          interval=(0.098, 0.102), lag_v=0.1, lag_w=0.1,
+                                          r2=0.99, confidence=0.99, valid_fraction=1.0,
+                                          channels=('v', 'w'))
+    (st,) = node._monitor_diagnostics()
+    assert st.level == b'\x01' and 'actuator lag 100 ms above the certified 41 ms' in st.message
+    node.inputs.follower = SimpleNamespace(finished=True, refused=None, started=True)
+    (st,) = node._monitor_diagnostics()
+    assert st.level == b'\x03' and 'at rest (trajectory finished): no excitation' in st.message
