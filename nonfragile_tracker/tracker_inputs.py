@@ -518,7 +518,7 @@ class TrackerInputs:
         # the odometry stamp is the latency predictor's time
         cmd = self.tracker.step(pose[0], pose[1], pose[2], ref,
                                 measured_speed=speed if math.isfinite(speed) else 0.0,
-                                stamp=s * 1e-9)
+                                stamp=s * 1e-9, stamp_ns=s)
         return Step(s, pose, ref, cmd)
 
     def _pose(self, odom: Any) -> tuple[float, float, float] | None:

@@ -40,6 +40,7 @@ import yaml
 from .. import topics
 from ..control.simulation.gains import gain_from_file_data
 from ..control.simulation.loop import Command, TrackerConfig
+from ..control.simulation.timing import WINDOW
 from ..files import node_key
 from ..msgconv import stamp_ns, tracker_config
 from ..resources import config_dir
@@ -58,7 +59,7 @@ __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
 TRACKER_DEFAULTS: dict[str, Any] = {
-    'K_shape': [2, 4], 'dt': 0.01, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
+    'K_shape': [2, 4], 'dt': 0.0, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
     'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
@@ -415,6 +416,17 @@ def _with_speed(e: ReplayEvent, v: float) -> ReplayEvent:
     return ReplayEvent(e.kind, e.receive_ns, e.topic, e.msgtype, raw, msg)
 
 
+def _prime_timing(inputs: TrackerInputs, before: list[ReplayEvent]) -> None:
+    """The odometry period the tracker had measured when the recording joined the run.
+
+    The tracker takes its step from the odometry stamps (``dt`` 0): a replay that starts at
+    its first recorded command feeds the stamps of the odometry before it to the period
+    estimate, as the running tracker had them (:mod:`control.simulation.timing`).
+    """
+    for e in before[-(WINDOW + 1):]:
+        inputs.tracker.timing.observe_ns(stamp_ns(e.msg.header.stamp))
+
+
 def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) -> float | None:
     """The compensator speed v at which the tracker's command speed is ``target_v``.
 
@@ -662,6 +674,7 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
         default = tl.before[id(od)]
         for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
             base = TrackerInputs(config, rules)
+            _prime_timing(base, odoms[:j])
             base.latest = tl.parts(s)
             if any(p is None for p in base.latest):
                 continue

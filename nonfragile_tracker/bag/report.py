@@ -669,7 +669,7 @@ def certificate_source(bag: str | os.PathLike[str],
                                                   certificate_from_parameters)
     if gains is not None:
         params = _tracker_section(Path(gains))
-        hold = float(params.get('dt', 0.01))
+        hold = float(params.get('dt', 0.0) or 0.0)   # 0: the odometry period (the check)
         cert = certificate_from_design(read_gain_design(gains), hold=hold, source=str(gains))
         if cert is None and params.get('certified_residual'):
             cert = certificate_from_parameters(params['certified_residual'],
@@ -686,7 +686,8 @@ def certificate_source(bag: str | os.PathLike[str],
     cert = certificate_from_parameters(params['certified_residual'],
                                        params.get('certified_lag', 0.0),
                                        params.get('certified_adapt_range'),
-                                       hold=float(params.get('dt', 0.01)), source=str(recorded))
+                                       hold=float(params.get('dt', 0.0) or 0.0),
+                                       source=str(recorded))
     return cert, params, str(recorded)
 
 
@@ -729,6 +730,9 @@ def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | No
         raise BagError(f'{bag}: the odometry carries no twist; the certificate check needs '
                        'twist.linear.x and twist.angular.z')
     P = float(params.get('predict_latency', 0.0))
+    if certificate is not None and not certificate.hold and o.t.size > 1:
+        # the tracker took its step from the odometry: its hold is the odometry period
+        certificate = replace(certificate, hold=float(np.median(np.diff(o.t))))
     notes = []
     if params.get('monitor_adapt'):
         notes.append('the run adapted predict_latency (monitor_adapt): checked against the '

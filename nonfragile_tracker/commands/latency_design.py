@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     print(summary)
     meta = {**res.metadata(), **record}
     # the certificate for the tracker's monitor (control.identification.monitor; the hold is
-    # the tracker's dt)
+    # the tracker's command period, its dt or the measured odometry period: not written)
     cert = certificate_from_design(meta, hold=0.0)
     if cert is not None:
         extra = {**extra, **cert.parameters()}

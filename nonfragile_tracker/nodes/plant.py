@@ -49,7 +49,7 @@ from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, ch
                      fill_pose, ns_to_stamp, require_at_least, run, settings_from)
 
 LATENCY_PARAMS = ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
-                  'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed')
+                  'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed', 'odom_jitter')
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
           read_only=True),
@@ -107,6 +107,9 @@ PARAMS = [
           'round(1/(odom_rate dt)) steps; 0 = every step', low=0.0, high=1e9, read_only=True),
     Param('odom_noise', [0.0, 0.0, 0.0], 'standard deviation of the odometry noise '
           '[x (m), y (m), yaw (rad)], Gaussian; 0 = exact', read_only=True),
+    Param('odom_jitter', 0.0, 'odometry jitter (s): each measurement is taken up to this '
+          'early or late (uniform over whole steps) and stamped with its true time; below '
+          'half the odometry period; 0 = none', low=0.0, high=1e3, read_only=True),
     Param('noise_seed', 0, 'seed of the odometry noise (numpy Generator); same seed, same '
           'noise', read_only=True),
     Param('cmd_latency_schedule', None, 'command latency that changes during the run: flat '

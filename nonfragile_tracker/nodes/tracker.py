@@ -27,11 +27,11 @@ measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
 the time the command acts (:mod:`control.simulation.predictor`; the tracker's *now* is the odom
 stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
 With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
-unknown) each command differs from the previous by at most the limit times ``dt`` and the
-predictor models the limits (:class:`control.simulation.loop.Tracker`).  Real
-time: a command per pose with the latest reference; if pose or reference is
-older than ``input_timeout`` the tracker publishes a stop (zero Twist), says so
-once, and re-initialises its compensator when fresh data returns.
+unknown) each command differs from the previous by at most the limit times the time since
+the previous one and the predictor models the limits
+(:class:`control.simulation.loop.Tracker`).  Real time: a command per pose with the latest
+reference; if pose or reference is older than ``input_timeout`` the tracker publishes a stop
+(zero Twist), says so once, and re-initialises its compensator when fresh data returns.
 
 Trajectories (:mod:`control.simulation.trajectory`): a nav_msgs/Path on ``trajectory``
 (transient-local; stamps give the times, all zero: a trapezoidal time law with
@@ -49,12 +49,19 @@ false`` the three reference topics are followed (real time: the built-in paths).
 Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
 go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
 ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``).
+
+Timing: the law's step comes from the odometry stamps (``dt: 0``, the default;
+:mod:`control.simulation.timing`): /diagnostics reports the measured ``odometry period``, a
+period that moves by more than 20 % (WARN once, logged) and a ``dt`` override that
+disagrees with it by more than 20 % (WARN, logged once), each with the numbers; a
+deadline miss is an odometry interval above 1.5 times the period; the certificate
+monitor's command hold is the measured period.
 """
 from __future__ import annotations
 
 import math
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -74,6 +81,7 @@ from ..control.identification.monitor import (Certificate, LatencyEstimate, Moni
                                               MonitorWorker, adapted_prediction,
                                               certificate_from_parameters, evaluate)
 from ..control.simulation.reference import RefSample
+from ..control.simulation.timing import period_disagreement
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
 from ..msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
 from ..robot import check_topic_name
@@ -91,8 +99,10 @@ PARAMS = [
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
           read_only=True),
     Param('K_shape', [2, 4], 'shape [rows, cols] of K', read_only=True),
-    Param('dt', 0.01, 'step of the compensator v\' = a (s); equals the plant step', low=1e-6,
-          high=10.0, read_only=True),
+    Param('dt', 0.0, 'step of the compensator v\' = a (s): 0 = from the odometry stamps (the '
+          'interval that passed, the measured period); > 0 = an override used whatever the '
+          'stamps say (reported on /diagnostics when it disagrees with the odometry)',
+          low=0.0, high=10.0, read_only=True),
     Param('max_linear_speed', 1.0, 'limit on |cmd_vel.linear.x| (m/s)', low=1e-9, high=1e3),
     Param('max_angular_speed', 2.0, 'limit on |cmd_vel.angular.z| (rad/s)', low=1e-9, high=1e3),
     Param('max_linear_accel', 0.0, 'the base\'s limit on |dv/dt| (m/s^2): commands change by '
@@ -198,7 +208,7 @@ MONITOR_PARAMS = [
           'estimate (minus its uncertainty), clamped to certified_adapt_range; needs the '
           'predictor (predict_latency > 0); off: the commands never depend on the monitor'),
     Param('certified_residual', None, 'certificate: the delay range [h_min, H] (s) the gain '
-          'is certified for (latency - predict_latency + the hold of dt; written by '
+          'is certified for (latency - predict_latency + the hold of a command; written by '
           'latency-design); unset: the monitor reports the certificate as unknown',
           type=ParameterType.PARAMETER_DOUBLE_ARRAY),
     Param('certified_lag', 0.0, 'certificate: actuator time constant the certificate '
@@ -358,6 +368,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.saturated = self.stale_stops = self.deadline_misses = 0
         self._rejected_reported = 0
         self._odom_intervals, self._odom_interval_sum = 0, 0.0
+        self._dt_disagreement = False      # a dt override disagreeing with the odometry (said)
         self._last_odom_rx = self._last_ref_rx = 0
         self.base_frame = cfg.base_frame
         if cfg.stamped_cmd_vel:
@@ -464,7 +475,16 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 pred.cmd_latency = P = new_p
         if self.inputs.stopped:
             est = LatencyEstimate(False, 'inputs stale: the tracker has stopped the robot')
-        verdict = evaluate(est, m.certificate, P, m.settings, adapting=adapting)
+        f = self.inputs.follower
+        if f is not None and (f.finished or f.refused or not f.started):
+            # data without excitation says nothing about the latency: STALE, never WARN
+            est = LatencyEstimate(False, 'at rest (' + ('trajectory finished' if f.finished
+                                  else 'waiting for the trajectory\'s start' if not f.refused
+                                  else 'trajectory refused') + '): no excitation')
+        cert = m.certificate
+        if cert is not None and not self.tracker.config.dt and self.tracker.hold:
+            cert = replace(cert, hold=self.tracker.hold)     # the measured command period
+        verdict = evaluate(est, cert, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
             self._monitor_last_level = verdict.level
             self.log({1: 'warn', 2: 'error'}.get(verdict.level, 'info'),
@@ -637,7 +657,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             gap = (s - last) * 1e-9
             self._odom_intervals += 1
             self._odom_interval_sum += gap
-            if gap > 1.5 * self.tracker.config.dt:
+            period = self.tracker.timing.period       # measured, whatever dt says
+            if period and gap > 1.5 * period:
                 self.deadline_misses += 1
         if self._retimed and self.pub_cmd.get_subscription_count() >= \
                 self.config.lockstep_subscribers:
@@ -811,10 +832,20 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             level = max(level, DiagnosticStatus.WARN)
             msgs.append(f'{self.inputs.rejected - self._rejected_reported} input(s) rejected')
         self._rejected_reported = self.inputs.rejected
+        timing = self._timing_report()
+        if timing:
+            level = max(level, DiagnosticStatus.WARN)
+            msgs.extend(timing)
         st = DiagnosticStatus(level=level, name=f'{self.get_name()}: tracking',
                               message='; '.join(msgs),
                               hardware_id=self.get_fully_qualified_name())
-        vals = {'loop period (s)': f'{period:.6f}', 'deadline misses': self.deadline_misses,
+        measured = self.tracker.timing.period
+        dt = self.tracker.config.dt
+        vals = {'loop period (s)': f'{period:.6f}',
+                'odometry period (s)': f'{measured:.6f}' if measured else 'unknown',
+                'tracker step (s)': f'{dt:g} (dt override)' if dt else
+                'from the odometry stamps (dt 0)',
+                'deadline misses': self.deadline_misses,
                 'odom age (s)': f'{odom_age:.3f}',
                 'reference age (s)': 'not used (own trajectory)' if f else f'{ref_age:.3f}',
                 'commands': self.commands,
@@ -830,6 +861,28 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st, *self._monitor_diagnostics()]
         self.pub_diag.publish(arr)
+
+    def _timing_report(self) -> list[str]:
+        """What is wrong with the timing: a changed odometry rate, a disagreeing dt override.
+
+        Each is logged once when it starts (:mod:`control.simulation.timing`); a changed rate
+        is reported in the diagnostics that follow it, a disagreement while it lasts.
+        """
+        timing, notes = self.tracker.timing, []
+        change = timing.rate_change()
+        if change is not None:
+            before, now = change
+            msg = (f'odometry period changed from {before:.4f} s ({1 / before:.1f} Hz) to '
+                   f'{now:.4f} s ({1 / now:.1f} Hz)')
+            self.log('warn', msg)
+            notes.append(msg)
+        wrong = period_disagreement(self.tracker.config.dt, timing.period)
+        if wrong is not None:
+            if not self._dt_disagreement:
+                self.log('warn', wrong)
+            notes.append(wrong)
+        self._dt_disagreement = wrong is not None
+        return notes
 
     def _watchdog(self) -> None:
         """Real time: stop while an input is stale (:func:`tracker_inputs.stale_inputs`)."""

@@ -152,7 +152,7 @@ def test_replay_cli(tmp_path, capsys):
     assert cli.main(['bag', 'replay', str(GOLDEN), *GAINS, '--expected', str(delta2),
                      '--max-diffs', '2']) == 1
     out = capsys.readouterr().out
-    assert 'cmd_vel[0] linear.x: expected' in out and '... and' in out
+    assert 'cmd_vel[1] linear.x: expected' in out and '... and' in out   # [0]: equal
     (tmp_path / 'bad.yaml').write_text('tracker: {ros__parameters: {K: [1.0, 2.0]}}\n')
     assert cli.main(['bag', 'replay', str(GOLDEN), '--gains', str(tmp_path / 'bad.yaml')]) == 2
     assert 'K has 2 entries' in capsys.readouterr().err

@@ -520,7 +520,10 @@ def test_golden_lockstep_bag_of_our_plant_has_no_latency():
     data = read_motion(bag)
     assert data.cmd_time == 'receive time' and data.odom_delay_s == 0.0
     res = identify_latency(data.commands, data.odometry, max_latency_s=0.2, bootstrap=50)
-    assert res.latency_s < STEP and res.latency_low_s == 0.0
+    # (since the tracker's first command is the speed in force - its step from the odometry
+    # stamps, issue 30 - the bag has no speed step at t = 0 and the interval's low end
+    # lies a fraction of a step above zero: [1.7, 9.1] ms)
+    assert res.latency_s < STEP and res.latency_low_s < STEP / 2
     assert res.tau_v_s < STEP and res.tau_w_s < STEP
     assert res.odom_rate_hz == pytest.approx(100.0)
     assert res.gain_v == pytest.approx(1.0, abs=0.01) and res.gain_w == pytest.approx(1.0, abs=0.01)

@@ -1,6 +1,7 @@
 """Plant latency model (command delay, actuator lag, acceleration limits, odometry latency,
 rate and noise) against closed forms, and the tracker's latency predictor (ROS-free)."""
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -241,10 +242,19 @@ def test_predictor_with_exact_knowledge_removes_the_latency_error():
     assert off < 4e-3 and off < without / 3
 
 
-def test_simulation_rejects_a_tracker_step_that_is_not_the_odometry_period():
+def test_simulation_reports_a_tracker_step_that_is_not_the_odometry_period():
+    """A dt override that disagrees with the odometry is run as set and reported (as the
+    node reports it on /diagnostics); dt = 0 (the default) and an agreeing one are not."""
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
-    with pytest.raises(ValueError, match='must equal the odometry period'):
-        simulate_tracking(PlantConfig(odom_rate=50.0), TrackerConfig(K=K, dt=0.01), circle(), 10)
+    with pytest.warns(UserWarning, match=r'dt = 0.01 s is set but the odometry period is '
+                                         r'0.0200 s \(50.0 Hz\)'):
+        run = simulate_tracking(PlantConfig(odom_rate=50.0), TrackerConfig(K=K, dt=0.01),
+                                circle(), 10)
+    assert run.t.size == 11
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        simulate_tracking(PlantConfig(odom_rate=50.0), TrackerConfig(K=K), circle(), 10)
+        simulate_tracking(PlantConfig(odom_rate=50.0), TrackerConfig(K=K, dt=0.02), circle(), 10)
 
 
 def test_predicting_tracker_survives_garbage_and_stays_bounded():

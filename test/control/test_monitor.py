@@ -241,3 +241,50 @@ def test_plant_latency_schedule():
 def test_plant_latency_schedule_is_validated(bad, match):
     with pytest.raises(LoopConfigError, match=match):
         PlantConfig(dt=DT, cmd_latency_schedule=bad)
+
+
+def at_rest_after(moving, L=0.1, lag=0.04, duration=12.0, seed=0):
+    """Random steps for ``moving`` s, then zero commands (the robot stands still)."""
+    rng = np.random.default_rng(seed)
+    p = UnicyclePlant(PlantConfig(dt=DT, cmd_latency=L, lag_v=lag, lag_w=lag, odom_rate=50.0))
+    cmds, odom = [], []
+    v = w = 0.0
+    for k in range(int(round(duration / DT))):
+        if k % 30 == 0:
+            v, w = rng.uniform(-0.5, 0.5), rng.uniform(-1.5, 1.5)
+        if k * DT >= moving:
+            v = w = 0.0
+        m = p.odometry()
+        if m is not None:
+            odom.append((step_time(m.step, DT), m.v + 0.003 * rng.standard_normal(),
+                         m.w + 0.01 * rng.standard_normal()))
+        if k % 2 == 0:
+            p.command(v, w)
+            cmds.append((step_time(k, DT), v, w))
+        p.advance()
+    return np.array(cmds).T, np.array(odom).T
+
+
+def test_a_robot_at_rest_is_stale_never_warn():
+    """Issue 30 item 5: after the motion ends and the robot stands still, every window is
+    OK (its latest half still moving) or STALE (at rest: no excitation), never WARN or
+    ERROR; from half a window after the stop the reason says there is no excitation."""
+    c, o = at_rest_after(6.0)
+    cert = Certificate((0.0, 0.15), 0.041, None, hold=0.02)
+    s = MonitorSettings()
+    seen = {}
+    for end in np.arange(6.0, 12.0, 0.25):
+        est = estimate_latency(*c[:, c[0] <= end], *o[:, o[0] <= end], s)
+        st = evaluate(est, cert, 0.0, s)
+        assert st.level in (OK, STALE), (end, st.message)
+        seen[round(float(end), 2)] = st
+        if 6.0 + 0.5 * s.window + 0.2 <= end < 6.0 + s.window:   # latest half at rest
+            assert st.level == STALE and 'no excitation in the last 2 s' in st.message
+        elif end >= 6.0 + s.window:                 # the whole window at rest
+            assert st.level == STALE and 'command varies too little' in st.message
+    assert seen[6.0].level == OK                    # while it moved: an estimate
+    # standing still from the start: commands all zero
+    z = c.copy()
+    z[1:] = 0.0
+    st = evaluate(estimate_latency(*z, *o, s), cert, 0.0, s)
+    assert st.level == STALE

@@ -84,8 +84,9 @@ def test_every_node_has_its_generated_parameter_table():
     assert {'monitor', 'monitor_window', 'monitor_adapt', 'certified_residual',
             'certified_lag'} <= {r[0] for r in rows}
     by_name = {r[0]: r for r in rows}
-    # type, default, range, read-only as declared (tracker.PARAMS: dt low=1e-6, high=10)
-    assert by_name['dt'][1:5] == ['double', '0.01', '[1e-06, 10]', 'yes']
+    # type, default, range, read-only as declared (tracker.PARAMS: dt 0 = from the odometry
+    # stamps, low=0, high=10)
+    assert by_name['dt'][1:5] == ['double', '0.0', '[0, 10]', 'yes']
     assert by_name['K'][1:3] == ['double[]', '(none: from a file or -p)']
     assert by_name['K_shape'][1:5] == ['integer[]', '[2, 4]', '', 'yes']
 

@@ -10,7 +10,9 @@ sliding window and compares it with the certificate.
 Estimator (:func:`estimate_latency`): the identification's model (first order plus dead
 time per channel) fitted by a small grid search over the window, the samples it cannot
 explain gated out (saturated commands, binding acceleration limits, odometry gaps); no
-estimate (STALE, with the reason) when too little is left.  Status (:func:`evaluate`): OK,
+estimate (STALE, with the reason) when too little is left, or when the commands have not
+varied over the window's latest half (data without excitation - a robot at rest after its
+trajectory - is STALE, never WARN or ERROR).  Status (:func:`evaluate`): OK,
 WARN, ERROR or STALE against the certified latency interval; adaptation
 (:func:`adapted_prediction`) moves the predictor's latency to the estimate.  The fit, the
 gates and the status are in the documentation: doc/theory.md, section "Latency monitor"
@@ -249,10 +251,15 @@ def estimate_latency(cmd_t: Any, cmd_v: Any, cmd_w: Any, odom_t: Any, odom_v: An
     r2s: list[float] = []
     fracs: list[float] = []
     reasons = []
+    recent = t >= end - 0.5 * s.window
     for c, name in enumerate(('v', 'w')):
         fitted = _channel_profile(s, grid, cu[c][grid.ci], y[c], masks[c], c, name)
         if isinstance(fitted, str):
             reasons.append(fitted)
+            continue
+        quiet = _quiet(s, grid, cu[c][grid.ci], masks[c] & recent, c, name)
+        if quiet:
+            reasons.append(quiet)
             continue
         used.append(name)
         costs.append(fitted[0])
@@ -353,6 +360,22 @@ class _Grid:
         base_idx = np.floor((t - g0) / res + 1e-9).astype(int)   # grid cell of each sample
         shift = np.arange(nL)[:, None]
         return cls(res, g0, grid_n, ci, nL, base_idx, base_idx[None, :] - shift)
+
+
+def _quiet(s: MonitorSettings, grid: _Grid, u: np.ndarray, recent: np.ndarray, c: int,
+           name: str) -> str:
+    """Why a channel without excitation in the window's latest half is not used ('' if it has).
+
+    Data without excitation (the robot at rest, constant commands) says nothing about the
+    latency or the lag: a window whose motion ended half a window ago or more is not
+    fitted, so standing still gives STALE, never a WARN from a lag fitted on the stop.
+    """
+    vals = u[grid.base_idx[recent]]
+    std = float(np.std(vals)) if vals.size else 0.0
+    if std < s.min_excitation[c]:
+        return (f'{name}: no excitation in the last {0.5 * s.window:g} s of the window '
+                f'(command std {std:.3g} < {s.min_excitation[c]:g}: at rest or constant)')
+    return ''
 
 
 def _channel_profile(s: MonitorSettings, grid: _Grid, u: np.ndarray, yc: np.ndarray,

@@ -270,7 +270,8 @@ def record_case(spec: dict[str, Any], *, seed: int = 1, duration: float = 30.0) 
     plant = PlantConfig(noise_seed=seed, **plant_kw)
     d = spec['drive']
     if 'gains' in d:
-        tracker = TrackerConfig(K=tuple(map(tuple, read_gain_file(d['gains']))), dt=d['dt'],
+        tracker = TrackerConfig(K=tuple(map(tuple, read_gain_file(d['gains']))),
+                                dt=d.get('dt', 0.0),
                                 max_angular_speed=d.get('max_angular_speed', 2.0))
         path = make_path(d['path'], radius=d['radius'], rate=d['rate'])
         return record_tracking(plant, tracker, path, duration)

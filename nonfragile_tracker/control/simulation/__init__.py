@@ -1,7 +1,8 @@
 """Simulation: the step functions the nodes run, and the in-process loops over them.
 
 The unicycle and its linearization (:mod:`.model`), the actuator, sensor and latency
-models (:mod:`.actuator`, :mod:`.sensors`, :mod:`.predictor`), paths and timed
+models (:mod:`.actuator`, :mod:`.sensors`, :mod:`.predictor`), the tracker's step from the
+odometry stamps (:mod:`.timing`), paths and timed
 trajectories within limits (:mod:`.reference`, :mod:`.trajectory`, :mod:`.limits`), the
 plant and tracker step functions (:mod:`.loop`, :mod:`.follow`) and the gain file they
 read (:mod:`.gains`), and the loops that run them in process, one case or many at once

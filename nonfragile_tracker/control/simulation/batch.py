@@ -23,8 +23,10 @@ value):
   (``S = 1``: constant; ``S = 2``: periodic switching; ``S`` large with random
   ``Delta``: random time-varying, see :func:`sample_deltas`);
 * command latency, actuator lag and acceleration limits of ``v`` and ``w``;
-* odometry latency, rate (the tracker's period is the odometry period) and noise
-  (the per-case seed draws the same sequence as :class:`control.simulation.sensors.Odometer`);
+* odometry latency, rate (the tracker's step is the odometry period, as the tracker
+  measures it from the stamps; a ``dt`` override is used as set and warned about when it
+  disagrees, as the tracker node reports it) and noise (the per-case seed draws the same
+  sequence as :class:`control.simulation.sensors.Odometer`);
 * initial pose and speed;
 * the reference: a shared path (any object with ``sample(t) -> RefSample``, e.g. a
   :class:`control.simulation.trajectory.Trajectory`, sampled once per step) or per-case
@@ -41,14 +43,17 @@ Per-case metrics are accumulated while running (no ``N x steps`` arrays unless
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
 
-from .loop import PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time_ns
+from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time,
+                   step_time_ns)
 from .reference import PATHS, Path
 from .errors import BatchError
+from .timing import period_disagreement
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
            'perturbation_schedule', 'sample_deltas', 'simulate_delay_loop_batch',
@@ -201,7 +206,7 @@ class BatchCases:
             raise BatchError(f'case {i} has a time-varying perturbation; a single run has a '
                              'constant one')
         tc = replace(tracker, K=tuple(map(tuple, s.K[i].tolist())),
-                     perturbation=tuple(map(tuple, P[0].tolist())), dt=float(s.tdt[i]))
+                     perturbation=tuple(map(tuple, P[0].tolist())))
         return pc, tc
 
 
@@ -242,7 +247,7 @@ class _Settings:
     cmd_d: np.ndarray      # (N,) int steps
     odom_d: np.ndarray
     period: np.ndarray
-    tdt: np.ndarray        # tracker dt per case
+    tdt: np.ndarray        # the tracker's step per case (its dt, else the odometry period)
     comp_n: np.ndarray     # compensation history length per case
 
     def __getattr__(self, name: str) -> np.ndarray:
@@ -257,8 +262,9 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise BatchError(f'number of cases must be an integer >= 1, got {n!r}')
     if not plant.regular:
-        raise BatchError('the batch simulation does not model latency jitter, stalls or a '
-                         'latency schedule (cmd_latency_jitter, stalls, cmd_latency_schedule); '
+        raise BatchError('the batch simulation does not model latency or odometry jitter, '
+                         'stalls or a latency schedule (cmd_latency_jitter, odom_jitter, stalls, '
+                         'cmd_latency_schedule); '
                          'run those cases with control.simulation.simulate.run_loop')
     vals = {}
     for name in _PER_CASE:
@@ -309,11 +315,18 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> _
                             np.int64)
     except ValueError as exc:
         raise BatchError(f'odom_rate: {exc}') from None
-    base_period = odometry_period_steps(plant.odom_rate, dt)[0]
-    tdt = np.where(period == base_period, tracker.dt, period * dt)
-    if np.any(np.abs(tdt - period * dt) > 1e-12 * tdt):
-        raise BatchError(f'tracker dt ({tracker.dt}) must equal the odometry period '
-                         f'({base_period} x plant dt {dt}) in lockstep')
+    # the tracker's step: its dt override, else the odometry period of each case (the
+    # interval between stamps, in whole nanoseconds as the tracker measures it)
+    odom_period = _per_value(lambda p: step_time(int(p), dt), period.astype(float), float)
+    if tracker.dt > 0:
+        tdt = np.full(n, tracker.dt)
+        for p in np.unique(odom_period):
+            msg = period_disagreement(tracker.dt, float(p))
+            if msg is not None:
+                warnings.warn(msg, UserWarning, stacklevel=3)
+                break
+    else:
+        tdt = odom_period
     if tracker.delay_compensation:
         comp_n = _per_value(lambda t: max(delay_steps(tracker.tau, t)[0], 1), tdt, np.int64)
     else:
@@ -650,7 +663,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
                             (tracker.max_linear_speed, tracker.max_angular_speed,
                              tracker.min_speed),
                             (delay.Nd, delay.ax, delay.ay) if delay.on else None,
-                            s.cmd_d if np.any(s.cmd_d) else None)
+                            s.cmd_d if np.any(s.cmd_d) else None, tracker.dt == 0)
             pos, th, err = _ideal_loop(run, body.pos, body.th, body.pv, metrics, trace)
             finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
         else:
@@ -874,6 +887,9 @@ class _BatchTracker:
         self.vmax, self.wmax = tracker.max_linear_speed, tracker.max_angular_speed
         self.vmin = tracker.min_speed
         self.exact, self.recur, self.ideal_odom, self.cblk = exact, recur, ideal_odom, cblk
+        # the step from the odometry: no interval known at a case's first command, whose
+        # speed is then the measured one (control.simulation.loop.Tracker)
+        self.first_hold_zero = tracker.dt == 0
         self.comp = tracker.delay_compensation
         if self.comp:
             Atc = np.array(tracker.A_tau, dtype=float)
@@ -898,9 +914,11 @@ class _BatchTracker:
         n = self.n
         qpos, qvel, qacc = ref
         vmax, wmax, vmin = self.vmax, self.wmax, self.vmin
+        first = None
         if not self.all_started:
             new = ~self.started if due is True else (~self.started & due)
             if new.any():
+                first = new if self.first_hold_zero else None
                 v_init = np.where(np.isfinite(mv), mv, 0.0)
                 v_init = np.maximum(-vmax, np.minimum(vmax, v_init))
                 self.tv = np.where(new, v_init, self.tv)
@@ -959,6 +977,8 @@ class _BatchTracker:
         np.minimum(cv, vmax, out=cv)
         v_next = cv.copy()
         cv += v
+        if first is not None:                     # a first command: no ramp, the speed
+            cv[first] = v[first] + v[first]
         cv *= 0.5                                 # (v + v_next) / 2
         # the sum is finite unless a value is nan (all are clipped)
         if math.isfinite(np.add.reduce(cmd, axis=None)):
@@ -1214,7 +1234,8 @@ class _IdealRun:
     ``limits`` is ``(max_linear_speed, max_angular_speed, min_speed)`` of the tracker
     (at the shared period ``tdt``), ``delay`` ``None`` or ``(Nd, ax, ay)``
     (``d = (ax x, ay y)(t - tau)``), ``cmd_d`` the command latencies in steps (``None``:
-    none).
+    none); ``first_hold_zero``: the tracker takes its step from the odometry, so its first
+    command (step 0) has no ramp (the measured speed).
     """
 
     steps: int
@@ -1225,6 +1246,7 @@ class _IdealRun:
     limits: tuple[float, float, float]
     delay: tuple[int, float, float] | None
     cmd_d: np.ndarray | None
+    first_hold_zero: bool = False
 
 
 def _ideal_loop(run: _IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
@@ -1379,6 +1401,8 @@ def _ideal_loop(run: _IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarra
         mv, mw = minred(absx, axis=1).tolist()      # nan if any is nan
         tvn[...] = cv
         cv += v
+        if k == 0 and run.first_hold_zero:         # the first command: no ramp
+            add(v, v, out=cv)
         if mv == mv and mw == mw:
             tv, tvn = tvn, tv
             careful = not (mv >= vmin)

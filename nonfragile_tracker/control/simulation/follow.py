@@ -20,9 +20,9 @@ from typing import Any
 
 
 from .limits import Limits, within_limits
-from .loop import Command, PlantConfig, Tracker, TrackerConfig, odometry_period_steps, step_time_ns
+from .loop import Command, PlantConfig, Tracker, TrackerConfig, step_time_ns
 from .reference import RefSample
-from .simulate import TrackingRun, run_loop
+from .simulate import TrackingRun, report_override, run_loop
 from .trajectory import Trajectory
 
 __all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors', 'trajectory_time',
@@ -297,10 +297,7 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     """
     if limits is not None:
         trajectory = within_limits(trajectory, limits)[0]
-    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
-    if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
-        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
-                         f'({period} x plant dt {plant_config.dt}) in lockstep')
+    report_override(plant_config, tracker_config)
     follower = Follower(Tracker(tracker_config), trajectory, rest_speed,
                         start_tolerance=start_tolerance, max_start_distance=max_start_distance)
     dt = plant_config.dt

@@ -28,9 +28,10 @@ import numpy as np
 
 from .actuator import ActuatorModel, actuate
 from .model import xi_from_state
-from .predictor import LatencyPredictor, invert_lag
+from .predictor import SUBSTEP, LatencyPredictor, invert_lag
 from .reference import RefSample
 from .sensors import Odometer, OdometryModel, OdometrySample
+from .timing import PeriodEstimator
 from ..validate import as_finite_float, as_matrix
 from .errors import LoopConfigError
 
@@ -203,7 +204,9 @@ class PlantConfig:
     ``max_linear_accel`` (m/s^2), ``max_angular_accel`` (rad/s^2) (0 = unlimited),
     ``odom_latency`` (s: the measurement of step ``k`` is published at ``k + d`` with
     the stamp of step ``k``), ``odom_rate`` (Hz, 0 = every step), ``odom_noise``
-    (standard deviations of x, y (m) and yaw (rad)) and ``noise_seed``.
+    (standard deviations of x, y (m) and yaw (rad)), ``noise_seed`` and ``odom_jitter``
+    (s: each odometry measurement is taken up to this early or late, uniformly over the
+    whole steps within it, and stamped with that true time; below half the odometry period).
     ``cmd_latency_schedule`` (flat ``[t_1, L_1, t_2, L_2, ...]``, times increasing, s):
     from ``t_i`` on a command received acts ``L_i`` later (``cmd_latency`` before
     ``t_1``); a command that would act no later than one received before it replaces
@@ -237,6 +240,7 @@ class PlantConfig:
     cmd_latency_schedule: tuple[float, ...] = ()
     cmd_latency_jitter: float = 0.0
     stalls: tuple[tuple[float, float], ...] = ()
+    odom_jitter: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
@@ -246,14 +250,18 @@ class PlantConfig:
             if not math.isfinite(getattr(self, name)):
                 raise LoopConfigError(f'{name} must be finite, got {getattr(self, name)!r}')
         for name in ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
-                     'odom_latency', 'odom_rate', 'cmd_latency_jitter'):
+                     'odom_latency', 'odom_rate', 'cmd_latency_jitter', 'odom_jitter'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
-        for name in ('cmd_latency', 'odom_latency', 'cmd_latency_jitter'):
+        for name in ('cmd_latency', 'odom_latency', 'cmd_latency_jitter', 'odom_jitter'):
             try:
                 delay_steps(getattr(self, name), self.dt)
             except LoopConfigError as exc:
                 raise LoopConfigError(f'{name}: {exc}') from None
-        odometry_period_steps(self.odom_rate, self.dt)
+        period = odometry_period_steps(self.odom_rate, self.dt)[0]
+        if 2 * delay_steps(self.odom_jitter, self.dt)[0] >= period:
+            raise LoopConfigError(f'odom_jitter ({self.odom_jitter} s) must be below half the '
+                                  f'odometry period ({period * self.dt:g} s) so that the '
+                                  'measurements stay in order; use a smaller jitter or a finer dt')
         noise = tuple(self.odom_noise) if not isinstance(self.odom_noise, str) else ()
         if len(noise) != 3:
             raise LoopConfigError('odom_noise needs 3 standard deviations [x (m), y (m), '
@@ -269,8 +277,9 @@ class PlantConfig:
 
     @property
     def regular(self) -> bool:
-        """True without jitter, stalls or a latency schedule: what the batch simulation models."""
-        return not (self.cmd_latency_jitter or self.stalls or self.cmd_latency_schedule)
+        """True without jitter (command or odometry), stalls or a latency schedule (batch's)."""
+        return not (self.cmd_latency_jitter or self.stalls or self.cmd_latency_schedule
+                    or self.odom_jitter)
 
     @property
     def stall_steps(self) -> tuple[tuple[int, int], ...]:
@@ -305,7 +314,8 @@ class PlantConfig:
         """The odometry model (latency, period, noise, seed) of this configuration."""
         return OdometryModel(delay_steps(self.odom_latency, self.dt)[0],
                              odometry_period_steps(self.odom_rate, self.dt)[0],
-                             self.odom_noise, int(self.noise_seed))
+                             self.odom_noise, int(self.noise_seed),
+                             delay_steps(self.odom_jitter, self.dt)[0])
 
 
 def _stalls(value: Any) -> tuple[tuple[float, float], ...]:
@@ -505,13 +515,12 @@ class UnicyclePlant:
 # ---------------------------------------------------------------------------------------------
 # Tracker
 
-def _toward(cmd: float, prev: float, step: float) -> float:
-    """``cmd`` moved at most ``step`` away from ``prev`` (``step = 0``: unchanged)."""
-    if step > 0.0:
-        if cmd > prev + step:
-            return prev + step
-        if cmd < prev - step:
-            return prev - step
+def _within(cmd: float, prev: float, step: float) -> float:
+    """``cmd`` moved at most ``step`` (>= 0) away from ``prev`` (``step = 0``: ``prev``)."""
+    if cmd > prev + step:
+        return prev + step
+    if cmd < prev - step:
+        return prev - step
     return cmd
 
 
@@ -578,10 +587,15 @@ class TrackerConfig:
     ``max_linear_accel`` (m/s^2) and ``max_angular_accel`` (rad/s^2) are the base's
     acceleration limits (0 = unknown, off): the tracker rate-limits its commands to them
     and its predictor models them (see :class:`Tracker`).
+
+    ``dt`` (s): 0 (the default) takes the tracker's step from the odometry stamps (the
+    interval that passed, the measured period: :mod:`control.simulation.timing`); a value
+    > 0 is an override, a constant step used whatever the stamps say (the behaviour before
+    the step came from the stamps; a node reports when it disagrees with the odometry).
     """
 
     K: tuple[tuple[float, ...], ...]
-    dt: float = 0.01
+    dt: float = 0.0
     max_linear_speed: float = 1.0
     max_angular_speed: float = 2.0
     min_speed: float = 1e-3
@@ -607,7 +621,13 @@ class TrackerConfig:
                 raise LoopConfigError('perturbation E D F must be a finite 2x4 matrix, got '
                                       f'{np.asarray(self.perturbation)!r}')
             object.__setattr__(self, 'perturbation', tuple(tuple(map(float, r)) for r in P))
-        for name in ('dt', 'max_linear_speed', 'max_angular_speed', 'min_speed'):
+        dt = self.dt
+        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) \
+                or dt < 0:
+            raise LoopConfigError(f'dt must be a finite number >= 0 s (0: the step from the '
+                                  f'odometry stamps), got {dt!r}')
+        object.__setattr__(self, 'dt', float(dt))
+        for name in ('max_linear_speed', 'max_angular_speed', 'min_speed'):
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, float)) \
                     or not math.isfinite(val) or val <= 0:
@@ -620,7 +640,7 @@ class TrackerConfig:
                 raise LoopConfigError('delay_compensation needs A_tau')
             object.__setattr__(self, 'A_tau', tuple(map(tuple, as_matrix(
                 self.A_tau, 'A_tau', (4, 4), error=LoopConfigError).tolist())))
-            delay_steps(self.tau, self.dt)
+            _nonneg('tau', self.tau)
         for name in ('predict_latency', 'predict_odom_latency', 'predict_lag_v',
                      'predict_lag_w', 'max_linear_accel', 'max_angular_accel'):
             object.__setattr__(self, name, _nonneg(name, getattr(self, name)))
@@ -660,9 +680,23 @@ class Tracker:
     pose ``(x, y, th)`` and the reference sample: ``a = u1 cos th + u2 sin th``,
     ``w = (u2 cos th - u1 sin th) / v_f`` where ``v_f`` is ``v`` floored to
     ``|v_f| >= min_speed`` (keeping its sign; ``+`` at 0), ``w`` is clipped to
-    ``max_angular_speed``, ``v`` advances to ``clip(v + a dt)`` and the command
-    speed is the mean of the ramp, ``(v_k + v_{k+1}) / 2``, within
-    ``max_linear_speed``.
+    ``max_angular_speed`` and the command speed is the mean of the ramp over the
+    coming interval ``h``, ``(v_k + clip(v_k + a_k h)) / 2``, within ``max_linear_speed``.
+
+    Timing (:mod:`control.simulation.timing`; ``config.dt = 0``, the default): the time of a
+    step is its ``stamp`` (default ``ref.t``).  The compensator integrates over the
+    interval that passed, ``v_k = clip(v_{k-1} + a_{k-1} (t_k - t_{k-1}))`` (intervals in
+    whole nanoseconds, as stamps are; a repeated or earlier stamp integrates nothing), and
+    the coming interval ``h`` is the measured odometry period (the median of the recent
+    intervals, robust to jitter, dropped and bunched messages).  First step of a run (after
+    :meth:`reset`, the compensator starts from the measured speed): its interval that
+    passed is not used; before any interval is known (the tracker's first step) ``h = 0``:
+    the command speed is the measured speed, no lag inversion, and with acceleration limits
+    the command is the start state ``(v_0, 0)``.  ``config.dt > 0`` overrides both the
+    interval that passed and ``h`` with that constant at every step (the tracker before it
+    took its step from the stamps); with a constant period equal to it the two agree after
+    the first step.  :attr:`timing` measures the period either way (a node reports a rate
+    change or a disagreeing override).
 
     With ``delay_compensation`` the tracker follows the *delay-consistent*
     reference ``xi*`` instead of ``xi_d`` (see :meth:`_compensated_reference`), so
@@ -675,7 +709,7 @@ class Tracker:
     commands already sent and the assumed actuator lag, and the reference by the
     reference at ``t_act``; the law above is evaluated there.  With a time constant
     the command is the one that takes the predicted actual speed to the law's value at
-    the end of the command interval ``dt`` (:func:`control.simulation.predictor.invert_lag`: the
+    the end of the command interval ``h`` (:func:`control.simulation.predictor.invert_lag`: the
     compensator's next speed for ``v``, ``w`` itself for ``w``).  The compensator speed
     ``v`` is the speed at ``t_act``.  With every ``predict_*`` at 0 the law is
     today's, operation for operation.
@@ -683,9 +717,10 @@ class Tracker:
     Acceleration limits (``max_linear_accel``, ``max_angular_accel``; 0 = off, the law
     above operation for operation): the compensator's acceleration ``a`` is clipped to
     ``max_linear_accel`` and each command differs from the previous one sent by at most
-    the limit times ``dt`` (the first from the measured speed and ``w = 0``, the state
-    the predictor starts from); a clipped step counts as ``saturated``.  The predictor's
-    actuator model has the same limits, so it predicts the speeds the base can reach.
+    the limit times the interval that passed (the first after a reset from the measured
+    speed and ``w = 0``, the state the predictor starts from, by the limit times ``h``);
+    a clipped step counts as ``saturated``.  The predictor's actuator model has the same
+    limits, so it predicts the speeds the base can reach.
     """
 
     def __init__(self, config: TrackerConfig):
@@ -698,21 +733,28 @@ class Tracker:
         """
         self.config = config
         self.v: float | None = None
+        #: The odometry period and the interval of each step (from the stamps).
+        self.timing = PeriodEstimator()
         self._ref_hist: deque[Any] | None = None
         if config.delay_compensation:
-            n = delay_steps(config.tau, config.dt)[0]
-            self._ref_hist = deque(maxlen=max(n, 1))
+            self._ref_hist = deque()
         self.predictor: LatencyPredictor | None = None
         if config.predicts:
             self.predictor = LatencyPredictor(
                 config.predict_latency, config.predict_odom_latency,
                 ActuatorModel(config.predict_lag_v, config.predict_lag_w,
-                              config.max_linear_accel, config.max_angular_accel), config.dt)
+                              config.max_linear_accel, config.max_angular_accel),
+                config.dt or SUBSTEP)
         #: The last command sent (v, w), for the rate limit; None until the first.
         self._last_cmd: tuple[float, float] | None = None
+        #: ``(v, a, h)`` of the previous step: the compensator's ramp to re-integrate over
+        #: the interval that passed (None: nothing to integrate).
+        self._ramp: tuple[float, float, float] | None = None
 
     def reset(self, v: float | None = None) -> None:
         """Forget the compensator state (re-initialised from the next measured speed).
+
+        The measured odometry period (:attr:`timing`) is kept: the rate is the stream's.
 
         Parameters
         ----------
@@ -722,17 +764,26 @@ class Tracker:
         """
         self.v = v
         self._last_cmd = None
+        self._ramp = None
         if self._ref_hist is not None:
             self._ref_hist.clear()
         if self.predictor is not None:
             self.predictor.reset()
 
+    @property
+    def hold(self) -> float:
+        """The coming interval ``h`` (s): ``dt`` if set, else the measured period (0: unknown)."""
+        return self.config.dt or (self.timing.period or 0.0)
+
     def step(self, x: float, y: float, th: float, ref: RefSample,
-             measured_speed: float | None = None, stamp: float | None = None) -> Command:
+             measured_speed: float | None = None, stamp: float | None = None,
+             stamp_ns: int | None = None) -> Command:
         """One command from a measured pose and a reference sample.
 
         The pose ``(x, y, th)`` is measured at ``stamp`` (s; default ``ref.t``); the
-        reference sample may be of any time (the predictor extrapolates it).
+        reference sample may be of any time (the predictor extrapolates it).  ``stamp_ns``
+        (the message's stamp in integer nanoseconds, ``stamp`` to within 0.5 ns) times the
+        interval exactly.
 
         Parameters
         ----------
@@ -746,22 +797,36 @@ class Tracker:
             Measured speed (m/s): starts the compensator at the first step.
         stamp : float, optional
             Measurement time (s).
+        stamp_ns : int, optional
+            Measurement time (ns), the same as ``stamp``: the interval's exact clock.
 
         Returns
         -------
         Command
         """
         c = self.config
+        t_meas = ref.t if stamp is None else float(stamp)
+        passed = (self.timing.observe(t_meas) if stamp_ns is None
+                  else self.timing.observe_ns(int(stamp_ns)))
+        if c.dt:
+            passed = h = c.dt
+        else:
+            h = self.timing.period or 0.0
+        vmax = c.max_linear_speed
         if self.v is None:
             self.v = float(measured_speed) if measured_speed is not None else 0.0
             if not math.isfinite(self.v):
                 self.v = 0.0
-            self.v = max(-c.max_linear_speed, min(c.max_linear_speed, self.v))
+            self.v = max(-vmax, min(vmax, self.v))
+            passed = None
+        elif self._ramp is not None and passed is not None and passed != self._ramp[2]:
+            v0, a0, _ = self._ramp                 # the interval that passed was not h
+            self.v = max(-vmax, min(vmax, v0 + a0 * passed))
         v = self.v
         pred = self.predictor
         if pred is not None:
-            t_meas = ref.t if stamp is None else float(stamp)
             if not math.isfinite(t_meas):          # no time, no prediction: stop
+                self._ramp = None
                 return Command(v=0.0, w=0.0, saturated=True)
             p = pred.predict(x, y, th, t_meas, v)
             x, y, th = p.x, p.y, p.th
@@ -770,7 +835,7 @@ class Tracker:
         if self._ref_hist is None:
             xd, ud = ref.xi, (ref.ax, ref.ay)
         else:
-            xd, ud = self._compensated_reference(ref)
+            xd, ud = self._compensated_reference(ref, h)
         e = (x - xd[0], v * cth - xd[1], y - xd[2], v * sth - xd[3])
         K = c.K_effective
         u1 = ud[0] + K[0][0] * e[0] + K[0][1] * e[1] + K[0][2] * e[2] + K[0][3] * e[3]
@@ -787,56 +852,66 @@ class Tracker:
             w, saturated = c.max_angular_speed, True
         elif w < -c.max_angular_speed:
             w, saturated = -c.max_angular_speed, True
-        vmax = c.max_linear_speed
-        v_next = v + a * c.dt
+        v_next = v + a * h
         if v_next > vmax:
             v_next, saturated = vmax, True
         elif v_next < -vmax:
             v_next, saturated = -vmax, True
         if not (math.isfinite(w) and math.isfinite(v_next)):
             # non-finite input slipped through: stop, keep the compensator state
+            self._ramp = None
             if pred is not None:
                 pred.record(p.t, 0.0, 0.0)
             return Command(v=0.0, w=0.0, a=0.0, u=(u1, u2), error=e, saturated=True,
                            floored=floored)
         self.v = v_next
+        self._ramp = (v, a, h)
         cmd_v = 0.5 * (v + v_next)
-        if pred is not None:
+        if pred is not None and h > 0.0:
             if c.predict_lag_v > 0.0:
-                cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, c.dt)
+                cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, h)
                 if abs(cmd_v) > vmax:
                     cmd_v, saturated = math.copysign(vmax, cmd_v), True
             if c.predict_lag_w > 0.0:
-                w = invert_lag(w, p.w, c.predict_lag_w, c.dt)
+                w = invert_lag(w, p.w, c.predict_lag_w, h)
                 if abs(w) > c.max_angular_speed:
                     w, saturated = math.copysign(c.max_angular_speed, w), True
             if not (math.isfinite(cmd_v) and math.isfinite(w)):
                 cmd_v = w = 0.0
         if c.rate_limited:
-            cmd_v, w, limited = self._rate_limit(cmd_v, w, v)
+            since = h if self._last_cmd is None or passed is None else passed
+            cmd_v, w, limited = self._rate_limit(cmd_v, w, v, since)
             saturated = saturated or limited
         if pred is not None:
             pred.record(p.t, cmd_v, w)
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
                        floored=floored)
 
-    def _rate_limit(self, cv: float, cw: float, v0: float) -> tuple[float, float, bool]:
-        """``(cv, cw)`` moved at most ``max_*_accel * dt`` from the previous command.
+    def _rate_limit(self, cv: float, cw: float, v0: float, since: float
+                    ) -> tuple[float, float, bool]:
+        """``(cv, cw)`` moved at most ``max_*_accel * since`` from the previous command.
 
-        Before the first command the previous one is ``(v0, 0)`` (the compensator's
-        initial speed, at rest in rotation: the predictor's initial state).
+        ``since`` is the time since the previous command (s).  Before the first command
+        the previous one is ``(v0, 0)`` (the compensator's initial speed, at rest in
+        rotation: the predictor's initial state).
         """
         c = self.config
         pv, pw = self._last_cmd if self._last_cmd is not None else (v0, 0.0)
-        cv2 = _toward(cv, pv, c.max_linear_accel * c.dt)
-        cw2 = _toward(cw, pw, c.max_angular_accel * c.dt)
+        if c.max_linear_accel > 0.0:
+            cv2 = _within(cv, pv, c.max_linear_accel * since)
+        else:
+            cv2 = cv
+        if c.max_angular_accel > 0.0:
+            cw2 = _within(cw, pw, c.max_angular_accel * since)
+        else:
+            cw2 = cw
         limited = cv2 != cv or cw2 != cw
         cv, cw = cv2, cw2
         self._last_cmd = (cv, cw)
         return cv, cw, limited
 
-    def _compensated_reference(self, ref: RefSample) -> tuple[tuple[float, float, float, float],
-                                                             tuple[float, float]]:
+    def _compensated_reference(self, ref: RefSample, h: float
+                               ) -> tuple[tuple[float, float, float, float], tuple[float, float]]:
         """Delay-consistent reference ``xi*`` and its feedforward input ``u*``.
 
         In the model, per axis ``p' = q + d_p`` and ``q' = u + d_q`` with
@@ -844,18 +919,22 @@ class Tracker:
         velocity state must be ``q* = p_d' - d*_p`` and the input
         ``u* = q*' - d*_q = p_d'' - (d*_p)' - d*_q``, where ``d* = A_tau xi*(t - tau)``
         and ``(d*)' = A_tau xi*'(t - tau)`` come from the tracker's own history of
-        ``(xi*, xi*')`` (delay rounded to whole steps; before the first sample the
-        history is the first sample at rest).  Then ``e = xi - xi*`` obeys
-        ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
+        ``(xi*, xi*')`` by time: the latest sample at or before ``t - tau + h / 2`` (the
+        sample nearest ``t - tau``; ``h`` the coming interval), and at least one step back;
+        before the first sample the history is the first sample at rest.  Then
+        ``e = xi - xi*`` obeys ``e' = (A + B K) e + A_tau e(t - tau)``: no steady-state bias.
         """
         # set whenever delay_compensation is
         At = cast(tuple[tuple[float, ...], ...], self.config.A_tau)
-        hist = cast(deque[Any], self._ref_hist)      # bounded deque whenever delay_compensation is
+        hist = cast(deque[Any], self._ref_hist)
         p_dot = (ref.vx, ref.vy)
+        t_ns = int(round(ref.t * 1e9))
         if not hist:
-            first = (ref.xi, (ref.vx, 0.0, ref.vy, 0.0))
-            hist.extend([first] * cast(int, hist.maxlen))
-        z, zdot = hist[0]
+            hist.append((None, ref.xi, (ref.vx, 0.0, ref.vy, 0.0)))    # the first, at rest
+        target = t_ns - int(round(self.config.tau * 1e9)) + int(round(0.5 * h * 1e9))
+        while len(hist) > 1 and hist[1][0] <= target:
+            hist.popleft()                  # a later sample is still at or before the target
+        _, z, zdot = hist[0]
         # A_tau z and A_tau zdot, summed left to right from 0.0 (as sum() does on 3.11)
         z0, z1, z2, z3 = z
         y0, y1, y2, y3 = zdot
@@ -863,5 +942,5 @@ class Tracker:
         dd = [0.0 + a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3 for a0, a1, a2, a3 in At]
         xs = (ref.x, ref.vx - d[0], ref.y, ref.vy - d[2])
         us = (ref.ax - dd[0] - d[1], ref.ay - dd[2] - d[3])
-        hist.append((xs, (p_dot[0], us[0] + d[1], p_dot[1], us[1] + d[3])))
+        hist.append((t_ns, xs, (p_dot[0], us[0] + d[1], p_dot[1], us[1] + d[3])))
         return xs, us

@@ -22,10 +22,13 @@ from .actuator import ActuatorModel, actuate, unicycle_arc
 from .reference import RefSample
 
 __all__ = ['Prediction', 'LatencyPredictor', 'extrapolate_reference', 'invert_lag',
-           'JERK_WINDOW']
+           'JERK_WINDOW', 'SUBSTEP']
 
 #: Longest gap (s) between two reference samples used to estimate the jerk.
 JERK_WINDOW = 1.0
+#: Longest integration sub-step (s) of the actuator model when the tracker takes its step
+#: from the odometry (an accuracy setting of the prediction, not the odometry period).
+SUBSTEP = 0.01
 
 
 class Prediction(NamedTuple):
@@ -105,7 +108,8 @@ class LatencyPredictor:
     actuator : ActuatorModel
         Assumed actuator (time constants; acceleration limits if known).
     dt : float
-        Longest integration sub-step (s): the plant's step.
+        Longest integration sub-step (s) of the actuator model: the tracker's ``dt`` when
+        set, else :data:`SUBSTEP`.
     max_gap : float
         A stamp more than this (s) away from the previous one restarts the model from the
         measured speed (the commands sent before the gap are forgotten).

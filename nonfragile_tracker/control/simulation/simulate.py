@@ -9,6 +9,7 @@ the command in force (held at steps without odometry).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable, cast
 
@@ -20,8 +21,10 @@ from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
 from .metrics import TrackingMetrics, tracking_metrics
 from .reference import Path, RefSample
 from .sensors import OdometrySample
+from .timing import period_disagreement
 
-__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'DelayRun', 'simulate_delay_loop',
+__all__ = ['TrackingRun', 'simulate_tracking', 'run_loop', 'report_override',
+           'DelayRun', 'simulate_delay_loop',
            'rk4_delay_steps',
            'steps_for_duration']
 
@@ -99,8 +102,10 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
                       steps: int) -> TrackingRun:
     """Run the nonlinear tracking loop for ``steps`` plant steps (``steps + 1`` samples).
 
-    The tracker's ``dt`` (its command period) must equal the odometry period
-    (``plant dt`` times the odometry decimation; the plant step by default).
+    The tracker takes its step from the odometry stamps (``dt = 0``, the default); a
+    ``dt`` set by hand that disagrees with the odometry period (``plant dt`` times the
+    odometry decimation) is run as set and reported (:func:`report_override`), as the
+    tracker node reports it.
 
     Parameters
     ----------
@@ -117,15 +122,12 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
     -------
     TrackingRun
 
-    Raises
-    ------
-    ValueError
-        If the tracker's ``dt`` is not the odometry period.
+    Warns
+    -----
+    UserWarning
+        If the tracker's ``dt`` is set and disagrees with the odometry period.
     """
-    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
-    if abs(tracker_config.dt - period * plant_config.dt) > 1e-12 * tracker_config.dt:
-        raise ValueError(f'tracker dt ({tracker_config.dt}) must equal the odometry period '
-                         f'({period} x plant dt {plant_config.dt}) in lockstep')
+    report_override(plant_config, tracker_config)
     tracker = Tracker(tracker_config)
     dt = plant_config.dt
 
@@ -136,6 +138,31 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
         return tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
 
     return run_loop(plant_config, steps, command, lambda k: path.sample(step_time(k, dt)))
+
+
+def report_override(plant_config: PlantConfig, tracker_config: TrackerConfig) -> str | None:
+    """Warn (once per call) when the tracker's ``dt`` override disagrees with the odometry.
+
+    The odometry period of a lockstep run is ``plant dt`` times the odometry decimation;
+    a ``dt`` set by hand more than :data:`control.simulation.timing.CHANGE` away from it
+    is what the tracker node reports on /diagnostics
+    (:func:`control.simulation.timing.period_disagreement`).
+
+    Parameters
+    ----------
+    plant_config, tracker_config : PlantConfig, TrackerConfig
+        The plant (its odometry period) and the tracker (its ``dt``).
+
+    Returns
+    -------
+    str or None
+        The message warned, None if the override agrees or there is none.
+    """
+    period = odometry_period_steps(plant_config.odom_rate, plant_config.dt)[0]
+    msg = period_disagreement(tracker_config.dt, step_time(period, plant_config.dt))
+    if msg is not None:
+        warnings.warn(msg, UserWarning, stacklevel=3)
+    return msg
 
 
 def run_loop(plant_config: PlantConfig, steps: int,
