@@ -40,8 +40,8 @@ if TYPE_CHECKING:
 
 #: The command modules (under ``nonfragile_tracker.commands``), in ``--help`` order; each
 #: exposes ``register(subparsers)``.  Imported by :func:`build_parser`.
-COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'study', 'trajectory',
-            'bag', 'reproduce', 'golden')
+COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'bringup', 'study',
+            'trajectory', 'bag', 'reproduce', 'golden')
 
 
 def build_parser() -> argparse.ArgumentParser:

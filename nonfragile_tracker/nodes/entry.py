@@ -26,7 +26,7 @@ import sys
 from typing import Sequence
 
 #: The node modules a process can run.
-NODES = ('reference', 'plant', 'tracker', 'recorder')
+NODES = ('reference', 'plant', 'tracker', 'recorder', 'bringup')
 #: Longest DDS tear-down (s) once a node has released its own resources (bag closed):
 #: past it the process dumps its stacks and ends with its exit code (:func:`arm_exit_deadline`).
 TEARDOWN_DEADLINE_S = 4.0
@@ -218,6 +218,11 @@ def tracker_main() -> int:
 def recorder_main() -> int:
     """Console script ``recorder``: :func:`main` of the recorder node."""
     return main('recorder')
+
+
+def bringup_main() -> int:
+    """Console script ``bringup``: :func:`main` of the bring-up node."""
+    return main('bringup')
 
 
 if __name__ == '__main__':

@@ -1,0 +1,543 @@
+"""The bring-up's ROS-free steps: robot settings, identify, design, write the files and report.
+
+``nonfragile_tracker bringup`` (the node :mod:`nonfragile_tracker.nodes.bringup` drives
+the robot) is the four-command path in one: record (the designed excitation,
+:mod:`nonfragile_tracker.control.identification.excitation`) -> identify
+(:func:`identify_recording`: refuses with the cause and what to change when the data is
+not informative) -> design (:func:`design_gain`: ``latency-design`` from the
+identification; refuses naming the latency when no gain within the bound certifies it)
+-> trial -> files (:func:`write_robot_file`, the gain file) and a report
+(:func:`write_report`: markdown and PNGs).  The heavy steps run in a child process of the
+node (:func:`analyse`, through :func:`analyse_in_child`) so that the node keeps
+answering a stop signal within 0.1 s while the SDPs run.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import traceback
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import yaml
+
+from .errors import InputError
+
+if TYPE_CHECKING:
+    from .control.identification.identify import Identification
+    from .control.synthesis.latency_design import LatencyDesign, LatencyPlan
+
+__all__ = ['BringupRefusal', 'RobotSettings', 'robot_settings', 'read_robot_file',
+           'bringup_limits', 'identify_recording', 'design_gain', 'write_robot_file',
+           'write_report', 'analyse', 'ROBOT_DEFAULTS', 'IDENTIFICATION_FILE', 'GAIN_FILE',
+           'ROBOT_FILE', 'REPORT_FILE', 'OUTCOME_FILE']
+
+#: The files a bring-up writes into its run folder.
+IDENTIFICATION_FILE = 'latency.yaml'
+GAIN_FILE = 'gains.yaml'
+ROBOT_FILE = 'robot.yaml'
+REPORT_FILE = 'report.md'
+OUTCOME_FILE = 'analysis.json'
+
+#: The robot file's tracker parameters the bring-up reads, with their defaults.
+ROBOT_DEFAULTS: dict[str, Any] = {
+    'odom_topic': 'odom', 'cmd_vel_topic': 'cmd_vel', 'odom_frame': 'odom',
+    'base_frame': 'base_link', 'enable_stamped_cmd_vel': False, 'max_linear_speed': 1.0,
+    'max_angular_speed': 2.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
+    'min_turning_radius': 0.0, 'input_timeout': 0.5}
+
+
+class BringupRefusal(InputError):
+    """The bring-up stops here: the cause and what to change (exit code 2, no gain written)."""
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    """The robot file's settings the bring-up uses (SI units; 0 accel = unknown)."""
+
+    odom_topic: str
+    cmd_vel_topic: str
+    odom_frame: str
+    base_frame: str
+    enable_stamped_cmd_vel: bool
+    max_linear_speed: float
+    max_angular_speed: float
+    max_linear_accel: float
+    max_angular_accel: float
+    min_turning_radius: float
+    input_timeout: float
+
+
+# robot file: replaced by nonfragile_tracker.robot at merge
+def robot_settings(params: Mapping[str, Any] | None) -> RobotSettings:
+    """The robot settings from the robot file's tracker parameters (defaults where absent).
+
+    Parameters
+    ----------
+    params : mapping or None
+        ``yaml.safe_load(path)['/**/tracker']['ros__parameters']`` of a robot file.
+
+    Returns
+    -------
+    RobotSettings
+
+    Raises
+    ------
+    InputError
+        If a value has the wrong type or is out of range.
+    """
+    values = dict(ROBOT_DEFAULTS)
+    values.update(params or {})
+    out: dict[str, Any] = {}
+    for key, default in ROBOT_DEFAULTS.items():
+        val = values[key]
+        if isinstance(default, bool):
+            if not isinstance(val, bool):
+                raise InputError(f'robot file: {key} must be true or false, got {val!r}')
+            out[key] = val
+        elif isinstance(default, str):
+            if not isinstance(val, str) or not val:
+                raise InputError(f'robot file: {key} must be a non-empty string, got {val!r}')
+            out[key] = val
+        else:
+            if isinstance(val, bool) or not isinstance(val, (int, float)) \
+                    or not math.isfinite(val) or val < 0:
+                raise InputError(f'robot file: {key} must be a finite number >= 0, got {val!r}')
+            out[key] = float(val)
+    for key in ('max_linear_speed', 'max_angular_speed', 'input_timeout'):
+        if out[key] <= 0:
+            raise InputError(f'robot file: {key} must be > 0, got {out[key]!r}')
+    return RobotSettings(**out)
+
+
+# robot file: replaced by nonfragile_tracker.robot at merge
+def read_robot_file(path: str | os.PathLike[str]) -> RobotSettings:
+    """Read a robot file (a ROS 2 parameter file with a ``/**/tracker`` section).
+
+    Parameters
+    ----------
+    path : path-like
+        The robot file.
+
+    Returns
+    -------
+    RobotSettings
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read or holds no tracker section.
+    """
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(f'robot file {path}: cannot read it ({exc})') from None
+    section = None
+    if isinstance(data, dict):
+        for key in ('/**/tracker', 'tracker', '/tracker'):
+            if isinstance(data.get(key), dict):
+                section = data[key].get('ros__parameters')
+                break
+    if not isinstance(section, dict):
+        raise InputError(f'robot file {path}: no "/**/tracker: ros__parameters:" section')
+    return robot_settings(section)
+
+
+def bringup_limits(robot: RobotSettings, max_speed: float | None = None,
+                   max_turn_rate: float | None = None) -> tuple[float, float]:
+    """The bring-up's speed limits: the user's (default 0.3 m/s, 1 rad/s) or the robot's if lower.
+
+    Parameters
+    ----------
+    robot : RobotSettings
+        The robot file's settings.
+    max_speed, max_turn_rate : float, optional
+        The user's limits (m/s, rad/s).
+
+    Returns
+    -------
+    (float, float)
+        ``(|v| limit, |w| limit)``.
+    """
+    from .control.identification.excitation import DEFAULT_SPEED, DEFAULT_TURN_RATE
+    v = DEFAULT_SPEED if max_speed is None else float(max_speed)
+    w = DEFAULT_TURN_RATE if max_turn_rate is None else float(max_turn_rate)
+    return min(v, robot.max_linear_speed), min(w, robot.max_angular_speed)
+
+
+def identify_recording(bag: str | os.PathLike[str], *, cmd_topic: str = 'cmd_vel',
+                       odom_topic: str = 'odom', odom_period: float = 0.02,
+                       accel_segment: bool = False) -> Identification:
+    """Identify latency, lags and limits from the excitation's bag, or refuse with the cause.
+
+    Parameters
+    ----------
+    bag : path-like
+        The excitation's bag.
+    cmd_topic, odom_topic : str
+        Topic names in the bag.
+    odom_period : float
+        The odometry period (s): a latency interval wider than two of them is not
+        informative.
+    accel_segment : bool
+        Whether the excitation had its acceleration segment (said in a refusal).
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    BringupRefusal
+        When the data is not informative, with the cause and what to change.
+    """
+    from .bag.motion import read_motion
+    from .control.identification.errors import (InsufficientExcitationError,
+                                                NotEnoughDataError, PoorFitError)
+    from .control.identification.identify import identify_latency, with_source
+    data = read_motion(bag, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    try:
+        res = identify_latency(data.commands, data.odometry, bootstrap=200)
+    except NotEnoughDataError as exc:
+        raise BringupRefusal(f'not enough data to identify the base: {exc}. What to change: '
+                             'check that the odometry topic is the robot\'s and publishes '
+                             'while it drives, and that the run was not cut short') from None
+    except InsufficientExcitationError as exc:
+        raise BringupRefusal(f'the recording does not excite the base: {exc}. What to change: '
+                             'the base hardly moved or hardly turned - check that it is '
+                             'powered and not e-stopped, and give a larger box (--box) or '
+                             'higher limits (--max-speed, --max-turn-rate)') from None
+    except PoorFitError as exc:
+        raise BringupRefusal(f'the base\'s response is not a latency and a lag: {exc}. What '
+                             'to change: check that cmd_vel reaches this base (topic, '
+                             'Twist/TwistStamped) and that the odometry is its own') from None
+    res = with_source(res, bag)
+    lo, hi = res.latency_interval_s
+    if hi - lo > 2.0 * odom_period + 0.01:
+        raise BringupRefusal(
+            f'the latency is not pinned down: {res.latency_s:.4f} s with the 95 % interval '
+            f'[{lo:.4f}, {hi:.4f}] s, wider than two odometry periods ({odom_period:.3f} s). '
+            'What to change: give a larger box (--box) or higher limits so the steps are '
+            'larger, or a faster odometry rate')
+    if accel_segment is False and res.max_linear_accel == 0 and res.max_angular_accel == 0:
+        res = replace(res, notes=tuple(res.notes) + (
+            'acceleration limits not identified: the excitation had no acceleration segment '
+            '(bringup --accel-segment), or the limits did not bind',))
+    return res
+
+
+@dataclass(frozen=True)
+class DesignOutcome:
+    """The designed gain and what it was designed from."""
+
+    plan: LatencyPlan
+    design: LatencyDesign
+    gain_file: Path
+    summary: str
+
+
+def design_gain(ident: Identification, problem: str | os.PathLike[str],
+                gain_file: str | os.PathLike[str], *, extra: Mapping[str, Any] | None = None
+                ) -> DesignOutcome:
+    """``latency-design PROBLEM --identification``: the gain file, or a refusal naming the latency.
+
+    Parameters
+    ----------
+    ident : Identification
+        From :func:`identify_recording`.
+    problem : path-like
+        The problem file (``config/paper_problem.yaml``: its gain bound and perturbation).
+    gain_file : path-like
+        Where to write the gain (replaced if it exists).
+    extra : mapping, optional
+        More tracker parameters for the gain file (the robot's limits).
+
+    Returns
+    -------
+    DesignOutcome
+
+    Raises
+    ------
+    BringupRefusal
+        When no gain within the bound certifies the identified latency.
+    """
+    from .control.identification.monitor import certificate_from_design
+    from .control.simulation.gains import write_gain_file
+    from .control.synthesis.errors import InfeasibleError
+    from .control.synthesis.latency_design import design_for_latency, plan_from_identification
+    from .control.synthesis.problem import load_problem
+    prob = load_problem(problem)
+    plan = plan_from_identification(ident)
+    r0, r1 = ident.latency_range_s
+    bound = prob.options.get('gain_bound')
+    try:
+        res = design_for_latency(prob, plan.h_min, plan.h_max, lag=plan.lag)
+    except InfeasibleError:
+        raise BringupRefusal(
+            f'the identified latency {ident.latency_s:.4f} s (varying over [{r0:.4f}, '
+            f'{r1:.4f}] s; residual delay after the predictor [{plan.h_min:.4f}, '
+            f'{plan.h_max:.4f}] s with the lag {plan.lag:.4f} s) is beyond what any gain '
+            f'with ||K||_2 <= {bound} certifies: no gain was written. What to change: '
+            'reduce the latency and its variation on the robot (command transport, '
+            'controller rate, odometry stamping), or allow a larger gain bound in the '
+            'problem file') from None
+    meta = {**res.metadata(), **plan.metadata()}
+    params: dict[str, Any] = {**plan.tracker_parameters(), **plan.actuator_parameters()}
+    cert = certificate_from_design(meta, hold=0.0)
+    if cert is not None:
+        params.update(cert.parameters())
+        if not params.get('certified_adapt_range'):
+            params.pop('certified_adapt_range', None)
+    for k, v in (extra or {}).items():
+        params.setdefault(k, v)
+    summary = plan.describe() + '\n' + res.summary()
+    write_gain_file(gain_file, res.K, comment='Generated by `nonfragile_tracker bringup`\n'
+                    + summary, overwrite=True, extra=params, design=meta)
+    return DesignOutcome(plan=plan, design=res, gain_file=Path(gain_file), summary=summary)
+
+
+# robot file: replaced by nonfragile_tracker.robot at merge
+def write_robot_file(path: str | os.PathLike[str], robot: RobotSettings,
+                     ident: Identification) -> Path:
+    """The robot file with the identified values: its tracker section, limits filled in.
+
+    An acceleration limit the identification found replaces an unknown one (0); a known
+    one is kept.  The identified latency and lags go into the ``identified`` comment lines
+    (the gain file carries the predictor settings).
+
+    Parameters
+    ----------
+    path : path-like
+        Where to write it (replaced).
+    robot : RobotSettings
+        The robot file's settings the bring-up started from.
+    ident : Identification
+        The identification.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    values = asdict(robot)
+    if values['max_linear_accel'] == 0 and ident.max_linear_accel > 0:
+        values['max_linear_accel'] = float(ident.max_linear_accel)
+    if values['max_angular_accel'] == 0 and ident.max_angular_accel > 0:
+        values['max_angular_accel'] = float(ident.max_angular_accel)
+    head = (f'# Written by `nonfragile_tracker bringup` from {ident.source}\n'
+            f'# identified: latency {ident.latency_s:.4f} s (range '
+            f'[{ident.latency_range_s[0]:.4f}, {ident.latency_range_s[1]:.4f}] s), '
+            f'lag of v {ident.tau_v_s:.4f} s, lag of w {ident.tau_w_s:.4f} s, odometry '
+            f'{ident.odom_rate_hz:.4g} Hz\n')
+    out = Path(path)
+    out.write_text(head + yaml.safe_dump({'/**/tracker': {'ros__parameters': values}},
+                                         sort_keys=False))
+    return out
+
+
+def _model_response(t_cmd: np.ndarray, u: np.ndarray, t: np.ndarray, latency: float,
+                    tau: float, gain: float) -> np.ndarray:
+    """First-order lag with dead time driven by the held commands, sampled at ``t``."""
+    h = 0.002
+    grid = np.arange(t[0], t[-1] + h, h)
+    idx = np.searchsorted(t_cmd, grid - latency, side='right') - 1
+    held = np.where(idx >= 0, u[np.clip(idx, 0, None)], 0.0) * gain
+    y = np.zeros_like(grid)
+    k = math.exp(-h / tau) if tau > 0 else 0.0
+    for i in range(1, grid.size):
+        y[i] = k * y[i - 1] + (1.0 - k) * held[i - 1]
+    return np.interp(t, grid, y)
+
+
+def plot_identification(bag: str | os.PathLike[str], ident: Identification,
+                        out: str | os.PathLike[str], *, cmd_topic: str = 'cmd_vel',
+                        odom_topic: str = 'odom') -> Path:
+    """PNG of the identified responses against the data: v and w, command, measured, model.
+
+    Parameters
+    ----------
+    bag : path-like
+        The excitation's bag.
+    ident : Identification
+        The identification.
+    out : path-like
+        The PNG to write.
+    cmd_topic, odom_topic : str
+        Topic names in the bag.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from .bag.motion import read_motion
+    data = read_motion(bag, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    c, o = data.commands, data.odometry
+    t0 = float(c.t[0])
+    fig = Figure(figsize=(10, 6))
+    FigureCanvasAgg(fig)
+    for i, (name, u, meas, tau, g, unit) in enumerate((
+            ('v', c.v, o.v, ident.tau_v_s, ident.gain_v, 'm/s'),
+            ('w', c.w, o.w, ident.tau_w_s, ident.gain_w, 'rad/s'))):
+        ax = fig.add_subplot(2, 1, i + 1)
+        ax.step(c.t - t0, u, where='post', lw=0.8, label=f'command {name}')
+        if meas is not None:
+            ax.plot(o.t - t0, meas, '.', ms=2, label='odometry')
+            model = _model_response(c.t, u, o.t, ident.latency_s, tau, g)
+            ax.plot(o.t - t0, model, lw=1.0, label=f'model: L = {ident.latency_s:.3f} s, '
+                    f'tau = {tau:.3f} s')
+        ax.set_ylabel(f'{name} ({unit})')
+        ax.legend(loc='upper right', fontsize=7)
+        ax.grid(True, alpha=0.3)
+    fig.axes[-1].set_xlabel('time (s)')
+    fig.suptitle('bring-up: identified responses against the data')
+    path = Path(out)
+    fig.savefig(path, dpi=90)
+    return path
+
+
+def analyse(bag: str | os.PathLike[str], run_dir: str | os.PathLike[str],
+            settings: Mapping[str, Any]) -> dict[str, Any]:
+    """Identify and design from the excitation's bag; write the files; the outcome as a dict.
+
+    Parameters
+    ----------
+    bag : path-like
+        The excitation's bag.
+    run_dir : path-like
+        The run folder (the identification, gain and robot files go there).
+    settings : mapping
+        ``robot`` (:class:`RobotSettings` as a dict), ``problem`` (path),
+        ``odom_period`` (s), ``accel_segment`` (bool).
+
+    Returns
+    -------
+    dict
+        ``ok``; with ``ok`` the identification's figures and file names; without it
+        ``phase`` (identify or design) and ``refusal`` (the cause and what to change).
+    """
+    from .control.identification.identify import write_identification
+    run = Path(run_dir)
+    robot = RobotSettings(**settings['robot'])
+    try:
+        ident = identify_recording(bag, cmd_topic=robot.cmd_vel_topic,
+                                   odom_topic=robot.odom_topic,
+                                   odom_period=float(settings['odom_period']),
+                                   accel_segment=bool(settings['accel_segment']))
+    except InputError as exc:
+        return {'ok': False, 'phase': 'identify', 'refusal': str(exc)}
+    write_identification(run / IDENTIFICATION_FILE, ident, overwrite=True)
+    ident_fig = plot_identification(bag, ident, run / 'identification.png',
+                                     cmd_topic=robot.cmd_vel_topic, odom_topic=robot.odom_topic)
+    limits = {'max_linear_speed': robot.max_linear_speed,
+              'max_angular_speed': robot.max_angular_speed}
+    for key in ('max_linear_accel', 'max_angular_accel'):
+        if getattr(robot, key) > 0:
+            limits[key] = getattr(robot, key)
+    try:
+        out = design_gain(ident, settings['problem'], run / GAIN_FILE, extra=limits)
+    except InputError as exc:
+        return {'ok': False, 'phase': 'design', 'refusal': str(exc),
+                'latency_s': ident.latency_s}
+    write_robot_file(run / ROBOT_FILE, robot, ident)
+    d = out.design
+    return {'ok': True, 'latency_s': ident.latency_s,
+            'latency_interval_s': list(ident.latency_interval_s),
+            'latency_range_s': list(ident.latency_range_s),
+            'tau_v_s': ident.tau_v_s, 'tau_w_s': ident.tau_w_s,
+            'tau_v_interval_s': list(ident.tau_v_interval_s),
+            'tau_w_interval_s': list(ident.tau_w_interval_s),
+            'max_linear_accel': ident.max_linear_accel,
+            'max_angular_accel': ident.max_angular_accel,
+            'odom_rate_hz': ident.odom_rate_hz, 'notes': list(ident.notes),
+            'gain_norm': d.gain_norm, 'decay_rate': d.decay_rate,
+            'residual': [out.plan.h_min, out.plan.h_max], 'lag': out.plan.lag,
+            'certified_h_max': d.lag_certified_h_max if d.lag_certified_h_max is not None
+            else d.certified_h_max,
+            'predict_latency': out.plan.predict_latency, 'summary': out.summary,
+            'identification_file': str(run / IDENTIFICATION_FILE),
+            'gain_file': str(out.gain_file), 'robot_file': str(run / ROBOT_FILE),
+            'identification_png': str(ident_fig)}
+
+
+def analyse_in_child(bag: str, run_dir: str, settings: dict[str, Any]) -> None:
+    """Child-process entry of :func:`analyse`: its outcome (or error) into ``analysis.json``.
+
+    Parameters
+    ----------
+    bag : str
+        The excitation's bag.
+    run_dir : str
+        The run folder.
+    settings : dict
+        As :func:`analyse`.
+    """
+    path = Path(run_dir) / OUTCOME_FILE
+    try:
+        outcome = analyse(bag, run_dir, settings)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which stops cleanly
+        outcome = {'ok': False, 'phase': 'analysis', 'refusal': f'{type(exc).__name__}: {exc}',
+                   'traceback': traceback.format_exc()}
+    tmp = path.with_suffix('.tmp')
+    tmp.write_text(json.dumps(outcome, indent=2, default=float))
+    tmp.replace(path)
+
+
+def write_report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
+                 trial: Mapping[str, Any] | None, excitation: Mapping[str, Any]) -> Path:
+    """The bring-up's report: markdown with the figures, next to its PNGs.
+
+    Parameters
+    ----------
+    run_dir : path-like
+        The run folder.
+    outcome : mapping
+        :func:`analyse`'s result.
+    trial : mapping or None
+        The trial's figures (``rms_error``, ``rms_cross_track``, ``max_error``,
+        ``certificate`` ...; None if there was none).
+    excitation : mapping
+        The excitation's figures (``duration``, ``max_distance`` ...).
+
+    Returns
+    -------
+    pathlib.Path
+        The markdown file.
+    """
+    run = Path(run_dir)
+    lines = ['# Bring-up report', '',
+             f'Run folder `{run}`.', '', '## Excitation', '']
+    lines += [f'- {k.replace("_", " ")}: {v:.4g}' if isinstance(v, float) else
+              f'- {k.replace("_", " ")}: {v}' for k, v in excitation.items()]
+    lines += ['', '## Identification', '']
+    if outcome.get('ok') or 'latency_s' in outcome:
+        lines.append(f'- latency {outcome["latency_s"]:.4f} s')
+    if outcome.get('ok'):
+        lo, hi = outcome['latency_interval_s']
+        lines += [f'- latency 95 % interval [{lo:.4f}, {hi:.4f}] s, range '
+                  f'[{outcome["latency_range_s"][0]:.4f}, {outcome["latency_range_s"][1]:.4f}] s',
+                  f'- lag of v {outcome["tau_v_s"]:.4f} s, lag of w {outcome["tau_w_s"]:.4f} s',
+                  f'- acceleration limits {outcome["max_linear_accel"]:.3g} m/s^2, '
+                  f'{outcome["max_angular_accel"]:.3g} rad/s^2 (0 = unknown)',
+                  *[f'- note: {n}' for n in outcome.get('notes', [])],
+                  '', '![identified responses](identification.png)', '',
+                  '## Design (the certified interval)', '', '```text', outcome['summary'],
+                  '```', '']
+    else:
+        lines += ['', f'**Refused ({outcome.get("phase")}):** {outcome.get("refusal")}', '']
+    if trial is not None:
+        lines += ['## Trial with the designed gain', '']
+        lines += [f'- {k.replace("_", " ")}: {v:.4g}' if isinstance(v, float) else
+                  f'- {k.replace("_", " ")}: {v}' for k, v in trial.items()
+                  if not k.endswith('png')]
+        if trial.get('errors_png'):
+            lines += ['', f'![trial errors]({Path(str(trial["errors_png"])).name})']
+        lines.append('')
+    path = run / REPORT_FILE
+    path.write_text('\n'.join(lines) + '\n')
+    return path
