@@ -20,7 +20,7 @@ import traceback
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import yaml
@@ -270,7 +270,7 @@ def design_gain(ident: Identification, problem: str | os.PathLike[str],
     from .control.synthesis.errors import InfeasibleError
     from .control.synthesis.latency_design import design_for_latency, plan_from_identification
     from .control.synthesis.problem import load_problem
-    prob = load_problem(problem)
+    prob = load_problem(Path(problem))
     plan = plan_from_identification(ident)
     r0, r1 = ident.latency_range_s
     bound = prob.options.get('gain_bound')
@@ -349,7 +349,7 @@ def _model_response(t_cmd: np.ndarray, u: np.ndarray, t: np.ndarray, latency: fl
     k = math.exp(-h / tau) if tau > 0 else 0.0
     for i in range(1, grid.size):
         y[i] = k * y[i - 1] + (1.0 - k) * held[i - 1]
-    return np.interp(t, grid, y)
+    return cast(np.ndarray, np.interp(t, grid, y))
 
 
 def plot_identification(bag: str | os.PathLike[str], ident: Identification,

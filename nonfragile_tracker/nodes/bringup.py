@@ -300,8 +300,8 @@ class BringupNode(AdapterNode[BringupConfig]):
         d = math.hypot(x - self.start[0], y - self.start[1])
         self.farthest = max(self.farthest, d)
         if d > self.config.box_radius:
-            self.stop(f'left the box: {d:.3f} m from the start pose > box {self.config.box_radius:g}'
-                      ' m', EXIT_LEFT_BOX)
+            self.stop(f'left the box: {d:.3f} m from the start pose > box '
+                      f'{self.config.box_radius:g} m', EXIT_LEFT_BOX)
             return
         if self.phase in ('excite', 'trial') and self.follower is not None:
             t = (stamp - self.origin_ns) * 1e-9
@@ -333,6 +333,8 @@ class BringupNode(AdapterNode[BringupConfig]):
     def _set_phase(self, phase: str) -> None:
         self.phase = phase
         self.phase_start = time.monotonic()
+        # planning took this process away from its queue: odometry waiting there is not silence
+        self.last_odom = self.phase_start
         _say(f'phase {phase}')
 
     def _tracker(self, values: dict[str, Any]) -> Tracker:
@@ -516,8 +518,9 @@ class BringupNode(AdapterNode[BringupConfig]):
         if self.trial_figs and self.trial_figs.get('samples'):
             f = self.trial_figs
             _say(f'trial: RMS error {f["rms_error_after_5s"] * 1e3:.2f} mm, cross-track RMS '
-                 f'{f["rms_cross_track_after_5s"] * 1e3:.2f} mm, max {f["max_error_after_5s"] * 1e3:.2f}'
-                 f' mm (after 5 s); certificate monitor: {status}')
+                 f'{f["rms_cross_track_after_5s"] * 1e3:.2f} mm, max '
+                 f'{f["max_error_after_5s"] * 1e3:.2f} mm (after 5 s); certificate monitor: '
+                 f'{status}')
         _say(f'robot time {self.robot_time:.1f} s; farthest {self.farthest:.3f} m from the start '
              f'pose (box {cfg.box_radius:g} m)')
         _say(f'wrote {o.get("robot_file")}, {o.get("gain_file")}, {report}')

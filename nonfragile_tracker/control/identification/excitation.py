@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -203,7 +203,7 @@ def _curvature(s: np.ndarray, radius: float, transition: float) -> np.ndarray:
     sign = np.where(k % 2 == 0, 1.0, -1.0)
     kappa = sign / radius
     if transition <= 0:
-        return cast(np.ndarray, kappa)
+        return kappa
     half = 0.5 * transition
     # distance to the nearest crossing (a crossing at j L switches from lobe j-1 to lobe j)
     near = np.round(s / L)
@@ -212,7 +212,7 @@ def _curvature(s: np.ndarray, radius: float, transition: float) -> np.ndarray:
     j = near
     after = np.where(j % 2 == 0, 1.0, -1.0)             # curvature sign of lobe j
     ramp = after * (d / half) / radius                  # -sign/r at d = -half, sign/r at +half
-    return cast(np.ndarray, np.where(within, ramp, kappa))
+    return np.where(within, ramp, kappa)
 
 
 def _speed_profile(levels: list[tuple[float, float, float]], dt: float) -> tuple[np.ndarray,
