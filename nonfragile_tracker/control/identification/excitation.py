@@ -90,7 +90,8 @@ class Plan:
     Arrays are sampled every :data:`PLAN_DT` s: time ``t`` (s), pose ``x, y`` (m) and
     heading ``th`` (rad), speed ``v`` (m/s), turn rate ``w`` (rad/s), acceleration ``a``
     (m/s^2), arc length ``s`` (m) along the figure eight.  ``segments`` names its parts
-    ``(name, t_start, t_end)``; ``radius`` is the figure eight's circle radius (m).
+    ``(name, t_start, t_end)``; ``radius`` is the figure eight's circle radius (m),
+    ``transition`` the length of its clothoids (m).
     """
 
     t: np.ndarray
@@ -105,6 +106,8 @@ class Plan:
     segments: tuple[tuple[str, float, float], ...]
     box_radius: float
     notes: tuple[str, ...] = field(default=())
+    #: length (m) of the clothoids where the curvature flips
+    transition: float = 0.0
 
     @property
     def duration(self) -> float:
@@ -231,6 +234,7 @@ def _speed_profile(levels: list[tuple[float, float, float]], dt: float) -> tuple
             v_out.append(v)
             a_out.append(step / dt)
             v += step
+        v = level
         for _ in range(int(round(hold / dt))):
             v_out.append(v)
             a_out.append(0.0)
@@ -299,26 +303,40 @@ def plan_excitation(box_radius: float = DEFAULT_BOX, max_speed: float = DEFAULT_
     lin = _nonneg('max_linear_accel', max_linear_accel)
     ang = _nonneg('max_angular_accel', max_angular_accel)
     total = _positive('duration', duration)
-    radius = 0.5 * (box - margin_for(box))
-    if radius <= 0.05:
-        raise ExcitationError(f'a box of {box:g} m leaves no room for a figure eight (radius '
-                              f'{radius:.3f} m after the margin for the tracking error); '
-                              'give a box of at least 0.3 m')
-    # the top speed: within the turn-rate limit on the circles
-    v_top = HEADROOM * min(vmax, wmax * radius)
-    if v_top < 0.05:
-        raise ExcitationError(f'with a box of {box:g} m (circles of {radius:.2f} m) and '
-                              f'|w| <= {wmax:g} rad/s the top speed would be {v_top:.3f} m/s, '
-                              'too slow to excite a base: give a larger box or a larger '
-                              'max turn rate')
     a_lin = GENTLE_LINEAR_ACCEL if lin == 0 else min(GENTLE_LINEAR_ACCEL, lin)
     a_ang = GENTLE_ANGULAR_ACCEL if ang == 0 else min(GENTLE_ANGULAR_ACCEL, ang)
     notes = []
     fast = accel_segment and (lin == 0 or ang == 0)
     if accel_segment and not fast:
         notes.append('the acceleration limits are known (robot file): no acceleration segment')
-    # clothoid length at the crossings: dw/dt = v^2 dkappa/ds <= a_ang at the top speed
-    transition = min(2.0 * v_top ** 2 / (radius * a_ang), math.pi * radius)
+    radius = 0.5 * (box - margin_for(box))
+    if radius <= 0.05:
+        raise ExcitationError(f'a box of {box:g} m leaves no room for a figure eight (radius '
+                              f'{radius:.3f} m after the margin for the tracking error); '
+                              'give a box of at least 0.3 m')
+    # the figure eight's reach grows with its clothoids: shrink it until it fits (a few %)
+    for _ in range(20):
+        plan = _plan(radius, box, vmax, wmax, rate, a_lin, a_ang, lin, fast, total,
+                     tuple(notes))
+        if plan.extent().max_distance <= box - 0.5 * margin_for(box):
+            return plan
+        radius *= 0.95
+    raise ExcitationError(f'no figure eight fits a box of {box:g} m with |v| <= {vmax:g} m/s '
+                          f'and |w| <= {wmax:g} rad/s; give a larger box')
+
+
+def _plan(radius: float, box: float, vmax: float, wmax: float, rate: float, a_lin: float,
+          a_ang: float, lin: float, fast: bool, total: float, notes: tuple[str, ...]) -> Plan:
+    """The excitation on circles of ``radius`` (see :func:`plan_excitation`)."""
+    # the top speed: within the turn-rate limit on the circles, and a clothoid at the
+    # crossings (dw/dt = v^2 dkappa/ds <= a_ang) no longer than the radius
+    v_top = HEADROOM * min(vmax, wmax * radius, radius * math.sqrt(0.5 * a_ang))
+    if v_top < 0.05:
+        raise ExcitationError(f'with a box of {box:g} m (circles of {radius:.2f} m) and '
+                              f'|w| <= {wmax:g} rad/s the top speed would be {v_top:.3f} m/s, '
+                              'too slow to excite a base: give a larger box or a larger '
+                              'max turn rate')
+    transition = 2.0 * v_top ** 2 / (radius * a_ang)
     hold = max(2.5, 25.0 / rate)
     levels: list[tuple[float, float, float]] = []
     seg_main = total * (0.7 if fast else 1.0)
@@ -354,7 +372,7 @@ def plan_excitation(box_radius: float = DEFAULT_BOX, max_speed: float = DEFAULT_
         segments.append((name, t_seg, t_end))
         t_seg, vv = t_end, lv
     return Plan(t=t, x=x, y=y, th=th, v=v, w=w, a=a, s=s, radius=radius,
-                segments=tuple(segments), box_radius=box, notes=tuple(notes))
+                segments=tuple(segments), box_radius=box, notes=notes, transition=transition)
 
 
 def plan_trial(excitation: Plan, *, speed_fraction: float = 0.7, duration: float = 20.0,
@@ -385,11 +403,7 @@ def plan_trial(excitation: Plan, *, speed_fraction: float = 0.7, duration: float
     ramp = v_top / a_lin
     hold = max(total - 2.0 * ramp, 1.0)
     v, a = _speed_profile([(v_top, hold, a_lin), (0.0, 0.5, a_lin)], PLAN_DT)
-    radius = excitation.radius
-    kap = np.abs(excitation.w[excitation.v > 1e-9] / excitation.v[excitation.v > 1e-9])
-    a_ang = GENTLE_ANGULAR_ACCEL
-    transition = min(2.0 * float(np.max(excitation.v)) ** 2 / (radius * a_ang),
-                     math.pi * radius) if kap.size else 0.0
+    radius, transition = excitation.radius, excitation.transition
     s0 = float(excitation.s[-1])
     _, x2, y2, th2, w, s = _integrate(v, a, PLAN_DT, radius, transition, s0=s0)
     x0, y0, th0 = float(excitation.x[-1]), float(excitation.y[-1]), float(excitation.th[-1])
@@ -397,5 +411,5 @@ def plan_trial(excitation: Plan, *, speed_fraction: float = 0.7, duration: float
     y = y0 + np.sin(th0) * x2 + np.cos(th0) * y2
     t = np.arange(v.size) * PLAN_DT
     return Plan(t=t, x=x, y=y, th=th0 + th2, v=v, w=w, a=a, s=s, radius=radius,
-                segments=(('trial v = %.3f m/s' % v_top, 0.0, float(t[-1])),),
-                box_radius=excitation.box_radius)
+                segments=((f'trial v = {v_top:.3f} m/s', 0.0, float(t[-1])),),
+                box_radius=excitation.box_radius, transition=transition)
