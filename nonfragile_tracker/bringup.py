@@ -28,11 +28,12 @@ import yaml
 from .errors import InputError
 
 if TYPE_CHECKING:
-    from .control.identification.identify import Identification
+    from .control.identification.identify import CommandSamples, Identification, OdometrySamples
     from .control.synthesis.latency_design import LatencyDesign, LatencyPlan
 
 __all__ = ['BringupRefusal', 'RobotSettings', 'robot_settings', 'read_robot_file',
-           'bringup_limits', 'identify_recording', 'design_gain', 'write_robot_file',
+           'bringup_limits', 'identify_recording', 'identify_samples', 'design_gain',
+           'write_robot_file',
            'write_report', 'analyse', 'ROBOT_DEFAULTS', 'IDENTIFICATION_FILE', 'GAIN_FILE',
            'ROBOT_FILE', 'REPORT_FILE', 'OUTCOME_FILE']
 
@@ -196,12 +197,43 @@ def identify_recording(bag: str | os.PathLike[str], *, cmd_topic: str = 'cmd_vel
         When the data is not informative, with the cause and what to change.
     """
     from .bag.motion import read_motion
+    from .control.identification.identify import with_source
+    data = read_motion(bag, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    res = identify_samples(data.commands, data.odometry, odom_period=odom_period,
+                           accel_segment=accel_segment)
+    return with_source(res, bag)
+
+
+def identify_samples(commands: CommandSamples, odometry: OdometrySamples, *,
+                     odom_period: float = 0.02, accel_segment: bool = False
+                     ) -> Identification:
+    """:func:`identify_recording` on commands and odometry already read.
+
+    Parameters
+    ----------
+    commands : CommandSamples
+        The commands with their times.
+    odometry : OdometrySamples
+        The odometry by measurement time.
+    odom_period : float
+        The odometry period (s).
+    accel_segment : bool
+        Whether the excitation had its acceleration segment.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    BringupRefusal
+        When the data is not informative, with the cause and what to change.
+    """
     from .control.identification.errors import (InsufficientExcitationError,
                                                 NotEnoughDataError, PoorFitError)
-    from .control.identification.identify import identify_latency, with_source
-    data = read_motion(bag, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    from .control.identification.identify import identify_latency
     try:
-        res = identify_latency(data.commands, data.odometry, bootstrap=200)
+        res = identify_latency(commands, odometry, bootstrap=200)
     except NotEnoughDataError as exc:
         raise BringupRefusal(f'not enough data to identify the base: {exc}. What to change: '
                              'check that the odometry topic is the robot\'s and publishes '
@@ -215,7 +247,6 @@ def identify_recording(bag: str | os.PathLike[str], *, cmd_topic: str = 'cmd_vel
         raise BringupRefusal(f'the base\'s response is not a latency and a lag: {exc}. What '
                              'to change: check that cmd_vel reaches this base (topic, '
                              'Twist/TwistStamped) and that the odometry is its own') from None
-    res = with_source(res, bag)
     lo, hi = res.latency_interval_s
     if hi - lo > 2.0 * odom_period + 0.01:
         raise BringupRefusal(
