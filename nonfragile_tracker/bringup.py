@@ -544,7 +544,11 @@ def write_report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
     lines = ['# Bring-up report', '',
              f'Run folder `{run}`.', '', '## Excitation', '']
     lines += [f'- {k.replace("_", " ")}: {v:.4g}' if isinstance(v, float) else
-              f'- {k.replace("_", " ")}: {v}' for k, v in excitation.items()]
+              f'- {k.replace("_", " ")}: {v}' for k, v in excitation.items()
+              if not k.endswith('png')]
+    if excitation.get('path_png'):
+        lines += ['', f'![the excitation\'s path](excitation_report/'
+                  f'{Path(str(excitation["path_png"])).name})']
     lines += ['', '## Identification', '']
     if outcome.get('ok') or 'latency_s' in outcome:
         lines.append(f'- latency {outcome["latency_s"]:.4f} s')
@@ -567,7 +571,7 @@ def write_report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
                   f'- {k.replace("_", " ")}: {v}' for k, v in trial.items()
                   if not k.endswith('png')]
         if trial.get('errors_png'):
-            lines += ['', f'![trial errors]({Path(str(trial["errors_png"])).name})']
+            lines += ['', f'![trial errors](trial_report/{Path(str(trial["errors_png"])).name})']
         lines.append('')
     path = run / REPORT_FILE
     path.write_text('\n'.join(lines) + '\n')

@@ -118,3 +118,22 @@ def test_analyse_reports_the_phase_and_cause_of_a_refusal(tmp_path):
         'odom_period': 0.02, 'accel_segment': False})
     assert out['ok'] is False and out['phase'] == 'identify'
     assert 'missing_bag' in out['refusal']
+
+
+def test_dry_run_prints_the_extent_and_moves_nothing(capsys, tmp_path):
+    from nonfragile_tracker.cli import main
+    assert main(['bringup', '--dry-run', '--box', '0.8', '--max-speed', '0.2',
+                 '--out', str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    first = out.splitlines()[0]
+    far = float(first.split('farthest ')[1].split(' m')[0])
+    assert far <= 0.8 - 0.5 * (0.05 + 0.15 * 0.8)
+    assert 'dry run: nothing moved' in out
+    assert not any(tmp_path.iterdir())                     # no run folder, no ROS
+    # a box too small, a bad robot file: refused before anything starts (exit 2)
+    assert main(['bringup', '--dry-run', '--box', '0.1']) == 2
+    bad = tmp_path / 'robot.yaml'
+    bad.write_text("'/**/tracker': {ros__parameters: {max_linear_speed: -1.0}}\n")
+    assert main(['bringup', '--dry-run', '--robot', str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert 'at least 0.3 m' in err and 'max_linear_speed must be' in err

@@ -536,7 +536,15 @@ def _report_in_child(run_dir: str, outcome: dict[str, Any], trial: dict[str, Any
     """Child process: the trial's certificate check and figures, then the report."""
     run = Path(run_dir)
     trial = dict(trial) if trial is not None else None
+    excitation = dict(excitation)
     status = 'no trial'
+    try:
+        from ..bag.report import bag_report
+        rep = bag_report(run / 'bag', run / 'excitation_report', overwrite=True)
+        if 'xy' in rep.plots:
+            excitation['path_png'] = str(rep.plots['xy'])
+    except Exception as exc:  # noqa: BLE001 - the report says what failed
+        excitation['report'] = f'not written ({type(exc).__name__}: {exc})'
     bag = run / 'trial_bag'
     if trial is not None and bag.exists():
         try:
