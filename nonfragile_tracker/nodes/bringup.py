@@ -14,8 +14,10 @@ latency) -> ``trial`` (the designed gain on the same figure eight, ``<run_dir>/t
 
 Safety (every exit path): zero velocity is published (Twist or TwistStamped as
 configured) and recorded in the bag, and the process ends, on SIGINT/SIGTERM, odometry
-silence beyond ``odom_timeout``, leaving the box (odometry farther than ``box_radius``
-from the start pose), a refusal and any error, within 0.1 s: the main loop spins with a
+silence beyond ``odom_timeout`` while driving (at rest - analysis, report - zero is
+commanded every 0.5 s, silence is reported, and the trial starts only with fresh
+odometry), leaving the box (odometry farther than ``box_radius`` from the start pose), a
+refusal and any error, within 0.1 s: the main loop spins with a
 20 ms timeout and checks the stop flag (rclpy's own signal handlers are not installed,
 so the context stays up for the zero command).  Every command is clamped to
 ``max_linear_speed`` and ``max_angular_speed``.
@@ -199,6 +201,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.phase_start = time.monotonic()
         self.started_wall = time.monotonic()
         self.last_odom = math.nan
+        self.silence_said = False
         self.last_stamp = 0
         self.stamps: list[int] = []
         self.start: tuple[float, float, float] | None = None
@@ -453,6 +456,11 @@ class BringupNode(AdapterNode[BringupConfig]):
                               (str(cfg.run_dir), self.outcome, None, self.excitation_figs))
             return
         assert self.plan is not None and self.start is not None
+        silent = time.monotonic() - self.last_odom
+        if silent > cfg.odom_timeout:
+            self.stop(f'odometry silent for {silent:.2f} s at the start of the trial (> '
+                      f'odom_timeout {cfg.odom_timeout:g} s)', EXIT_SILENCE)
+            return
         values = _tracker_values(Path(o['gain_file']))
         self.trial_plan = plan_trial(self.plan, duration=cfg.trial_duration,
                                      max_linear_accel=cfg.robot.max_linear_accel)
@@ -476,10 +484,19 @@ class BringupNode(AdapterNode[BringupConfig]):
                           'check the topic name and that the robot publishes it',
                           EXIT_SILENCE)
             return
-        if now - self.last_odom > cfg.odom_timeout:
-            self.stop(f'odometry silent for {now - self.last_odom:.2f} s (> odom_timeout '
-                      f'{cfg.odom_timeout:g} s)', EXIT_SILENCE)
-            return
+        silent = now - self.last_odom
+        if silent > cfg.odom_timeout:
+            if self.phase in ('excite', 'trial'):
+                self.stop(f'odometry silent for {silent:.2f} s (> odom_timeout '
+                          f'{cfg.odom_timeout:g} s)', EXIT_SILENCE)
+                return
+            if not self.silence_said:        # at rest, commanded zero: say it, go on
+                self.silence_said = True
+                _say(f'warning: odometry silent for {silent:.2f} s while the robot is at '
+                     'rest; zero is still commanded, and the trial starts only with fresh '
+                     'odometry')
+        else:
+            self.silence_said = False
         if self.phase in ('analyse', 'report'):
             if now - self.last_progress > 0.5:
                 self._command(0.0, 0.0)       # at rest; keeps a base's cmd watchdog fed
@@ -571,8 +588,13 @@ def _report_in_child(run_dir: str, outcome: dict[str, Any], trial: dict[str, Any
 
 def _child_main(target: Any, args: tuple[Any, ...]) -> None:
     """Child process: ignore the terminal's Ctrl-C (the parent stops and kills the child)."""
+    import os
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.nice(10)               # background work: the control loop (and a local base) first
+    except OSError:
+        pass
     target(*args)
 
 
