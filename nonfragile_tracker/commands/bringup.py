@@ -38,7 +38,7 @@ def cmd_bringup(args: argparse.Namespace) -> int:
     from ..bringup import bringup_limits, read_robot_file, robot_settings
     from ..control.identification.excitation import plan_excitation
     from ..resources import config_dir
-    robot = read_robot_file(args.robot) if args.robot else robot_settings(None)
+    robot = read_robot_file(args.robot) if args.robot else robot_settings(None)   # '': none
     v, w = bringup_limits(robot, args.max_speed, args.max_turn_rate)
     plan = plan_excitation(args.box, v, w, accel_segment=args.accel_segment,
                            odom_rate=args.odom_rate, max_linear_accel=robot.max_linear_accel,

@@ -36,6 +36,7 @@ def arguments(path):
     ('robot.launch.py', {'cmd_vel', 'odom', 'namespace', 'gains', 'scenario', 'trajectory',
                          'trajectory_topic', 'enable_stamped_cmd_vel', 'odom_frame',
                          'base_frame', 'use_sim_time'}),
+    ('bringup.launch.py', {'robot', 'box', 'accel_segment', 'out'}),
 ])
 def test_launch_arguments(name, expected):
     tree, declared, used = arguments(LAUNCH / name)
@@ -90,6 +91,18 @@ def test_robot_launch_starts_tracker_and_reference_with_remappable_topics():
     remaps = [t for t in ast.walk(tree) if isinstance(t, ast.Tuple) and len(t.elts) == 2
               and isinstance(t.elts[0], ast.Constant) and t.elts[0].value in ('cmd_vel', 'odom')]
     assert {t.elts[0].value for t in remaps} == {'cmd_vel', 'odom'}
+
+
+def test_bringup_launch_runs_the_cli_command():
+    """The launch file is the CLI's ``bringup`` (one implementation, its safety included),
+    with ``--accel-segment`` only when asked."""
+    tree, _, _ = arguments(LAUNCH / 'bringup.launch.py')
+    runs = calls(tree, 'ExecuteProcess')
+    assert len(runs) == 2
+    text = (LAUNCH / 'bringup.launch.py').read_text()
+    assert "'nonfragile_tracker', 'nonfragile_tracker', 'bringup'" in text
+    assert sorted(kw.value.func.id for c in runs for kw in c.keywords
+                  if kw.arg == 'condition') == ['IfCondition', 'UnlessCondition']
 
 
 def test_rviz_config_is_installed_and_shows_the_topics():
