@@ -299,10 +299,18 @@ def _table(results: dict) -> None:
     if results['ctrlc']:
         rows = results['ctrlc']
         zero = sum(1 for r in rows if r.get('last_v') == 0.0 and r.get('last_w') == 0.0)
-        prompt = sum(1 for r in rows if r.get('delay') is not None and r['delay'] <= 0.1)
+        by_signal = [r for r in rows if r['exit'] == 130]
+        driving = [r for r in by_signal if r['phase'] != 'analyse']
+        prompt = sum(1 for r in driving if 0.0 <= r.get('delay', math.nan) <= 0.1)
+        delays = sorted(1e3 * r['delay'] for r in driving if 'delay' in r)
         left = sum(1 for r in rows if r['left_running'])
-        print(f'Ctrl-C: {len(rows)} trials, last command zero {zero}, within 0.1 s of the '
-              f'signal {prompt} (analyse: the robot was at rest before), processes left {left}')
+        others = sorted(r['exit'] for r in rows if r['exit'] != 130)
+        shown = ', '.join(f'{d:.1f}' for d in delays)
+        print(f'Ctrl-C: {len(rows)} trials, {len(by_signal)} ended by the signal (the others '
+              f'stopped before it: {others}); last command zero {zero}/{len(rows)}; driving '
+              f'when signalled {len(driving)}, zero within 0.1 s {prompt}/{len(driving)} '
+              f'(delays {shown} ms); at rest (analyse) {len(by_signal) - len(driving)}; '
+              f'processes left {left}')
     if results['refusal']:
         print(f'refusal: {results["refusal"]}')
 

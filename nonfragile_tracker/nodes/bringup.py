@@ -269,6 +269,11 @@ class BringupNode(AdapterNode[BringupConfig]):
             self.recording.close()
             self.recording = None
         _say(f'stopped ({reason}); zero velocity commanded')
+        if self.start is not None:
+            if self.phase in ('excite', 'trial'):
+                self.robot_time += time.monotonic() - self.phase_start
+            _say(f'robot time {self.robot_time:.1f} s; farthest {self.farthest:.3f} m from the '
+                 f'start pose (box {self.config.box_radius:g} m)')
         self.finished = True
         self.exit_code = code
 
@@ -538,8 +543,6 @@ class BringupNode(AdapterNode[BringupConfig]):
                  f'{f["rms_cross_track_after_5s"] * 1e3:.2f} mm, max '
                  f'{f["max_error_after_5s"] * 1e3:.2f} mm (after 5 s); certificate monitor: '
                  f'{status}')
-        _say(f'robot time {self.robot_time:.1f} s; farthest {self.farthest:.3f} m from the start '
-             f'pose (box {cfg.box_radius:g} m)')
         _say(f'wrote {o.get("robot_file")}, {o.get("gain_file")}, {report}')
         _say('next: run the tracker with the designed gain and the robot file, e.g.\n'
              f'  ros2 launch nonfragile_tracker robot.launch.py gains:={o.get("gain_file")} '
