@@ -8,7 +8,7 @@ not informative) -> design (:func:`design_gain`: ``latency-design`` from the
 identification; refuses naming the latency when no gain within the bound certifies it)
 -> trial -> files (:func:`write_robot_file`, the gain file) and a report
 (:func:`write_report`: markdown and PNGs).  The heavy steps run in a child process of the
-node (:func:`analyse`, through :func:`analyse_in_child`) so that the node keeps
+node (:func:`analyse` and :func:`report`, through :func:`run_child`) so that the node keeps
 answering a stop signal within 0.1 s while the SDPs run.
 """
 from __future__ import annotations
@@ -33,9 +33,9 @@ if TYPE_CHECKING:
 
 __all__ = ['BringupRefusal', 'RobotSettings', 'robot_settings', 'read_robot_file',
            'bringup_limits', 'identify_recording', 'identify_samples', 'design_gain',
-           'write_robot_file',
-           'write_report', 'analyse', 'ROBOT_DEFAULTS', 'IDENTIFICATION_FILE', 'GAIN_FILE',
-           'ROBOT_FILE', 'REPORT_FILE', 'OUTCOME_FILE']
+           'write_robot_file', 'write_report', 'analyse', 'report', 'run_child',
+           'ROBOT_DEFAULTS', 'IDENTIFICATION_FILE', 'GAIN_FILE', 'ROBOT_FILE', 'REPORT_FILE',
+           'OUTCOME_FILE']
 
 #: The files a bring-up writes into its run folder.
 IDENTIFICATION_FILE = 'latency.yaml'
@@ -496,18 +496,39 @@ def analyse(bag: str | os.PathLike[str], run_dir: str | os.PathLike[str],
             'identification_png': str(ident_fig)}
 
 
-def analyse_in_child(bag: str, run_dir: str, settings: dict[str, Any]) -> None:
-    """Child-process entry of :func:`analyse`: its outcome (or error) into ``analysis.json``.
+def run_child(task_file: str) -> int:
+    """Child-process entry of the bring-up node: :func:`analyse` or :func:`report` of a task.
+
+    The child ignores SIGINT (a terminal's Ctrl-C reaches the whole process group; the node
+    stops and kills the child) and runs at a lower priority than the node's control loop.
 
     Parameters
     ----------
-    bag : str
-        The excitation's bag.
-    run_dir : str
-        The run folder.
-    settings : dict
-        As :func:`analyse`.
+    task_file : str
+        JSON: ``task`` (``analyse``: ``bag``, ``run_dir``, ``settings``; ``report``:
+        ``run_dir``, ``outcome``, ``trial``, ``excitation``).
+
+    Returns
+    -------
+    int
+        0; the outcome (or the error) is in the run folder's files.
     """
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.nice(10)
+    except OSError:
+        pass
+    spec = json.loads(Path(task_file).read_text())
+    if spec['task'] == 'analyse':
+        _analyse_to_file(spec['bag'], spec['run_dir'], spec['settings'])
+    else:
+        report(spec['run_dir'], spec['outcome'], spec['trial'], spec['excitation'])
+    return 0
+
+
+def _analyse_to_file(bag: str, run_dir: str, settings: dict[str, Any]) -> None:
+    """:func:`analyse`'s outcome (or error) into ``analysis.json``."""
     path = Path(run_dir) / OUTCOME_FILE
     try:
         outcome = analyse(bag, run_dir, settings)
@@ -576,3 +597,58 @@ def write_report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
     path = run / REPORT_FILE
     path.write_text('\n'.join(lines) + '\n')
     return path
+
+
+def report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
+           trial: Mapping[str, Any] | None, excitation: Mapping[str, Any]) -> str:
+    """The figures of both bags (``bag report``), the trial's certificate check, the report.
+
+    Parameters
+    ----------
+    run_dir : path-like
+        The run folder (``bag``, ``trial_bag``).
+    outcome : mapping
+        :func:`analyse`'s result.
+    trial : mapping or None
+        The trial's figures from the node (None: no trial).
+    excitation : mapping
+        The excitation's figures from the node.
+
+    Returns
+    -------
+    str
+        The certificate monitor's status over the trial (also in ``report.json``).
+    """
+    from .bag.report import bag_report, certificate_check, certificate_source
+    run = Path(run_dir)
+    tr = dict(trial) if trial is not None else None
+    ex = dict(excitation)
+    status = 'no trial'
+    try:
+        rep = bag_report(run / 'bag', run / 'excitation_report', overwrite=True)
+        if 'xy' in rep.plots:
+            ex['path_png'] = str(rep.plots['xy'])
+    except Exception as exc:  # noqa: BLE001 - the report says what failed
+        ex['report'] = f'not written ({type(exc).__name__}: {exc})'
+    bag = run / 'trial_bag'
+    if tr is not None and bag.exists():
+        try:
+            src = certificate_source(bag, outcome.get('gain_file'))
+            if src is not None:
+                cert, params, source = src
+                chk = certificate_check(bag, cert, params, source=source)
+                status = (f'{100 * chk.inside:.0f} % of windows inside the certified interval, '
+                          f'{100 * chk.outside:.0f} % outside, {100 * chk.unknown:.0f} % unknown; '
+                          f'last: {chk.last_message}')
+                tr['certificate'] = status
+            rep = bag_report(bag, run / 'trial_report', overwrite=True)
+            errors = rep.plots.get('errors')
+            if errors is not None:
+                tr['errors_png'] = str(errors)
+        except Exception as exc:  # noqa: BLE001 - the report says what failed
+            status = f'not checked ({type(exc).__name__}: {exc})'
+            tr['certificate'] = status
+    write_report(run, outcome, tr, ex)
+    (run / 'report.json').write_text(json.dumps({'certificate': status, 'trial': tr},
+                                                default=float))
+    return status

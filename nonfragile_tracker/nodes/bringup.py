@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
+import subprocess
 import sys
 import time
 import traceback
@@ -263,8 +263,9 @@ class BringupNode(AdapterNode[BringupConfig]):
                 self._command(0.0, 0.0)
         except Exception:  # noqa: BLE001 - the context may be gone; nothing else to do
             pass
-        if self.child is not None and self.child.is_alive():
+        if self.child is not None and self.child.poll() is None:
             self.child.kill()
+            self.child.wait()
         if self.recording is not None:
             self.recording.close()
             self.recording = None
@@ -396,25 +397,30 @@ class BringupNode(AdapterNode[BringupConfig]):
         if self.phase == 'excite':
             self.excitation_figs.update(farthest_distance=self.farthest,
                                         robot_time=self.robot_time)
-            self._start_child('analyse', steps.analyse_in_child,
-                              (str(self.config.run_dir / 'bag'), str(self.config.run_dir),
-                               {'robot': self.config.robot.__dict__,
-                                'problem': str(self.config.problem),
-                                'odom_period': self.odom_period,
-                                'accel_segment': self.config.accel_segment}))
+            self._start_child('analyse', {
+                'task': 'analyse', 'bag': str(self.config.run_dir / 'bag'),
+                'run_dir': str(self.config.run_dir),
+                'settings': {'robot': self.config.robot.__dict__,
+                             'problem': str(self.config.problem),
+                             'odom_period': self.odom_period,
+                             'accel_segment': self.config.accel_segment}})
         elif self.phase == 'trial':
             self._trial_figures()
-            self._start_child('report', _report_in_child,
-                              (str(self.config.run_dir), self.outcome or {}, self.trial_figs,
-                               self.excitation_figs))
+            self._start_child('report', {
+                'task': 'report', 'run_dir': str(self.config.run_dir),
+                'outcome': self.outcome or {}, 'trial': self.trial_figs,
+                'excitation': self.excitation_figs})
 
-    def _start_child(self, phase: str, target: Any, args: tuple[Any, ...]) -> None:
-        ctx = multiprocessing.get_context('spawn')
+    def _start_child(self, phase: str, spec: dict[str, Any]) -> None:
+        """Run :func:`nonfragile_tracker.bringup.run_child` on ``spec`` in a child process."""
         out = self.config.run_dir / steps.OUTCOME_FILE
         if phase == 'analyse' and out.exists():
             out.unlink()
-        self.child = ctx.Process(target=_child_main, args=(target, args), daemon=True)
-        self.child.start()
+        path = self.config.run_dir / f'{phase}_task.json'
+        path.write_text(json.dumps(spec, default=float))
+        self.child = subprocess.Popen(
+            [sys.executable, '-c', 'import sys; from nonfragile_tracker.bringup import '
+             'run_child; sys.exit(run_child(sys.argv[1]))', str(path)])
         self._set_phase(phase)
 
     def _trial_figures(self) -> None:
@@ -437,7 +443,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         try:
             self.outcome = json.loads(out.read_text())
         except (OSError, ValueError):
-            self.stop(f'the analysis ended without a result (exit code {self.child.exitcode})',
+            self.stop(f'the analysis ended without a result (exit code {self.child.returncode})',
                       EXIT_RUN)
             return
         assert self.outcome is not None
@@ -457,8 +463,9 @@ class BringupNode(AdapterNode[BringupConfig]):
              f'{o["gain_file"]}')
         cfg = self.config
         if cfg.trial_duration <= 0:
-            self._start_child('report', _report_in_child,
-                              (str(cfg.run_dir), self.outcome, None, self.excitation_figs))
+            self._start_child('report', {
+                'task': 'report', 'run_dir': str(cfg.run_dir), 'outcome': self.outcome,
+                'trial': None, 'excitation': self.excitation_figs})
             return
         assert self.plan is not None and self.start is not None
         silent = time.monotonic() - self.last_odom
@@ -505,7 +512,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         if self.phase in ('analyse', 'report'):
             if now - self.last_progress > 0.5:
                 self._command(0.0, 0.0)       # at rest; keeps a base's cmd watchdog fed
-            if self.child is not None and not self.child.is_alive():
+            if self.child is not None and self.child.poll() is not None:
                 if self.phase == 'analyse':
                     self._after_analysis()
                 else:
@@ -549,56 +556,6 @@ class BringupNode(AdapterNode[BringupConfig]):
              f'trajectory:=lap.csv cmd_vel:={cfg.robot.cmd_vel_topic} '
              f'odom:={cfg.robot.odom_topic}')
         self.stop('done', 0)
-
-
-def _report_in_child(run_dir: str, outcome: dict[str, Any], trial: dict[str, Any] | None,
-                     excitation: dict[str, Any]) -> None:
-    """Child process: the trial's certificate check and figures, then the report."""
-    run = Path(run_dir)
-    trial = dict(trial) if trial is not None else None
-    excitation = dict(excitation)
-    status = 'no trial'
-    try:
-        from ..bag.report import bag_report
-        rep = bag_report(run / 'bag', run / 'excitation_report', overwrite=True)
-        if 'xy' in rep.plots:
-            excitation['path_png'] = str(rep.plots['xy'])
-    except Exception as exc:  # noqa: BLE001 - the report says what failed
-        excitation['report'] = f'not written ({type(exc).__name__}: {exc})'
-    bag = run / 'trial_bag'
-    if trial is not None and bag.exists():
-        try:
-            from ..bag.report import bag_report, certificate_check, certificate_source
-            src = certificate_source(bag, outcome.get('gain_file'))
-            if src is not None:
-                cert, params, source = src
-                chk = certificate_check(bag, cert, params, source=source)
-                status = (f'{100 * chk.inside:.0f} % of windows inside the certified interval, '
-                          f'{100 * chk.outside:.0f} % outside, {100 * chk.unknown:.0f} % unknown; '
-                          f'last: {chk.last_message}')
-                trial['certificate'] = status
-            rep = bag_report(bag, run / 'trial_report', overwrite=True)
-            errors = rep.plots.get('errors')
-            if errors is not None:
-                trial['errors_png'] = str(errors)
-        except Exception as exc:  # noqa: BLE001 - the report says what failed
-            status = f'not checked ({type(exc).__name__}: {exc})'
-            trial['certificate'] = status
-    steps.write_report(run, outcome, trial, excitation)
-    (run / 'report.json').write_text(json.dumps({'certificate': status, 'trial': trial},
-                                                default=float))
-
-
-def _child_main(target: Any, args: tuple[Any, ...]) -> None:
-    """Child process: ignore the terminal's Ctrl-C (the parent stops and kills the child)."""
-    import os
-    import signal
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        os.nice(10)               # background work: the control loop (and a local base) first
-    except OSError:
-        pass
-    target(*args)
 
 
 def main(args: list[str] | None = None) -> int:
