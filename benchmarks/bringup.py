@@ -56,6 +56,8 @@ LATENCIES = (40, 100, 200, 300)
 LAGS = (30, 80)
 LIMITS = {1.0: (1.0, 3.0), 0.5: (0.5, 1.5)}
 TARGET_FIG8, TARGET_LAP, TARGET_ROBOT_TIME = 0.002, 0.003, 90.0
+#: The phases a Ctrl-C trial picks from (--ctrlc-phases).
+PHASES = ['excite', 'analyse', 'trial']
 
 
 def _netns(cmd: list[str]) -> list[str]:
@@ -176,7 +178,7 @@ def ctrlc_trial(out: Path, k: int, rng: random.Random) -> dict:
     d = out / f'ctrlc_{k}'
     d.mkdir(parents=True, exist_ok=True)
     sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml', base_plant(100, 30, 1.0, seed=k))
-    phase = rng.choice(['excite', 'analyse', 'trial'])
+    phase = rng.choice(PHASES)
     cmd = _netns([sys.executable, '-m', 'nonfragile_tracker.cli', 'bringup', '--simulate',
                   str(sc), '--out', str(d), '--name', 'run', '--odom-timeout',
                   str(ODOM_TIMEOUT)])
@@ -209,6 +211,9 @@ def ctrlc_trial(out: Path, k: int, rng: random.Random) -> dict:
         row.update(last_v=float(c.v[-1]), last_w=float(c.w[-1]),
                    delay=float(c.t[-1]) - sent)
     if left:
+        ps = subprocess.run(['ps', '-o', 'pid,stat,args', '-g', str(p.pid)], capture_output=True,
+                            text=True)
+        row['left'] = ps.stdout[-2000:]
         os.killpg(p.pid, signal.SIGKILL)
     return row
 
@@ -241,7 +246,10 @@ def main() -> int:
     ap.add_argument('--odom-timeout', type=float, default=0.5,
                     help='the bring-up\'s odometry timeout (s; default 0.5, the robot file '
                     'default): raise it on a loaded machine whose plant stalls')
+    ap.add_argument('--ctrlc-phases', default='excite,analyse,trial',
+                    help='the phases a Ctrl-C trial picks from')
     args = ap.parse_args()
+    PHASES[:] = args.ctrlc_phases.split(',')
     global ODOM_TIMEOUT
     ODOM_TIMEOUT = args.odom_timeout
     out = Path(args.out)
