@@ -251,9 +251,12 @@ def identify_samples(commands: CommandSamples, odometry: OdometrySamples, *,
     if hi - lo > 2.0 * odom_period + 0.01:
         raise BringupRefusal(
             f'the latency is not pinned down: {res.latency_s:.4f} s with the 95 % interval '
-            f'[{lo:.4f}, {hi:.4f}] s, wider than two odometry periods ({odom_period:.3f} s). '
-            'What to change: give a larger box (--box) or higher limits so the steps are '
-            'larger, or a faster odometry rate')
+            f'[{lo:.4f}, {hi:.4f}] s, wider than two odometry periods ({odom_period:.3f} s): '
+            'the base\'s latency varies during the run, or the steps are too small to time. '
+            'What to change: if the latency varies (a busy controller, a lossy link, a '
+            'bridge that batches commands), reduce the variation - no gain is designed for a '
+            'latency that is not known; otherwise give a larger box (--box) or higher limits '
+            '(--max-speed, --max-turn-rate) for larger steps')
     if accel_segment is False and res.max_linear_accel == 0 and res.max_angular_accel == 0:
         res = replace(res, notes=tuple(res.notes) + (
             'acceleration limits not identified: the excitation had no acceleration segment '

@@ -418,9 +418,10 @@ class BringupNode(AdapterNode[BringupConfig]):
             out.unlink()
         path = self.config.run_dir / f'{phase}_task.json'
         path.write_text(json.dumps(spec, default=float))
+        # a session of its own: a terminal's Ctrl-C reaches this node, which kills the child
         self.child = subprocess.Popen(
             [sys.executable, '-c', 'import sys; from nonfragile_tracker.bringup import '
-             'run_child; sys.exit(run_child(sys.argv[1]))', str(path)])
+             'run_child; sys.exit(run_child(sys.argv[1]))', str(path)], start_new_session=True)
         self._set_phase(phase)
 
     def _trial_figures(self) -> None:
@@ -487,6 +488,9 @@ class BringupNode(AdapterNode[BringupConfig]):
     # ------------------------------------------------------------------ watchdog, progress
     def _tick(self) -> None:
         if self.stopped:
+            return
+        if stop_requested():                 # a signal during this spin: it comes first
+            self.stop('stop signal', 0)
             return
         now = time.monotonic()
         cfg = self.config
