@@ -67,6 +67,24 @@ def test_uninformative_data_is_refused_with_what_to_change():
         identify_samples(rec.commands, rec.odometry)
 
 
+def test_a_latency_that_jumps_is_refused_naming_it():
+    # the base's latency jumps between 0.1 and 0.6 s every 1.5 s: no latency to design for
+    sched = []
+    for i in range(1, 20):
+        sched += [1.5 * i, 0.6 if i % 2 else 0.1]
+    base = PlantConfig(dt=0.01, cmd_latency=0.1, lag_v=0.05, lag_w=0.05, odom_rate=50.0,
+                       odom_noise=(1e-3, 1e-3, 1e-3), noise_seed=3,
+                       cmd_latency_schedule=tuple(sched))
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 30.0, 0.02)
+    v = np.repeat(rng.uniform(0.05, 0.3, 20), t.size // 20 + 1)[:t.size]
+    w = np.repeat(rng.uniform(-0.8, 0.8, 20), t.size // 20 + 1)[:t.size]
+    rec = record_open_loop(base, t, v, w)
+    with pytest.raises(BringupRefusal, match=r'the latency is not pinned down: 0\.\d+ s .*'
+                       r'reduce the variation'):
+        identify_samples(rec.commands, rec.odometry)
+
+
 def test_informative_steps_are_identified():
     rng = np.random.default_rng(0)
     t = np.arange(0.0, 30.0, 0.02)
