@@ -3,7 +3,7 @@
 ``nonfragile_tracker bringup`` drives the robot closed-loop (the shipped certified gain,
 :class:`~nonfragile_tracker.control.simulation.loop.Tracker`) along the reference planned
 here, records commands and odometry, and identifies latency, lags and limits from them
-(:mod:`.identify`).  What makes a recording informative is a matter of the commands:
+(:mod:`nonfragile_tracker.control.identification.identify`).  What makes a recording informative is a matter of the commands:
 distinct steps in ``v`` and in ``w``, each held long enough for the response to settle
 (several lags, many odometry samples), and - for the acceleration limits - steps faster
 than the base can follow.  The plan is pure (numpy only, no ROS): ``bringup --dry-run``
@@ -70,10 +70,10 @@ class Extent:
 
     max_distance: float        #: farthest distance of the reference from the start pose (m)
     duration: float            #: robot time (s)
-    max_speed: float           #: largest |v| (m/s)
-    max_turn_rate: float       #: largest |w| (rad/s)
-    max_linear_accel: float    #: largest |dv/dt| of the reference (m/s^2)
-    max_angular_accel: float   #: largest |dw/dt| of the reference (rad/s^2)
+    max_speed: float           #: largest ``|v|`` (m/s)
+    max_turn_rate: float       #: largest ``|w|`` (rad/s)
+    max_linear_accel: float    #: largest ``|dv/dt|`` of the reference (m/s^2)
+    max_angular_accel: float   #: largest ``|dw/dt|`` of the reference (rad/s^2)
 
     def describe(self) -> str:
         """One line with the figures."""
