@@ -4,8 +4,9 @@
 :class:`~nonfragile_tracker.control.simulation.loop.Tracker`) along the reference planned
 here, records commands and odometry, and identifies latency, lags and limits from them
 (:mod:`nonfragile_tracker.control.identification.identify`).  What makes a recording
-informative is a matter of the commands: distinct steps in ``v`` and in ``w``, each held long enough for the response to settle
-(several lags, many odometry samples), and - for the acceleration limits - steps faster
+informative is a matter of the commands: distinct steps in ``v`` and in ``w``, each held
+long enough for the response to settle (several lags, many odometry samples), and - for
+the acceleration limits - steps faster
 than the base can follow.  The plan is pure (numpy only, no ROS): ``bringup --dry-run``
 prints its extent without moving anything.
 
