@@ -6,9 +6,8 @@ here, records commands and odometry, and identifies latency, lags and limits fro
 (:mod:`nonfragile_tracker.control.identification.identify`).  What makes a recording
 informative is a matter of the commands: distinct steps in ``v`` and in ``w``, each held
 long enough for the response to settle (several lags, many odometry samples), and - for
-the acceleration limits - steps faster
-than the base can follow.  The plan is pure (numpy only, no ROS): ``bringup --dry-run``
-prints its extent without moving anything.
+the acceleration limits - steps faster than the base can follow.  The plan is pure (numpy
+only, no ROS): ``bringup --dry-run`` prints its extent without moving anything.
 
 The geometry is a figure eight of two circles of radius ``r`` that touch at the start
 pose (heading 0 there), so every point of it lies within ``2 r`` of the start; ``r`` is
