@@ -22,7 +22,7 @@ from setuptools.command.install_scripts import install_scripts
 
 package_name = 'nonfragile_tracker'
 #: The node executables (``nonfragile_tracker.nodes.entry.NODES``), one console script each.
-NODES = ('reference', 'plant', 'tracker', 'recorder')
+NODES = ('reference', 'plant', 'tracker', 'recorder', 'bringup')
 
 
 def lean_wrapper(script_name, contents):

@@ -36,8 +36,8 @@ EPILOG = ('exit codes: 0 ok; 1 a check found differences or violations (golden, 
 
 #: The command modules (under ``nonfragile_tracker.commands``), in ``--help`` order; each
 #: exposes ``register(subparsers)``.  Imported by :func:`build_parser`.
-COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'study', 'trajectory',
-            'bag', 'reproduce', 'golden')
+COMMANDS = ('synthesis', 'identify', 'latency_design', 'sweep', 'run', 'bringup', 'study',
+            'trajectory', 'bag', 'reproduce', 'golden')
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -66,7 +66,7 @@ LAYERS = (
     ('foundation', {'', 'errors', 'files', 'parallel'}),
     ('control', {'control'}),
     ('conversions', {'topics', 'msgconv', 'resources', 'scenario', 'tracker_inputs', 'robot'}),
-    ('bag', {'bag'}),
+    ('bag', {'bag', 'bringup'}),
     ('nodes', {'nodes'}),
     ('orchestration', {'runner', 'replayer', 'golden', 'reproduce', 'region_check'}),
     ('top', {'commands', 'cli'}),

@@ -40,20 +40,20 @@ CHECKED = tuple(
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
         'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains', 'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
-        'identify', 'lag_fit', 'records', 'recording', 'monitor')]
+        'identify', 'lag_fit', 'records', 'recording', 'monitor', 'excitation')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
         'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot',
-        'region_check')]
+        'region_check', 'bringup')]
     + [f'nonfragile_tracker.bag.{m}' for m in (
         'compare', 'reader', 'writer', 'repair', 'errors', 'typestore', 'report', 'replay',
         'motion')]
     + [f'nonfragile_tracker.commands.{m}' for m in (
         'argtypes', 'common', 'synthesis', 'identify', 'latency_design', 'sweep', 'run',
-        'study', 'trajectory', 'bag', 'reproduce', 'golden')]
+        'study', 'trajectory', 'bag', 'reproduce', 'golden', 'bringup')]
     + [f'nonfragile_tracker.nodes.{m}' for m in (
         'trajectory_io', 'entry', 'errors', 'common', 'plant', 'reference', 'tracker',
-        'recorder', 'workarounds')])
+        'recorder', 'workarounds', 'bringup')])
 
 
 def _defined_in(obj: object, module: str) -> bool:

@@ -29,7 +29,7 @@ from sphinx.util.docutils import SphinxDirective
 
 #: node name -> module holding its ``PARAMS``
 NODE_MODULES = {name: f'nonfragile_tracker.nodes.{name}'
-                for name in ('reference', 'plant', 'tracker', 'recorder')}
+                for name in ('reference', 'plant', 'tracker', 'recorder', 'bringup')}
 
 
 def _type_name(param: Any) -> str:

@@ -28,7 +28,7 @@ from typing import Any, Sequence
 from . import workarounds         # (lean: the standard library only)
 
 #: The node modules a process can run.
-NODES = ('reference', 'plant', 'tracker', 'recorder')
+NODES = ('reference', 'plant', 'tracker', 'recorder', 'bringup')
 
 _received: list[int] = []
 
@@ -176,6 +176,11 @@ def tracker_main() -> int:
 def recorder_main() -> int:
     """Console script ``recorder``: :func:`main` of the recorder node."""
     return main('recorder')
+
+
+def bringup_main() -> int:
+    """Console script ``bringup``: :func:`main` of the bring-up node."""
+    return main('bringup')
 
 
 if __name__ == '__main__':

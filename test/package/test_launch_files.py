@@ -36,6 +36,7 @@ def arguments(path):
                             'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
     ('robot.launch.py', {'robot', 'gains', 'trajectory', 'trajectory_topic', 'namespace',
                          'use_sim_time'}),
+    ('bringup.launch.py', {'robot', 'box', 'accel_segment', 'out'}),
 ])
 def test_launch_arguments(name, expected):
     tree, declared, used = arguments(LAUNCH / name)
@@ -166,6 +167,18 @@ def test_robot_launch_with_a_users_robot_file_and_a_trajectory(monkeypatch, tmp_
     mine.write_text('/**/tracker:\n  ros__parameters:\n    max_linear_speed: 1\n')
     with pytest.raises(RobotFileError, match='max_linear_speed is 1: write 1.0'):
         robot_launch(monkeypatch, robot=str(mine))
+
+
+def test_bringup_launch_runs_the_cli_command():
+    """The launch file is the CLI's ``bringup`` (one implementation, its safety included),
+    with ``--accel-segment`` only when asked."""
+    tree, _, _ = arguments(LAUNCH / 'bringup.launch.py')
+    runs = calls(tree, 'ExecuteProcess')
+    assert len(runs) == 2
+    text = (LAUNCH / 'bringup.launch.py').read_text()
+    assert "'nonfragile_tracker', 'nonfragile_tracker', 'bringup'" in text
+    assert sorted(kw.value.func.id for c in runs for kw in c.keywords
+                  if kw.arg == 'condition') == ['IfCondition', 'UnlessCondition']
 
 
 def test_rviz_config_is_installed_and_shows_the_topics():

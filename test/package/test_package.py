@@ -9,7 +9,7 @@ from pathlib import Path
 from conftest import ROOT
 
 COLCON = Path(sys.executable).parent / 'colcon'
-EXECUTABLES = {'reference', 'plant', 'tracker', 'recorder', 'nonfragile_tracker'}
+EXECUTABLES = {'reference', 'plant', 'tracker', 'recorder', 'bringup', 'nonfragile_tracker'}
 
 
 def test_package_xml_is_valid_for_catkin_pkg():

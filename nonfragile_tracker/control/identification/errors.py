@@ -5,14 +5,18 @@ CLI exits 2), each message saying what is missing or wrong::
 
     InputError
     +-- IdentificationError     the run cannot give a latency estimate (too few samples,
-    |                           too little excitation, a poor fit) or a file is malformed
+    |   |                       too little excitation, a poor fit) or a file is malformed
+    |   +-- NotEnoughDataError           too few samples (the bring-up names the cause)
+    |   +-- InsufficientExcitationError  a command that hardly varies
+    |   +-- PoorFitError                 a poor fit or an estimate at a search limit
     +-- MonitorError            a monitor setting or certificate record
 """
 from __future__ import annotations
 
 from ...errors import InputError
 
-__all__ = ['IdentificationError', 'MonitorError']
+__all__ = ['IdentificationError', 'NotEnoughDataError', 'InsufficientExcitationError',
+           'PoorFitError', 'MonitorError']
 
 
 class IdentificationError(InputError):
@@ -21,6 +25,22 @@ class IdentificationError(InputError):
     The message says what is missing (too few samples, too little excitation, a poor fit)
     or names the field.
     """
+
+
+class NotEnoughDataError(IdentificationError):
+    """Too few commands or odometry samples, or too short an overlap, to estimate from.
+
+    Caught by the bring-up (:func:`nonfragile_tracker.bringup.identify_samples`), which
+    says what to change.
+    """
+
+
+class InsufficientExcitationError(IdentificationError):
+    """A command channel hardly varies: the data cannot show a latency (bring-up: a larger box)."""
+
+
+class PoorFitError(IdentificationError):
+    """The model explains too little of the response, or an estimate is at a search limit."""
 
 
 class MonitorError(InputError):

@@ -36,7 +36,8 @@ from typing import Any, cast
 import numpy as np
 
 from ...errors import InputError
-from .errors import IdentificationError
+from .errors import (IdentificationError, InsufficientExcitationError, NotEnoughDataError,
+                     PoorFitError)
 from .lag_fit import (ACCEL_UNITS, NAMES, CHANNELS, MIN_EVENTS, UNITS, Fit, FitData,
                       Measurement, binding_fraction)
 # the records, importable from here as before (explicit re-exports)
@@ -195,8 +196,8 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
     """
     # -- commands
     if len(commands) < 10:
-        raise IdentificationError(f'the run has {len(commands)} velocity commands; at least 10 '
-                                  'are needed (record cmd_vel while the robot moves)')
+        raise NotEnoughDataError(f'the run has {len(commands)} velocity commands; at least 10 '
+                                 'are needed (record cmd_vel while the robot moves)')
     order = _check_times('command t', commands.t)
     tc = commands.t[order]
     cmd = {'v': commands.v[order], 'w': commands.w[order]}
@@ -216,8 +217,8 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
         raise InputError('odometry poses have non-finite values')
     twist = {'v': None if o.v is None else o.v[idx], 'w': None if o.w is None else o.w[idx]}
     if to.size < MIN_ODOM_SAMPLES:
-        raise IdentificationError(f'the run has {to.size} odometry samples; at least '
-                                  f'{MIN_ODOM_SAMPLES} are needed')
+        raise NotEnoughDataError(f'the run has {to.size} odometry samples; at least '
+                                 f'{MIN_ODOM_SAMPLES} are needed')
     odom_period = float(np.median(np.diff(to)))
     odom_rate = 1.0 / odom_period
 
@@ -246,7 +247,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
     meas = {c: measurement(c) for c in CHANNELS}
     n_used = {c: meas[c][3].size for c in CHANNELS}
     if min(n_used.values()) < MIN_ODOM_SAMPLES:
-        raise IdentificationError(
+        raise NotEnoughDataError(
             f'only {min(n_used.values())} odometry samples lie between {max_latency_s:g} s '
             f'after the first command and the last command (t = {tc[0]:.3f} ... {tc[-1]:.3f} '
             f's; odometry {to[0]:.3f} ... {to[-1]:.3f} s); at least {MIN_ODOM_SAMPLES} are '
@@ -257,7 +258,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
     block_len = float(np.clip(duration / 20.0, 0.25, 2.0))
     n_blocks = int(duration // block_len) + 1
     if duration < MIN_BLOCKS * block_len:
-        raise IdentificationError(
+        raise NotEnoughDataError(
             f'commands and odometry overlap for {duration:.2f} s after the first '
             f'{max_latency_s:g} s; at least {MIN_BLOCKS * 0.25:g} s are needed for the '
             'uncertainty (block bootstrap): record a longer run')
@@ -278,7 +279,7 @@ def _check_excitation(data: FitData, max_latency_s: float,
         ptp = float(np.ptp(u)) if u.size else 0.0
         changes = int(np.count_nonzero(np.diff(u))) if u.size > 1 else 0
         if ptp < lo or changes < 3:
-            raise IdentificationError(
+            raise InsufficientExcitationError(
                 f'the {NAMES[c]} command hardly varies in the fitted span ({t_begin:.2f} ... '
                 f'{t_end:.2f} s): peak-to-peak {ptp:.3g} {UNITS[c]} (need >= {lo:g}), '
                 f'{changes} changes; its lag and the latency cannot be seen. Record a run that '
@@ -342,16 +343,16 @@ def _check_quality(fit: Fit, excluded: list[tuple[float, float]], max_latency_s:
 
     for c in CHANNELS:
         if r2[c] < MIN_R2:
-            raise IdentificationError(_poor_fit_cause(c, r2[c], data.use[c], chans[c].z,
-                                                      data.cmd[c], fit.accel[c], excluded_s))
+            raise PoorFitError(_poor_fit_cause(c, r2[c], data.use[c], chans[c].z,
+                                               data.cmd[c], fit.accel[c], excluded_s))
     if pos >= fit.d_max - 0.5:
-        raise IdentificationError(f'the latency estimate is at the search limit '
-                                  f'{max_latency_s:g} s: either the latency is longer (raise '
-                                  'max_latency_s, --max-latency) or the odometry does not '
-                                  'respond to these commands (another robot, another clock)')
+        raise PoorFitError(f'the latency estimate is at the search limit '
+                           f'{max_latency_s:g} s: either the latency is longer (raise '
+                           'max_latency_s, --max-latency) or the odometry does not '
+                           'respond to these commands (another robot, another clock)')
     for c in CHANNELS:
         if tau_hat[c] >= 0.999 * max_tau_s:
-            raise IdentificationError(
+            raise PoorFitError(
                 f'the {NAMES[c]} time constant reaches the search limit {max_tau_s:g} s: the '
                 f'measured {NAMES[c]} does not follow the commands through a lag. Real '
                 'actuator lags are tens of milliseconds; a fit this slow means something the '
