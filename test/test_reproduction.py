@@ -73,31 +73,75 @@ def test_markdown_is_rendered_from_the_committed_numbers(committed):
         assert (DOCS / fig).stat().st_size > 10_000, fig
 
 
+#: The rows whose gain is fixed (the paper's printed gains): every figure is an exact
+#: computation on the same K (eigenvalues, simulation), equal across machines to round-off.
+FIXED_ROWS = ('paper K_nf', 'paper K_normal')
+#: The designed rows' gains come from the SDP solver, whose last digits differ between
+#: OpenBLAS kernels (chosen by CPU), at flat optima: K moved by up to 3e-3 (max decay rate)
+#: under Haswell, Sandybridge and Prescott kernels and an AMD EPYC.  Their figures are judged
+#: with tolerances taken from that spread: the norm (the budget spent within the bisection's
+#: 2e-3, measured 2e-5 apart) 1e-3, the measured fragility margin (a worst case over
+#: Delta, measured 1.4e-4 apart) 1e-3, the certified one (a bisection on fixed points) 2e-3,
+#: figures of K (abscissae, decay rate; measured 0.9 % apart) 2 %, tracking figures of K (a
+#: slow loop's error after 20 s amplifies K's difference: measured 3.2 % apart) 5 %.
+DESIGNED_TOL = {'norm': 1e-3, 'measured_margin': 1e-3, 'certified_margin': 2e-3,
+                'abscissa_nominal': 2e-2, 'abscissa_delta1': 2e-2, 'abscissa_delta2': 2e-2,
+                'worst_abscissa': 2e-2, 'certified_decay': 2e-2, 'delay_margin': 0,
+                'certified_delay': 0}
+DESIGNED_TRACKING_TOL = 5e-2
+#: The max perturbation scale's K is one of a flat family (the scale is the objective; K
+#: moved by 0.1 and its abscissae, decay rate and tracking by up to 20 % under the
+#: Prescott kernel): of it the tolerances above hold for the norm and the fragility
+#: margins only; its other figures are checked for what does not move: their sign and
+#: whether they are finite (stable, reaches 1 cm).
+FLAT_ROWS = ('max perturbation scale',)
+
+
 @pytest.mark.ros
 def test_gain_table_matches_fresh_computation(committed, fresh):
     assert list(committed['gains']) == list(fresh['gains'])
-    tol = {'norm': 1e-6, 'abscissa_nominal': 1e-6, 'abscissa_delta1': 1e-6,
-           'abscissa_delta2': 1e-6, 'worst_abscissa': 1e-4, 'measured_margin': 1e-3,
-           'certified_margin': 2e-3, 'delay_margin': 1e-6, 'certified_delay': 0}
+    exact = {'norm': 1e-6, 'abscissa_nominal': 1e-6, 'abscissa_delta1': 1e-6,
+             'abscissa_delta2': 1e-6, 'worst_abscissa': 1e-4, 'measured_margin': 1e-3,
+             'certified_margin': 2e-3, 'delay_margin': 1e-6, 'certified_delay': 0,
+             'certified_decay': 2e-3}
     for name, row in committed['gains'].items():
         new = fresh['gains'][name]
-        np.testing.assert_allclose(row['K'], new['K'], atol=1e-4, err_msg=name)
         for key in ('certified_nominal', 'certified_nonfragile'):
             assert row[key] == new[key], (name, key)
+        if name in FIXED_ROWS:
+            np.testing.assert_array_equal(row['K'], new['K'], err_msg=name)
+            tol, track = exact, 1e-6
+        else:
+            # K itself is not compared digit by digit (a flat optimum), only its size
+            np.testing.assert_allclose(row['K'], new['K'], atol=0.2, err_msg=name)
+            tol, track = DESIGNED_TOL, DESIGNED_TRACKING_TOL
         for key, rel in tol.items():
-            assert close(row[key], new[key], rel), (name, key, row[key], new[key])
+            if name in FLAT_ROWS and key not in ('norm', 'measured_margin', 'certified_margin'):
+                assert np.sign(row[key]) == np.sign(new[key]), (name, key)
+            else:
+                assert close(row[key], new[key], rel), (name, key, row[key], new[key])
         for part in ('tracking', 'tracking_compensated'):
             for key, val in row[part].items():
-                assert close(val, new[part][key], 1e-6, 1e-9), (name, part, key)
+                got = new[part][key]
+                if name in FLAT_ROWS:
+                    assert (val is None or math.isfinite(val)) == \
+                        (got is None or math.isfinite(got)), (name, part, key)
+                else:
+                    assert close(val, got, track, 1e-9), (name, part, key, val, got)
 
 
 @pytest.mark.ros
 def test_harder_delay_section_matches(committed, fresh):
+    """The certified h_max comes from a bisection on fixed points (the same on every machine
+    within its 1e-3 s); the exact margins are of the designed K, which moves by up to
+    2e-3 between BLAS kernels (a flat optimum): they moved by 2.2e-3 relative (1.16349
+    against 1.16601 s on an AMD EPYC), so they are checked to 1 % and above h_max."""
     a, b = committed['harder'], fresh['harder']
     assert a['theorem1_feasible'] is False and b['theorem1_feasible'] is False
     assert close(a['h_max'], b['h_max'], 0, 2e-3)
     for k, v in a['true_delay_margin'].items():
-        assert v > a['h_max'] and close(v, b['true_delay_margin'][k], 1e-3)
+        assert v > a['h_max'] and b['true_delay_margin'][k] > b['h_max']
+        assert close(v, b['true_delay_margin'][k], 1e-2), k
 
 
 @pytest.mark.ros
