@@ -19,6 +19,9 @@ from nonfragile_tracker.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 DOCS = ROOT / 'docs'
 
 

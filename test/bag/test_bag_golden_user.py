@@ -7,6 +7,9 @@ import yaml
 from conftest import CONFIG
 from nonfragile_tracker import cli, golden
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 def test_golden_refuses_to_write_into_an_installed_package(monkeypatch, capsys):
     monkeypatch.setattr(golden, 'source_root', lambda: None)

@@ -18,6 +18,9 @@ from nonfragile_tracker.errors import InputError
 
 from conftest import CONFIG, ROOT, DI_PROBLEM
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 PAPER = str(CONFIG / 'paper_problem.yaml')
 
 

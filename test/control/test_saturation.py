@@ -14,6 +14,9 @@ from nonfragile_tracker.control.synthesis.saturation import (SaturationLimits, c
                                                              simulate_saturated, verify_saturation)
 from nonfragile_tracker.errors import InputError
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 #: The paper scenario's circle: r = 0.5 m at 0.01 rad/s -> |v| = 0.005 m/s, |u_d| = r w^2
 PAPER = SaturationLimits(max_angular_speed=2.0, min_speed=0.005, max_reference_accel=5e-5)
 

@@ -16,6 +16,9 @@ from nonfragile_tracker.control.synthesis.lmi import certify_gain
 
 from conftest import CONFIG, SHIPPED_DESIGN_ARGV, SHIPPED_NORM
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 PAPER = str(CONFIG / 'paper_problem.yaml')
 DEFAULT = CONFIG / 'tracker_gains.yaml'
 MAX_DECAY = CONFIG / 'max_decay_gains.yaml'

@@ -15,6 +15,9 @@ from nonfragile_tracker.control.synthesis.lmi import (TRUST_GAIN_NORM, Untrusted
 from nonfragile_tracker.control.synthesis.problem import Problem
 from nonfragile_tracker.control.synthesis.errors import CertificateError, InfeasibleError
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 def random_problem(seed: int) -> Problem:
     """n = 2-6, random A, B, A_tau, E, F (a new user's problems, no gain bound)."""
