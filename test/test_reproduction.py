@@ -25,6 +25,24 @@ pytestmark = pytest.mark.numerical
 DOCS = ROOT / 'docs'
 
 
+#: Simulated time of the fresh Fig. 6 ROS run (s).  Trim: the command's (and the committed
+#: report's) is 60 s; the claim checked - the lockstep ROS run and its bag give the numbers
+#: of the in-process simulation to round-off - is the same at 10 s (3.8 s to within 1 cm,
+#: 1000 steps), and the committed 60 s numbers are checked against the in-process
+#: simulation of 60 s (test_fig6_numbers_equal_the_in_process_simulation): 50 s of
+#: three-process lockstep less in each of make test's two passes.
+FRESH_FIG6_DURATION = 10.0
+
+
+def fig6_simulation(duration):
+    """The in-process simulation of Fig. 6's run (the paper's K_nf, ``duration`` s)."""
+    import yaml
+    K = np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'])
+    steps = int(round(duration / 0.01))
+    return steps, simulate_tracking(paper_plant_config(), TrackerConfig(K=K), circle(),
+                                    steps).metrics()
+
+
 @pytest.fixture(scope='module')
 def committed():
     return json.loads((DOCS / 'paper_reproduction.json').read_text())
@@ -34,8 +52,8 @@ def committed():
 def fresh(tmp_path_factory, shipped_design):
     """A fresh computation of the report; its max-decay design at the paper's gain budget is
     the identical call the shipped gain's command made this session (conftest
-    ``shipped_design``), every other number is computed here, Fig. 6 from a ROS run of 60 s
-    (the command's default)."""
+    ``shipped_design``), every other number is computed here, Fig. 6 from a ROS run of
+    :data:`FRESH_FIG6_DURATION` (the command's default is 60 s)."""
     from nonfragile_tracker.control.synthesis.design import max_decay_rate
     (fn, problem, norm), kw, result = shipped_design.calls[0]
     assert fn is max_decay_rate and kw == {'nominal': False}
@@ -55,7 +73,8 @@ def fresh(tmp_path_factory, shipped_design):
     patch.setattr(reproduce, 'at_gain_norm', at_gain_norm)
     patch.setenv('ROS_DOMAIN_ID', str(unique_domain_id('reproduce')))
     try:
-        out = reproduce.compute(CONFIG, tmp_path_factory.mktemp('repro'))
+        out = reproduce.compute(CONFIG, tmp_path_factory.mktemp('repro'),
+                                ros_duration=FRESH_FIG6_DURATION)
     finally:
         patch.undo()
     assert reused == [norm]
@@ -148,12 +167,16 @@ def test_harder_delay_section_matches(committed, fresh):
 
 
 @pytest.mark.ros
-def test_fig6_of_a_fresh_ros_run_matches(committed, fresh):
-    """Fig. 6's numbers from a fresh lockstep ROS run (and its bag) equal the committed ones."""
-    a, b = committed['fig6'], fresh['fig6']
-    assert a['duration'] == b['duration'] and a['steps'] == b['steps']
-    for key in ('final_error', 'first_within_1cm', 'rms_error', 'peak_abs_w'):
-        assert b[key] == pytest.approx(a[key], rel=1e-9, abs=1e-12), key
+def test_fig6_of_a_fresh_ros_run_matches(fresh):
+    """Fig. 6's numbers from a fresh lockstep ROS run (and its bag) equal the in-process
+    simulation of the same run to round-off (the run is :data:`FRESH_FIG6_DURATION`)."""
+    b = fresh['fig6']
+    assert b['duration'] == FRESH_FIG6_DURATION
+    steps, m = fig6_simulation(b['duration'])
+    assert b['steps'] == steps + 1 and m.first_within < b['duration']
+    for key, want in (('final_error', m.final_error), ('first_within_1cm', m.first_within),
+                      ('rms_error', m.rms_error), ('peak_abs_w', m.peak_abs_w)):
+        assert b[key] == pytest.approx(want, rel=1e-9, abs=1e-9), key
     assert 'fig6_xy.png' in fresh['figures']
 
 
@@ -171,11 +194,8 @@ def test_claims_are_backed_by_the_numbers(committed):
 
 def test_fig6_numbers_equal_the_in_process_simulation(committed):
     """Fig. 6 comes from a ROS run; the lockstep run equals the simulation to round-off."""
-    import yaml
     f6 = committed['fig6']
-    K = np.array(yaml.safe_load((CONFIG / 'paper_gains.yaml').read_text())['K_nf'])
-    steps = int(round(f6['duration'] / 0.01))
-    m = simulate_tracking(paper_plant_config(), TrackerConfig(K=K), circle(), steps).metrics()
+    steps, m = fig6_simulation(f6['duration'])
     assert f6['steps'] == steps + 1
     assert f6['final_error'] == pytest.approx(m.final_error, abs=1e-9)
     assert f6['first_within_1cm'] == pytest.approx(m.first_within, abs=1e-9)
