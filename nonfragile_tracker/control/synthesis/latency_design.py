@@ -435,8 +435,9 @@ def _settled_decay(problem: Problem, h0: float, h1: float, bound: float | None,
 
     def trial(a: float) -> InputDelayResult | None:
         try:
+            # one solve at the search's eps (its last climb chose it at the boundary)
             return synthesize_input_delay(problem, h0, h1, alpha=a, gain_bound=bound,
-                                          stop_at_first=True, eps_start=res.eps, refine=0)
+                                          eps=res.eps)
         except (InfeasibleError, CertificateError, SolverFailure):
             return None
 
