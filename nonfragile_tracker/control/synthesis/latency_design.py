@@ -419,8 +419,9 @@ def _lagged_figures(problem: Problem, K: np.ndarray, h0: float, h1: float, T: fl
 #: largest value of that grid which is certified (:func:`.search.settle_on_grid`), so that
 #: every machine records the same figure.  The searches stop within 0.2 % of the boundary
 #: at a point that moves with the solver's last digits (0.7163 against 0.7167 1/s under
-#: two OpenBLAS kernels); whether a fixed value is certified moves only when it lies within
-#: the solver's accuracy (strictness ~1e-7) of the boundary.
+#: two OpenBLAS kernels); whether a fixed value is certified moves only when it lies that
+#: close to the boundary at a fixed ``eps`` (which moves by about 1e-4 1/s between kernels:
+#: the strictness ``t`` at 0.716 1/s was 2.9e-4 / 3.1e-4 / 3.0e-4 under three kernels).
 FIGURE_DIGITS = 3
 
 

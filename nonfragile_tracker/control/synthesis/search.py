@@ -301,9 +301,10 @@ def settle_on_grid(trial: Callable[[float], T | None], x: float, result: T, step
     Why: a search that stops within a tolerance of the boundary (Newton steps, false
     position, bisection) stops at a point that depends on the path, and the path on the
     solver's last digits (OpenBLAS picks its kernels by CPU): two machines returned
-    0.7163 and 0.7167 1/s for the same design.  Whether a *fixed* value is certified does
-    not move with those digits unless the value lies within the solver's accuracy of the
-    boundary (``t`` to about 1e-7 against a grid of 1e-3 relative).  So the answer is
+    0.7163 and 0.7167 1/s for the same design.  Whether a *fixed* value is certified
+    moves with those digits only when the value lies within the boundary's own spread
+    (about 1e-4 1/s there, against a grid of 1e-3: the strictness at a fixed rate and
+    ``eps`` differed by 2e-5 between kernels).  So the answer is
     taken on a fixed grid: ``g = floor(x / step) * step``, then ``g + step`` is tried
     while it is certified (the search may have stopped more than one step short).  The
     result of ``g`` itself is ``trial(g)`` (the design at the value recorded, which does
