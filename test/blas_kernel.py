@@ -14,7 +14,8 @@ time under another kernel than the machine's (``python test/blas_kernel.py`` pri
 * anything else, or no kernel older than the machine's: none - the pass runs under the
   default kernel and says so (``test/test_blas_kernel.py`` reports it as skipped).
 
-``python test/blas_kernel.py --current`` prints the kernel in use (threadpoolctl).
+``python test/blas_kernel.py --current`` prints the kernels in use (threadpoolctl: numpy's and
+scipy's and cvxpy's OpenBLAS, comma-separated).
 """
 from __future__ import annotations
 
@@ -23,19 +24,22 @@ import sys
 from pathlib import Path
 
 #: What OpenBLAS reports (threadpoolctl ``architecture``) for each ``OPENBLAS_CORETYPE``
-#: this module sets (Prescott's kernels are Katmai's).
-REPORTED = {'Sandybridge': 'Sandybridge', 'Prescott': 'Katmai', 'ARMV8': 'ARMV8'}
+#: this module sets: numpy's and scipy's OpenBLAS name Prescott's kernels Katmai's, the older
+#: OpenBLAS that cvxpy's solvers load (0.3.15) Prescott.
+REPORTED = {'Sandybridge': {'Sandybridge'}, 'Prescott': {'Katmai', 'Prescott'},
+            'ARMV8': {'ARMV8'}}
 
 
-def current_kernel() -> str:
-    """The OpenBLAS kernel numpy's BLAS runs (``architecture`` of threadpoolctl), or
-    ``'unknown'`` when numpy's BLAS is not OpenBLAS."""
-    import numpy  # noqa: F401  (loads numpy's BLAS, which threadpoolctl then finds)
+def current_kernels() -> set[str]:
+    """The OpenBLAS kernels the numerical stack runs (``architecture`` of threadpoolctl, one
+    per library: numpy's, scipy's and the older one cvxpy's solvers bring), empty when none
+    is OpenBLAS."""
+    import numpy  # noqa: F401  (loads the BLAS libraries, which threadpoolctl then finds)
+    import scipy.linalg  # noqa: F401
+    import cvxpy  # noqa: F401
     from threadpoolctl import threadpool_info
-    for lib in threadpool_info():
-        if lib.get('internal_api') == 'openblas':
-            return str(lib.get('architecture') or 'unknown')
-    return 'unknown'
+    return {str(lib.get('architecture') or 'unknown') for lib in threadpool_info()
+            if lib.get('internal_api') == 'openblas'}
 
 
 def cpu_flags() -> set[str]:
@@ -50,36 +54,37 @@ def cpu_flags() -> set[str]:
     return set()
 
 
-def second_kernel(machine: str, current: str, flags: set[str]) -> tuple[str | None, str]:
+def second_kernel(machine: str, current: set[str], flags: set[str]) -> tuple[str | None, str]:
     """``(OPENBLAS_CORETYPE or None, why)`` for the second pass (module docstring).
 
     Parameters
     ----------
     machine : str
         ``uname -m``.
-    current : str
-        The kernel in use (:func:`current_kernel`).
+    current : set of str
+        The kernels in use (:func:`current_kernels`).
     flags : set of str
         The CPU's feature flags (:func:`cpu_flags`).
     """
+    now = ', '.join(sorted(current)) or 'none'
     if machine in ('x86_64', 'AMD64'):
-        if 'avx' in flags and current != 'Sandybridge':
-            return 'Sandybridge', f'x86-64 with AVX, machine kernel {current}'
-        if current != REPORTED['Prescott']:
-            return 'Prescott', f'x86-64, machine kernel {current}'
-        return None, f'x86-64 already on the oldest kernel ({current})'
+        if 'avx' in flags and not current & REPORTED['Sandybridge']:
+            return 'Sandybridge', f'x86-64 with AVX, machine kernel {now}'
+        if not current & REPORTED['Prescott']:
+            return 'Prescott', f'x86-64, machine kernel {now}'
+        return None, f'x86-64 already on the oldest kernel ({now})'
     if machine in ('aarch64', 'arm64'):
-        if current != 'ARMV8':
-            return 'ARMV8', f'aarch64, machine kernel {current}'
+        if not current & REPORTED['ARMV8']:
+            return 'ARMV8', f'aarch64, machine kernel {now}'
         return None, 'aarch64 already on the generic ARMV8 kernel'
     return None, f'no second OpenBLAS kernel chosen for the architecture {machine!r}'
 
 
 def main(argv: list[str]) -> int:
     """Print the kernel in use (``--current``) or the second pass's assignment."""
-    current = current_kernel()
+    current = current_kernels()
     if argv[1:] == ['--current']:
-        print(current)
+        print(','.join(sorted(current)) or 'unknown')
         return 0
     kernel, why = second_kernel(platform.machine(), current, cpu_flags())
     if kernel is None:
