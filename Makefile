@@ -31,18 +31,26 @@ demo: $(STAMP)
 # Every test but the real-time ones on one worker more than cores (pytest-xdist, whole modules
 # per worker; the ROS tests wait on processes and DDS part of the time, and in lockstep or
 # about processes they do not depend on the load; each worker has ROS domains of its own),
-# then the real-time tests alone, at most two at a time (-n 2): they run nodes on the wall
-# clock and judge timing, and together use about 0.7 of the two cores.  The package is
-# byte-compiled first: with PYTHONDONTWRITEBYTECODE set (as in CI) every node process would
-# compile it again.
-# Exit 5 (no tests) is a failure unless the other part ran tests (ARGS may select one part).
+# then the numerical tests (mark `numerical`: synthesis, certificates, delay spectrum,
+# reproduction, golden bags and replays) again under a second OpenBLAS kernel - OpenBLAS picks
+# its kernels by CPU and the suite must pass on any CPU: test/blas_kernel.py chooses it per
+# architecture (x86-64: Sandybridge, or Prescott; aarch64: ARMV8; else none, said loudly) and
+# test/test_blas_kernel.py checks that the pass really ran it - then the real-time tests
+# alone, at most two at a time (-n 2): they run nodes on the wall clock and judge timing, and
+# together use about 0.7 of the two cores.  The first pass keeps the machine's environment.
+# The package is byte-compiled first: with PYTHONDONTWRITEBYTECODE set (as in CI) every node
+# process would compile it again.
+# Exit 5 (no tests) is a failure unless another part ran tests (ARGS may select one part).
 WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 test: $(STAMP)
 	$(PY) -m compileall -q nonfragile_tracker
 	$(PY) -m pytest -q -p no:cacheprovider -n $(WORKERS) -m "not realtime" test $(ARGS); a=$$?; \
+	first=$$($(PY) test/blas_kernel.py --current) && second=$$($(PY) test/blas_kernel.py) || exit 1; \
+	env $$second NONFRAGILE_FIRST_KERNEL=$$first $(PY) -m pytest -q -p no:cacheprovider \
+	  -n $(WORKERS) -m "numerical and not realtime" test $(ARGS); c=$$?; \
 	$(PY) -m pytest -q -p no:cacheprovider -n 2 -m realtime test $(ARGS); b=$$?; \
-	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
-	for rc in $$a $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
+	if [ $$a -eq 5 ] && [ $$b -eq 5 ] && [ $$c -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
+	for rc in $$a $$c $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
 
 # The signal tests repeated to catch rare races (20 trials of every pattern instead of 8), and
 # Ctrl-C under an emulated ros2 launch at 20 random moments (every node ends within 1 s).

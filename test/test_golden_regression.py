@@ -19,6 +19,9 @@ from nonfragile_tracker.scenario import node_parameters
 
 from conftest import unique_domain_id
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 @pytest.mark.parametrize('name', sorted(golden.SCENARIOS))
 def test_rerun_matches_golden_bag(name, tmp_path):

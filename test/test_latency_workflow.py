@@ -32,6 +32,9 @@ from nonfragile_tracker.errors import InputError
 
 from conftest import CONFIG, DI_PROBLEM
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 DT = 0.01            # plant step (config/latency_scenario.yaml)
 LATENCY = 0.1
 LAG = 0.05

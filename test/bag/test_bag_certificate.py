@@ -19,6 +19,9 @@ from nonfragile_tracker.control.simulation.gains import write_gain_file
 from nonfragile_tracker.control.simulation.loop import (PlantConfig, UnicyclePlant, step_time_ns,
                                                         yaw_to_quaternion)
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 DT, STEP, DURATION = 0.01, 10.0, 20.0
 K = [[-1.0, -1.5, 0.0, 0.0], [0.0, 0.0, -1.0, -1.5]]
 

@@ -7,6 +7,9 @@ import yaml
 from conftest import CONFIG
 from nonfragile_tracker import cli, golden
 
+#: Not marked ``numerical``: every comparison here is of two runs of the same scenario on the
+#: same machine and kernel (exact by construction), so a second BLAS kernel checks nothing new.
+
 
 def test_golden_refuses_to_write_into_an_installed_package(monkeypatch, capsys):
     monkeypatch.setattr(golden, 'source_root', lambda: None)

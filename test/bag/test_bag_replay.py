@@ -16,6 +16,9 @@ from nonfragile_tracker.control.simulation.loop import PlantConfig, UnicyclePlan
 from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.tracker_inputs import InputRules, TrackerInputs
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 GOLDEN = ROOT / 'test' / 'data' / 'golden_paper'
 GAINS = ['--gains', str(golden.golden_gains())]      # the gain the golden bags were made with
 TS = jazzy_typestore()

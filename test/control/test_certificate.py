@@ -14,6 +14,9 @@ from nonfragile_tracker.control.synthesis.lmi import Verification, verify_certif
 from nonfragile_tracker.control.synthesis.problem import Problem
 from nonfragile_tracker.errors import InputError
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 def scalar_problem() -> Problem:
     """x' = -x + u + 0.1 x(t - tau), one input, E = F = 0.5: small enough to check by hand."""

@@ -21,6 +21,9 @@ from nonfragile_tracker.control.synthesis.delay import (FragilityResult, RootsRe
                                                         rightmost_roots, spectral_abscissa,
                                                         worst_case_abscissa)
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 # ----------------------------------------------------------------------------- paper data
 A = np.array([[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]], dtype=float)
 B = np.array([[0, 0], [1, 0], [0, 0], [0, 1]], dtype=float)

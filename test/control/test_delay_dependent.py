@@ -14,6 +14,9 @@ from nonfragile_tracker.control.synthesis.delay_dependent import (max_certified_
 from nonfragile_tracker.control.synthesis.lmi import CertificateError, InfeasibleError, synthesize
 from nonfragile_tracker.control.synthesis.problem import Problem
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 # Harder delay term on the paper's data: delayed velocity damping, v_i' = u_i - C v_i(t - h).
 # For a scalar loop v' = k v - C v(t - h) delay-independent stability needs k < -C, so with
 # C = 3 and ||K||_2 <= 3 no gain passes Theorem 1 (delay-independent): checked below.

@@ -18,6 +18,9 @@ from nonfragile_tracker.control.synthesis.delay import (closed_loop_matrix, righ
                                                         spectral_abscissa)
 from nonfragile_tracker.control.synthesis.problem import load_problem
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 
 def _cheb(N: int) -> np.ndarray:

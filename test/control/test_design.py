@@ -11,6 +11,9 @@ from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.scenario import paper_plant_config
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 PAPER_NORM = 8.67
 
 

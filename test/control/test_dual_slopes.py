@@ -26,6 +26,9 @@ from nonfragile_tracker.control.synthesis import input_delay
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 #: offsets of the fitted points (in units of the step) and the cubic fitted through them
 OFFSETS = np.arange(-2, 3)
 

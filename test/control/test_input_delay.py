@@ -16,6 +16,9 @@ from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.control.synthesis.errors import InfeasibleError
 from nonfragile_tracker.control.synthesis.problem import Problem
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 BOUND = 8.67
 GRID = tuple(float(e) for e in np.logspace(-2, 1, 7))   # a short eps grid keeps tests fast
 

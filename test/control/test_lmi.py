@@ -9,6 +9,9 @@ from nonfragile_tracker.control.synthesis.lmi import (CertificateError, Infeasib
                                                       synthesize, verify_certificate)
 from nonfragile_tracker.control.synthesis.problem import problem_from_mapping
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 def lk_matrix(p, K, P, Q, Delta):
     """Paper eq. (10): M for a given Delta (built here, independently of lmi.py)."""

@@ -18,6 +18,9 @@ from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.region_check import (RobotSetup, check_region, reference_speeds,
                                              simulate_start)
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 @pytest.fixture(scope='module')
 def paper():

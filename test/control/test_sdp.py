@@ -1,9 +1,13 @@
 """Shared SDP plumbing: status classification, the one bounded program cache."""
 import numpy as np
+import pytest
 
 from nonfragile_tracker.control.synthesis import sdp
 from nonfragile_tracker.control.synthesis.lmi import synthesize
 from nonfragile_tracker.control.synthesis.problem import Problem
+
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
 
 
 def test_classify_statuses():

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker.control.synthesis.search import (eps_search, golden_section_max,
-                                                         largest_feasible)
+                                                         largest_feasible, resolution,
+                                                         settle_on_grid)
 
 GRID = [float(e) for e in np.logspace(-3, 2, 21)]
 
@@ -150,3 +151,40 @@ def test_bracketed_search_without_scores_is_bisection_and_never_worse_than_thric
         bracketed_trial(root, calls2, score=lambda x, r: max(r - x, -1e-12) if x > r
                         else 1.0), 0.0, 1.0, 0.0, tol=tol, lo_score=1.0, hi_score=-1e-12)
     assert x2 <= root < x2 + tol and n2 <= 3 * math.ceil(math.log2(1.0 / tol))
+
+
+# ----------------------------------------------------------------------------- settle_on_grid
+def test_resolution_is_three_significant_digits():
+    assert resolution(0.7166) == pytest.approx(1e-3)
+    assert resolution(1.508) == pytest.approx(1e-2)
+    assert resolution(0.2208) == pytest.approx(1e-3)
+    assert resolution(0.0247) == pytest.approx(1e-4)
+
+
+@pytest.mark.parametrize('x', [0.7163, 0.7166, 0.71675, 0.7121])
+def test_settle_lands_on_the_same_grid_value_wherever_the_search_stopped(x):
+    """Boundary 0.7168: searches stopping anywhere below it (by up to 5 steps) record 0.716,
+    whose own result is returned."""
+    calls = []
+
+    def trial(v):
+        calls.append(v)
+        return ('at', v) if v <= 0.7168 else None
+
+    v, r, n = settle_on_grid(trial, x, ('at', x), 1e-3)
+    assert v == 0.716 and r == ('at', 0.716) and n == len(calls)
+    assert 0.717 in calls and all(c <= 0.717 for c in calls)
+
+
+def test_settle_keeps_the_search_result_where_the_grid_value_fails():
+    """Not monotone: 0.716 fails though 0.7166 was certified: the value recorded is still
+    0.716 (a certified rate implies every smaller one), with the search's result."""
+    v, r, n = settle_on_grid(lambda a: None, 0.7166, 'search', 1e-3)
+    assert (v, r, n) == (0.716, 'search', 2)
+
+
+def test_settle_on_a_grid_value_and_below_the_limit():
+    v, r, n = settle_on_grid(lambda a: a, 0.5, 0.5, 0.1, hi_limit=0.8)
+    assert v == 0.8 and r == 0.8 and n == 3
+    v, r, n = settle_on_grid(lambda a: None, 0.5, 'x', 0.1)
+    assert (v, r, n) == (0.5, 'x', 1)

@@ -17,6 +17,9 @@ from nonfragile_tracker.control.synthesis.sweep import (SweepPoint, design_point
 from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.parallel import map_tasks, open_executor
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 
 def di_problem():
     return Problem(A=np.array([[0.0, 1.0], [0.0, 0.0]]), B=np.array([[0.0], [1.0]]),

@@ -8,12 +8,16 @@ import warnings
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.synthesis.delay import closed_loop_matrix, spectral_abscissa
+from nonfragile_tracker.control.synthesis.delay import (closed_loop_matrix, delay_margin,
+                                                       spectral_abscissa)
 from nonfragile_tracker.control.synthesis.lmi import (TRUST_GAIN_NORM, UntrustedGainWarning,
                                                       gain_trust_message, synthesize,
                                                       verify_certificate)
 from nonfragile_tracker.control.synthesis.problem import Problem
 from nonfragile_tracker.control.synthesis.errors import CertificateError, InfeasibleError
+
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
 
 
 def random_problem(seed: int) -> Problem:
@@ -47,15 +51,20 @@ def edge_problem(seed: int) -> Problem:
 
 
 def check_sound(problem: Problem, res, delays=(0.0, 0.2)) -> None:
-    """Independent: the numpy certificate check and the delay spectrum at several delays
-    (Theorem 1 is delay-independent) for the nominal loop and Delta = +-I."""
+    """Independent: the numpy certificate check and the delay spectrum (Theorem 1 is
+    delay-independent) for the nominal loop and Delta = +-I: stable at delay 0 and no
+    characteristic root crossing the imaginary axis up to the largest delay, so stable on
+    the whole interval.  Trim: the exact delay margin (imaginary-axis crossings,
+    ``delay_margin``) instead of the spectrum at each delay (``spectral_abscissa``): a
+    stronger claim (every delay up to the largest, not two samples) for 0.2 s instead of
+    17 s on the fifty random problems (their margins are all infinite)."""
     ver = verify_certificate(problem, res.K, res.P, res.Q, res.eps)
     assert ver.ok and ver.max_eig_V < 0
     q, r = problem.E.shape[1], problem.F.shape[0]
     for D in (np.zeros((q, r)), np.eye(q, r), -np.eye(q, r)):
         A0 = closed_loop_matrix(problem.A, problem.B, res.K, problem.E, problem.F, D)
-        for tau in delays:
-            assert spectral_abscissa(A0, problem.A_tau, tau) < 0
+        assert spectral_abscissa(A0, problem.A_tau, 0.0) < 0
+        assert delay_margin(A0, problem.A_tau) > max(delays)
 
 
 def test_fifty_random_problems_moderate_and_verified():

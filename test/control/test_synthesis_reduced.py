@@ -15,6 +15,9 @@ from nonfragile_tracker.control.synthesis.lmi import synthesize, verify_certific
 from nonfragile_tracker.control.synthesis.problem import load_problem
 from nonfragile_tracker.control.synthesis.errors import InfeasibleError
 
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
+
 PAPER = load_problem(CONFIG / 'paper_problem.yaml')
 
 

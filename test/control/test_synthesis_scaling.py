@@ -6,6 +6,7 @@ from __future__ import annotations
 
 
 import numpy as np
+import pytest
 import scipy.linalg as sla
 
 from conftest import CONFIG
@@ -13,6 +14,9 @@ from nonfragile_tracker.control.synthesis.delay import closed_loop_matrix, spect
 from nonfragile_tracker.control.synthesis.lmi import (decoupled_blocks, synthesize,
                                                       verify_certificate)
 from nonfragile_tracker.control.synthesis.problem import load_problem
+
+#: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
+pytestmark = pytest.mark.numerical
 
 PAPER = load_problem(CONFIG / 'paper_problem.yaml')
 

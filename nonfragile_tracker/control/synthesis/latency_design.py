@@ -35,6 +35,15 @@ paper problem with a 50 ms lag: ``[0, 0.03]`` s 9 synthesis + 2 certification so
 s 8 + 2 (17 + 7; 164 + 23); figures 1.5111 1/s / 0.1485 s and 0.7167 1/s / 0.2208 s (were
 1.511 / 0.1484 and 0.716 / 0.2206).  The solver, its tolerances and the margin are
 unchanged, and every certificate is verified in numpy as before.
+
+Same answer on every machine (issue 29): the searches stop within their tolerance at a
+point that moves with the solver's last digits (OpenBLAS picks its kernels by CPU:
+0.7163 and 0.7167 1/s under two kernels), so the recorded decay rate and certified
+latency are the largest certified values of a fixed 3-digit grid
+(:func:`.search.settle_on_grid`, :data:`FIGURE_DIGITS`): 0.716 1/s and 0.221 s on
+``[0, 0.15]`` s under the Haswell, Sandybridge and Prescott kernels alike (2-3 more
+solves).  ``K`` itself still moves by about 1 % between kernels (the decay rate is a flat
+function of it): it is judged by its certificate and figures, never by its digits.
 """
 from __future__ import annotations
 
@@ -45,14 +54,14 @@ from typing import Any, cast
 import numpy as np
 
 from ...errors import InputError
-from .errors import CertificateError, InfeasibleError
+from .errors import CertificateError, InfeasibleError, SolverFailure
 from .delay import chebyshev_differentiation, delay_margin
 from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certify_input_delay,
                           max_certified_input_delay, max_input_delay_decay_rate,
                           synthesize_input_delay)
 from ..identification.identify import Identification
 from .problem import Problem
-from .search import largest_feasible_bracketed
+from .search import largest_feasible_bracketed, resolution, settle_on_grid
 
 __all__ = ['OBJECTIVES', 'LatencyDesign', 'LatencyPlan', 'lagged_problem', 'perturbation_set',
            'exact_abscissa', 'exact_figures', 'design_for_latency', 'latency_figures',
@@ -119,6 +128,11 @@ class LatencyDesign:
 
         Only figures of the loop the design is for: with an actuator lag, the lagged
         loop's certified latency and exact figures (not those of the loop without it).
+        Each figure is printed to the precision that holds on every machine: the decay
+        rate and latency certified to :data:`FIGURE_DIGITS` digits (grid values, the same
+        under every BLAS kernel), the exact delay margin to 4, the worst abscissa to 2
+        (a property of ``K``, which moves by about 1 % with the solver's last digits: the
+        decay rate is a flat function of it; doc/reproduction.md, "Across machines").
         """
         lines = [
             f'input-delay design ({self.objective}) for problem {self.problem!r}: latency '
@@ -145,7 +159,7 @@ class LatencyDesign:
             else self.abscissa_at_h_max
         lines.append(f'exact ({loop}constant delay and Delta, state delay included): delay '
                      f'margin {self.true_delay_margin:.4g} s, worst spectral abscissa on '
-                     f'[{self.h_min:g}, {self.h_max:g}] s {worst:.4g}')
+                     f'[{self.h_min:g}, {self.h_max:g}] s {worst:.2g}')
         lines.append(f'verification: max eig Psi = '
                      f'{self.synthesis.verification.max_eig_Psi:.4g} -> OK')
         return '\n'.join(lines)
@@ -418,7 +432,54 @@ def _lagged_figures(problem: Problem, K: np.ndarray, h0: float, h1: float, T: fl
         certified_margin=start.margin_achieved, certified_slope=start.slope,
         h_hi_refuted=hi == margin > guess,
         h_guess=None if guess > h1 else GUESS_OF_MARGIN * hi)
-    return margin, absc, worst, lag_h
+    return margin, absc, worst, max(_settled_latency(lp, K_aug, h0, lag_h, hi), h1)
+
+
+#: Significant digits of the figures a design records (decay rate, certified latency): the
+#: largest value of that grid which is certified (:func:`.search.settle_on_grid`), so that
+#: every machine records the same figure.  The searches stop within 0.2 % of the boundary
+#: at a point that moves with the solver's last digits (0.7163 against 0.7167 1/s under
+#: two OpenBLAS kernels); whether a fixed value is certified moves only when it lies that
+#: close to the boundary at a fixed ``eps`` (which moves by about 1e-4 1/s between kernels:
+#: the strictness ``t`` at 0.716 1/s was 2.9e-4 / 3.1e-4 / 3.0e-4 under three kernels).
+FIGURE_DIGITS = 3
+
+
+def _settled_decay(problem: Problem, h0: float, h1: float, bound: float | None,
+                   res: InputDelayResult) -> tuple[float, InputDelayResult]:
+    """The largest certified decay rate of :data:`FIGURE_DIGITS` digits and its synthesis.
+
+    Where the grid rate itself fails, the synthesis at the search's rate (which implies it).
+    """
+    if not res.alpha > 0:
+        return res.alpha, res
+
+    def trial(a: float) -> InputDelayResult | None:
+        try:
+            # one solve at the search's eps (its last climb chose it at the boundary)
+            return synthesize_input_delay(problem, h0, h1, alpha=a, gain_bound=bound,
+                                          eps=res.eps)
+        except (InfeasibleError, CertificateError, SolverFailure):
+            return None
+
+    rate, out, _ = settle_on_grid(trial, res.alpha, res, resolution(res.alpha, FIGURE_DIGITS))
+    return rate, out
+
+
+def _settled_latency(problem: Problem, K: np.ndarray, h0: float, h: float,
+                     hi: float) -> float:
+    """The largest certified latency ``h_max`` of :data:`FIGURE_DIGITS` digits for ``K``.
+
+    From a search's certified ``h``, never above ``hi`` (the exact margin or cap).
+    """
+    if not h > max(h0, 0.0):
+        return h
+
+    def trial(x: float) -> bool | None:
+        return True if certify_input_delay(problem, K, h0, x).certified else None
+
+    x, _, _ = settle_on_grid(trial, h, True, resolution(h, FIGURE_DIGITS), hi_limit=hi)
+    return x if x >= h0 else h
 
 
 def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
@@ -463,7 +524,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     res: InputDelayResult
     if objective == 'decay':
         res = max_input_delay_decay_rate(problem, h0, syn_h1, gain_bound=bound)
-        decay = res.alpha
+        decay, res = _settled_decay(problem, h0, syn_h1, bound, res)
     else:
         res = _max_delay_synthesis(problem, h0, syn_h1, bound, tol)
         decay = 0.0
@@ -477,7 +538,7 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
         certified = certified_input_delay_of_gain(
             problem, res.K, h0, h_hi=max(hi, syn_h1 + tol), tol=tol, h_certified=syn_h1,
             h_hi_refuted=hi == margin > syn_h1, h_guess=GUESS_OF_MARGIN * hi)
-        certified = max(certified, syn_h1)
+        certified = max(_settled_latency(problem, res.K, h0, certified, hi), syn_h1)
     elif objective == 'decay':
         certified = syn_h1
     else:

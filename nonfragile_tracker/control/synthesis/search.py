@@ -7,14 +7,17 @@
 * :func:`golden_section_max` - golden-section refinement of a scalar;
 * :func:`eps_search` - the line search over the tuning scalar ``eps`` of the
   delay-dependent and input-delay LMIs: a whole log grid, or a local climb on it from
-  a warm start, then golden-section refinement around the best grid point.
+  a warm start, then golden-section refinement around the best grid point;
+* :func:`resolution` and :func:`settle_on_grid` - the stopping rule that makes a search's
+  result the same on every machine: the largest certified point of a fixed grid.
 """
 from __future__ import annotations
 
 import math
 from typing import Callable, Sequence, TypeVar, overload
 
-__all__ = ['largest_feasible', 'largest_feasible_bracketed', 'golden_section_max', 'eps_search']
+__all__ = ['largest_feasible', 'largest_feasible_bracketed', 'golden_section_max', 'eps_search',
+           'resolution', 'settle_on_grid']
 
 T = TypeVar('T')
 
@@ -271,3 +274,88 @@ def eps_search(f: Callable[[float], float], grid: Sequence[float], refine: int, 
         lo, hi = math.log(pts[max(j - 1, 0)]), math.log(pts[min(j + 1, len(pts) - 1)])
         if hi > lo:
             golden_section_max(lambda u: f(math.exp(u)), lo, hi, refine)
+
+
+def resolution(x: float, digits: int = 3) -> float:
+    """The grid step of ``digits`` significant digits at ``x > 0`` (``0.7166 -> 0.001``).
+
+    Parameters
+    ----------
+    x : float
+        A positive value.
+    digits : int, optional
+        Significant digits resolved.
+
+    Returns
+    -------
+    float
+        ``10 ** (floor(log10 x) - digits + 1)``.
+    """
+    return float(10.0 ** (math.floor(math.log10(x)) - digits + 1))
+
+
+def settle_on_grid(trial: Callable[[float], T | None], x: float, result: T, step: float, *,
+                   hi_limit: float = math.inf, max_up: int = 20) -> tuple[float, T, int]:
+    """The largest multiple of ``step`` certified, from a search's certified ``x``.
+
+    Why: a search that stops within a tolerance of the boundary (Newton steps, false
+    position, bisection) stops at a point that depends on the path, and the path on the
+    solver's last digits (OpenBLAS picks its kernels by CPU): two machines returned
+    0.7163 and 0.7167 1/s for the same design.  Whether a *fixed* value is certified
+    moves with those digits only when the value lies within the boundary's own spread
+    (about 1e-4 1/s there, against a grid of 1e-3: the strictness at a fixed rate and
+    ``eps`` differed by 2e-5 between kernels).  So the answer is
+    taken on a fixed grid: ``g = floor(x / step) * step``, then ``g + step`` is tried
+    while it is certified (the search may have stopped more than one step short).  The
+    result of ``g`` itself is ``trial(g)`` (the design at the value recorded, which does
+    not depend on the path either); where ``g`` fails though ``x >= g`` was certified
+    (feasibility is not proven monotone) the result of ``x`` is kept: a certified decay
+    rate or latency interval ``x`` implies every smaller one (the claim is monotone).
+
+    Parameters
+    ----------
+    trial : callable
+        ``trial(v)``: a result if ``v`` is certified, else ``None``.
+    x : float
+        A certified value (the search's answer), ``x >= step``.
+    result : object
+        Its result.
+    step : float
+        The grid (e.g. :func:`resolution`).
+    hi_limit : float, optional
+        Largest value tried.
+    max_up : int, optional
+        Most steps up (a guard: the search's answer is within a step or two).
+
+    Returns
+    -------
+    value : float
+        The multiple of ``step`` (rounded to 12 significant digits).
+    result : object
+        Its result (see above).
+    trials : int
+        Number of calls of ``trial``.
+    """
+    def on_grid(k: int) -> float:
+        return float(f'{k * step:.12g}')
+
+    k = math.floor(x / step * (1.0 + 1e-12))
+    trials = 0
+    up: T | None = None
+    for _ in range(max_up):
+        v = on_grid(k + 1)
+        if v > hi_limit:
+            break
+        r = trial(v)
+        trials += 1
+        if r is None:
+            break
+        k, up = k + 1, r
+    if up is not None:
+        return on_grid(k), up, trials
+    g = on_grid(k)
+    if g == x:
+        return g, result, trials
+    r = trial(g)
+    trials += 1
+    return g, (result if r is None else r), trials
