@@ -96,8 +96,8 @@ def test_a_quoted_figure_is_its_source_rounded(page, line, quoted, unit, name):
 
 
 def test_the_check_fails_on_a_stale_figure():
-    """The README's old demo figure, 3.98 s, and a gain figure one digit off are refused."""
-    assert _rounded(SOURCES['demo.settle'](), '3.98', 's') != 3.98
+    """A stale demo figure (the old 2.21 s) and a gain figure one digit off are refused."""
+    assert _rounded(SOURCES['demo.settle'](), '2.21', 's') != 2.21
     lag = SOURCES['gain.lag_certified']()
     assert _rounded(lag, '0.2209', 's') != pytest.approx(0.2209, abs=1e-12) or \
         _rounded(lag, '0.2207', 's') != pytest.approx(0.2207, abs=1e-12)

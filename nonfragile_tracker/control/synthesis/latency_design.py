@@ -132,7 +132,7 @@ class LatencyDesign:
         rate and latency certified to :data:`FIGURE_DIGITS` digits (grid values, the same
         under every BLAS kernel), the exact delay margin to 4, the worst abscissa to 2
         (a property of ``K``, which moves by about 1 % with the solver's last digits: the
-        decay rate is a flat function of it; doc/reproduction.md, "Across machines").
+        decay rate is a flat function of it; doc/across-machines.md).
         """
         lines = [
             f'input-delay design ({self.objective}) for problem {self.problem!r}: latency '
