@@ -135,7 +135,7 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
             while time.monotonic() < settle:
                 ex.spin_once(timeout_sec=0.01)
             first_odom = True
-            for e in plan.events:
+            for e in (*plan.prime, *plan.events):
                 if e.kind == 'odom' and first_odom:
                     first_odom = False
                     settle = time.monotonic() + 0.2 * SETTLE    # the state before the start

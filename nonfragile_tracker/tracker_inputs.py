@@ -482,10 +482,24 @@ class TrackerInputs:
     def compute(self) -> Step | None:
         """The step the inputs taken so far make due, if any (at most one per stamp).
 
+        While no step is due and no trajectory is followed (before the first reference or
+        trajectory, at rest waiting for one) the odometry stamps still go to the law's
+        period estimate (:attr:`control.simulation.loop.Tracker.timing`): the first command
+        already knows the odometry rate, and a replay that joins a run primes it with the
+        odometry before its first command.
+
         Returns
         -------
         Step or None
         """
+        step = self._compute()
+        s = self.last_odom_stamp
+        if step is None and self.follower is None and s >= 0 \
+                and self.tracker.timing.last_ns != s:
+            self.tracker.timing.observe_ns(s)
+        return step
+
+    def _compute(self) -> Step | None:
         f = self.follower
         if f is not None:
             return self._follow(f)

@@ -402,6 +402,9 @@ class ReplayPlan:
     swaps: int = 0                   # odometry/reference pairs taken in the other order
     adopted_ns: int | None = None    # real-time follower bags: the odometry stamp at which
                                      # the tracker said (tracker/trajectory) it adopted it
+    #: real-time bags that join a run: the odometry before the start, fed first without a
+    #: reference (no command) so the tracker's period estimate is the running tracker's
+    prime: tuple[ReplayEvent, ...] = ()
 
 
 #: Receive-time window (s) within which the recorder and the tracker may have received an
@@ -416,15 +419,19 @@ def _with_speed(e: ReplayEvent, v: float) -> ReplayEvent:
     return ReplayEvent(e.kind, e.receive_ns, e.topic, e.msgtype, raw, msg)
 
 
-def _prime_timing(inputs: TrackerInputs, before: list[ReplayEvent]) -> None:
+def _prime_timing(inputs: TrackerInputs, before: list[ReplayEvent]) -> list[ReplayEvent]:
     """The odometry period the tracker had measured when the recording joined the run.
 
-    The tracker takes its step from the odometry stamps (``dt`` 0): a replay that starts at
-    its first recorded command feeds the stamps of the odometry before it to the period
-    estimate, as the running tracker had them (:mod:`control.simulation.timing`).
+    The tracker takes its step from the odometry stamps (``dt`` 0) and measures them while
+    no step is due (:meth:`TrackerInputs.compute`): a replay that starts at its first
+    recorded command feeds it the odometry before it, without a reference, as the running
+    tracker had it (:mod:`control.simulation.timing`).  Returns those events: a tracker
+    node is fed the same first (:attr:`ReplayPlan.prime`).
     """
-    for e in before[-(WINDOW + 1):]:
-        inputs.tracker.timing.observe_ns(stamp_ns(e.msg.header.stamp))
+    prime = before[-(WINDOW + 1):]
+    for e in prime:
+        inputs.odom(e.msg)
+    return prime
 
 
 def _recover_speed(inputs: TrackerInputs, odom: ReplayEvent, target_v: float) -> float | None:
@@ -674,7 +681,7 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
         default = tl.before[id(od)]
         for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
             base = TrackerInputs(config, rules)
-            _prime_timing(base, odoms[:j])
+            prime = _prime_timing(base, odoms[:j])
             base.latest = tl.parts(s)
             if any(p is None for p in base.latest):
                 continue
@@ -699,7 +706,7 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
                     break
             skipped = sum(1 for e in data if e.receive_ns < od.receive_ns) - len(head)
             return ReplayPlan('realtime', head + order, commands, recorded, {},
-                              dict(inputs.ignored), v0, skipped, swaps)
+                              dict(inputs.ignored), v0, skipped, swaps, prime=tuple(prime))
     return None
 
 

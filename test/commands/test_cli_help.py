@@ -27,7 +27,7 @@ def test_the_top_level_help_is_plain_and_lists_every_command():
     top = PARSERS[()]
     text = top.format_help()
     commands = [p[0] for p in PARSERS if len(p) == 1]
-    assert len(commands) == 14 and 'sweep' in commands and 'trajectory' in commands
+    assert len(commands) == 15 and 'bringup' in commands and 'sweep' in commands and 'trajectory' in commands
     for name in commands:
         assert re.search(rf'^\s+{re.escape(name)}\b', text, re.MULTILINE), name
     assert '``' not in text and '::' not in text             # no RST markup

@@ -70,6 +70,9 @@ ERRORS = {
                    'LoopConfigError': (ValueError, 2, ['loop', 'gains']),
                    'BatchError': (ValueError, 2, ['batch', 'study'])},
     'identification': {'IdentificationError': (ValueError, 2, ['identify']),
+                       'NotEnoughDataError': (ValueError, 2, ['identify']),
+                       'InsufficientExcitationError': (ValueError, 2, ['identify']),
+                       'PoorFitError': (ValueError, 2, ['identify']),
                        'MonitorError': (ValueError, 2, ['monitor'])},
 }
 

@@ -31,7 +31,7 @@ from .model import xi_from_state
 from .predictor import SUBSTEP, LatencyPredictor, invert_lag
 from .reference import RefSample
 from .sensors import Odometer, OdometryModel, OdometrySample
-from .timing import PeriodEstimator
+from .timing import MAX_INTERVAL, PeriodEstimator
 from ..validate import as_finite_float, as_matrix
 from .errors import LoopConfigError
 
@@ -750,6 +750,8 @@ class Tracker:
         #: ``(v, a, h)`` of the previous step: the compensator's ramp to re-integrate over
         #: the interval that passed (None: nothing to integrate).
         self._ramp: tuple[float, float, float] | None = None
+        #: The time (ns) of the previous step (its interval to this one is what passed).
+        self._last_step_ns: int | None = None
 
     def reset(self, v: float | None = None) -> None:
         """Forget the compensator state (re-initialised from the next measured speed).
@@ -769,6 +771,28 @@ class Tracker:
             self._ref_hist.clear()
         if self.predictor is not None:
             self.predictor.reset()
+
+    def _passed(self, t_meas: float, stamp_ns: int | None) -> float | None:
+        """The interval (s) since the previous step; the step's time goes to :attr:`timing`.
+
+        The interval is the step's own (None at the first step, after a time that went back
+        or jumped by more than :data:`~control.simulation.timing.MAX_INTERVAL`); the
+        estimator may have seen this time already (the input rules measure the odometry
+        rate while no step is due, :meth:`TrackerInputs.compute
+        <nonfragile_tracker.tracker_inputs.TrackerInputs.compute>`): it is not counted twice.
+        """
+        if stamp_ns is None:
+            if not (math.isfinite(t_meas) and abs(t_meas) < 1e12):
+                return None
+            t_ns = int(round(t_meas * 1e9))
+        else:
+            t_ns = int(stamp_ns)
+        if self.timing.last_ns != t_ns:
+            self.timing.observe_ns(t_ns)
+        last, self._last_step_ns = self._last_step_ns, t_ns
+        if last is None or t_ns < last or t_ns - last > MAX_INTERVAL * 1e9:
+            return None
+        return (t_ns - last) * 1e-9
 
     @property
     def hold(self) -> float:
@@ -806,8 +830,7 @@ class Tracker:
         """
         c = self.config
         t_meas = ref.t if stamp is None else float(stamp)
-        passed = (self.timing.observe(t_meas) if stamp_ns is None
-                  else self.timing.observe_ns(int(stamp_ns)))
+        passed = self._passed(t_meas, stamp_ns)
         if c.dt:
             passed = h = c.dt
         else:

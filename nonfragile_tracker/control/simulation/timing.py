@@ -123,6 +123,11 @@ class PeriodEstimator:
         return n * 1e-9
 
     @property
+    def last_ns(self) -> int | None:
+        """The time (ns) of the last observation; None before the first (or after a reset)."""
+        return self._last
+
+    @property
     def period(self) -> float | None:
         """The period (s): lower median of the recent intervals; None before the first."""
         return self._period_ns * 1e-9 if self._period_ns else None
