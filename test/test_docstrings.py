@@ -38,7 +38,8 @@ CHECKED = tuple(
         'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'batch_parts',
-        'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains', 'timing')]
+        'batch_ideal', 'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains',
+        'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
         'identify', 'lag_fit', 'records', 'recording', 'monitor', 'excitation')]
     + [f'nonfragile_tracker.{m}' for m in (
