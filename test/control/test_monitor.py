@@ -133,7 +133,7 @@ def test_status_transitions_at_the_thresholds():
     assert 'below (over-prediction)' in evaluate(estimate(0.085), cert, 0.1, s).message
     # OK says what was compared: the residual L - P plus the hold against [h_min, H]
     assert evaluate(estimate(0.15), cert, 0.1, s).message == (
-        'latency 150 ms (interval 148-152 ms): residual 50 ms (latency - predict_latency '
+        'latency 150 ms (interval 148 ms-152 ms): residual 50 ms (latency - predict_latency '
         '100 ms) plus the hold 0 to 20 ms: 50 ms to 70 ms, inside the certified delay '
         '[0 ms, 150 ms] (latency certified in [100 ms, 230 ms])')
     # below P + h_min within the estimator's tolerance: certified, and not called "inside"
