@@ -37,8 +37,9 @@ CHECKED = tuple(
         'latency_design', 'saturation', 'sweep',
         'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
-        'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'study',
-        'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains', 'timing')]
+        'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'batch_parts',
+        'batch_ideal', 'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains',
+        'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
         'identify', 'lag_fit', 'records', 'recording', 'monitor', 'excitation')]
     + [f'nonfragile_tracker.{m}' for m in (

@@ -22,13 +22,13 @@ from nonfragile_tracker.scenario import paper_plant_config
 def ideal_calls(monkeypatch):
     """Counts the runs that took the specialised loop."""
     calls = []
-    inner = batch_mod._ideal_loop
+    inner = batch_mod.ideal_loop
 
     def spy(*args, **kw):
         calls.append(1)
         return inner(*args, **kw)
 
-    monkeypatch.setattr(batch_mod, '_ideal_loop', spy)
+    monkeypatch.setattr(batch_mod, 'ideal_loop', spy)
     return calls
 
 

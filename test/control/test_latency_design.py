@@ -218,3 +218,19 @@ def test_congruent_verification_accepts_a_strict_point_the_relative_test_refuses
     Psi = idm.input_delay_verification_matrix(p.A, p.B, p.A_tau, p.tau, p.E, p.F, r.K, 0.0,
                                               0.2, 0.71, r.certificate)
     assert np.linalg.eigvalsh(Psi)[-1] < 0
+
+
+@pytest.mark.parametrize('kw, match', [
+    (dict(h_min=-0.1), 'h_min: expected a number >= 0, got -0.1'),
+    (dict(h_min=True), 'h_min: expected a number, got True'),
+    (dict(h_max=0.0), 'h_max: expected a number > 0, got 0.0'),
+    (dict(h_max=float('inf')), 'h_max: expected a finite number, got inf'),
+    (dict(lag=False), 'lag: expected a number, got False'),
+    (dict(lag='x'), "lag: expected a number, got 'x'"),
+    (dict(gain_bound=0), 'gain bound: expected a number > 0, got 0'),
+])
+def test_design_refuses_bad_numbers_with_the_validators_messages(kw, match):
+    """One number rule (control.validate.as_finite_float): bools are not numbers."""
+    args = dict(h_min=0.0, h_max=0.1, lag=0.0) | kw
+    with pytest.raises(InputError, match=match):
+        design_for_latency(di_problem(), args.pop('h_min'), args.pop('h_max'), **args)

@@ -131,6 +131,16 @@ def test_status_transitions_at_the_thresholds():
     assert 'latency-design' in err.message                  # the command to run
     assert err.values['certified latency (s)'] == '[0.1000, 0.2300]'
     assert 'below (over-prediction)' in evaluate(estimate(0.085), cert, 0.1, s).message
+    # OK says what was compared: the residual L - P plus the hold against [h_min, H]
+    assert evaluate(estimate(0.15), cert, 0.1, s).message == (
+        'latency 150 ms (interval 148 ms-152 ms): residual 50 ms (latency - predict_latency '
+        '100 ms) plus the hold 0 to 20 ms: 50 ms to 70 ms, inside the certified delay '
+        '[0 ms, 150 ms] (latency certified in [100 ms, 230 ms])')
+    # below P + h_min within the estimator's tolerance: certified, and not called "inside"
+    low = evaluate(estimate(0.095), cert, 0.1, s).message
+    assert 'inside' not in low and ('residual -5 ms' in low and '5 ms below the lower end of '
+                                    'the certified delay [0 ms, 150 ms], within the '
+                                    "estimator's tolerance 10 ms" in low)
     # the lag estimate is coarser (closed loop: up to twice the truth seen): WARN above
     # (1 + lag_tolerance) x the certified lag + tolerance = 0.11 s
     assert evaluate(estimate(0.12, lag=0.1), cert, 0.1, s).level == OK

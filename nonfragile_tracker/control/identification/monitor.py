@@ -729,7 +729,26 @@ def evaluate(est: LatencyEstimate | None, cert: Certificate | None, predict_late
         notes.append(f'actuator lag {_ms(lag)} above the certified {_ms(cert.lag)}')
     if notes:
         return MonitorStatus(WARN, '; '.join(notes) + cannot, vals, P)
-    return MonitorStatus(OK, f'{where} inside the {span}', vals, P)
+    return MonitorStatus(OK, _certified(L, P, cert, settings.tolerance, where, lo, hi), vals, P)
+
+
+def _certified(L: float, P: float, cert: Certificate, tolerance: float, where: str, lo: float,
+               hi: float) -> str:
+    """The OK message, in the certificate's own terms: the residual delay plus the hold.
+
+    The certificate bounds ``L - P`` plus the hold (0 to ``hold``) by ``[h_min, H]``, with
+    ``tolerance`` below ``h_min`` (the estimator's precision), so a latency a few ms
+    under ``P + h_min`` is certified: the message says so rather than "inside" an
+    interval it is below.
+    """
+    r, h0, h1 = L - P, cert.residual[0], cert.residual[1]
+    delay = (f'residual {_ms(r)} (latency - predict_latency {_ms(P)}) plus the hold 0 to '
+             f'{_ms(cert.hold)}: {_ms(r)} to {_ms(r + cert.hold)},')
+    span = f'the certified delay [{_ms(h0)}, {_ms(h1)}]'
+    where_ok = (f'inside {span}' if L >= lo else
+                f'{_ms(lo - L)} below the lower end of {span}, within the estimator\'s '
+                f'tolerance {_ms(tolerance)}')
+    return (f'{where}: {delay} {where_ok} (latency certified in [{_ms(lo)}, {_ms(hi)}])')
 
 
 def adapted_prediction(est: LatencyEstimate, cert: Certificate, current: float,

@@ -60,6 +60,7 @@ from .input_delay import (InputDelayResult, certified_input_delay_of_gain, certi
                           max_certified_input_delay, max_input_delay_decay_rate,
                           synthesize_input_delay)
 from ..identification.identify import Identification
+from ..validate import as_finite_float
 from .problem import Problem
 from .search import largest_feasible_bracketed, resolution, settle_on_grid
 
@@ -366,17 +367,6 @@ def exact_figures(problem: Problem, K: np.ndarray, h_min: float, h_max: float, *
     return float(min(margins)), float(max(at_max)), float(max(worst))
 
 
-def _number(value: Any, name: str, *, positive: bool = False, allow_zero: bool = True) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f'{name} must be a number, got {value!r}') from None
-    if not math.isfinite(x) or x < 0 or (positive and x == 0) or (not allow_zero and x == 0):
-        raise InputError(f'{name} must be a finite number {"> 0" if positive else ">= 0"}, '
-                         f'got {value!r}')
-    return x
-
-
 def _max_delay_synthesis(problem: Problem, h0: float, h1: float, bound: float | None,
                          tol: float) -> InputDelayResult:
     """The ``'max-delay'`` objective of :func:`design_for_latency` (at least ``h1``).
@@ -510,16 +500,16 @@ def design_for_latency(problem: Problem, h_min: float, h_max: float, *,
     InfeasibleError
         Nothing certifies the interval (with the lag, if given).
     """
-    h0 = _number(h_min, 'h_min')
-    h1 = _number(h_max, 'h_max', positive=True)
+    h0 = as_finite_float(h_min, 'h_min', low=0.0)
+    h1 = as_finite_float(h_max, 'h_max', low=0.0, low_inclusive=False)
     if h0 > h1:
         raise InputError(f'delay interval must have h_min <= h_max, got [{h_min!r}, {h_max!r}]')
-    T = _number(lag, 'lag')
+    T = as_finite_float(lag, 'lag', low=0.0)
     if objective not in OBJECTIVES:
         raise InputError(f'objective must be one of {OBJECTIVES}, got {objective!r}')
     bound = problem.options.get('gain_bound') if gain_bound is None else gain_bound
     if bound is not None:
-        bound = _number(bound, 'gain bound', positive=True)
+        bound = as_finite_float(bound, 'gain bound', low=0.0, low_inclusive=False)
     syn_h1 = h1 + T
     res: InputDelayResult
     if objective == 'decay':
@@ -768,7 +758,7 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
         raise InputError('the identification has no command_period_s (an older file or '
                          'another tool wrote it); pass the tracker\'s command period, e.g. '
                          '--command-period 0.02')
-    T = _number(T, 'command period', positive=True)
+    T = as_finite_float(T, 'command period', low=0.0, low_inclusive=False)
     a_lo = ident.command_age_low_s if math.isfinite(ident.command_age_low_s) else 0.0
     a_hi = ident.command_age_high_s if math.isfinite(ident.command_age_high_s) else a_lo
     a_lo, a_hi = max(a_lo, 0.0), max(a_hi, a_lo, 0.0)
