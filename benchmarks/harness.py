@@ -11,6 +11,8 @@ import os
 import signal
 import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
@@ -249,6 +251,25 @@ class Procs:
     def stop_all(cls) -> None:
         for group in list(cls.live):
             group.stop(grace=3.0)
+
+
+def baseline_tree(ref: str, prefix: str = 'nfbench_base_') -> Path | None:
+    """``nonfragile_tracker/`` of the git commit ``ref`` in a temporary directory.
+
+    Today's code for a side-by-side row, run from its own directory (None: no git, or no
+    such commit).
+    """
+    tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    try:
+        data = subprocess.run(['git', 'archive', ref, 'nonfragile_tracker'],
+                              cwd=ROOT, capture_output=True, check=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError):
+        return None
+    tar = tmp / 'base.tar'
+    tar.write_bytes(data)
+    with tarfile.open(tar) as tf:
+        tf.extractall(tmp, filter='data')
+    return tmp
 
 
 def ros_env(domain: int) -> dict:

@@ -15,12 +15,10 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import tarfile
-import tempfile
 import time
 from pathlib import Path
 
-from harness import CONFIG, PY, ROOT, Table, fmt, log, run_worker, spread, summary
+from harness import CONFIG, PY, ROOT, Table, baseline_tree, fmt, log, run_worker, spread, summary
 
 TARGETS_12 = {
     'latency_design_ratio': ('<=', 3.0, 'x synthesize'),
@@ -34,19 +32,6 @@ DI = dict(A=[[0.0, 1.0], [0.0, 0.0]], B=[[0.0], [1.0]], A_tau=[[0.0, 0.0], [0.0,
           E=[[1.0]], F=[[0.2, 0.2]])
 
 
-def _baseline_tree() -> Path | None:
-    """``nonfragile_tracker/`` of BASELINE_REF in a temporary directory (None: no git)."""
-    tmp = Path(tempfile.mkdtemp(prefix='nfbench_base_'))
-    try:
-        data = subprocess.run(['git', 'archive', BASELINE_REF, 'nonfragile_tracker'],
-                              cwd=ROOT, capture_output=True, check=True, timeout=60).stdout
-    except (OSError, subprocess.SubprocessError):
-        return None
-    tar = tmp / 'base.tar'
-    tar.write_bytes(data)
-    with tarfile.open(tar) as tf:
-        tf.extractall(tmp, filter='data')
-    return tmp
 
 
 def _cli(args: list[str], pythonpath: Path | None = None, timeout: float = 600.0
@@ -107,7 +92,7 @@ def bench_startup(cfg, table: Table, raw: dict) -> None:
 def bench_latency_design(cfg, table: Table, raw: dict) -> None:
     """12.1: latency-design / synthesize, today and now, medians of alternated runs."""
     reps = 1 if cfg.quick else 3
-    base = _baseline_tree()
+    base = baseline_tree(BASELINE_REF, 'nfbench_base_')
     paper = str(CONFIG / 'paper_problem.yaml')
     for k, h in enumerate((0.03, 0.15), start=1):
         ld = ['latency-design', paper, '--delay-interval', '0', str(h), '--lag', '0.05']

@@ -29,7 +29,6 @@ import random
 import signal
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -37,7 +36,7 @@ from pathlib import Path
 if __name__ == '__main__':
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from harness import CONFIG, PY, ROOT, Table, fmt, log, ros_env, spread, summary  # noqa: E402
+from harness import CONFIG, PY, ROOT, Table, baseline_tree, fmt, log, ros_env, spread, summary  # noqa: E402
 
 #: Today's code: the base of the branch that made issue 30's item 4.
 BASELINE_REF = os.environ.get('BENCH_STOP_BASELINE_REF', '0cce4da')
@@ -50,19 +49,6 @@ STARTUP_TARGET = 1.0
 NODES = ('recorder', 'tracker', 'reference', 'plant')
 
 
-def baseline_tree() -> Path | None:
-    """``nonfragile_tracker/`` of :data:`BASELINE_REF` in a temporary directory."""
-    tmp = Path(tempfile.mkdtemp(prefix='nfbench_stop_base_'))
-    try:
-        data = subprocess.run(['git', 'archive', BASELINE_REF, 'nonfragile_tracker'],
-                              cwd=ROOT, capture_output=True, check=True, timeout=60).stdout
-    except (OSError, subprocess.SubprocessError):
-        return None
-    tar = tmp / 'base.tar'
-    tar.write_bytes(data)
-    with tarfile.open(tar) as tf:
-        tf.extractall(tmp, filter='data')
-    return tmp
 
 
 def _env(domain: int, code: Path) -> dict:
@@ -180,7 +166,7 @@ def launch_stop(code: Path, run_dir: Path, domain: int, moment: float, seed: int
 
 def bench_stop(cfg, table: Table, raw: dict, domain: int, tmp: Path) -> None:
     """13.1 and 13.2 (module docstring)."""
-    base = baseline_tree()
+    base = baseline_tree(BASELINE_REF, 'nfbench_stop_base_')
     codes = {'now': ROOT} | ({'today': base} if base is not None else {})
     reps = 1 if cfg.quick else 3
     out: dict = {'baseline': BASELINE_REF if base is not None else None}
