@@ -54,7 +54,8 @@ from .typestore import jazzy_typestore
 __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
            'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
-           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'replay_rules']
+           'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'PRIME_SEARCH',
+           'replay_rules']
 
 #: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
 #: a test keeps the two equal).
@@ -419,16 +420,18 @@ def _with_speed(e: ReplayEvent, v: float) -> ReplayEvent:
     return ReplayEvent(e.kind, e.receive_ns, e.topic, e.msgtype, raw, msg)
 
 
-def _prime_timing(inputs: TrackerInputs, before: list[ReplayEvent]) -> list[ReplayEvent]:
+def _prime_timing(inputs: TrackerInputs, before: list[ReplayEvent], count: int
+                  ) -> list[ReplayEvent]:
     """The odometry period the tracker had measured when the recording joined the run.
 
     The tracker takes its step from the odometry stamps (``dt`` 0) and measures them while
     no step is due (:meth:`TrackerInputs.compute`): a replay that starts at its first
-    recorded command feeds it the odometry before it, without a reference, as the running
-    tracker had it (:mod:`control.simulation.timing`).  Returns those events: a tracker
-    node is fed the same first (:attr:`ReplayPlan.prime`).
+    recorded command feeds it the last ``count`` odometry messages before it, without a
+    reference, as the running tracker had them (:mod:`control.simulation.timing`; a
+    tracker that ran for a while had a whole window, one that had just started fewer).
+    Returns those events: a tracker node is fed the same first (:attr:`ReplayPlan.prime`).
     """
-    prime = before[-(WINDOW + 1):]
+    prime = before[max(0, len(before) - count):]
     for e in prime:
         inputs.odom(e.msg)
     return prime
@@ -469,6 +472,10 @@ def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
 START_SEARCH = 1.0
 #: Recorded commands that must be reproduced to accept a starting point.
 START_CHECK = 10
+#: At the nearest this many starting points the replay also tries a tracker that had
+#: measured fewer odometry intervals than a whole window (it had just started: its first
+#: reference came with its first odometry or a few after).
+PRIME_SEARCH = 3
 
 
 def replay_rules(values: Mapping[str, Any] | None, mode: str) -> InputRules:
@@ -509,7 +516,9 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     * the start: the tracker may have started, or the recorder may have joined, after
       the first inputs; the replay starts at the odometry (within :data:`START_SEARCH`
       s before the first recorded command) from which :data:`START_CHECK` recorded
-      commands are reproduced, with the compensator speed recovered from the first;
+      commands are reproduced, with the compensator speed recovered from the first and
+      the odometry the tracker had measured its period on before it (a whole window; at
+      the nearest :data:`PRIME_SEARCH` starts also fewer: a tracker that had just started);
     * the reference at each odometry: the tracker uses the latest reference parts it
       has; when the bag order's choice does not reproduce the recorded command, the
       reference states received from :data:`ORDER_WINDOW` s before the odometry up to
@@ -675,13 +684,19 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
     starts = [j for j in range(first - 1, -1, -1)
               if t_first - odoms[j].receive_ns <= START_SEARCH * 1e9][:200]
     v_target = float(_twist(recorded[0][1]).linear.x)
-    for j in starts:
+    for rank, j in enumerate(starts):
         od = odoms[j]
         lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
         default = tl.before[id(od)]
-        for s in [default] + [x for x in range(hi, lo - 1, -1) if x != default][:64]:
+        # odometry the tracker had seen before the start: a whole window (it ran for a
+        # while; the recorder joined late), else any number down to none
+        counts = [WINDOW + 1] + (list(range(min(WINDOW, j), -1, -1))
+                                 if rank < PRIME_SEARCH else [])
+        for s, count in ((s, c) for s in [default] + [x for x in range(hi, lo - 1, -1)
+                                                     if x != default][:64]
+                         for c in counts):
             base = TrackerInputs(config, rules)
-            prime = _prime_timing(base, odoms[:j])
+            prime = _prime_timing(base, odoms[:j], count)
             base.latest = tl.parts(s)
             if any(p is None for p in base.latest):
                 continue

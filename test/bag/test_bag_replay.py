@@ -43,15 +43,20 @@ def _pose(x, y, th):
                                                       w=math.cos(th / 2)))
 
 
-def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None):
+def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
+                           odom_from=0, refs_from=0, jitter=0.0):
     """A real-time run simulated in process and written as the recorder would see it.
 
-    Odometry k is stamped T0 + 10k ms; reference j 5 ms later, except reference
+    Odometry k is stamped T0 + 10k ms (plus a uniform jitter of +-``jitter`` ms, seeded);
+    reference j 5 ms later, except reference
     ``swapped`` which the tracker received 0.5 ms *after* odometry ``swapped`` and the
     recorder 0.2 ms *before* it.  The tracker (the node's input rules) runs in the true
     order; the recorder missed the tracker's first ``late`` commands.  ``params``: the
-    tracker's parameter file (default: the paper scenario's).
+    tracker's parameter file (default: the paper scenario's).  The tracker receives
+    odometry from step ``odom_from`` and references from step ``refs_from`` on (a tracker
+    started while the recorder ran); the plant is at rest until its first command.
     """
+    jit = np.random.default_rng(7).uniform(-jitter, jitter, steps)
     config, _ = load_tracker_parameters(params=params)
     tracker = TrackerInputs(config, InputRules('realtime'))
     plant = UnicyclePlant(PlantConfig())
@@ -59,7 +64,7 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None)
     cov = np.zeros(36)
     true_order, bag = [], []            # (time, kind, msg) for the tracker / the recorder
     for k in range(steps):
-        odom_ns = T0 + k * 10 * MS
+        odom_ns = T0 + k * 10 * MS + int(round(jit[k] * MS))
         odom = T['nav_msgs/msg/Odometry'](
             header=_hdr(odom_ns), child_frame_id='base_link',
             pose=T['geometry_msgs/msg/PoseWithCovariance'](
@@ -91,9 +96,14 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None)
         # the tracker, in its order, for this step
         cmd = None
         for _, kind, m in true_order[-4:]:
+            if k < (odom_from if kind == 'odom' else refs_from):
+                continue
             out = tracker.odom(m) if kind == 'odom' else tracker.reference(
                 {'ref_pose': 0, 'ref_twist': 1, 'ref_accel': 2}[kind], m)
             cmd = out.command if out is not None else cmd
+        if cmd is None:
+            plant.step(0.0, 0.0)
+            continue
         plant.step(cmd.v, cmd.w)
         if k >= late:
             bag.append((recv + 2 * MS, 'cmd', T['geometry_msgs/msg/Twist'](
@@ -108,7 +118,7 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None)
         for t, kind, m in sorted(bag, key=lambda b: b[0]):
             name, msgtype = topic[kind]
             w.write(name, t, bytes(TS.serialize_cdr(m, msgtype)))
-    return steps - late
+    return sum(1 for b in bag if b[1] == 'cmd')
 
 
 def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
@@ -124,6 +134,22 @@ def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
     # without the order fix the swapped step (and what follows) would differ
     res_other = replay(tmp_path / 'rt', expected=tmp_path / 'rt')
     assert not res_other.comparison.equal
+
+
+@pytest.mark.parametrize('before', [0, 3, 30])
+def test_replay_of_a_tracker_started_during_the_recording(tmp_path, before):
+    """A tracker started while the recorder ran had measured its period (from jittered
+    stamps) on only the ``before`` odometry messages it got before its first reference:
+    the replay finds that history (30: a whole window) and reproduces every command."""
+    start = 100
+    n = simulated_realtime_bag(tmp_path / 'rt', late=0, swapped=-1, jitter=3.0,
+                               odom_from=start - before, refs_from=start)
+    assert n == 300 - start
+    res = replay(tmp_path / 'rt')
+    assert res.comparison.equal, res.comparison.differences[:3]
+    assert len(res.commands) == len(res.recorded) == n
+    assert res.max_abs_error <= 1e-9
+    assert len(res.plan.prime) == min(before, 10)
 
 
 def test_replay_reproduces_a_run_with_acceleration_limits(tmp_path):
