@@ -3,6 +3,7 @@ cycles, no private name across modules."""
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -22,11 +23,19 @@ def _module_name(path: Path) -> str:
 MODULES = {_module_name(p): p for p in sorted(PKG.rglob('*.py'))}
 
 
+@functools.cache
+def _import_nodes(path: Path, source: str | None, top_level_only: bool) -> tuple[ast.stmt, ...]:
+    """The import statements of ``path`` (or of ``source``): parsed once per module and
+    test process, as each check walks every module."""
+    tree = ast.parse(path.read_text() if source is None else source)
+    nodes = tree.body if top_level_only else ast.walk(tree)
+    return tuple(n for n in nodes if isinstance(n, (ast.Import, ast.ImportFrom)))
+
+
 def _imports(name: str, path: Path, top_level_only: bool, source: str | None = None):
     """(imported module, imported names, line) of ``path``, package-internal only."""
-    tree = ast.parse(path.read_text() if source is None else source)
     package = name if path.name == '__init__.py' else name.rpartition('.')[0]
-    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    nodes = _import_nodes(path, source, top_level_only)
     for node in nodes:
         if isinstance(node, ast.ImportFrom) and node.module != '__future__':
             if node.level:
@@ -48,7 +57,7 @@ def _imports(name: str, path: Path, top_level_only: bool, source: str | None = N
 
 def _external_imports(path: Path, source: str | None = None):
     """(top-level package, line) of every import of ``path`` outside the package."""
-    for node in ast.walk(ast.parse(path.read_text() if source is None else source)):
+    for node in _import_nodes(path, source, False):
         if isinstance(node, ast.ImportFrom) and not node.level and node.module:
             names = [node.module]
         elif isinstance(node, ast.Import):

@@ -13,12 +13,15 @@ The real ``ros2 launch`` is not installable here; this reproduces its signal pat
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import queue
 import random
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -51,6 +54,26 @@ def _bad(text: str) -> list[str]:
     """The words of :data:`BAD` in a node's output, rcl's /rosout race line left out."""
     text = '\n'.join(line for line in text.splitlines() if not line.startswith(ROSOUT_RACE))
     return [w for w in BAD if w in text]
+
+
+class DomainPool:
+    """``n`` ROS domains for trials run ``n`` at a time: a trial holds one that no running
+    trial has.  (A thread pool hands the next job to whichever thread is free: domain
+    ``k % n`` could still be in use by job ``k - n``, whose plant the new trial's tracker
+    would hear - it did, a lockstep run stalled on the other run's odometry stamps.)"""
+
+    def __init__(self, name: str, n: int):
+        self._free: queue.SimpleQueue[int] = queue.SimpleQueue()
+        for d in domain_ids(name, n):
+            self._free.put(d)
+
+    @contextlib.contextmanager
+    def env(self, base: dict) -> Iterator[dict]:
+        domain = self._free.get()
+        try:
+            yield dict(base, ROS_DOMAIN_ID=str(domain))
+        finally:
+            self._free.put(domain)
 
 
 class Launch:
@@ -156,11 +179,11 @@ def test_signal_patterns_end_every_node_cleanly(tmp_path, ros_env):
     jobs = [(pattern, mode, i) for pattern, mode, n in PLAN for i in range(n)]
     assert len(jobs) == (20 if SOAK else 8)
 
-    domains = domain_ids('signal-patterns', 4)
+    domains = DomainPool('signal-patterns', 4)                      # four at a time
 
     def job(k: int):
-        env = dict(ros_env, ROS_DOMAIN_ID=str(domains[k % 4]))      # four at a time
-        return _trial(tmp_path, env, *jobs[k], seed=1000 + k)
+        with domains.env(ros_env) as env:
+            return _trial(tmp_path, env, *jobs[k], seed=1000 + k)
 
     with ThreadPoolExecutor(max_workers=4) as pool:
         results = list(pool.map(job, range(len(jobs))))
@@ -269,13 +292,13 @@ def test_ctrl_c_under_launch_ends_every_node_at_once(tmp_path, ros_env):
     machine; a loaded one stretches every process)."""
     rng = random.Random(30)
     moments = [rng.uniform(0.0, 8.0) for _ in range(20)] if SOAK else list(STOP_MOMENTS)
-    domains = domain_ids('launch-stop', 2)
+    domains = DomainPool('launch-stop', 2)                          # two at a time
 
     def trial(k: int) -> dict:
         run_dir = tmp_path / f'stop_{k}'
         run_dir.mkdir()
-        env = dict(ros_env, ROS_DOMAIN_ID=str(domains[k % 2]))       # two at a time
-        return launch_stop_trial(run_dir, env, moments[k], seed=3000 + k)
+        with domains.env(ros_env) as env:
+            return launch_stop_trial(run_dir, env, moments[k], seed=3000 + k)
 
     with ThreadPoolExecutor(max_workers=2) as pool:
         results = list(pool.map(trial, range(len(moments))))
