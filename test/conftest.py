@@ -111,11 +111,35 @@ def pytest_cmdline_main(config):
 
 
 def pytest_ignore_collect(collection_path, config):
-    """Without ROS tests, the modules holding nothing else are not even imported (their
-    ``rclpy`` imports cost each worker ~0.7 s); ``None`` leaves the decision to pytest."""
-    if ros_may_run(config) or collection_path.suffix != '.py':
+    """A module none of whose tests the ``-m`` expression can select is not even imported
+    (each worker of each ``make test`` pass would import and collect every module: ~4 s of
+    CPU; the real-time and second-kernel passes select a few modules): the marks its tests
+    may carry are the ones this file gives them (:func:`pytest_collection_modifyitems`) and
+    those its text names (``mark.<name>``).  ``None`` leaves the decision to pytest."""
+    if collection_path.suffix != '.py' or not collection_path.name.startswith('test_'):
         return None
-    return True if _ros_only(collection_path) else None
+    expr = config.getoption('markexpr') or ''
+    if not expr.strip():
+        return None
+    given, named = _module_marks(collection_path)
+    absent = frozenset(re.findall(r'[A-Za-z_][\w.\-]*', expr)) - given - named
+    return None if _may_match(expr, given, absent) else True
+
+
+@functools.lru_cache(maxsize=None)
+def _module_marks(module_path: Path) -> tuple[frozenset[str], frozenset[str]]:
+    """(marks every test of the module gets here, marks its source names)."""
+    given = set()
+    if module_path.stem in REALTIME_MODULES:
+        given |= {'realtime', 'ros'}
+    if _ros_only(module_path):
+        given.add('ros')
+    if module_path.stem in SLOW_MODULES:
+        given.add('slow')
+    named = set(re.findall(r'mark\.(\w+)', module_path.read_text()))
+    if 'realtime' in named:
+        named.add('ros')                   # a real-time test is a ROS test too (below)
+    return frozenset(given), frozenset(named - given)
 
 
 def _ros_only(module_path: Path) -> bool:
@@ -134,6 +158,7 @@ def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`, ``realtime``
     those of :data:`REALTIME_MODULES` (a real-time test is a ROS test too); ``slow`` those
     of :data:`SLOW_MODULES`."""
+    ours = {line.split(':')[0].strip() for line in config.getini('markers')}
     for item in items:
         if item.path.stem in REALTIME_MODULES:
             item.add_marker(pytest.mark.realtime)
@@ -141,6 +166,14 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.ros)
         if item.path.stem in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+        # what pytest_ignore_collect judged the module by must hold for every test in it
+        given, named = _module_marks(item.path)
+        extra = {m.name for m in item.iter_markers()} & ours - given - named
+        if extra:
+            raise pytest.UsageError(
+                f'{item.nodeid} carries marks {sorted(extra)} that neither its module\'s text '
+                'nor test/conftest.py names: a -m run could skip its module; name the mark '
+                'in the module (e.g. pytestmark) or list the module in conftest')
 
 
 def _domain_range() -> range:

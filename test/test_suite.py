@@ -85,3 +85,44 @@ def test_real_time_tests_alone_may_use_the_workers(expr, serial):
     """Serial only when real-time tests may run together with others (make test's second
     part, ``-m realtime``, runs on two workers)."""
     assert serial_run(expr) is serial
+
+
+@pytest.mark.parametrize('expr, source, skipped', [
+    ('realtime', 'def test_a(): pass\n', True),
+    ('realtime', '@pytest.mark.realtime\ndef test_a(): pass\n', False),
+    ('numerical and not realtime', 'pytestmark = pytest.mark.numerical\n', False),
+    ('numerical and not realtime', '@pytest.mark.slow\ndef test_a(): pass\n', True),
+    ('not realtime', 'def test_a(): pass\n', False),
+    ('not numerical', 'pytestmark = pytest.mark.numerical\n', False),   # a test may lack it
+    ('ros', 'def test_a(): pass\n', True),
+    ('ros', '@pytest.mark.realtime\ndef test_a(): pass\n', False),      # realtime is ros
+    ('', 'def test_a(): pass\n', False),
+    ('numerical and', 'def test_a(): pass\n', False)])                  # pytest reports it
+def test_a_module_no_test_of_which_the_expression_selects_is_not_imported(
+        tmp_path, expr, source, skipped):
+    """make test's second-kernel and real-time passes import the modules they select from,
+    judged by the marks conftest gives and the module's text names."""
+    import types
+    import conftest
+    module = tmp_path / 'test_planted.py'
+    module.write_text('import pytest\n' + source)
+    config = types.SimpleNamespace(getoption=lambda name: expr)
+    assert (conftest.pytest_ignore_collect(module, config) is True) is skipped
+
+
+def test_a_mark_the_skip_could_not_see_stops_the_run(tmp_path):
+    """A test carrying one of the suite's marks that its module's text does not name (given
+    by a plugin, say) stops the run with a clear error instead of being skipped unseen."""
+    import types
+    import conftest
+    module = tmp_path / 'test_hidden.py'
+    module.write_text('def test_a():\n    pass\n')
+    item = types.SimpleNamespace(
+        path=module, nodeid='test_hidden.py::test_a', add_marker=lambda mark: None,
+        get_closest_marker=lambda name: None,
+        iter_markers=lambda: iter([pytest.mark.numerical.mark]))
+    config = types.SimpleNamespace(getini=lambda name: ['numerical: linear algebra'])
+    with pytest.raises(pytest.UsageError, match=r"carries marks \['numerical'\]"):
+        conftest.pytest_collection_modifyitems(config, [item])
+    item.iter_markers = lambda: iter([pytest.mark.parametrize.mark])     # not one of ours
+    conftest.pytest_collection_modifyitems(config, [item])

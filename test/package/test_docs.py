@@ -124,14 +124,53 @@ def _sphinx(out, *options: str) -> subprocess.CompletedProcess:
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
-def test_pages_build_without_warnings(tmp_path):
-    """The narrative pages alone (the API reference, whose autodoc imports every module,
-    is left out, and with it the toctree warnings about it; the full build is the slow test
-    below): a broken link, a missing anchor or
-    bad markup is a warning, and a warning fails.  About 3 s."""
-    out = tmp_path / 'html'
-    proc = _sphinx(out, '-D', 'exclude_patterns=_build,api',
-                   '-D', 'suppress_warnings=toc.excluded,toc.not_readable')
+#: What rosdoc2 (0.2) puts around a package's doc/conf.py: its own conf.py in a build folder
+#: exec's ours (so ``__file__`` is not doc/conf.py), then adds its extensions and theme.
+ROSDOC2_WRAPPER = """\
+import os
+import sys
+exec(open({conf!r}).read())
+extensions.append('sphinx.ext.autodoc')
+extensions.append('sphinx.ext.intersphinx')
+extensions.append('sphinx_rtd_theme')
+html_theme = 'sphinx_rtd_theme'
+extensions.append('myst_parser')
+"""
+
+
+@pytest.fixture(scope='module')
+def site(tmp_path_factory):
+    """The whole site with the API reference (autodoc + napoleon over every module; about
+    15 s of CPU, once for the module's tests), built the way rosdoc2 builds it (``-c`` a
+    wrapping conf.py that exec's ours), warnings as errors."""
+    tmp = tmp_path_factory.mktemp('docs')
+    wrapper = tmp / 'rosdoc2_wrapper'
+    wrapper.mkdir()
+    (wrapper / 'conf.py').write_text(ROSDOC2_WRAPPER.format(conf=str(DOC / 'conf.py')))
+    out = tmp / 'html'
+    proc = _sphinx(out, '-c', str(wrapper))
+    return out, proc
+
+
+@pytest.mark.slow
+def test_full_docs_build_without_warnings(site):
+    """Docstring markup that breaks fails, and every module has its entry."""
+    out, proc = site
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stderr.strip() == '', proc.stderr
+    api = ''.join(p.read_text() for p in (out / 'api').glob('*.html'))
+    modules = {'nonfragile_tracker.' + p.relative_to(PKG).with_suffix('').as_posix()
+               .replace('/', '.') for p in PKG.rglob('*.py') if p.stem != '__init__'}
+    missing = {m for m in modules if f'id="module-{m}"' not in api}
+    assert not missing, sorted(missing)
+    assert len(modules) >= 60
+
+
+@pytest.mark.slow
+def test_pages_build_without_warnings(site):
+    """The narrative pages of the same build: a broken link, a missing anchor or bad
+    markup is a warning, and a warning fails; the generated tables are in them."""
+    out, proc = site
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stderr.strip() == '', proc.stderr
     for page in ('index', 'getting-started', 'tutorial', 'cli', 'ros-interface', 'bags',
@@ -147,40 +186,6 @@ def test_pages_build_without_warnings(tmp_path):
     assert cli.count('usage: nonfragile_tracker') == len(re.findall(
         r'^```\{cli-help\}', (DOC / 'cli.md').read_text(), flags=re.MULTILINE))
     assert '(reproduction.html' not in ros and (out / '_images').is_dir()
-
-
-#: What rosdoc2 (0.2) puts around a package's doc/conf.py: its own conf.py in a build folder
-#: exec's ours (so ``__file__`` is not doc/conf.py), then adds its extensions and theme.
-ROSDOC2_WRAPPER = """\
-import os
-import sys
-exec(open({conf!r}).read())
-extensions.append('sphinx.ext.autodoc')
-extensions.append('sphinx.ext.intersphinx')
-extensions.append('sphinx_rtd_theme')
-html_theme = 'sphinx_rtd_theme'
-extensions.append('myst_parser')
-"""
-
-
-@pytest.mark.slow
-def test_full_docs_build_without_warnings(tmp_path):
-    """The whole site with the API reference (autodoc + napoleon over every module; about
-    10 s of CPU), built the way rosdoc2 builds it (``-c`` a wrapping conf.py that exec's
-    ours): docstring markup that breaks fails, and every module has its entry."""
-    wrapper = tmp_path / 'rosdoc2_wrapper'
-    wrapper.mkdir()
-    (wrapper / 'conf.py').write_text(ROSDOC2_WRAPPER.format(conf=str(DOC / 'conf.py')))
-    out = tmp_path / 'html'
-    proc = _sphinx(out, '-c', str(wrapper))
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stderr.strip() == '', proc.stderr
-    api = ''.join(p.read_text() for p in (out / 'api').glob('*.html'))
-    modules = {'nonfragile_tracker.' + p.relative_to(PKG).with_suffix('').as_posix()
-               .replace('/', '.') for p in PKG.rglob('*.py') if p.stem != '__init__'}
-    missing = {m for m in modules if f'id="module-{m}"' not in api}
-    assert not missing, sorted(missing)
-    assert len(modules) >= 60
 
 
 def _github_slug(heading: str) -> str:
