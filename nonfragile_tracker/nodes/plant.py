@@ -265,6 +265,7 @@ class PlantNode(AdapterNode[PlantSettings]):
             self.watchdog = self.create_timer(0.02, self._lockstep_watchdog)
         else:
             self.last_cmd_time: float | None = None
+            self._rt_origin_ns: int | None = None     # clock at step 0 (_realtime_step)
             self.timer = None
             self.recorder_ready = False
             if self.config.realtime_recorder:      # step once the recorder is subscribed
@@ -440,13 +441,29 @@ class PlantNode(AdapterNode[PlantSettings]):
 
     # ------------------------------------------------------------------ real time
     def _realtime_step(self) -> None:
+        """A timer tick: the steps whose time has come, each published with its own stamp.
+
+        A robot moves on while its driver is late: when a tick comes late (a loaded
+        machine), the steps it missed are taken now with the command in force and their
+        odometry published in a burst, stamped with their own times (step k at
+        ``origin + k dt``, the origin the smallest ``clock - k dt`` seen: a stamp is never
+        ahead of the clock).  The stamps are then the time of the motion they report, as
+        a controller that integrates over the time that passed needs them to be.
+        """
+        now = self.get_clock().now().nanoseconds
+        grid = now - self.plant.k * self.dt_ns
+        if self._rt_origin_ns is None or grid < self._rt_origin_ns:
+            self._rt_origin_ns = grid      # the earliest tick on time: no stamp is ahead of now
+        due = (now - self._rt_origin_ns) // self.dt_ns
         stale = self.last_cmd_time is None or \
             time.monotonic() - self.last_cmd_time > self.config.cmd_timeout
         v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
-        self._publish_state(self.get_clock().now().nanoseconds)
-        self.plant.step(v, w)
-        if self.final_step and self.plant.k >= self.final_step:
-            self._finish()
+        while self.plant.k <= due:
+            self._publish_state(self._rt_origin_ns + self.plant.k * self.dt_ns)
+            self.plant.step(v, w)
+            if self.final_step and self.plant.k >= self.final_step:
+                self._finish()
+                return
 
 
 #: Console entry point of the plant node: ``main(args)`` is ``run(PlantNode, args)``

@@ -116,3 +116,39 @@ def test_the_monitor_is_stale_while_the_robot_rests_after_its_trajectory(make_no
     node.inputs.follower = SimpleNamespace(finished=True, refused=None, started=True)
     (st,) = node._monitor_diagnostics()
     assert st.level == b'\x03' and 'at rest (trajectory finished): no excitation' in st.message
+
+
+def test_the_real_time_plant_stamps_the_time_of_its_motion_when_a_tick_is_late():
+    """A late timer tick (a loaded machine): the plant takes the steps it missed, publishes
+    each with its own stamp (a burst), and never stamps ahead of its clock - the stamps
+    stay the time of the motion, which the tracker integrates over."""
+    from nonfragile_tracker.nodes.plant import PlantNode
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=unique_domain_id('plant_timing'))
+    plant = PlantNode(context=ctx, parameter_overrides=[
+        Parameter('mode', value='realtime'), Parameter('duration', value=0.0)])
+    try:
+        plant.destroy_timer(plant.timer)                  # ticks by hand, clock by hand
+        clock = {'ns': T0}
+        plant.get_clock = lambda: type('C', (), {'now': lambda self: type(
+            'T', (), {'nanoseconds': clock['ns']})()})()
+        stamps = []
+        publish = plant._publish_state
+        plant._publish_state = lambda ns: (stamps.append((ns, plant.plant.k)), publish(ns))[1]
+        plant.cmd, plant.last_cmd_time = (0.2, 0.0), None
+        dt = plant.dt_ns
+        for late in (0, 0, 0, int(2.5 * dt), 0, -dt // 10, 0):     # tick n at T0 + n dt + late
+            n = len({s for s, _ in stamps})
+            clock['ns'] = T0 + n * dt + late
+            plant._realtime_step()
+            assert all(s <= clock['ns'] for s, _ in stamps)        # never ahead of the clock
+        ks = [k for _, k in stamps]
+        assert ks == list(range(9))         # no step skipped: the late tick took 3, 4 and 5
+        # each at its own time: T0 + k dt, from the early tick on the earlier grid
+        assert [s for s, _ in stamps] == [T0 + k * dt - (dt // 10 if k >= 7 else 0)
+                                          for k in ks]
+        assert plant.plant.k == 9
+        assert plant.plant.x == pytest.approx(0.2 * 9 * dt * 1e-9, rel=0.3)   # it moved on
+    finally:
+        plant.destroy_node()
+        rclpy.try_shutdown(context=ctx)
