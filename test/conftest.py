@@ -40,6 +40,14 @@ ROS_MODULES = {'test_bag_writer_reader', 'test_failures', 'test_golden_regressio
 #: Other tests mark theirs with ``@pytest.mark.realtime``.
 REALTIME_MODULES = {'test_bag_realtime', 'test_netns', 'test_realtime_faults',
                     'test_certificate_monitor'}
+#: Modules that keep a worker busy longest (tens of seconds each, measured): collected
+#: first, so that pytest-xdist (whole modules per worker, handed out in collection order)
+#: starts them first instead of leaving one running alone at the end of a pass.
+LONGEST_FIRST = ('test_signals', 'test_failures', 'test_docs', 'test_reproduction',
+                 'test_identify', 'test_recorder_node', 'test_input_delay',
+                 'test_colcon_setuptools', 'test_bag_golden_user', 'test_golden_regression',
+                 'test_latency_lockstep', 'test_trajectory_nodes', 'test_realtime_faults',
+                 'test_bag_realtime', 'test_netns')
 #: Modules whose tests take tens of seconds (marked ``slow``).
 SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_faults',
                 'test_ros_lockstep'}
@@ -158,6 +166,8 @@ def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test under ``test/nodes/`` and of :data:`ROS_MODULES`, ``realtime``
     those of :data:`REALTIME_MODULES` (a real-time test is a ROS test too); ``slow`` those
     of :data:`SLOW_MODULES`."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.stem, len(rank)))     # stable
     ours = {line.split(':')[0].strip() for line in config.getini('markers')}
     for item in items:
         if item.path.stem in REALTIME_MODULES:
