@@ -172,13 +172,14 @@ def one_base(out: Path, lat: float, lag: float, acc: float, rep: int) -> dict:
     return row
 
 
-def ctrlc_trial(out: Path, k: int, rng: random.Random) -> dict:
-    """One bring-up stopped by SIGINT to its process group in a random phase."""
+def ctrlc_trial(out: Path, k: int, rng: random.Random, phase: str | None = None) -> dict:
+    """One bring-up stopped by SIGINT to its process group in a random (or the given)
+    phase, at a random moment of it."""
     from nonfragile_tracker.bag.motion import read_motion
     d = out / f'ctrlc_{k}'
     d.mkdir(parents=True, exist_ok=True)
     sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml', base_plant(100, 30, 1.0, seed=k))
-    phase = rng.choice(PHASES)
+    phase = phase or rng.choice(PHASES)
     cmd = _netns([sys.executable, '-m', 'nonfragile_tracker.cli', 'bringup', '--simulate',
                   str(sc), '--out', str(d), '--name', 'run', '--odom-timeout',
                   str(ODOM_TIMEOUT)])
@@ -248,6 +249,12 @@ def main() -> int:
                     'default): raise it on a loaded machine whose plant stalls')
     ap.add_argument('--ctrlc-phases', default='excite,analyse,trial',
                     help='the phases a Ctrl-C trial picks from')
+    ap.add_argument('--ctrlc-each-phase', action='store_true',
+                    help='--ctrlc N trials in each phase (not N in random phases)')
+    ap.add_argument('--jobs', type=int, default=1,
+                    help='bring-ups at once (each in a network namespace of its own; the '
+                    'real-time plant stamps the time of its motion, so a loaded machine '
+                    'shifts no figure, but a stall beyond --odom-timeout stops a run)')
     args = ap.parse_args()
     PHASES[:] = args.ctrlc_phases.split(',')
     global ODOM_TIMEOUT
@@ -264,18 +271,23 @@ def main() -> int:
                      'odom_timeout': ODOM_TIMEOUT,
                      'bases': [], 'ctrlc': [], 'refusal': None}
     path = out / 'bringup.json'
-    for lat, lag, acc in bases:
-        for rep in range(1, args.reps + 1):
-            row = one_base(out, lat, lag, acc, rep)
-            results['bases'].append(row)
-            print(json.dumps(row, default=float), file=sys.stderr, flush=True)
-            path.write_text(json.dumps(results, indent=1, default=float))
-    rng = random.Random(31)
-    for k in range(args.ctrlc):
-        row = ctrlc_trial(out, k, rng)
-        results['ctrlc'].append(row)
+
+    def done(key: str, row: dict) -> None:
+        results[key].append(row)
         print(json.dumps(row, default=float), file=sys.stderr, flush=True)
         path.write_text(json.dumps(results, indent=1, default=float))
+
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        for f in [pool.submit(one_base, out, lat, lag, acc, rep)
+                  for lat, lag, acc in bases for rep in range(1, args.reps + 1)]:
+            done('bases', f.result())
+        # each trial its own generator: the same moments whatever the number of jobs
+        trials = ([(k, PHASES[k % len(PHASES)]) for k in range(args.ctrlc * len(PHASES))]
+                  if args.ctrlc_each_phase else [(k, None) for k in range(args.ctrlc)])
+        for f in [pool.submit(ctrlc_trial, out, k, random.Random(31_000 + k), phase)
+                  for k, phase in trials]:
+            done('ctrlc', f.result())
     if args.refusal:
         results['refusal'] = refusal(out)
         print(json.dumps(results['refusal']), file=sys.stderr, flush=True)
@@ -319,6 +331,19 @@ def _table(results: dict) -> None:
               f'when signalled {len(driving)}, zero within 0.1 s {prompt}/{len(driving)} '
               f'(delays {shown} ms); at rest (analyse) {len(by_signal) - len(driving)}; '
               f'processes left {left}')
+        print('| phase | trials | ended by the signal | last command zero | zero within 0.1 s '
+              '(driving) | signal -> zero command ms (median, max) | processes left |')
+        print('|---|---|---|---|---|---|---|')
+        for phase in dict.fromkeys(r['phase'] for r in rows):
+            pr = [r for r in rows if r['phase'] == phase]
+            sig = [r for r in pr if r['exit'] == 130]
+            ms = [1e3 * r['delay'] for r in sig if 'delay' in r and phase != 'analyse']
+            print(f'| {phase} | {len(pr)} | {len(sig)} | '
+                  f'{sum(1 for r in pr if r.get("last_v") == 0.0 and r.get("last_w") == 0.0)} | '
+                  + (f'{sum(1 for d in ms if 0.0 <= d <= 100.0)}/{len(ms)} | '
+                     f'{statistics.median(ms):.1f}, {max(ms):.1f} | ' if ms else
+                     '- (at rest) | - | ')
+                  + f'{sum(1 for r in pr if r["left_running"])} |')
     if results['refusal']:
         print(f'refusal: {results["refusal"]}')
 
