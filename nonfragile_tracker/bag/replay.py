@@ -689,9 +689,11 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
         lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
         default = tl.before[id(od)]
         # odometry the tracker had seen before the start: a whole window (it ran for a
-        # while; the recorder joined late), else any number down to none
-        counts = [WINDOW + 1] + (list(range(min(WINDOW, j), -1, -1))
-                                 if rank < PRIME_SEARCH else [])
+        # while; the recorder joined late) or none (its first odometry made its first step;
+        # under load a tracker works off a queue of odometry from well before the first
+        # recorded command), and at the nearest starts any number in between
+        counts = [WINDOW + 1, 0] + (list(range(min(WINDOW, j), 0, -1))
+                                    if rank < PRIME_SEARCH else [])
         for s, count in ((s, c) for s in [default] + [x for x in range(hi, lo - 1, -1)
                                                      if x != default][:64]
                          for c in counts):

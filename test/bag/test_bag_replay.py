@@ -44,7 +44,7 @@ def _pose(x, y, th):
 
 
 def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
-                           odom_from=0, refs_from=0, jitter=0.0):
+                           odom_from=0, refs_from=0, jitter=0.0, backlog=0):
     """A real-time run simulated in process and written as the recorder would see it.
 
     Odometry k is stamped T0 + 10k ms (plus a uniform jitter of +-``jitter`` ms, seeded);
@@ -54,7 +54,9 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
     order; the recorder missed the tracker's first ``late`` commands.  ``params``: the
     tracker's parameter file (default: the paper scenario's).  The tracker receives
     odometry from step ``odom_from`` and references from step ``refs_from`` on (a tracker
-    started while the recorder ran); the plant is at rest until its first command.
+    started while the recorder ran); the plant is at rest until its first command.  Its
+    first ``backlog`` commands reach the recorder in a burst after the odometry of the
+    last of them (a tracker working off a queue of odometry as it starts, under load).
     """
     jit = np.random.default_rng(7).uniform(-jitter, jitter, steps)
     config, _ = load_tracker_parameters(params=params)
@@ -63,6 +65,7 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
     ref_path = make_path('circle', radius=0.5, rate=0.01)
     cov = np.zeros(36)
     true_order, bag = [], []            # (time, kind, msg) for the tracker / the recorder
+    first_cmd = None                    # the step of the tracker's first command
     for k in range(steps):
         odom_ns = T0 + k * 10 * MS + int(round(jit[k] * MS))
         odom = T['nav_msgs/msg/Odometry'](
@@ -105,8 +108,12 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
             plant.step(0.0, 0.0)
             continue
         plant.step(cmd.v, cmd.w)
+        first_cmd = k if first_cmd is None else first_cmd
+        t_cmd = recv + 2 * MS
+        if k < first_cmd + backlog:             # in the burst after step first_cmd + backlog
+            t_cmd = T0 + (first_cmd + backlog) * 10 * MS + 4 * MS + (k - first_cmd) * 10_000
         if k >= late:
-            bag.append((recv + 2 * MS, 'cmd', T['geometry_msgs/msg/Twist'](
+            bag.append((t_cmd, 'cmd', T['geometry_msgs/msg/Twist'](
                 linear=_vec(cmd.v), angular=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0,
                                                                              z=cmd.w))))
     topic = {'odom': ('/odom', 'nav_msgs/msg/Odometry'),
@@ -136,14 +143,16 @@ def test_replay_handles_a_late_recorder_and_a_swapped_pair(tmp_path):
     assert not res_other.comparison.equal
 
 
-@pytest.mark.parametrize('before', [0, 3, 30])
-def test_replay_of_a_tracker_started_during_the_recording(tmp_path, before):
+@pytest.mark.parametrize('before, backlog', [(0, 0), (3, 0), (30, 0), (0, 15)])
+def test_replay_of_a_tracker_started_during_the_recording(tmp_path, before, backlog):
     """A tracker started while the recorder ran had measured its period (from jittered
     stamps) on only the ``before`` odometry messages it got before its first reference:
-    the replay finds that history (30: a whole window) and reproduces every command."""
+    the replay finds that history (30: a whole window) and reproduces every command, also
+    when its first commands came in a burst 15 odometry periods late (a loaded machine:
+    its first step lies well before the first recorded command)."""
     start = 100
     n = simulated_realtime_bag(tmp_path / 'rt', late=0, swapped=-1, jitter=3.0,
-                               odom_from=start - before, refs_from=start)
+                               odom_from=start - before, refs_from=start, backlog=backlog)
     assert n == 300 - start
     res = replay(tmp_path / 'rt')
     assert res.comparison.equal, res.comparison.differences[:3]
