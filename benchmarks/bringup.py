@@ -236,6 +236,25 @@ def refusal(out: Path) -> dict:
             'names_latency': 'latency' in line, 'gain_written': (d / 'run' / 'gains.yaml').exists()}
 
 
+def steady(out: Path, lat_ms: float) -> dict:
+    """A base with a steady latency of ``lat_ms`` (lag 80 ms, 1 m/s^2 / 3 rad/s^2): the
+    bring-up either designs a gain certified for it (the predictor takes the latency, the
+    certificate the residual) or refuses, and says which."""
+    d = out / f'steady_{lat_ms:g}'
+    d.mkdir(parents=True, exist_ok=True)
+    sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml', base_plant(lat_ms, 80, 1.0, 1))
+    res = cli('bringup', '--simulate', str(sc), '--out', str(d), '--name', 'run',
+              '--trial-duration', '0', '--odom-timeout', str(ODOM_TIMEOUT),
+              log=d / 'bringup.log', check=False)
+    line = next((ln for ln in res.stdout.splitlines() if 'REFUSED' in ln), '')
+    m = re.search(r'robot time ([\d.]+) s; farthest ([\d.]+) m', res.stdout)
+    return {'latency_ms': lat_ms, 'exit': res.returncode, 'refusal': line,
+            'names_latency': 'latency' in line,
+            'gain_written': (d / 'run' / 'gains.yaml').exists(),
+            'farthest': float(m.group(2)) if m else None,
+            'tail': res.stdout[-600:]}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--bases', default='100/30/1,300/80/0.5',
@@ -243,6 +262,9 @@ def main() -> int:
     ap.add_argument('--reps', type=int, default=1)
     ap.add_argument('--ctrlc', type=int, default=0)
     ap.add_argument('--refusal', action='store_true')
+    ap.add_argument('--steady', default='',
+                    help='steady latencies (ms, comma-separated) beyond the shipped gain\'s: '
+                    'designed for or refused (see steady())')
     ap.add_argument('--out', default='/tmp/bringup_bench')
     ap.add_argument('--odom-timeout', type=float, default=0.5,
                     help='the bring-up\'s odometry timeout (s; default 0.5, the robot file '
@@ -291,6 +313,10 @@ def main() -> int:
     if args.refusal:
         results['refusal'] = refusal(out)
         print(json.dumps(results['refusal']), file=sys.stderr, flush=True)
+    results['steady'] = []
+    for lat in [float(x) for x in args.steady.split(',') if x]:
+        results['steady'].append(steady(out, lat))
+        print(json.dumps(results['steady'][-1]), file=sys.stderr, flush=True)
     results['load_end'] = os.getloadavg()
     path.write_text(json.dumps(results, indent=1, default=float))
     _table(results)
@@ -346,6 +372,9 @@ def _table(results: dict) -> None:
                   + f'{sum(1 for r in pr if r["left_running"])} |')
     if results['refusal']:
         print(f'refusal: {results["refusal"]}')
+    for r in results.get('steady', []):
+        print(f'steady latency {r["latency_ms"]:g} ms: exit {r["exit"]}, gain written '
+              f'{r["gain_written"]}, farthest {r["farthest"]} m, {r["refusal"] or "designed"}')
 
 
 if __name__ == '__main__':
