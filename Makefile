@@ -35,12 +35,9 @@ demo: $(STAMP)
 # reproduction, golden bags and replays) again under a second OpenBLAS kernel - OpenBLAS picks
 # its kernels by CPU and the suite must pass on any CPU: test/blas_kernel.py chooses it per
 # architecture (x86-64: Sandybridge, or Prescott; aarch64: ARMV8; else none, said loudly) and
-# test/test_blas_kernel.py checks that the pass really ran it - side by side with the
-# real-time tests, at most two at a time (-n 2): they run nodes on the wall clock and judge
-# timing, and together use about 0.7 of the two cores; the second-kernel pass runs at the
-# lowest CPU priority (nice 19: it takes what they leave, and they preempt it) on ROS domains
-# 1-99 (the real-time pass keeps 100-199), its output printed after theirs, and is stopped
-# with them (a background job ignores Ctrl-C).  The first pass keeps the machine's environment.
+# test/test_blas_kernel.py checks that the pass really ran it - then the real-time tests
+# alone, at most two at a time (-n 2): they run nodes on the wall clock and judge timing, and
+# together use about 0.7 of the two cores.  The first pass keeps the machine's environment.
 # The package is byte-compiled first: with PYTHONDONTWRITEBYTECODE set (as in CI) every node
 # process would compile it again.
 # Exit 5 (no tests) is a failure unless another part ran tests (ARGS may select one part).
@@ -49,12 +46,9 @@ test: $(STAMP)
 	$(PY) -m compileall -q nonfragile_tracker
 	$(PY) -m pytest -q -p no:cacheprovider -n $(WORKERS) -m "not realtime" test $(ARGS); a=$$?; \
 	first=$$($(PY) test/blas_kernel.py --current) && second=$$($(PY) test/blas_kernel.py) || exit 1; \
-	log=$$(mktemp); env $$second NONFRAGILE_FIRST_KERNEL=$$first NONFRAGILE_DOMAINS=1:100 \
-	  nice -n 19 $(PY) -m pytest -q -p no:cacheprovider -n $(WORKERS) \
-	  -m "numerical and not realtime" test $(ARGS) > $$log 2>&1 & second_pid=$$!; \
-	trap 'kill $$second_pid 2>/dev/null' INT TERM; \
+	env $$second NONFRAGILE_FIRST_KERNEL=$$first $(PY) -m pytest -q -p no:cacheprovider \
+	  -n $(WORKERS) -m "numerical and not realtime" test $(ARGS); c=$$?; \
 	$(PY) -m pytest -q -p no:cacheprovider -n 2 -m realtime test $(ARGS); b=$$?; \
-	wait $$second_pid; c=$$?; cat $$log; rm -f $$log; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ] && [ $$c -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	for rc in $$a $$c $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
 

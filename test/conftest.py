@@ -107,9 +107,8 @@ def pytest_cmdline_main(config):
     modules per worker so that module fixtures are computed once), ROS tests in lockstep or
     about processes and signals included: their results do not depend on the load (each
     worker has ROS domains of its own, :func:`domain_ids`).  Real-time tests (``realtime``)
-    keep wall-clock time: they must not share the machine with CPU-bound tests of their own
-    priority.  Alone (``-m realtime``, ``make test`` runs them with ``-n 2``, the second-kernel
-    pass beside them at the lowest priority) two of them may run at once:
+    keep wall-clock time: they must not share the machine with the CPU-bound tests.  Alone
+    (``-m realtime``, ``make test`` runs them with ``-n 2``) two of them may run at once:
     together they keep about 0.7 of the two cores busy (nodes at 100 Hz and waits).
     (xdist's ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no
     effect, pytest-xdist issue 1386.)
@@ -187,21 +186,14 @@ def pytest_collection_modifyitems(config, items):
                 'in the module (e.g. pytestmark) or list the module in conftest')
 
 
-#: The ROS_DOMAIN_IDs of a test run, ``FIRST:STOP`` (environment ``NONFRAGILE_DOMAINS``,
-#: default 100:200): ``make test`` gives its second-kernel pass, which runs beside the
-#: real-time one, 1:100.
-DOMAINS_ENV = 'NONFRAGILE_DOMAINS'
-
-
 def _domain_range() -> range:
-    """The ROS_DOMAIN_IDs this test process may use: the run's (:data:`DOMAINS_ENV`), split
-    evenly between the pytest-xdist workers (a worker runs its tests one after another)."""
-    first, stop = (int(v) for v in os.environ.get(DOMAINS_ENV, '100:200').split(':'))
+    """The ROS_DOMAIN_IDs this test process may use: 100..199, split evenly between the
+    pytest-xdist workers (a worker runs its tests one after another)."""
     worker = os.environ.get('PYTEST_XDIST_WORKER', '')
     count = max(int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1')), 1)
     index = int(worker[2:]) if worker.startswith('gw') else 0
-    size = (stop - first) // count
-    return range(first + index * size, first + (index + 1) * size)
+    size = 100 // count
+    return range(100 + index * size, 100 + (index + 1) * size)
 
 
 def domain_ids(salt: str = '', n: int = 1) -> list[int]:
