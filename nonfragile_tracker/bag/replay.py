@@ -473,8 +473,9 @@ START_SEARCH = 1.0
 #: Recorded commands that must be reproduced to accept a starting point.
 START_CHECK = 10
 #: At the nearest this many starting points the replay also tries a tracker that had
-#: measured fewer odometry intervals than a whole window (it had just started: its first
-#: reference came with its first odometry or a few after).
+#: measured some but not a whole window of odometry intervals (it had just started: its
+#: first reference came a few odometry messages after its first); at every start it tries
+#: a whole window and none.
 PRIME_SEARCH = 3
 
 
@@ -517,8 +518,9 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
       the first inputs; the replay starts at the odometry (within :data:`START_SEARCH`
       s before the first recorded command) from which :data:`START_CHECK` recorded
       commands are reproduced, with the compensator speed recovered from the first and
-      the odometry the tracker had measured its period on before it (a whole window; at
-      the nearest :data:`PRIME_SEARCH` starts also fewer: a tracker that had just started);
+      the odometry the tracker had measured its period on before it (a whole window, or
+      none: a tracker whose first odometry made its first step; at the nearest
+      :data:`PRIME_SEARCH` starts any number between);
     * the reference at each odometry: the tracker uses the latest reference parts it
       has; when the bag order's choice does not reproduce the recorded command, the
       reference states received from :data:`ORDER_WINDOW` s before the odometry up to
