@@ -219,40 +219,35 @@ def ctrlc_trial(out: Path, k: int, rng: random.Random, phase: str | None = None)
     return row
 
 
-def refusal(out: Path) -> dict:
-    d = out / 'refusal'
+def design_or_refusal(d: Path, plant: dict) -> dict:
+    """One bring-up without a trial on ``plant``: designed for, or refused (the line)."""
     d.mkdir(parents=True, exist_ok=True)
-    sched = []
-    for i in range(1, 40):
-        sched += [3.0 * i, 0.6 if i % 2 else 0.1]
-    sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml',
-                  {**base_plant(100, 30, 1.0, 1), 'cmd_latency_schedule': sched})
+    sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml', plant)
     res = cli('bringup', '--simulate', str(sc), '--out', str(d), '--name', 'run',
               '--trial-duration', '0', '--odom-timeout', str(ODOM_TIMEOUT),
               log=d / 'bringup.log', check=False)
-    text = res.stdout
-    line = next((ln for ln in text.splitlines() if 'REFUSED' in ln), '')
-    return {'exit': res.returncode, 'refusal': line,
-            'names_latency': 'latency' in line, 'gain_written': (d / 'run' / 'gains.yaml').exists()}
+    line = next((ln for ln in res.stdout.splitlines() if 'REFUSED' in ln), '')
+    m = re.search(r'robot time ([\d.]+) s; farthest ([\d.]+) m', res.stdout)
+    return {'exit': res.returncode, 'refusal': line, 'names_latency': 'latency' in line,
+            'gain_written': (d / 'run' / 'gains.yaml').exists(),
+            'farthest': float(m.group(2)) if m else None, 'tail': res.stdout[-600:]}
+
+
+def refusal(out: Path) -> dict:
+    """A base whose latency jumps between 0.1 and 0.6 s every 3 s: refused, naming it."""
+    sched = []
+    for i in range(1, 40):
+        sched += [3.0 * i, 0.6 if i % 2 else 0.1]
+    return design_or_refusal(out / 'refusal', {**base_plant(100, 30, 1.0, 1),
+                                               'cmd_latency_schedule': sched})
 
 
 def steady(out: Path, lat_ms: float) -> dict:
     """A base with a steady latency of ``lat_ms`` (lag 80 ms, 1 m/s^2 / 3 rad/s^2): the
     bring-up either designs a gain certified for it (the predictor takes the latency, the
     certificate the residual) or refuses, and says which."""
-    d = out / f'steady_{lat_ms:g}'
-    d.mkdir(parents=True, exist_ok=True)
-    sc = scenario(LATENCY_SCENARIO, d / 'scenario.yaml', base_plant(lat_ms, 80, 1.0, 1))
-    res = cli('bringup', '--simulate', str(sc), '--out', str(d), '--name', 'run',
-              '--trial-duration', '0', '--odom-timeout', str(ODOM_TIMEOUT),
-              log=d / 'bringup.log', check=False)
-    line = next((ln for ln in res.stdout.splitlines() if 'REFUSED' in ln), '')
-    m = re.search(r'robot time ([\d.]+) s; farthest ([\d.]+) m', res.stdout)
-    return {'latency_ms': lat_ms, 'exit': res.returncode, 'refusal': line,
-            'names_latency': 'latency' in line,
-            'gain_written': (d / 'run' / 'gains.yaml').exists(),
-            'farthest': float(m.group(2)) if m else None,
-            'tail': res.stdout[-600:]}
+    return {'latency_ms': lat_ms, **design_or_refusal(out / f'steady_{lat_ms:g}',
+                                                      base_plant(lat_ms, 80, 1.0, 1))}
 
 
 def main() -> int:
