@@ -408,8 +408,9 @@ class ReplayPlan:
     prime: tuple[ReplayEvent, ...] = ()
 
 
-#: Receive-time window (s) within which the recorder and the tracker may have received an
-#: odometry and a reference message in different orders.
+#: Receive-time window (s): a reference the recorder got this long after a command may have
+#: reached the tracker before it computed the command (and at the start, before the first
+#: odometry).
 ORDER_WINDOW = 0.002
 
 
@@ -472,6 +473,9 @@ def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
 START_SEARCH = 1.0
 #: Recorded commands that must be reproduced to accept a starting point.
 START_CHECK = 10
+#: How much later (s) the recorder may have received an odometry message than the tracker
+#: did (starts that make a command come before its odometry by more are tried last).
+START_SKEW = 0.02
 #: At the nearest this many starting points the replay also tries a tracker that had
 #: measured some but not a whole window of odometry intervals (it had just started: its
 #: first reference came a few odometry messages after its first); at every start it tries
@@ -523,9 +527,11 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
       :data:`PRIME_SEARCH` starts any number between);
     * the reference at each odometry: the tracker uses the latest reference parts it
       has; when the bag order's choice does not reproduce the recorded command, the
-      reference states received from :data:`ORDER_WINDOW` s before the odometry up to
-      the command are tried (a near-simultaneous pair seen in the other order, or a burst
-      of queued odometry processed late).
+      other reference states are tried, from the one used at the previous command up to
+      those received :data:`ORDER_WINDOW` s after the command (the tracker and the
+      recorder are two readers: under load one got the odometry before a reference the
+      other got first, by several milliseconds; or a burst of queued odometry was
+      processed late).
 
     Every odometry after the start is paired with the next recorded command; once a
     command cannot be reproduced this way, the rest is fed in bag order (and the
@@ -642,9 +648,11 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded: list[Timed],
         chosen: tuple[int, TrackerInputs, Command | None] | None = None
         if matching and k < len(recorded):
             t_o, t_c = od.receive_ns, recorded[k][0]
-            lo, hi = tl.window(t_o - window, max(t_c, t_o + window))
-            lo = max(lo, applied)
-            cands = [default] + list(range(default - 1, lo - 1, -1)) \
+            # any state from the last one used (the tracker may have taken this odometry
+            # before references the recorder got earlier) up to those the recorder got
+            # just after the command (the tracker may have had them first)
+            hi = tl.window(t_o, max(t_c, t_o) + window)[1]
+            cands = [default] + list(range(default - 1, applied - 1, -1)) \
                 + list(range(default + 1, max(hi, default) + 1))
             for s in cands[:64]:
                 trial = inputs.fork()
@@ -685,6 +693,16 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
     first = bisect.bisect_right([e.receive_ns for e in odoms], t_first)
     starts = [j for j in range(first - 1, -1, -1)
               if t_first - odoms[j].receive_ns <= START_SEARCH * 1e9][:200]
+    # a start is tried first where every command could follow its odometry: a tracker
+    # that starts on a queue of odometry answers it in a burst of commands, before the
+    # recorder got the next odometry, so the nearest starts cannot be the right one
+    receive = [e.receive_ns for e in odoms]
+    skew, n = int(START_SKEW * 1e9), min(len(recorded), START_CHECK * 20)
+
+    def causal(j: int) -> bool:
+        return all(receive[j + c] <= recorded[c][0] + skew
+                   for c in range(min(n, len(odoms) - j)))
+    starts = [j for j in starts if causal(j)] + [j for j in starts if not causal(j)]
     v_target = float(_twist(recorded[0][1]).linear.x)
     for rank, j in enumerate(starts):
         od = odoms[j]

@@ -19,6 +19,7 @@ from nonfragile_tracker.bag.report import bag_report
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TOPICS = "['odom','reference/pose','reference/twist','reference/accel','cmd_vel']"
+INPUTS = ('odom', 'reference/pose', 'reference/twist', 'reference/accel')
 
 
 @pytest.fixture(scope='module')
@@ -36,17 +37,22 @@ def realtime_bag(tmp_path_factory):
     probe = Probe(int(env['ROS_DOMAIN_ID']))
     bag = tmp / 'bag'
     procs = {}
+    rec_log = tmp / 'recorder.log'
     try:
         procs['recorder'] = subprocess.Popen(
             [sys.executable, '-m', 'nonfragile_tracker.nodes.recorder', '--ros-args', '-p',
-             f'output:={bag}', '-p', f'topics:={TOPICS}'], env=env, stdout=subprocess.PIPE,
+             f'output:={bag}', '-p', f'topics:={TOPICS}'],
+            env=dict(env, RCUTILS_LOGGING_BUFFERED_STREAM='0'), stdout=rec_log.open('w'),
             stderr=subprocess.STDOUT, text=True)
         procs['plant'] = start('plant', env, '-p', 'duration:=0.0')
         procs['reference'] = start('reference', env)
         assert probe.wait_for(lambda: len(probe.odoms) > 50, timeout=20)
-        assert probe.wait_for(lambda: probe.node.count_subscribers('/odom') >= 2
-                              and probe.node.count_subscribers('/reference/pose') >= 1)
-        probe.spin(1.5)                       # the recorder has matched both writers
+        # the tracker starts once the recorder has every input: a graph that lists the
+        # recorder's readers is not enough (under load a reader matched its writer seconds
+        # later, and the bag lacked the references the tracker's first commands came from)
+        assert probe.wait_for(lambda: all(f'first message on /{t}' in rec_log.read_text()
+                                          for t in INPUTS), timeout=30), \
+            rec_log.read_text()
         procs['tracker'] = start('tracker', env, '-p', 'input_timeout:=30.0')
         assert probe.wait_for(lambda: sum(1 for c in probe.cmds if c[1] != 0.0) > 250,
                               timeout=30), 'no commands from the tracker'
