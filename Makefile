@@ -36,8 +36,8 @@ demo: $(STAMP)
 # its kernels by CPU and the suite must pass on any CPU: test/blas_kernel.py chooses it per
 # architecture (x86-64: Sandybridge, or Prescott; aarch64: ARMV8; else none, said loudly) and
 # test/test_blas_kernel.py checks that the pass really ran it - then the real-time tests
-# alone, at most two at a time (-n 2): they run nodes on the wall clock and judge timing, and
-# together use about 0.7 of the two cores.  The first pass keeps the machine's environment.
+# alone, at most three at a time (-n 3): they run nodes on the wall clock and judge timing, and
+# together use about 0.75 of the two cores.  The first pass keeps the machine's environment.
 # The package is byte-compiled first: with PYTHONDONTWRITEBYTECODE set (as in CI) every node
 # process would compile it again.
 # Exit 5 (no tests) is a failure unless another part ran tests (ARGS may select one part).
@@ -48,7 +48,7 @@ test: $(STAMP)
 	first=$$($(PY) test/blas_kernel.py --current) && second=$$($(PY) test/blas_kernel.py) || exit 1; \
 	env $$second NONFRAGILE_FIRST_KERNEL=$$first $(PY) -m pytest -q -p no:cacheprovider \
 	  -n $(WORKERS) -m "numerical and not realtime" test $(ARGS); c=$$?; \
-	$(PY) -m pytest -q -p no:cacheprovider -n 2 -m realtime test $(ARGS); b=$$?; \
+	$(PY) -m pytest -q -p no:cacheprovider -n 3 -m realtime test $(ARGS); b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ] && [ $$c -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	for rc in $$a $$c $$b; do if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit $$rc; fi; done
 

@@ -41,13 +41,16 @@ ROS_MODULES = {'test_bag_writer_reader', 'test_failures', 'test_golden_regressio
 REALTIME_MODULES = {'test_bag_realtime', 'test_netns', 'test_realtime_faults',
                     'test_certificate_monitor'}
 #: Modules that keep a worker busy longest (tens of seconds each, measured): collected
-#: first, so that pytest-xdist (whole modules per worker, handed out in collection order)
-#: starts them first instead of leaving one running alone at the end of a pass.
+#: first, so that pytest-xdist (whole modules per worker, handed out in collection order:
+#: ``--no-loadscope-reorder`` in setup.cfg, else it orders them by their number of tests)
+#: starts them first instead of leaving one running alone at the end of a pass.  The
+#: real-time modules are in the order that pairs them evenly on three workers.
 LONGEST_FIRST = ('test_signals', 'test_failures', 'test_docs', 'test_reproduction',
                  'test_identify', 'test_recorder_node', 'test_input_delay',
                  'test_colcon_setuptools', 'test_bag_golden_user', 'test_golden_regression',
-                 'test_latency_lockstep', 'test_trajectory_nodes', 'test_realtime_faults',
-                 'test_bag_realtime', 'test_netns')
+                 'test_latency_lockstep', 'test_realtime_faults',
+                 'test_trajectory_realtime_replay', 'test_trajectory_nodes', 'test_netns',
+                 'test_bringup_node', 'test_bag_realtime')
 #: Modules whose tests take tens of seconds (marked ``slow``).
 SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_faults',
                 'test_ros_lockstep'}
@@ -55,7 +58,7 @@ SLOW_MODULES = {'test_reproduction', 'test_golden_regression', 'test_realtime_fa
 
 def serial_run(expr: str) -> bool:
     """Whether a run with mark expression ``expr`` must be serial: it may select real-time
-    tests together with others (``-m realtime`` alone may use two workers, see
+    tests together with others (``-m realtime`` alone may use workers, see
     :func:`pytest_cmdline_main`)."""
     return (mark_expression_may_select(expr, 'realtime', 'ros')
             and _may_match(expr, frozenset(), frozenset({'realtime'})))
@@ -108,8 +111,8 @@ def pytest_cmdline_main(config):
     about processes and signals included: their results do not depend on the load (each
     worker has ROS domains of its own, :func:`domain_ids`).  Real-time tests (``realtime``)
     keep wall-clock time: they must not share the machine with the CPU-bound tests.  Alone
-    (``-m realtime``, ``make test`` runs them with ``-n 2``) two of them may run at once:
-    together they keep about 0.7 of the two cores busy (nodes at 100 Hz and waits).
+    (``-m realtime``, ``make test`` runs them with ``-n 3``) three of them may run at once:
+    together they keep about 0.75 of the two cores busy (nodes at 100 Hz and waits).
     (xdist's ``loadgroup`` cannot keep them together: with pytest 9.2 its group marks have no
     effect, pytest-xdist issue 1386.)
     """

@@ -83,7 +83,7 @@ def test_which_mark_expressions_may_select_realtime_tests(expr, serial):
     ('not ros', False), ('not realtime', False)])
 def test_real_time_tests_alone_may_use_the_workers(expr, serial):
     """Serial only when real-time tests may run together with others (make test's second
-    part, ``-m realtime``, runs on two workers)."""
+    part, ``-m realtime``, runs on three workers)."""
     assert serial_run(expr) is serial
 
 
