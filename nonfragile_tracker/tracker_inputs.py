@@ -50,7 +50,7 @@ from typing import Any, NamedTuple
 from . import topics
 from .control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
                              trajectory_time)
-from .control.simulation.limits import Limits, within_limits
+from .control.simulation.limits import ACCEL_FRACTION, Limits, within_limits
 from .control.simulation.loop import Command, Tracker, TrackerConfig
 from .control.simulation.reference import RefSample
 from .control.simulation.trajectory import Trajectory, TrajectoryError
@@ -71,6 +71,7 @@ INPUT_DEFAULTS: dict[str, Any] = {
     'odom_frame': topics.ODOM_FRAME, 'max_stamp_jump': 1.0, 'wait_for_trajectory': False,
     'cruise_speed': 0.5, 'max_accel': 0.5, 'retime': True, 'rest_speed': REST_SPEED,
     'start_tolerance': START_TOLERANCE, 'max_start_distance': MAX_START_DISTANCE,
+    'trajectory_accel_fraction': ACCEL_FRACTION,
 }
 #: Trajectory messages, by kind: ``path`` (nav_msgs/Path), ``multidof``
 #: (trajectory_msgs/MultiDOFJointTrajectory).
@@ -98,6 +99,9 @@ class InputRules:
         Re-time a trajectory that exceeds ``limits`` (else follow it as sent).
     limits : Limits
         The base's limits trajectories are re-timed within.
+    accel_fraction : float
+        The share of the acceleration limits a trajectory may use, in (0, 1]
+        (``trajectory_accel_fraction``).
     rest_speed, start_tolerance, max_start_distance : float
         The :class:`~nonfragile_tracker.control.follow.Follower`'s end and start rules.
     """
@@ -110,6 +114,7 @@ class InputRules:
     max_accel: float = INPUT_DEFAULTS['max_accel']
     retime: bool = INPUT_DEFAULTS['retime']
     limits: Limits = field(default_factory=Limits)
+    accel_fraction: float = INPUT_DEFAULTS['trajectory_accel_fraction']
     rest_speed: float = INPUT_DEFAULTS['rest_speed']
     start_tolerance: float = INPUT_DEFAULTS['start_tolerance']
     max_start_distance: float = INPUT_DEFAULTS['max_start_distance']
@@ -120,6 +125,9 @@ class InputRules:
         if not (math.isfinite(self.max_stamp_jump) and self.max_stamp_jump > 0):
             raise InputError(f'max_stamp_jump must be a finite number > 0 s, got '
                              f'{self.max_stamp_jump!r}')
+        if not 0.0 < self.accel_fraction <= 1.0:
+            raise InputError(f'trajectory_accel_fraction must be in (0, 1], got '
+                             f'{self.accel_fraction!r}')
 
 
 def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRules:
@@ -140,7 +148,8 @@ def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRule
     Raises
     ------
     InputError
-        For a mode that is neither, or a ``max_stamp_jump`` that is not > 0.
+        For a mode that is neither, a ``max_stamp_jump`` that is not > 0 or a
+        ``trajectory_accel_fraction`` outside (0, 1].
     """
     v = {**INPUT_DEFAULTS, **values}
     return InputRules(
@@ -149,6 +158,7 @@ def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRule
         wait_for_trajectory=bool(v['wait_for_trajectory']),
         cruise_speed=float(v['cruise_speed']), max_accel=float(v['max_accel']),
         retime=bool(v['retime']), limits=Limits.from_values(v),
+        accel_fraction=float(v['trajectory_accel_fraction']),
         rest_speed=float(v['rest_speed']), start_tolerance=float(v['start_tolerance']),
         max_start_distance=float(v['max_start_distance']))
 
@@ -419,7 +429,7 @@ class TrackerInputs:
         """
         if not self.rules.retime:
             return traj, ''
-        return within_limits(traj, self.rules.limits)
+        return within_limits(traj, self.rules.limits, self.rules.accel_fraction)
 
     def adopt(self, traj: Trajectory, origin_ns: int) -> None:
         """Start a new run on ``traj`` (the previous trajectory, if any, is replaced).

@@ -120,6 +120,11 @@ PARAMS = [
           'max_linear_accel, max_angular_speed, max_angular_accel and min_turning_radius and '
           're-time one that exceeds them along its path (logged); false: follow as sent',
           read_only=True),
+    Param('trajectory_accel_fraction', _RULES['trajectory_accel_fraction'], 'share of '
+          'max_linear_accel and max_angular_accel a trajectory may use (checked and re-timed '
+          'against it); the rest is left to the feedback, which a reference at the whole '
+          'limit leaves no acceleration to correct an error with; 1 = all of it',
+          low=0.05, high=1.0, read_only=True),
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),

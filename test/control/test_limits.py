@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from nonfragile_tracker.control.simulation.limits import (LIMIT_NAMES, PATH_TOLERANCE, Limits,
+from nonfragile_tracker.control.simulation.limits import (ACCEL_FRACTION, LIMIT_NAMES,
+                                                          PATH_TOLERANCE, TOLERANCE, Limits,
                                                           check, retime, within_limits)
 from nonfragile_tracker.control.simulation.trajectory import TrajectoryError, load_waypoints
 
@@ -43,6 +44,31 @@ def test_within_the_limits_nothing_changes(lap):
     r = check(lap, lim)
     assert r.ok and all(rep.margin > 0 for rep in r.reports)
     assert within_limits(lap, lim) == (lap, '')
+
+
+def test_a_trajectory_takes_its_share_of_the_acceleration_limits(lap):
+    """A trajectory may use ACCEL_FRACTION (80 %) of each acceleration limit, the rest is
+    the feedback's: the lap (peaks 0.449 m/s^2, 5.43 rad/s^2) is left alone within the
+    whole of 0.5 m/s^2 and 6 rad/s^2 but re-timed to its share by default, the speeds
+    unscaled; given again, the re-timed lap is left as it is (judged to the re-timing's
+    accuracy, TOLERANCE)."""
+    lim = Limits(max_linear_speed=0.41, max_linear_accel=0.5, max_angular_accel=6.0)
+    assert within_limits(lap, lim, 1.0) == (lap, '')
+    assert ACCEL_FRACTION == 0.8
+    new, note = within_limits(lap, lim)
+    assert 'the acceleration limits at 80 % (trajectory_accel_fraction' in note
+    after = check(new, lim.accel_share(ACCEL_FRACTION), tolerance=TOLERANCE)
+    assert after.ok
+    assert 0.36 < after['max_linear_accel'].peak <= 0.4 * (1 + TOLERANCE)       # 90-101 %
+    assert after['max_angular_accel'].peak <= 4.8 * (1 + TOLERANCE)
+    assert after['max_linear_speed'].peak <= 0.41 and new.t_end > lap.t_end
+    assert within_limits(new, lim) == (new, '')
+    share = lim.accel_share(0.5)
+    assert (share.max_linear_speed, share.max_linear_accel, share.max_angular_accel) == \
+        (0.41, 0.25, 3.0)
+    for bad in (0.0, -0.1, 1.5, math.nan, True):
+        with pytest.raises(TrajectoryError, match=r'trajectory_accel_fraction must be'):
+            within_limits(lap, lim, bad)
 
 
 @pytest.mark.parametrize('name', list(BELOW))
@@ -114,9 +140,13 @@ def test_cli_trajectory_check_names_the_limit_time_and_value(capsys, lap, name):
     value = BELOW.get(name, 0.5)
     assert main(['trajectory', 'check', str(LINE_ARC), '--limits', f'{name}={value}']) == 1
     out = capsys.readouterr().out
-    v = check(lap, Limits(**{name: value}))[name]
+    # judged as the tracker judges it: an acceleration against its share of the limit
+    # (ACCEL_FRACTION, the rest is the feedback's), to the re-timing's accuracy (TOLERANCE)
+    share = Limits(**{name: value}).accel_share(ACCEL_FRACTION)
+    v = check(lap, share, tolerance=TOLERANCE)[name]
     line = next(ln for ln in out.splitlines() if 'VIOLATES' in ln)
-    assert f'VIOLATES {name} = {value:g}' in line
+    assert f'VIOLATES {name} = {getattr(share, name):g}' in line
+    assert ('80 % of the acceleration limits' in out) is (ACCEL_FRACTION == 0.8)
     assert f'first at t = {v.violated_at:.3f} s' in line
     if name == 'min_turning_radius':
         assert 'refused: ' in out and 'curvature' in out

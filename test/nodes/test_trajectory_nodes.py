@@ -568,7 +568,7 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
     a minimum turning radius above the lap's is a refusal naming place and curvature."""
     from nav_msgs.msg import Path as PathMsg
     from rclpy.node import Node
-    from nonfragile_tracker.control.simulation.limits import Limits, check
+    from nonfragile_tracker.control.simulation.limits import ACCEL_FRACTION, Limits, check
     from nonfragile_tracker.nodes.common import LATCHED_QOS
     from nonfragile_tracker.nodes.tracker import TrackerNode
 
@@ -587,7 +587,11 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
         try:
             spin_nodes([test, tracker], lambda: tracker.inputs.follower is not None
                        or tracker.inputs.last_refusal, ctx, timeout=30)
-            v = check(lap, Limits(**{name: value}))[name]
+            # a trajectory may use ACCEL_FRACTION of an acceleration limit (the rest is the
+            # feedback's): it is checked and re-timed against that share, and the note says so
+            share = Limits(**{name: value}).accel_share(ACCEL_FRACTION)
+            v = check(lap, share)[name]
+            value = getattr(share, name)
             if name == 'min_turning_radius':
                 assert tracker.inputs.follower is None
                 note = tracker.inputs.last_refusal
@@ -598,6 +602,8 @@ def test_tracker_checks_each_limit_and_retimes_or_refuses(ros_context):
                 assert tracker.inputs.follower.trajectory.source.endswith('(re-timed)')
                 assert tracker.inputs.follower.trajectory.t_end > lap.t_end
                 assert f'{v.violated_value:.4g}' in note
+                assert ('the acceleration limits at 80 % (trajectory_accel_fraction' in note) \
+                    == name.endswith('_accel')
             assert f'VIOLATES {name} = {value:g}' in note or name == 'min_turning_radius'
             if name == 'min_turning_radius':     # the fitted path's place and planned time
                 assert 'first above the limit at t = ' in note and ' at (' in note

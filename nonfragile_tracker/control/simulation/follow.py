@@ -19,7 +19,7 @@ import math
 from typing import Any
 
 
-from .limits import Limits, within_limits
+from .limits import ACCEL_FRACTION, Limits, within_limits
 from .loop import Command, PlantConfig, Tracker, TrackerConfig, step_time_ns
 from .reference import RefSample
 from .simulate import TrackingRun, report_override, run_loop
@@ -262,7 +262,8 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
                        rest_speed: float = REST_SPEED, origin_ns: int = 0,
                        start_tolerance: float = START_TOLERANCE,
                        max_start_distance: float = MAX_START_DISTANCE,
-                       limits: Limits | None = None) -> TrackingRun:
+                       limits: Limits | None = None,
+                       accel_fraction: float = ACCEL_FRACTION) -> TrackingRun:
     """In-process run of a :class:`Follower`, the ROS lockstep sequence step by step.
 
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
@@ -290,13 +291,16 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
         Largest distance (m) between the robot and the reference at the first step.
     limits : Limits, optional
         The robot's limits: the trajectory is re-timed within them first.
+    accel_fraction : float, optional
+        With ``limits``: the share of the acceleration limits the trajectory may use
+        (the tracker's ``trajectory_accel_fraction``).
 
     Returns
     -------
     TrackingRun
     """
     if limits is not None:
-        trajectory = within_limits(trajectory, limits)[0]
+        trajectory = within_limits(trajectory, limits, accel_fraction)[0]
     report_override(plant_config, tracker_config)
     follower = Follower(Tracker(tracker_config), trajectory, rest_speed,
                         start_tolerance=start_tolerance, max_start_distance=max_start_distance)
