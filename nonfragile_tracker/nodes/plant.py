@@ -119,6 +119,10 @@ PARAMS = [
 ]
 #: Lockstep: at most this many steps without waiting (QoS keep-last depth headroom).
 MAX_FREE_STEPS = 50
+#: Real time: a tick that comes later than this many steps (the machine stalled) integrates
+#: every missed step but publishes the odometry of the last ones only: a driver reports
+#: where the robot is, not seconds of history at once into a subscriber's keep-last queue.
+MAX_BURST = 10
 
 
 @dataclass(frozen=True)
@@ -276,9 +280,16 @@ class PlantNode(AdapterNode[PlantSettings]):
                 self.timer = self.create_timer(cfg.dt, self._realtime_step)
 
     # ------------------------------------------------------------------ publishing
-    def _publish_state(self, stamp_ns: int) -> bool:
-        """Publish the current step (clock, true pose, odometry if due); True if odom went out."""
+    def _publish_state(self, stamp_ns: int, publish: bool = True) -> bool:
+        """Publish the current step (clock, true pose, odometry if due); True if odom went out.
+
+        ``publish`` False takes the odometry measurement (the model's state moves on) but
+        publishes nothing (a step skipped after a stall, :data:`MAX_BURST`).
+        """
         p = self.plant
+        if not publish:
+            p.odometry()
+            return False
         if self.mode == 'lockstep' and self.pub_clock.get_subscription_count():
             ns_to_stamp(stamp_ns, self._clock_msg.clock)     # nobody on sim time: skip it
             self.pub_clock.publish(self._clock_msg)
@@ -448,7 +459,9 @@ class PlantNode(AdapterNode[PlantSettings]):
         odometry published in a burst, stamped with their own times (step k at
         ``origin + k dt``, the origin the smallest ``clock - k dt`` seen: a stamp is never
         ahead of the clock).  The stamps are then the time of the motion they report, as
-        a controller that integrates over the time that passed needs them to be.
+        a controller that integrates over the time that passed needs them to be.  After a
+        stall of more than :data:`MAX_BURST` steps only the last of them are published
+        (every one is integrated; logged).
         """
         now = self.get_clock().now().nanoseconds
         grid = now - self.plant.k * self.dt_ns
@@ -458,8 +471,14 @@ class PlantNode(AdapterNode[PlantSettings]):
         stale = self.last_cmd_time is None or \
             time.monotonic() - self.last_cmd_time > self.config.cmd_timeout
         v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
+        quiet = due - MAX_BURST          # steps up to this one are integrated, not published
+        if quiet >= self.plant.k:
+            self.log('warn', f'the timer was {(quiet + 1 - self.plant.k) * self.dt:.3g} s late '
+                     f'(a stalled machine): {quiet + 1 - self.plant.k} steps integrated without '
+                     f'odometry, the last {MAX_BURST} published')
         while self.plant.k <= due:
-            self._publish_state(self._rt_origin_ns + self.plant.k * self.dt_ns)
+            self._publish_state(self._rt_origin_ns + self.plant.k * self.dt_ns,
+                                publish=self.plant.k > quiet)
             self.plant.step(v, w)
             if self.final_step and self.plant.k >= self.final_step:
                 self._finish()

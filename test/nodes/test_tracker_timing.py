@@ -121,8 +121,10 @@ def test_the_monitor_is_stale_while_the_robot_rests_after_its_trajectory(make_no
 def test_the_real_time_plant_stamps_the_time_of_its_motion_when_a_tick_is_late():
     """A late timer tick (a loaded machine): the plant takes the steps it missed, publishes
     each with its own stamp (a burst), and never stamps ahead of its clock - the stamps
-    stay the time of the motion, which the tracker integrates over."""
-    from nonfragile_tracker.nodes.plant import PlantNode
+    stay the time of the motion, which the tracker integrates over.  After a stall of
+    seconds it integrates every step but publishes only the last MAX_BURST."""
+    from nonfragile_tracker.msgconv import stamp_ns
+    from nonfragile_tracker.nodes.plant import MAX_BURST, PlantNode
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=unique_domain_id('plant_timing'))
     plant = PlantNode(context=ctx, parameter_overrides=[
@@ -133,8 +135,9 @@ def test_the_real_time_plant_stamps_the_time_of_its_motion_when_a_tick_is_late()
         plant.get_clock = lambda: type('C', (), {'now': lambda self: type(
             'T', (), {'nanoseconds': clock['ns']})()})()
         stamps = []
-        publish = plant._publish_state
-        plant._publish_state = lambda ns: (stamps.append((ns, plant.plant.k)), publish(ns))[1]
+        send = plant._publish_state
+        plant._publish_state = lambda ns, publish=True: (
+            stamps.append((ns, plant.plant.k)), send(ns, publish))[1]
         plant.cmd, plant.last_cmd_time = (0.2, 0.0), None
         dt = plant.dt_ns
         for late in (0, 0, 0, int(2.5 * dt), 0, -dt // 10, 0):     # tick n at T0 + n dt + late
@@ -149,6 +152,17 @@ def test_the_real_time_plant_stamps_the_time_of_its_motion_when_a_tick_is_late()
                                           for k in ks]
         assert plant.plant.k == 9
         assert plant.plant.x == pytest.approx(0.2 * 9 * dt * 1e-9, rel=0.3)   # it moved on
+        # a stall of 3 s: every step integrated, the last MAX_BURST published
+        odoms = []
+        plant.pub_odom.publish = lambda msg: odoms.append(stamp_ns(msg.header.stamp))
+        x0 = plant.plant.x
+        clock['ns'] += 3 * 10 ** 9
+        plant._realtime_step()
+        late = 3 * 10 ** 9 // dt
+        assert plant.plant.k == 9 + late
+        assert plant.plant.x - x0 == pytest.approx(0.2 * 3.0, rel=0.05)    # moved all along
+        assert 0 < len(odoms) <= MAX_BURST and odoms == sorted(odoms)
+        assert odoms[-1] <= clock['ns'] and clock['ns'] - odoms[0] < MAX_BURST * dt
     finally:
         plant.destroy_node()
         rclpy.try_shutdown(context=ctx)
