@@ -189,7 +189,8 @@ def in_process(gains: Path, seeds: int) -> dict:
                                    max_angular_speed=t['max_angular_speed'], **pred)
                 lim = Limits.from_values(t) if variant == 'new' else None
                 from nonfragile_tracker.control.simulation.limits import within_limits
-                followed = within_limits(traj, lim)[0] if lim else traj
+                # the whole limits, as the figures in benchmarks/README.md were measured
+                followed = within_limits(traj, lim, 1.0)[0] if lim else traj
                 run = simulate_following(pc, tc, followed,
                                          int(round((followed.t_end + 3.0) / pc.dt)))
                 act = (run.t >= followed.t_start) & (run.t <= followed.t_end)

@@ -50,7 +50,8 @@ from typing import Any, NamedTuple
 from . import topics
 from .control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
                              trajectory_time)
-from .control.simulation.limits import ACCEL_FRACTION, Limits, within_limits
+from .control.simulation.limits import (ACCEL_FRACTION, MIN_ACCEL_FRACTION, Limits,
+                                        within_limits)
 from .control.simulation.loop import Command, Tracker, TrackerConfig
 from .control.simulation.reference import RefSample
 from .control.simulation.trajectory import Trajectory, TrajectoryError
@@ -100,7 +101,7 @@ class InputRules:
     limits : Limits
         The base's limits trajectories are re-timed within.
     accel_fraction : float
-        The share of the acceleration limits a trajectory may use, in (0, 1]
+        The share of the acceleration limits a trajectory may use, in [0.05, 1]
         (``trajectory_accel_fraction``).
     rest_speed, start_tolerance, max_start_distance : float
         The :class:`~nonfragile_tracker.control.follow.Follower`'s end and start rules.
@@ -125,9 +126,9 @@ class InputRules:
         if not (math.isfinite(self.max_stamp_jump) and self.max_stamp_jump > 0):
             raise InputError(f'max_stamp_jump must be a finite number > 0 s, got '
                              f'{self.max_stamp_jump!r}')
-        if not 0.0 < self.accel_fraction <= 1.0:
-            raise InputError(f'trajectory_accel_fraction must be in (0, 1], got '
-                             f'{self.accel_fraction!r}')
+        if not MIN_ACCEL_FRACTION <= self.accel_fraction <= 1.0:
+            raise InputError(f'trajectory_accel_fraction must be in [{MIN_ACCEL_FRACTION:g}, 1], '
+                             f'got {self.accel_fraction!r}')
 
 
 def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRules:
@@ -149,7 +150,7 @@ def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRule
     ------
     InputError
         For a mode that is neither, a ``max_stamp_jump`` that is not > 0 or a
-        ``trajectory_accel_fraction`` outside (0, 1].
+        ``trajectory_accel_fraction`` outside [0.05, 1].
     """
     v = {**INPUT_DEFAULTS, **values}
     return InputRules(

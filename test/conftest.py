@@ -42,7 +42,7 @@ REALTIME_MODULES = {'test_bag_realtime', 'test_netns', 'test_realtime_faults',
                     'test_certificate_monitor'}
 #: Modules that keep a worker busy longest (tens of seconds each, measured): collected
 #: first, so that pytest-xdist (whole modules per worker, handed out in collection order:
-#: ``--no-loadscope-reorder`` in setup.cfg, else it orders them by their number of tests)
+#: :func:`pytest_cmdline_main` turns its reordering by number of tests off)
 #: starts them first instead of leaving one running alone at the end of a pass.  The
 #: real-time modules are in the order that pairs them evenly on three workers.
 LONGEST_FIRST = ('test_signals', 'test_failures', 'test_docs', 'test_reproduction',
@@ -119,6 +119,10 @@ def pytest_cmdline_main(config):
     if serial_run(config.getoption('markexpr') or '') \
             and getattr(config.option, 'numprocesses', None):
         config.option.numprocesses = 0
+    if hasattr(config.option, 'loadscopereorder'):
+        # modules in the collection order (LONGEST_FIRST), not by their number of tests
+        # (``--no-loadscope-reorder``, pytest-xdist >= 3.8; older ones always reorder)
+        config.option.loadscopereorder = False
 
 
 def pytest_ignore_collect(collection_path, config):

@@ -267,8 +267,8 @@ def test_rules_from_parameter_values():
         InputRules(max_stamp_jump=0.0)
     assert input_rules({'trajectory_accel_fraction': 0.6}).accel_fraction == 0.6
     assert InputRules().accel_fraction == INPUT_DEFAULTS['trajectory_accel_fraction'] == 0.8
-    for bad in (0.0, -0.5, 1.5, math.nan):
-        with pytest.raises(InputError, match=r'trajectory_accel_fraction must be in \(0, 1\]'):
+    for bad in (0.0, 0.01, -0.5, 1.5, math.nan):
+        with pytest.raises(InputError, match=r'trajectory_accel_fraction must be in \[0.05, 1\]'):
             input_rules({'trajectory_accel_fraction': bad})
 
 

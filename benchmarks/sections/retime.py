@@ -194,7 +194,7 @@ def _tracking(table: Table, before) -> dict:
                     continue
                 f = before.retime(traj, before.Limits(**lim.__dict__)).trajectory
             else:
-                f = within_limits(traj, lim)[0]
+                f = within_limits(traj, lim, 1.0)[0]   # the whole limits, as 'today' had
             s0 = f.sample(f.t_start)
             pc = PlantConfig(dt=pl['dt'], cmd_latency=pl['cmd_latency'], lag_v=pl['lag_v'],
                              lag_w=pl['lag_w'], max_linear_accel=pl['max_linear_accel'],

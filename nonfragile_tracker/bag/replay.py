@@ -652,9 +652,11 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded: list[Timed],
             # before references the recorder got earlier) up to those the recorder got
             # just after the command (the tracker may have had them first)
             hi = tl.window(t_o, max(t_c, t_o) + window)[1]
-            cands = [default] + list(range(default - 1, applied - 1, -1)) \
-                + list(range(default + 1, max(hi, default) + 1))
-            for s in cands[:64]:
+            # at most 32 of each side (a gap in the odometry with references arriving leaves
+            # many states behind: the later ones keep their turn)
+            cands = [default] + list(range(default - 1, applied - 1, -1))[:32] \
+                + list(range(default + 1, max(hi, default) + 1))[:31]
+            for s in cands:
                 trial = inputs.fork()
                 for e in tl.events[applied:s]:
                     _feed(trial, e)
@@ -699,12 +701,11 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
     receive = [e.receive_ns for e in odoms]
     skew, n = int(START_SKEW * 1e9), min(len(recorded), START_CHECK * 20)
 
-    def causal(j: int) -> bool:
-        return all(receive[j + c] <= recorded[c][0] + skew
-                   for c in range(min(n, len(odoms) - j)))
-    starts = [j for j in starts if causal(j)] + [j for j in starts if not causal(j)]
+    causal = {j: all(receive[j + c] <= recorded[c][0] + skew
+                     for c in range(min(n, len(odoms) - j))) for j in starts}
+    starts = [j for j in starts if causal[j]] + [j for j in starts if not causal[j]]
     v_target = float(_twist(recorded[0][1]).linear.x)
-    for rank, j in enumerate(starts):
+    for j in starts:
         od = odoms[j]
         lo, hi = tl.window(od.receive_ns - int(ORDER_WINDOW * 1e9), t_first)
         default = tl.before[id(od)]
@@ -713,7 +714,7 @@ def _plan_realtime(data: list[ReplayEvent], recorded: list[Timed], config: Track
         # under load a tracker works off a queue of odometry from well before the first
         # recorded command), and at the nearest starts any number in between
         counts = [WINDOW + 1, 0] + (list(range(min(WINDOW, j), 0, -1))
-                                    if rank < PRIME_SEARCH else [])
+                                    if first - 1 - j < PRIME_SEARCH else [])
         for s, count in ((s, c) for s in [default] + [x for x in range(hi, lo - 1, -1)
                                                      if x != default][:64]
                          for c in counts):

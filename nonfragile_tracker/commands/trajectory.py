@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..control.simulation.limits import (ACCEL_FRACTION, LIMIT_NAMES, PATH_TOLERANCE,
-                                         TOLERANCE, Limits, check, retime)
+from ..control.simulation.limits import (ACCEL_FRACTION, LIMIT_NAMES, MIN_ACCEL_FRACTION,
+                                         PATH_TOLERANCE, TOLERANCE, Limits, check, retime)
 from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 from .common import Subparsers
@@ -61,8 +61,8 @@ def register(subparsers: Subparsers) -> None:
                    f'{", ".join(LIMIT_NAMES)} (SI units; 0 or absent = not checked)')
     c.add_argument('--accel-fraction', type=float, default=ACCEL_FRACTION, metavar='F',
                    help='with --limits: the share of the acceleration limits a trajectory may '
-                   f'use, in (0, 1] (default {ACCEL_FRACTION:g}, as the tracker\'s '
-                   'trajectory_accel_fraction: the rest is the feedback\'s)')
+                   f'use, in [{MIN_ACCEL_FRACTION:g}, 1] (default {ACCEL_FRACTION:g}, as the '
+                   'tracker\'s trajectory_accel_fraction: the rest is the feedback\'s)')
     c.add_argument('--path-tolerance', type=float, default=PATH_TOLERANCE, metavar='M',
                    help='with --limits: largest distance (m) of the re-timed path from the '
                    f'file\'s points (default {PATH_TOLERANCE:g}: the smoothing that takes the '
@@ -100,8 +100,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     if not (args.path_tolerance > 0 and args.path_tolerance < float('inf')):
         raise InputError(f'--path-tolerance must be a distance > 0 m, got '
                          f'{args.path_tolerance!r}')
-    if not 0.0 < args.accel_fraction <= 1.0:
-        raise InputError(f'--accel-fraction must be a share in (0, 1], got '
+    if not MIN_ACCEL_FRACTION <= args.accel_fraction <= 1.0:
+        raise InputError(f'--accel-fraction must be a share in [{MIN_ACCEL_FRACTION:g}, 1], got '
                          f'{args.accel_fraction!r} (1 = the whole acceleration limits)')
     limits = Limits(**dict(args.limits)).accel_share(args.accel_fraction)
     result = check(traj, limits, tolerance=TOLERANCE)

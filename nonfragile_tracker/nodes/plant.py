@@ -473,9 +473,9 @@ class PlantNode(AdapterNode[PlantSettings]):
         v, w = (0.0, 0.0) if stale and self.last_cmd_time is not None else self.cmd
         quiet = due - MAX_BURST          # steps up to this one are integrated, not published
         if quiet >= self.plant.k:
-            self.log('warn', f'the timer was {(quiet + 1 - self.plant.k) * self.dt:.3g} s late '
-                     f'(a stalled machine): {quiet + 1 - self.plant.k} steps integrated without '
-                     f'odometry, the last {MAX_BURST} published')
+            self.log('warn', f'the timer was {(due - self.plant.k) * self.dt:.3g} s late (a '
+                     f'stalled machine): {quiet + 1 - self.plant.k} steps integrated without '
+                     f'publishing, the odometry of the last {MAX_BURST} steps published')
         while self.plant.k <= due:
             self._publish_state(self._rt_origin_ns + self.plant.k * self.dt_ns,
                                 publish=self.plant.k > quiet)

@@ -80,6 +80,7 @@ from ..control.simulation.loop import Command, Tracker, TrackerConfig
 from ..control.identification.monitor import (Certificate, LatencyEstimate, MonitorSettings,
                                               MonitorWorker, adapted_prediction,
                                               certificate_from_parameters, evaluate)
+from ..control.simulation.limits import MIN_ACCEL_FRACTION
 from ..control.simulation.reference import RefSample
 from ..control.simulation.timing import period_disagreement
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
@@ -124,7 +125,7 @@ PARAMS = [
           'max_linear_accel and max_angular_accel a trajectory may use (checked and re-timed '
           'against it); the rest is left to the feedback, which a reference at the whole '
           'limit leaves no acceleration to correct an error with; 1 = all of it',
-          low=0.05, high=1.0, read_only=True),
+          low=MIN_ACCEL_FRACTION, high=1.0, read_only=True),
     Param('min_speed', 1e-3, 'floor on |v| in w = (...)/v near the v = 0 singularity (m/s)',
           low=1e-9, high=1e3),
     Param('E', [1.0, 0.0, 0.0, 1.0], 'perturbation matrix E (2x2 row-major)'),

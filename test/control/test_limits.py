@@ -66,7 +66,7 @@ def test_a_trajectory_takes_its_share_of_the_acceleration_limits(lap):
     share = lim.accel_share(0.5)
     assert (share.max_linear_speed, share.max_linear_accel, share.max_angular_accel) == \
         (0.41, 0.25, 3.0)
-    for bad in (0.0, -0.1, 1.5, math.nan, True):
+    for bad in (0.0, 0.01, -0.1, 1.5, math.nan, True):
         with pytest.raises(TrajectoryError, match=r'trajectory_accel_fraction must be'):
             within_limits(lap, lim, bad)
 

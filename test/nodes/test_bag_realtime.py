@@ -38,11 +38,12 @@ def realtime_bag(tmp_path_factory):
     bag = tmp / 'bag'
     procs = {}
     rec_log = tmp / 'recorder.log'
+    rec_out = rec_log.open('w')
     try:
         procs['recorder'] = subprocess.Popen(
             [sys.executable, '-m', 'nonfragile_tracker.nodes.recorder', '--ros-args', '-p',
              f'output:={bag}', '-p', f'topics:={TOPICS}'],
-            env=dict(env, RCUTILS_LOGGING_BUFFERED_STREAM='0'), stdout=rec_log.open('w'),
+            env=dict(env, RCUTILS_LOGGING_BUFFERED_STREAM='0'), stdout=rec_out,
             stderr=subprocess.STDOUT, text=True)
         procs['plant'] = start('plant', env, '-p', 'duration:=0.0')
         procs['reference'] = start('reference', env)
@@ -65,7 +66,8 @@ def realtime_bag(tmp_path_factory):
     finally:
         logs = {k: stop(p) for k, p in procs.items()}
         probe.close()
-    assert (bag / 'metadata.yaml').exists(), logs
+        rec_out.close()
+    assert (bag / 'metadata.yaml').exists(), (logs, rec_log.read_text())
     return bag
 
 

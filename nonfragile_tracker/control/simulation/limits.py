@@ -29,7 +29,7 @@ from .errors import TrajectoryError
 __all__ = ['Limits', 'LimitReport', 'LimitCheck', 'Retimed', 'check', 'retime',
            'LIMIT_NAMES', 'MOVING_SPEED', 'WINDOW', 'refuse_tight_turns', 'fit_path',
            'PathFit', 'PathPiece', 'PATH_TOLERANCE', 'time_optimal_duration', 'within_limits',
-           'ACCEL_FRACTION', 'TOLERANCE']
+           'ACCEL_FRACTION', 'MIN_ACCEL_FRACTION', 'TOLERANCE']
 
 #: Below this speed (m/s) a trajectory is at rest: no heading rate, no curvature.
 MOVING_SPEED = 1e-3
@@ -74,6 +74,8 @@ REST_KNOT = 1e-3
 #: 80 ms of lag, the cross-track error 40 % larger; the saturation certificate's premise
 #: ``||u_d|| < u_max``, :mod:`..synthesis.saturation`, says the same).
 ACCEL_FRACTION = 0.8
+#: The smallest share accepted (a trajectory at less than 5 % of the limits barely moves).
+MIN_ACCEL_FRACTION = 0.05
 #: Names of the limits, as the tracker's parameters spell them.
 LIMIT_NAMES = ('max_linear_speed', 'max_linear_accel', 'max_angular_speed',
                'max_angular_accel', 'min_turning_radius')
@@ -132,7 +134,7 @@ class Limits:
         Parameters
         ----------
         fraction : float
-            In (0, 1] (:data:`ACCEL_FRACTION`).
+            In [:data:`MIN_ACCEL_FRACTION`, 1] (:data:`ACCEL_FRACTION`).
 
         Returns
         -------
@@ -141,12 +143,12 @@ class Limits:
         Raises
         ------
         TrajectoryError
-            For a fraction outside (0, 1].
+            For a fraction outside [:data:`MIN_ACCEL_FRACTION`, 1].
         """
         if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or \
-                not 0.0 < fraction <= 1.0:
-            raise TrajectoryError(f'trajectory_accel_fraction must be a number in (0, 1], '
-                                  f'got {fraction!r}')
+                not MIN_ACCEL_FRACTION <= fraction <= 1.0:
+            raise TrajectoryError(f'trajectory_accel_fraction must be a number in '
+                                  f'[{MIN_ACCEL_FRACTION:g}, 1], got {fraction!r}')
         return Limits(self.max_linear_speed, self.max_linear_accel * fraction,
                       self.max_angular_speed, self.max_angular_accel * fraction,
                       self.min_turning_radius)
@@ -1117,8 +1119,8 @@ def within_limits(traj: Trajectory, limits: Limits, accel_fraction: float = ACCE
     limits : Limits
         The base's limits (the tracker's parameters).
     accel_fraction : float, optional
-        The share of the acceleration limits the trajectory may use, in (0, 1]
-        (:data:`ACCEL_FRACTION`; the rest is the feedback's).
+        The share of the acceleration limits the trajectory may use, in
+        [:data:`MIN_ACCEL_FRACTION`, 1] (:data:`ACCEL_FRACTION`; the rest is the feedback's).
 
     Returns
     -------
