@@ -208,6 +208,8 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.started_wall = time.monotonic()
         self.last_odom = math.nan
         self.silence_said = False
+        self.last_tick = time.monotonic()
+        self.deferred = False               # the last tick put the silence judgement off
         self.last_stamp = 0
         self.stamps: list[int] = []
         self.start: tuple[float, float, float] | None = None
@@ -507,6 +509,16 @@ class BringupNode(AdapterNode[BringupConfig]):
                           EXIT_SILENCE)
             return
         silent = now - self.last_odom
+        own_gap, self.last_tick = now - self.last_tick, now
+        if silent > cfg.odom_timeout and own_gap > cfg.odom_timeout / 2 and not self.deferred:
+            # this node itself stalled (a loaded machine): the odometry may be waiting unread
+            # in its queue, so the judgement waits one tick, for the queue to be taken (once:
+            # a node starved at every tick judges at the next)
+            self.deferred = True
+            _say(f'warning: this node did not run for {own_gap:.2f} s (a loaded machine); '
+                 'the odometry silence is judged at the next tick')
+            return
+        self.deferred = False
         if silent > cfg.odom_timeout:
             if self.phase in ('excite', 'trial'):
                 self.stop(f'odometry silent for {silent:.2f} s (> odom_timeout '

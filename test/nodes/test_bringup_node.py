@@ -196,6 +196,25 @@ def test_odometry_silence_stops(rig):
     assert 'odometry silent for' in r.log()
 
 
+@pytest.mark.realtime
+def test_a_stall_of_the_node_itself_is_not_odometry_silence(rig):
+    """The bring-up node stopped for 0.8 s (a loaded machine) while the odometry went on:
+    the odometry waits in its queue, and the node drives on instead of stopping for a
+    silence it did not see; a real silence still stops it (the test above)."""
+    r = rig()
+    r.wait_for('phase excite')
+    time.sleep(0.5)
+    os.killpg(r.procs['bringup'].pid, signal.SIGSTOP)
+    time.sleep(0.8)
+    os.killpg(r.procs['bringup'].pid, signal.SIGCONT)
+    r.wait_for('did not run for')
+    time.sleep(1.0)
+    assert r.procs['bringup'].poll() is None, r.log()
+    assert 'odometry silent' not in r.log()
+    r.procs['bringup'].send_signal(signal.SIGINT)
+    assert r.wait_node() == 0, r.log()
+
+
 def test_leaving_the_box_stops(rig):
     # a base rolling at 0.6 m/s with 0.5 s of latency: the commands act too late for a 0.35 m box
     r = rig(box=0.35, plant={'initial_speed': 0.6, 'cmd_latency': 0.5})
