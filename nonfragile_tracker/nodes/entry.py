@@ -66,11 +66,19 @@ def _import_node(name: str) -> Any:
         return None
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _stop_import)
+    # a signal that lands in code whose exceptions Python cannot raise (a weakref callback
+    # such as importlib's module-lock one, a __del__) is "Exception ignored in ...", with a
+    # traceback on stderr, and the import goes on: the stop is noted all the same (seen
+    # once in a suite run of Ctrl-C 0.2 s after launch), so that report is not printed
+    unraisable = sys.unraisablehook
+    sys.unraisablehook = lambda u: None if isinstance(u.exc_value, _StopImport) \
+        else unraisable(u)
     try:
         try:
             return importlib.import_module(f'nonfragile_tracker.nodes.{name}')
         finally:
             catch_stop_signals()            # only noted again from here on
+            sys.unraisablehook = unraisable
     except BaseException:
         # _StopImport, or what an extension module's initialisation made of it (an
         # ImportError or SystemError around it): any failure once a stop was requested
