@@ -113,27 +113,36 @@ def test_run_ends_a_stuck_teardown_after_sigint_with_0(ros_env):
     assert 'started;' in out and 'Timeout (0:00:00.800000)!' in out and 'Traceback' not in out
 
 
-# a node module whose import takes 30 s (numpy, rclpy, scipy ... on a busy machine: seconds)
-_SLOW_IMPORT = '''
-import importlib.abc, importlib.util, sys, time
+def _importing(body: str) -> str:
+    """A script running node ``reference`` whose module import runs ``body`` (the
+    ``exec_module`` of a finder put first on ``sys.meta_path``), then ``main`` returns 9."""
+    body = '\n'.join('        ' + line for line in body.strip().splitlines())
+    return f'''
+import gc, importlib.abc, importlib.util, os, signal, sys, time, weakref
 
-class Slow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+class Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     def find_spec(self, name, path, target=None):
         if name == 'nonfragile_tracker.nodes.reference':
             return importlib.util.spec_from_loader(name, self)
     def create_module(self, spec):
         return None
     def exec_module(self, module):
-        print('importing', flush=True)
-        t_end = time.monotonic() + 30.0
-        while time.monotonic() < t_end:     # bytecodes (a long import) ...
-            time.sleep(0.05)                # ... and C calls
+{body}
         module.main = lambda args: 9
 
-sys.meta_path.insert(0, Slow())
+sys.meta_path.insert(0, Finder())
 from nonfragile_tracker.nodes import entry
 sys.exit(entry.main('reference', ['reference']))
 '''
+
+
+# a node module whose import takes 30 s (numpy, rclpy, scipy ... on a busy machine: seconds)
+_SLOW_IMPORT = _importing('''
+print('importing', flush=True)
+t_end = time.monotonic() + 30.0
+while time.monotonic() < t_end:     # bytecodes (a long import) ...
+    time.sleep(0.05)                # ... and C calls
+''')
 
 
 def test_a_stop_signal_ends_the_node_module_import_at_once():
@@ -159,28 +168,14 @@ def test_a_stop_signal_ends_the_node_module_import_at_once():
 
 # a signal that lands in a weakref callback while the node module imports (importlib's
 # module-lock callback in the suite): Python cannot raise there, it reports the exception
-_SIGNAL_IN_A_CALLBACK = '''
-import gc, importlib.abc, importlib.util, os, signal, sys, weakref
-
-class Stopped(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    def find_spec(self, name, path, target=None):
-        if name == 'nonfragile_tracker.nodes.reference':
-            return importlib.util.spec_from_loader(name, self)
-    def create_module(self, spec):
-        return None
-    def exec_module(self, module):
-        class Obj: pass
-        o = Obj()
-        ref = weakref.ref(o, lambda r: os.kill(os.getpid(), signal.SIGINT))
-        del o                           # the callback runs, the handler raises in it
-        gc.collect()
-        print('imported', flush=True)
-        module.main = lambda args: 9
-
-sys.meta_path.insert(0, Stopped())
-from nonfragile_tracker.nodes import entry
-sys.exit(entry.main('reference', ['reference']))
-'''
+_SIGNAL_IN_A_CALLBACK = _importing('''
+class Obj: pass
+o = Obj()
+ref = weakref.ref(o, lambda r: os.kill(os.getpid(), signal.SIGINT))
+del o                           # the callback runs, the handler raises in it
+gc.collect()
+print('imported', flush=True)
+''')
 
 
 def test_a_stop_signal_in_a_callback_during_the_import_ends_quietly():
