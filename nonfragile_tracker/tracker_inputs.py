@@ -51,7 +51,7 @@ from . import topics
 from .control.simulation.follow import (MAX_START_DISTANCE, REST_SPEED, START_TOLERANCE, Follower,
                              trajectory_time)
 from .control.simulation.limits import (ACCEL_FRACTION, MIN_ACCEL_FRACTION, Limits,
-                                        within_limits)
+                                        valid_accel_fraction, within_limits)
 from .control.simulation.loop import Command, Tracker, TrackerConfig
 from .control.simulation.reference import RefSample
 from .control.simulation.trajectory import Trajectory, TrajectoryError
@@ -126,7 +126,7 @@ class InputRules:
         if not (math.isfinite(self.max_stamp_jump) and self.max_stamp_jump > 0):
             raise InputError(f'max_stamp_jump must be a finite number > 0 s, got '
                              f'{self.max_stamp_jump!r}')
-        if not MIN_ACCEL_FRACTION <= self.accel_fraction <= 1.0:
+        if not valid_accel_fraction(self.accel_fraction):
             raise InputError(f'trajectory_accel_fraction must be in [{MIN_ACCEL_FRACTION:g}, 1], '
                              f'got {self.accel_fraction!r}')
 

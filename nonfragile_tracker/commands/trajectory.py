@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 
 from ..control.simulation.limits import (ACCEL_FRACTION, LIMIT_NAMES, MIN_ACCEL_FRACTION,
-                                         PATH_TOLERANCE, TOLERANCE, Limits, check, retime)
+                                         PATH_TOLERANCE, TOLERANCE, Limits, check, retime,
+                                         valid_accel_fraction)
 from ..control.simulation.trajectory import TrajectoryError, describe, load_waypoints
 from ..errors import InputError
 from .common import Subparsers
@@ -100,7 +101,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if not (args.path_tolerance > 0 and args.path_tolerance < float('inf')):
         raise InputError(f'--path-tolerance must be a distance > 0 m, got '
                          f'{args.path_tolerance!r}')
-    if not MIN_ACCEL_FRACTION <= args.accel_fraction <= 1.0:
+    if not valid_accel_fraction(args.accel_fraction):
         raise InputError(f'--accel-fraction must be a share in [{MIN_ACCEL_FRACTION:g}, 1], got '
                          f'{args.accel_fraction!r} (1 = the whole acceleration limits)')
     limits = Limits(**dict(args.limits)).accel_share(args.accel_fraction)

@@ -29,7 +29,7 @@ from .errors import TrajectoryError
 __all__ = ['Limits', 'LimitReport', 'LimitCheck', 'Retimed', 'check', 'retime',
            'LIMIT_NAMES', 'MOVING_SPEED', 'WINDOW', 'refuse_tight_turns', 'fit_path',
            'PathFit', 'PathPiece', 'PATH_TOLERANCE', 'time_optimal_duration', 'within_limits',
-           'ACCEL_FRACTION', 'MIN_ACCEL_FRACTION', 'TOLERANCE']
+           'ACCEL_FRACTION', 'MIN_ACCEL_FRACTION', 'TOLERANCE', 'valid_accel_fraction']
 
 #: Below this speed (m/s) a trajectory is at rest: no heading rate, no curvature.
 MOVING_SPEED = 1e-3
@@ -69,13 +69,31 @@ SPEED_GAP = 0.1
 REST_KNOT = 1e-3
 #: Share of the base's acceleration limits a followed trajectory may use (the tracker's
 #: ``trajectory_accel_fraction``): the rest is the feedback's.  A reference at the whole
-#: limit leaves the tracker no acceleration to correct an error with, and its commands ride
-#: the limit (measured: 80 % of the commands of a line-arc lap at the limit on a base with
-#: 80 ms of lag, the cross-track error 40 % larger; the saturation certificate's premise
-#: ``||u_d|| < u_max``, :mod:`..synthesis.saturation`, says the same).
+#: limit leaves the tracker no acceleration to correct an error with: its leading commands
+#: ramp at the limit, fall behind and overshoot (measured: the line-arc lap on bases with
+#: 80 ms of lag and 0.5 m/s^2 / 1.5 rad/s^2, 2.8-3.5 mm cross-track RMS at the whole limit,
+#: 1.2-1.4 mm at 80 %; the saturation certificate's premise ``||u_d|| < u_max``,
+#: :mod:`..synthesis.saturation`, says the same).
 ACCEL_FRACTION = 0.8
 #: The smallest share accepted (a trajectory at less than 5 % of the limits barely moves).
 MIN_ACCEL_FRACTION = 0.05
+
+
+def valid_accel_fraction(fraction: object) -> bool:
+    """Whether ``fraction`` is a share of the acceleration limits a trajectory may use.
+
+    Parameters
+    ----------
+    fraction : object
+        The value given (``trajectory_accel_fraction``, ``--accel-fraction``).
+
+    Returns
+    -------
+    bool
+        A number (not a bool) in [:data:`MIN_ACCEL_FRACTION`, 1].
+    """
+    return (not isinstance(fraction, bool) and isinstance(fraction, (int, float))
+            and MIN_ACCEL_FRACTION <= fraction <= 1.0)
 #: Names of the limits, as the tracker's parameters spell them.
 LIMIT_NAMES = ('max_linear_speed', 'max_linear_accel', 'max_angular_speed',
                'max_angular_accel', 'min_turning_radius')
@@ -145,8 +163,7 @@ class Limits:
         TrajectoryError
             For a fraction outside [:data:`MIN_ACCEL_FRACTION`, 1].
         """
-        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or \
-                not MIN_ACCEL_FRACTION <= fraction <= 1.0:
+        if not valid_accel_fraction(fraction):
             raise TrajectoryError(f'trajectory_accel_fraction must be a number in '
                                   f'[{MIN_ACCEL_FRACTION:g}, 1], got {fraction!r}')
         return Limits(self.max_linear_speed, self.max_linear_accel * fraction,
