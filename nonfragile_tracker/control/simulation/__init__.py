@@ -4,6 +4,7 @@ The unicycle and its linearization (:mod:`.model`), the actuator, sensor and lat
 models (:mod:`.actuator`, :mod:`.sensors`, :mod:`.predictor`), the tracker's step from the
 odometry stamps (:mod:`.timing`), paths and timed
 trajectories within limits (:mod:`.reference`, :mod:`.trajectory`, :mod:`.limits`), the
+tracking law in its scalar and vector forms (:mod:`.law`), the
 plant and tracker step functions (:mod:`.loop`, :mod:`.follow`) and the gain file they
 read (:mod:`.gains`), and the loops that run them in process, one case or many at once
 (:mod:`.simulate`, :mod:`.batch`, :mod:`.study`, :mod:`.metrics`).  A lockstep ROS run of

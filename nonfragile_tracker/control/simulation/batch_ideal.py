@@ -5,7 +5,8 @@ general loop when, without ``exact``, every case measures the plant's own state 
 step (no odometry latency, rate or noise), the tracker has no delay compensation, the
 plant no actuator lag or acceleration limit, and the state delay is none or the paper's
 diagonal one; any command latency and perturbation schedule.  It is the same step as the
-general loop, the same values to round-off (``test/control/test_batch_ideal.py`` checks
+general loop (the law is :class:`control.simulation.law.VectorLaw`, with ``K e`` summed
+first), the same values to round-off (``test/control/test_batch_ideal.py`` checks
 it against single runs and the exact mode), with about 50 whole-array operations a step
 instead of about 64 (``doc/study.md``).
 """
@@ -18,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .batch_parts import BLOCK, S1, S2, S3, wrap, wrap_due
+from .law import VectorLaw
 from .loop import step_time_ns
 
 if TYPE_CHECKING:
@@ -57,7 +59,8 @@ def ideal_loop(run: IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
     compensation and no actuator dynamics.
 
     The same step as the general loop with fewer whole-array operations (at about 1,000
-    cases their count sets the time): one reduction checks ``|v| >= min_speed`` and
+    cases their count sets the time): the law (:class:`control.simulation.law.VectorLaw`)
+    sums ``K e`` first; one reduction checks ``|v| >= min_speed`` and
     finiteness, the commanded speed is kept as ``v + v_next`` (twice the mean: halving is
     exact), the arc's series is a polynomial in ``w**2`` (``dt sin(h) / (2h)``,
     ``h = w dt / 2``; ``cos h = sqrt(1 - sin(h)**2)``), the next heading's cosine and sine
@@ -65,8 +68,8 @@ def ideal_loop(run: IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
     rotation per step), the new position is written into the ring of delayed
     positions over the oldest one, constants are 0-d arrays (no conversion per call);
     without a trace the heading advances once per metrics block by the sum of its rows of
-    ``w dt`` (its one use is the fresh cosine and sine at the block's start).  ``K e``
-    and the squared error are sums of products (``einsum``: one pass).  ``run`` holds the
+    ``w dt`` (its one use is the fresh cosine and sine at the block's start).  The
+    squared error is a sum of products (``einsum``: one pass).  ``run`` holds the
     settings (:class:`IdealRun`), ``pos0``, ``th0``, ``v0`` the initial state.  Returns
     the final position, heading and squared error (a row of ``metrics``).
 
@@ -92,12 +95,11 @@ def ideal_loop(run: IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
     vmax, wmax, vmin = run.limits
     hdt = 0.5 * dt
     mul, add, sub = np.multiply, np.add, np.subtract
-    fmax, fmin, absolute = np.maximum, np.minimum, np.absolute
+    absolute = np.absolute
     minred, addred = np.minimum.reduce, np.add.reduce
     cos, sin = np.cos, np.sin
     c0 = np.array                                   # 0-d constants
-    tdt_, dt_, vmax_, nvmax_, wmax_, nwmax_ = (c0(float(x)) for x in
-                                                (tdt, dt, vmax, -vmax, wmax, -wmax))
+    tdt_, dt_ = c0(float(tdt)), c0(float(dt))
     ref_rows = ref.rows if ref.table is not None else None
     ref_at = ref.at
     # positions: a ring of the delayed ones (the new position replaces the oldest)
@@ -113,26 +115,21 @@ def ideal_loop(run: IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
         pos = pos0.copy()
     th = th0.copy()
     cs = np.empty((2, n))
-    cs_rev = cs[::-1]
     mid = np.empty((2, n))
     cs0, cs1 = cs
     mid0, mid1 = mid
     sqrt = np.sqrt
     # tracker
-    E = np.empty((4, n))
-    epos, evel = E[0::2], E[1::2]
+    law = VectorLaw(n, vmax, wmax, vmin, ordered=False)
+    command = law.command
+    epos = law.E[0::2]
     einsum = np.einsum
-    U = np.empty((2, n))
     uc = np.empty((2, n))
     uc0, uc1 = uc
     absx = np.empty((2, n))
     tv = np.maximum(-vmax, np.minimum(vmax, np.where(np.isfinite(v0), v0, 0.0)))
     tvn = np.empty(n)
-    vabs = np.abs(tv)
-    careful = not (float(minred(vabs)) >= vmin)
-    vf_buf = np.empty(n)
-    vmin_, zero = np.full(n, vmin), np.zeros(n)
-    copysign = np.copysign
+    careful = not (float(minred(np.abs(tv))) >= vmin)
     seg = 0                                         # Schedule.segment(0) is 0
     Kc = schedule.gain(seg)                         # (2, 4, N)
     # plant: the arc's series in w**2: Q = hdt sin(h) / h (sin h = w Q); ch = cos h
@@ -181,36 +178,13 @@ def ideal_loop(run: IdealRun, pos0: np.ndarray, th0: np.ndarray, v0: np.ndarray,
         if j == 0:                                  # fresh cosine and sine every block
             cos(th, out=cs[0])
             sin(th, out=cs[1])
-        sub(pos, rpos, out=epos)
-        mul(cs, v, out=evel)
-        sub(evel, rvel, out=evel)
         sg = schedule.segment(k) if S > 1 else 0
         if sg != seg:
             Kc = schedule.gain(sg)                  # (2, 4, N)
             seg = sg
-        einsum('ijn,jn->in', Kc, E, out=U)          # K e, then u = K e + u*
-        U += racc
-        if careful:     # v, or +-min_speed (+ for v = -0.0: v + 0.0 is +0.0) where slower
-            absolute(v, out=vabs)
-            fmax(vabs, vmin_, out=vabs)
-            add(v, zero, out=vf_buf)
-            copysign(vabs, vf_buf, out=vf_buf)
-            vf = vf_buf
-        else:
-            vf = v
         X = cblk[j]                                 # (v_next, w), then (v + v_next, w)
+        command(Kc, pos, cs, v, rpos, rvel, racc, tdt_, X, careful)
         cv, w = X
-        mul(U, cs, out=uc)                          # u1 cos, u2 sin
-        add(uc0, uc1, out=cv)
-        cv *= tdt_
-        cv += v
-        mul(U, cs_rev, out=uc)                      # u1 sin, u2 cos
-        sub(uc1, uc0, out=w)
-        w /= vf
-        fmax(w, nwmax_, out=w)                      # nan stays nan
-        fmin(w, wmax_, out=w)
-        fmax(cv, nvmax_, out=cv)
-        fmin(cv, vmax_, out=cv)
         absolute(X, out=absx)
         mv, mw = minred(absx, axis=1).tolist()      # nan if any is nan
         tvn[...] = cv

@@ -5,7 +5,7 @@ holding one piece of the single run's state for every case and stepping it with 
 operations of the scalar step functions in the same order: the odometry
 (:class:`Odometry`, as :class:`control.simulation.sensors.Odometer`), the tracker
 (:class:`BatchTracker`, as :class:`control.simulation.loop.Tracker` with its delay
-compensation), the command line (:class:`CommandLine`: command latency) and the plant
+compensation; the law itself is :class:`control.simulation.law.VectorLaw`), the command line (:class:`CommandLine`: command latency) and the plant
 (:class:`BatchPlant`, as :class:`control.simulation.loop.UnicyclePlant`, with its actuator
 and state delay), and the arithmetic they share with the batch's loops (heading wrap,
 the arc's series and angle addition, sums of products in the plant's order).  The
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from .law import VectorLaw
 from .loop import PlantConfig, TrackerConfig, delay_steps
 
 if TYPE_CHECKING:
@@ -293,14 +294,8 @@ class BatchTracker:
             self.cbuf_ref = np.zeros((int(self.Lc.max()), 8, n))
             self.ccount = np.zeros(n, dtype=np.int64)
         self.cs = np.empty((2, n))                  # cos, sin of the measured heading
-        self.cs_rev = self.cs[::-1]
-        self.e = np.empty((4, n))                   # tracking error (x, x', y, y')
-        self.epos, self.evel = self.e[0::2], self.e[1::2]
-        self.prod = np.empty((2, 5, n))             # u* and the four K_j e_j terms
-        self.prod_ud, self.prod_ke = self.prod[:, 0], self.prod[:, 1:]
-        self.u = np.empty((2, n))
-        self.uc = np.empty((2, n))
-        self.vabs = np.empty(n)
+        self.law = VectorLaw(n, self.vmax, self.wmax, self.vmin, ordered=True)
+        self.epos = self.law.E[0::2]                # the position error (x, y)
         self.cmd_log = np.stack((s.v0, np.zeros(n)))    # the command in force: (v0, 0)
 
     def command(self, k: int, j: int, due: Any, mpos: np.ndarray, mth: np.ndarray,
@@ -324,7 +319,7 @@ class BatchTracker:
         """
         n = self.n
         qpos, qvel, qacc = ref
-        vmax, wmax, vmin = self.vmax, self.wmax, self.vmin
+        vmax = self.vmax
         first = None
         if not self.all_started:
             new = ~self.started if due is True else (~self.started & due)
@@ -344,8 +339,7 @@ class BatchTracker:
             qz, qw = np.sin(0.5 * mth), np.cos(0.5 * mth)
             mth = _ATAN2(2.0 * (qw * qz), qw * qw - qz * qz).astype(float)
         # (otherwise the yaw is used as measured: the same angle to round-off)
-        cs, uc = self.cs, self.uc
-        uc0, uc1 = uc[0], uc[1]
+        cs = self.cs
         if not self.recur or k % _ANCHOR == 0:
             np.cos(mth, out=cs[0])
             np.sin(mth, out=cs[1])
@@ -354,43 +348,20 @@ class BatchTracker:
                                             qpos, qvel, qacc, due, self.idx, n)
         else:
             xdpos, xdvel, ud = qpos, qvel, qacc
-        np.subtract(mpos, xdpos, out=self.epos)
-        np.multiply(cs, v, out=uc)
-        np.subtract(uc, xdvel, out=self.evel)
         sg = self.schedule.segment(k)
         if sg != self.seg:
             self.Kc = self.schedule.gain(sg)
             self.seg = sg
-        # u = u* + K_0 e_0 + K_1 e_1 + K_2 e_2 + K_3 e_3, left to right (a reduction
-        # over a non-contiguous axis of 5 adds in order, as the tracker does)
-        u = self.u
-        self.prod_ud[...] = ud
-        np.multiply(self.Kc, self.e, out=self.prod_ke)
-        np.add.reduce(self.prod, axis=1, out=u)
-        vabs = np.abs(v, out=self.vabs)
-        if np.minimum.reduce(vabs) < vmin:
-            vf = np.where(vabs < vmin, np.where(v >= 0, vmin, -vmin), v)
-        else:
-            vf = v
         # (v, w) sent; with a command every step, straight into the block
         cmd = self.cblk[j] if self.ideal_odom else np.empty((2, n))
-        cv, w = cmd[0], cmd[1]
-        np.multiply(u, cs, out=uc)                # u1 cos, u2 sin
-        np.add(uc0, uc1, out=cv)                  # a
-        cv *= self.tdt
-        cv += v                                   # v_next = v + a dt
-        np.multiply(u, self.cs_rev, out=uc)       # u1 sin, u2 cos
-        np.subtract(uc1, uc0, out=w)
-        w /= vf
-        np.maximum(w, -wmax, out=w)               # nan stays nan
-        np.minimum(w, wmax, out=w)
-        np.maximum(cv, -vmax, out=cv)             # v_next clipped
-        np.minimum(cv, vmax, out=cv)
+        self.law.command(self.Kc, mpos, cs, v, xdpos, xdvel, ud, self.tdt, cmd)
+        cv = cmd[0]
         v_next = cv.copy()
         cv += v
         if first is not None:                     # a first command: no ramp, the speed
             cv[first] = v[first] + v[first]
         cv *= 0.5                                 # (v + v_next) / 2
+        w = cmd[1]
         # the sum is finite unless a value is nan (all are clipped)
         if math.isfinite(np.add.reduce(cmd, axis=None)):
             self.tv = v_next if due is True else np.where(due, v_next, self.tv)

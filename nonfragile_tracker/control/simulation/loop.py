@@ -27,6 +27,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 
 from .actuator import ActuatorModel, actuate
+from .law import feedback
 from .model import xi_from_state
 from .predictor import SUBSTEP, LatencyPredictor, invert_lag
 from .reference import RefSample
@@ -859,14 +860,8 @@ class Tracker:
             xd, ud = ref.xi, (ref.ax, ref.ay)
         else:
             xd, ud = self._compensated_reference(ref, h)
-        e = (x - xd[0], v * cth - xd[1], y - xd[2], v * sth - xd[3])
-        K = c.K_effective
-        u1 = ud[0] + K[0][0] * e[0] + K[0][1] * e[1] + K[0][2] * e[2] + K[0][3] * e[3]
-        u2 = ud[1] + K[1][0] * e[0] + K[1][1] * e[1] + K[1][2] * e[2] + K[1][3] * e[3]
-        floored = abs(v) < c.min_speed
-        vf = (c.min_speed if v >= 0 else -c.min_speed) if floored else v
-        a = u1 * cth + u2 * sth
-        w = (u2 * cth - u1 * sth) / vf
+        e, u1, u2, a, w, floored = feedback(x, y, cth, sth, v, xd, ud, c.K_effective,
+                                            c.min_speed)
         saturated = False
         amax = c.max_linear_accel
         if amax > 0.0 and abs(a) > amax:          # the base cannot follow more than this
