@@ -804,152 +804,194 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
     reader = open_reader(path)
     try:
         by_topic = _connections_by_topic(reader)
-        topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
-        topic_map = _complete_topic_map(by_topic, topic_map, topic_overrides)
-        path_topic = traj_topic = None
-        followed = topic_map.get(topics.FOLLOWED_TRAJECTORY)
-        if followed is not None and by_topic[followed].msgtype == TRAJECTORY_TOPICS[0][1]:
-            traj_topic = followed        # what the tracker followed: before the samples
-        elif any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
-                                              topics.REF_ACCEL)):
-            for logical, msgtype in TRAJECTORY_TOPICS:
-                if logical in topic_map and by_topic[topic_map[logical]].msgtype == msgtype:
-                    traj_topic = topic_map[logical]
-                    break
-            paths = [t for t, c in by_topic.items() if c.msgtype == PATH_TYPE]
-            named = resolve_topics(paths, PATH_TOPICS, namespace)
-            preferred = [named[n] for n in PATH_TOPICS if n in named]
-            path_topic = preferred[0] if preferred else (paths[0] if len(paths) == 1 else None)
-        missing = _missing_run_topics(topic_map)
-        if path_topic is not None or traj_topic is not None:
-            missing = [m for m in missing if not m.startswith('reference/')]
-        if missing and strict:
-            raise MissingTopicsError(
-                f'bag {path} lacks topic(s) {", ".join(missing)} needed for a tracking run; '
-                f'it has {sorted(by_topic) or "no topics"}. Record them (recorder parameter '
-                '`topics`) or pass strict=False.', missing)
-        for logical, expected in _EXPECTED_TYPES.items():
-            topic = topic_map.get(logical)
-            ok = (expected,) if isinstance(expected, str) else expected
-            if topic is not None and by_topic[topic].msgtype not in ok:
-                raise BagError(f'topic {topic} in {path} has type '
-                               f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
-        pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
-        role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
-                                          topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
-        if path_topic is not None:
-            role[path_topic] = PATH_TYPE
-        if traj_topic is not None:
-            role[traj_topic] = _TRAJ_ROLE
-        traj_msgs: list[tuple[int, Any]] = []
-        ts = jazzy_typestore()
-        receive: dict[str, list[int]] = {t: [] for t in by_topic}
-        pose_rows: dict[int, tuple[Any, ...]] = {}
-        pose_recv: dict[int, int] = {}
-        frames = ['', '']
-        ref_parts: dict[str, dict[int, tuple[Any, ...]]] = {
-            topics.REF_POSE: {}, topics.REF_TWIST: {}, topics.REF_ACCEL: {}}
-        cmds: list[tuple[int, float, float, int]] = []
-        cmd_stamped = False
-        last_path = None
-        dup: dict[str, int] = {}
-        try:
-            appenders: dict[int, Any] = {}
-            for conn, timestamp, raw in reader.messages():
-                key = id(conn)
-                add = appenders.get(key)
-                if add is None:
-                    add = appenders[key] = receive.setdefault(conn.topic, []).append
-                add(timestamp)
-                name = role.get(conn.topic)
-                if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
-                    continue
-                if name == _TRAJ_ROLE:
-                    m_t = ts.deserialize_cdr(raw, conn.msgtype)
-                    traj_msgs.append((timestamp, m_t))
-                    if conn.topic == path_topic:
-                        last_path = m_t
-                    continue
-                fast = fast_fields(raw, conn.msgtype, name == topics.CMD_VEL) \
-                    if name != PATH_TYPE else None
-                if fast is None:
-                    fast = _slow_fields(ts.deserialize_cdr(raw, conn.msgtype), name, timestamp)
-                    if name == PATH_TYPE:
-                        last_path = fast
-                        continue
-                    if name == pose_name and not frames[0]:
-                        frames[:] = list(fast[1])
-                    fast = fast[0]
-                elif name == pose_name and not frames[0]:
-                    m: Any = ts.deserialize_cdr(raw, conn.msgtype)
-                    frames[:] = [str(m.header.frame_id), str(getattr(m, 'child_frame_id', ''))]
-                if name == topics.CMD_VEL:
-                    if len(fast) == 3:                  # TwistStamped: (stamp, v, w)
-                        cmd_stamped = True
-                        cmds.append((timestamp, fast[1], fast[2], fast[0]))
-                    else:
-                        cmds.append((timestamp, fast[0], fast[1], timestamp))
-                    continue
-                stamp = fast[0]
-                if name == pose_name:
-                    target = pose_rows
-                    row: tuple[Any, ...] = (fast[1], fast[2], quaternion_to_yaw(*fast[3:7]),
-                           fast[7] if len(fast) > 7 else math.nan)
-                    if stamp not in pose_recv:
-                        pose_recv[stamp] = timestamp
-                else:
-                    target = ref_parts[name]
-                    row = (fast[1], fast[2])
-                if stamp in target:
-                    dup[conn.topic] = dup.get(conn.topic, 0) + 1
-                else:
-                    target[stamp] = row
-        except (ReaderError, ValueError, IndexError, KeyError, AssertionError,
-                struct.error, UnicodeDecodeError) as exc:
-            raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
-                           f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
-                           'repair`') from None
+        plan = _plan(path, by_topic, namespace, topic_overrides, strict)
+        scan = _scan(path, reader, by_topic, plan)
         msgtypes = {t: c.msgtype for t, c in by_topic.items()}
         offered = {t: list(c.ext.offered_qos_profiles) for t, c in by_topic.items()
                    if isinstance(c.ext, ConnectionExtRosbag2)}
     finally:
         reader.close()
-
-    stamps = np.array(sorted(pose_rows), dtype=np.int64)
-    rows = np.array([pose_rows[s] for s in stamps], dtype=float).reshape(-1, 4)
-    precv = np.array([pose_recv[s] for s in stamps], dtype=np.int64)
+    topic_map = plan.topic_map
+    stamps = np.array(sorted(scan.pose_rows), dtype=np.int64)
+    rows = np.array([scan.pose_rows[s] for s in stamps], dtype=float).reshape(-1, 4)
+    precv = np.array([scan.pose_recv[s] for s in stamps], dtype=np.int64)
     pose = PoseSeries(stamps, stamps * 1e-9, rows[:, 0].copy(), rows[:, 1].copy(),
-                      rows[:, 2].copy(), rows[:, 3].copy(), topic_map.get(pose_name, ''),
-                      receive_ns=precv, frame_id=frames[0], child_frame_id=frames[1])
-    common = set(ref_parts[topics.REF_POSE]) & set(ref_parts[topics.REF_TWIST]) \
-        & set(ref_parts[topics.REF_ACCEL])
-    reference = None
-    if (not common or traj_topic == followed) and traj_msgs and traj_topic is not None:
-        try:
-            reference = _trajectory_reference(traj_msgs, by_topic[traj_topic].msgtype,
-                                              traj_topic, stamps, precv)
-        except TrajectoryError:
-            reference = None           # fall back to the Path by differences, if any
-    if reference is not None:
-        pass
-    elif not common and last_path is not None and path_topic is not None:
-        reference = _path_reference(last_path, path_topic)
-    else:
-        rstamps = np.array(sorted(common), dtype=np.int64)
-        rrows = np.array([ref_parts[topics.REF_POSE][s] + ref_parts[topics.REF_TWIST][s]
-                          + ref_parts[topics.REF_ACCEL][s] for s in rstamps],
-                         dtype=float).reshape(-1, 6)
-        x, y, vx, vy, ax, ay = (rrows[:, i].copy() for i in range(6))
-        reference = ReferenceSeries(rstamps, rstamps * 1e-9, x, y, vx, vy, ax, ay,
-                                    source=topic_map.get(topics.REF_POSE, ''))
+                      rows[:, 2].copy(), rows[:, 3].copy(), topic_map.get(plan.pose_name, ''),
+                      receive_ns=precv, frame_id=scan.frames[0],
+                      child_frame_id=scan.frames[1])
+    reference = _run_reference(plan, scan, by_topic, stamps, precv)
+    cmds = scan.cmds
     crow = np.array(cmds, dtype=float).reshape(-1, 4)
     cns = np.array([c[0] for c in cmds], dtype=np.int64)
     cst = np.array([c[3] for c in cmds], dtype=np.int64)
     commands = CommandSeries(cns, cns * 1e-9, crow[:, 1].copy(), crow[:, 2].copy(),
-                             stamp_ns=cst, stamped=cmd_stamped,
+                             stamp_ns=cst, stamped=scan.cmd_stamped,
                              topic=topic_map.get(topics.CMD_VEL, ''))
     return BagData(path=Path(path), msgtypes=msgtypes,
-                   counts={t: len(v) for t, v in receive.items()},
-                   receive_ns={t: np.array(v, dtype=np.int64) for t, v in receive.items()},
-                   offered_qos=offered, topic_map=topic_map, duplicates=dup,
-                   run=RunData(pose, reference, commands), missing=tuple(missing))
+                   counts={t: len(v) for t, v in scan.receive.items()},
+                   receive_ns={t: np.array(v, dtype=np.int64) for t, v in scan.receive.items()},
+                   offered_qos=offered, topic_map=topic_map, duplicates=scan.dup,
+                   run=RunData(pose, reference, commands), missing=tuple(plan.missing))
+
+
+@dataclass
+class _Plan:
+    """Which stored topic plays which part in a run (:func:`read_bag`)."""
+
+    topic_map: dict[str, str]
+    followed: str | None
+    traj_topic: str | None
+    path_topic: str | None
+    missing: list[str]
+    pose_name: str
+    role: dict[str, str]
+
+
+def _plan(path: Any, by_topic: dict[str, Connection], namespace: str | None,
+          overrides: dict[str, str] | None, strict: bool) -> _Plan:
+    """The topics of a run in a bag, checked for presence (with ``strict``) and type."""
+    topic_map = resolve_topics(by_topic, list(topics.TYPES), namespace)
+    topic_map = _complete_topic_map(by_topic, topic_map, overrides)
+    path_topic = traj_topic = None
+    followed = topic_map.get(topics.FOLLOWED_TRAJECTORY)
+    if followed is not None and by_topic[followed].msgtype == TRAJECTORY_TOPICS[0][1]:
+        traj_topic = followed        # what the tracker followed: before the samples
+    elif any(n not in topic_map for n in (topics.REF_POSE, topics.REF_TWIST,
+                                          topics.REF_ACCEL)):
+        for logical, msgtype in TRAJECTORY_TOPICS:
+            if logical in topic_map and by_topic[topic_map[logical]].msgtype == msgtype:
+                traj_topic = topic_map[logical]
+                break
+        paths = [t for t, c in by_topic.items() if c.msgtype == PATH_TYPE]
+        named = resolve_topics(paths, PATH_TOPICS, namespace)
+        preferred = [named[n] for n in PATH_TOPICS if n in named]
+        path_topic = preferred[0] if preferred else (paths[0] if len(paths) == 1 else None)
+    missing = _missing_run_topics(topic_map)
+    if path_topic is not None or traj_topic is not None:
+        missing = [m for m in missing if not m.startswith('reference/')]
+    if missing and strict:
+        raise MissingTopicsError(
+            f'bag {path} lacks topic(s) {", ".join(missing)} needed for a tracking run; '
+            f'it has {sorted(by_topic) or "no topics"}. Record them (recorder parameter '
+            '`topics`) or pass strict=False.', missing)
+    for logical, expected in _EXPECTED_TYPES.items():
+        topic = topic_map.get(logical)
+        ok = (expected,) if isinstance(expected, str) else expected
+        if topic is not None and by_topic[topic].msgtype not in ok:
+            raise BagError(f'topic {topic} in {path} has type '
+                           f'{by_topic[topic].msgtype}, expected {" or ".join(ok)}')
+    pose_name = topics.ODOM if topics.ODOM in topic_map else topics.POSE
+    role = {topic_map[n]: n for n in (pose_name, topics.REF_POSE, topics.REF_TWIST,
+                                      topics.REF_ACCEL, topics.CMD_VEL) if n in topic_map}
+    if path_topic is not None:
+        role[path_topic] = PATH_TYPE
+    if traj_topic is not None:
+        role[traj_topic] = _TRAJ_ROLE
+    return _Plan(topic_map, followed, traj_topic, path_topic, missing, pose_name, role)
+
+
+@dataclass
+class _Scan:
+    """What one pass over a bag's messages collects (:func:`read_bag`)."""
+
+    receive: dict[str, list[int]]
+    pose_rows: dict[int, tuple[Any, ...]] = field(default_factory=dict)
+    pose_recv: dict[int, int] = field(default_factory=dict)
+    frames: list[str] = field(default_factory=lambda: ['', ''])
+    ref_parts: dict[str, dict[int, tuple[Any, ...]]] = field(default_factory=lambda: {
+        topics.REF_POSE: {}, topics.REF_TWIST: {}, topics.REF_ACCEL: {}})
+    cmds: list[tuple[int, float, float, int]] = field(default_factory=list)
+    cmd_stamped: bool = False
+    last_path: Any = None
+    dup: dict[str, int] = field(default_factory=dict)
+    traj_msgs: list[tuple[int, Any]] = field(default_factory=list)
+
+
+def _scan(path: Any, reader: Reader, by_topic: dict[str, Connection], plan: _Plan) -> _Scan:
+    """Every message's receive time, and the run's rows of the topics in ``plan.role``."""
+    ts = jazzy_typestore()
+    role, pose_name, path_topic = plan.role, plan.pose_name, plan.path_topic
+    out = _Scan({t: [] for t in by_topic})
+    receive, pose_rows, pose_recv, frames = out.receive, out.pose_rows, out.pose_recv, out.frames
+    ref_parts, cmds, dup = out.ref_parts, out.cmds, out.dup
+    try:
+        appenders: dict[int, Any] = {}
+        for conn, timestamp, raw in reader.messages():
+            key = id(conn)
+            add = appenders.get(key)
+            if add is None:
+                add = appenders[key] = receive.setdefault(conn.topic, []).append
+            add(timestamp)
+            name = role.get(conn.topic)
+            if name is None or conn.msgtype != by_topic[conn.topic].msgtype:
+                continue
+            if name == _TRAJ_ROLE:
+                m_t = ts.deserialize_cdr(raw, conn.msgtype)
+                out.traj_msgs.append((timestamp, m_t))
+                if conn.topic == path_topic:
+                    out.last_path = m_t
+                continue
+            fast = fast_fields(raw, conn.msgtype, name == topics.CMD_VEL) \
+                if name != PATH_TYPE else None
+            if fast is None:
+                fast = _slow_fields(ts.deserialize_cdr(raw, conn.msgtype), name, timestamp)
+                if name == PATH_TYPE:
+                    out.last_path = fast
+                    continue
+                if name == pose_name and not frames[0]:
+                    frames[:] = list(fast[1])
+                fast = fast[0]
+            elif name == pose_name and not frames[0]:
+                m: Any = ts.deserialize_cdr(raw, conn.msgtype)
+                frames[:] = [str(m.header.frame_id), str(getattr(m, 'child_frame_id', ''))]
+            if name == topics.CMD_VEL:
+                if len(fast) == 3:                  # TwistStamped: (stamp, v, w)
+                    out.cmd_stamped = True
+                    cmds.append((timestamp, fast[1], fast[2], fast[0]))
+                else:
+                    cmds.append((timestamp, fast[0], fast[1], timestamp))
+                continue
+            stamp = fast[0]
+            if name == pose_name:
+                target = pose_rows
+                row: tuple[Any, ...] = (fast[1], fast[2], quaternion_to_yaw(*fast[3:7]),
+                                        fast[7] if len(fast) > 7 else math.nan)
+                if stamp not in pose_recv:
+                    pose_recv[stamp] = timestamp
+            else:
+                target = ref_parts[name]
+                row = (fast[1], fast[2])
+            if stamp in target:
+                dup[conn.topic] = dup.get(conn.topic, 0) + 1
+            else:
+                target[stamp] = row
+    except (ReaderError, ValueError, IndexError, KeyError, AssertionError,
+            struct.error, UnicodeDecodeError) as exc:
+        raise BagError(f'{path}: a message cannot be read ({type(exc).__name__}: '
+                       f'{exc}); the bag is damaged - try `nonfragile_tracker bag '
+                       'repair`') from None
+    return out
+
+
+def _run_reference(plan: _Plan, scan: _Scan, by_topic: dict[str, Connection],
+                   stamps: np.ndarray, precv: np.ndarray) -> ReferenceSeries:
+    """The run's reference: its three topics, else the trajectory message, else the Path."""
+    parts = scan.ref_parts
+    common = set(parts[topics.REF_POSE]) & set(parts[topics.REF_TWIST]) \
+        & set(parts[topics.REF_ACCEL])
+    traj_topic = plan.traj_topic
+    if (not common or traj_topic == plan.followed) and scan.traj_msgs and traj_topic is not None:
+        try:
+            return _trajectory_reference(scan.traj_msgs, by_topic[traj_topic].msgtype,
+                                         traj_topic, stamps, precv)
+        except TrajectoryError:
+            pass                       # fall back to the Path by differences, if any
+    if not common and scan.last_path is not None and plan.path_topic is not None:
+        return _path_reference(scan.last_path, plan.path_topic)
+    rstamps = np.array(sorted(common), dtype=np.int64)
+    rrows = np.array([parts[topics.REF_POSE][s] + parts[topics.REF_TWIST][s]
+                      + parts[topics.REF_ACCEL][s] for s in rstamps],
+                     dtype=float).reshape(-1, 6)
+    x, y, vx, vy, ax, ay = (rrows[:, i].copy() for i in range(6))
+    return ReferenceSeries(rstamps, rstamps * 1e-9, x, y, vx, vy, ax, ay,
+                           source=plan.topic_map.get(topics.REF_POSE, ''))

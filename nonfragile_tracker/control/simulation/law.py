@@ -160,9 +160,10 @@ class VectorLaw:
         _add(uc0, uc1, out=cv)                      # a
         cv *= h
         cv += v                                     # v + a h
-        if cs is not self._cs:
-            self._cs, self._cs_rev = cs, cs[::-1]
-        _mul(U, self._cs_rev, out=uc)               # u1 sin, u2 cos
+        cs_rev = self._cs_rev
+        if cs is not self._cs or cs_rev is None:
+            self._cs, self._cs_rev = cs, (cs_rev := cs[::-1])
+        _mul(U, cs_rev, out=uc)                     # u1 sin, u2 cos
         _sub(uc1, uc0, out=w)
         w /= vf
         _fmax(w, self.nwmax, out=w)                 # nan stays nan
