@@ -38,7 +38,7 @@ CHECKED = tuple(
         'worst_delta')]
     + [f'nonfragile_tracker.control.simulation.{m}' for m in (
         'model', 'reference', 'metrics', 'sensors', 'actuator', 'simulate', 'batch', 'batch_parts',
-        'batch_ideal', 'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains',
+        'batch_ideal', 'law', 'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains',
         'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
         'identify', 'lag_fit', 'records', 'recording', 'monitor', 'excitation')]

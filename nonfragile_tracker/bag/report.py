@@ -338,40 +338,16 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
         notes.append(f'no commands ({topics.CMD_VEL}): no command rate, latency or peaks')
     starts = [a[0] for a in (pose.stamp_ns, ref.stamp_ns) if a.size]
     t0 = int(min(starts)) if starts else int(cmd.receive_ns[0])
-    mode, metrics, matched = 'realtime', None, 0
-    phases = None
-    ph = np.zeros(0, dtype=np.int8)
-    x = y = xd = yd = vxd = vyd = th = v = t = np.zeros(0)
-    if len(pose) and len(ref):
-        common, ip, ir = np.intersect1d(pose.stamp_ns, ref.stamp_ns, assume_unique=True,
-                                        return_indices=True)
-        if common.size >= LOCKSTEP_MATCH * len(pose):
-            mode = 'lockstep'
-            sel = ip
-            xd, yd, vxd, vyd = ref.x[ir], ref.y[ir], ref.vx[ir], ref.vy[ir]
-            if ref.phase is not None:
-                ph = ref.phase[ir]
-        else:
-            sel = np.flatnonzero((pose.stamp_ns >= ref.stamp_ns[0])
-                                 & (pose.stamp_ns <= ref.stamp_ns[-1]))
-            rt = (ref.stamp_ns - t0) * 1e-9
-            pt = (pose.stamp_ns[sel] - t0) * 1e-9
-            xd, yd, vxd, vyd = (np.interp(pt, rt, a) for a in (ref.x, ref.y, ref.vx, ref.vy))
-            if ref.phase is not None and ref.phase.size:
-                near = np.clip(np.searchsorted(rt, pt), 0, rt.size - 1)
-                ph = ref.phase[near]
-            if sel.size == 0:
-                notes.append(f'no pose stamp lies within the reference\'s time span (pose '
-                             f'{pose.t[0]:.3f}..{pose.t[-1]:.3f} s, reference {ref.t[0]:.3f}..'
-                             f'{ref.t[-1]:.3f} s): the stamps come from different clocks; no '
-                             'tracking metrics')
-        matched = int(sel.size)
-        if matched:
-            t = (pose.stamp_ns[sel] - t0) * 1e-9
-            x, y, th, v = pose.x[sel], pose.y[sel], pose.th[sel], pose.v[sel]
-            metrics = tracking_metrics(t, x, y, xd, yd, cmd.v, cmd.w, tolerance=tolerance)
-            if ph.size == t.size:
-                phases = PhaseErrors.of(t, np.hypot(x - xd, y - yd), ph)
+    metrics, phases = None, None
+    mode, sel, (xd, yd, vxd, vyd), ph = _match(pose, ref, t0, notes)
+    matched = int(sel.size)
+    x = y = th = v = t = np.zeros(0)
+    if matched:
+        t = (pose.stamp_ns[sel] - t0) * 1e-9
+        x, y, th, v = pose.x[sel], pose.y[sel], pose.th[sel], pose.v[sel]
+        metrics = tracking_metrics(t, x, y, xd, yd, cmd.v, cmd.w, tolerance=tolerance)
+        if ph.size == t.size:
+            phases = PhaseErrors.of(t, np.hypot(x - xd, y - yd), ph)
     med, gaps = find_gaps(pose.topic, (pose.stamp_ns - t0) * 1e-9) if len(pose) \
         else (math.nan, [])
     timing = timing_metrics(pose.stamp_ns, pose.receive_ns, cmd.receive_ns,
@@ -394,10 +370,6 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
     if not plots:
         return report
     out = Path(out_dir) if out_dir is not None else Path(f'{Path(path)}_report')
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise BagError(f'cannot create report directory {out}: {exc.strerror or exc}') from None
     files: dict[str, Callable[[], Figure]] = {}
     if len(pose):
         files['xy.png'] = lambda: _plot_xy(pose.x if metrics is None else x,
@@ -408,6 +380,49 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
         files['xi.png'] = lambda: _plot_xi(t, x, y, th, v, xd, yd, vxd, vyd, pose.topic)
     if len(cmd):
         files['commands.png'] = lambda: _plot_commands(tc, cmd.v, cmd.w, note)
+    written = _write_figures(out, files, overwrite)
+    return replace(report, plots=written, out_dir=out)
+
+
+def _match(pose: Any, ref: Any, t0: int, notes: list[str]
+           ) -> tuple[str, np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
+    """The poses compared with the reference, and the reference there.
+
+    Returns the mode (lockstep: equal stamps; else the reference interpolated), the poses'
+    indices, ``(xd, yd, vxd, vyd)`` at them and the reference's phases.
+    """
+    empty = np.zeros(0)
+    if not (len(pose) and len(ref)):
+        return 'realtime', np.zeros(0, dtype=np.intp), (empty,) * 4, np.zeros(0, dtype=np.int8)
+    ph = np.zeros(0, dtype=np.int8)
+    common, ip, ir = np.intersect1d(pose.stamp_ns, ref.stamp_ns, assume_unique=True,
+                                    return_indices=True)
+    if common.size >= LOCKSTEP_MATCH * len(pose):
+        if ref.phase is not None:
+            ph = ref.phase[ir]
+        return 'lockstep', ip, (ref.x[ir], ref.y[ir], ref.vx[ir], ref.vy[ir]), ph
+    sel = np.flatnonzero((pose.stamp_ns >= ref.stamp_ns[0])
+                         & (pose.stamp_ns <= ref.stamp_ns[-1]))
+    rt = (ref.stamp_ns - t0) * 1e-9
+    pt = (pose.stamp_ns[sel] - t0) * 1e-9
+    xi_d = tuple(np.interp(pt, rt, a) for a in (ref.x, ref.y, ref.vx, ref.vy))
+    if ref.phase is not None and ref.phase.size:
+        ph = ref.phase[np.clip(np.searchsorted(rt, pt), 0, rt.size - 1)]
+    if sel.size == 0:
+        notes.append(f'no pose stamp lies within the reference\'s time span (pose '
+                     f'{pose.t[0]:.3f}..{pose.t[-1]:.3f} s, reference {ref.t[0]:.3f}..'
+                     f'{ref.t[-1]:.3f} s): the stamps come from different clocks; no '
+                     'tracking metrics')
+    return 'realtime', sel, xi_d, ph
+
+
+def _write_figures(out: Path, files: dict[str, Callable[[], Figure]], overwrite: bool
+                   ) -> dict[str, Path]:
+    """Draw and save each figure into ``out`` (created); never replace one unless told."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BagError(f'cannot create report directory {out}: {exc.strerror or exc}') from None
     existing = [n for n in files if (out / n).exists()]
     if existing and not overwrite:
         raise BagError(f'{out} already holds {", ".join(existing)}; pass --force to replace '
@@ -415,11 +430,10 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
     written: dict[str, Path] = {}
     for name, make in files.items():
         fig = make()
-        target = out / name
         FigureCanvasAgg(fig)
-        fig.savefig(target, dpi=110)
-        written[name] = target
-    return replace(report, plots=written, out_dir=out)
+        fig.savefig(out / name, dpi=110)
+        written[name] = out / name
+    return written
 
 
 # ---------------------------------------------------------------------------------------------

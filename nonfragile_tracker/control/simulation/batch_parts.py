@@ -5,7 +5,8 @@ holding one piece of the single run's state for every case and stepping it with 
 operations of the scalar step functions in the same order: the odometry
 (:class:`Odometry`, as :class:`control.simulation.sensors.Odometer`), the tracker
 (:class:`BatchTracker`, as :class:`control.simulation.loop.Tracker` with its delay
-compensation; the law itself is :class:`control.simulation.law.VectorLaw`), the command line (:class:`CommandLine`: command latency) and the plant
+compensation; the law itself is :class:`control.simulation.law.VectorLaw`), the command
+line (:class:`CommandLine`: command latency) and the plant
 (:class:`BatchPlant`, as :class:`control.simulation.loop.UnicyclePlant`, with its actuator
 and state delay), and the arithmetic they share with the batch's loops (heading wrap,
 the arc's series and angle addition, sums of products in the plant's order).  The
