@@ -106,7 +106,18 @@ class VectorLaw:
             self._prod = np.empty((2, 5, n))        # u* and the four K_j e_j terms
 
     def floored(self, v: np.ndarray) -> np.ndarray:
-        """``v`` floored to ``|v| >= min_speed`` with its sign (``+`` at ``-0.0``; nan stays)."""
+        """``v`` floored to ``|v| >= min_speed`` with its sign (``+`` at ``-0.0``; nan stays).
+
+        Parameters
+        ----------
+        v : numpy.ndarray
+            Speeds (n,).
+
+        Returns
+        -------
+        numpy.ndarray
+            A buffer of the law's, overwritten by the next call.
+        """
         vabs, vf = self._vabs, self._vf
         np.absolute(v, out=vabs)
         np.maximum(vabs, self._vmin_n, out=vabs)
