@@ -17,7 +17,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import rclpy
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
@@ -96,8 +96,6 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
     mode = plan.mode
     predict = TrackerInputs(config, replay_rules(values, mode))
     env = isolated_env(env)
-    ts = jazzy_typestore()
-    RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
     with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
         pfile = write_parameter_file({'tracker': {'ros__parameters': values}},
                                      Path(tmp) / 'p.yaml')
@@ -123,7 +121,6 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
                     raise RunError(f'replay over DDS: no {what} within {timeout} s')
                 ex.spin_once(timeout_sec=0.005)
 
-        commands = []
         try:
             # matched both ways (our writers -> its readers, its writer -> our reader): a
             # command published before the match would be lost
@@ -131,34 +128,8 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
                  and sub.get_publisher_count() >= 1, 'tracker node matched on every topic')
             # a reliable reader may take a moment to accept a newly matched writer (its first
             # samples then come late, after a repair): let discovery settle both ways
-            settle = time.monotonic() + SETTLE
-            while time.monotonic() < settle:
-                ex.spin_once(timeout_sec=0.01)
-            first_odom = True
-            for e in (*plan.prime, *plan.events):
-                if e.kind == 'odom' and first_odom:
-                    first_odom = False
-                    settle = time.monotonic() + 0.2 * SETTLE    # the state before the start
-                    while time.monotonic() < settle:
-                        ex.spin_once(timeout_sec=0.01)
-                before = len(got)
-                out = predict.odom(e.msg) if e.kind == 'odom' else predict.reference(
-                    REF_INDEX[e.kind], e.msg)
-                pub = pubs[e.kind]
-                pub.publish(e.raw)
-                if out is not None:
-                    wait(lambda: len(got) > before, f'command after {e.kind} at '
-                         f'{e.receive_ns} ns')
-                    c = got[before]
-                    commands.append((e.receive_ns, RTwist(RVector3(c.linear.x, 0.0, 0.0),
-                                                          RVector3(0.0, 0.0, c.angular.z))))
-                else:
-                    # no command expected: the node's events executor handles messages in
-                    # arrival order, and one participant's samples arrive in publish order
-                    ex.spin_once(timeout_sec=0.0)
-                    if len(got) > before:
-                        raise RunError(f'the tracker node published a command after {e.kind} '
-                                       f'at {e.receive_ns} ns where the replay expects none')
+            _spin_for(ex, SETTLE)
+            commands = _publish_events(plan, predict, pubs, got, wait, ex)
         finally:
             node.destroy_node()
             rclpy.try_shutdown(context=ctx)
@@ -166,3 +137,45 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
             proc.close()
     return finish_replay(bag, plan, commands, expected=expected, atol=atol, rtol=rtol,
                          max_differences=max_differences, via='over DDS (tracker node)')
+
+
+def _spin_for(ex: Any, seconds: float) -> None:
+    """Spin ``ex`` for ``seconds`` (discovery and matching settle meanwhile)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
+
+
+def _publish_events(plan: Any, predict: TrackerInputs, pubs: dict[str, Any],
+                    got: list[Twist], wait: Callable[[Callable[[], bool], str], None],
+                    ex: Any) -> list[tuple[int, Any]]:
+    """Publish the plan's messages in order, each awaited command collected.
+
+    After each message that the in-process rules expect a command for, the node's command
+    is awaited.  Returns ``(receive_ns, Twist)`` pairs (the bag's type store's Twist).
+    """
+    ts = jazzy_typestore()
+    RTwist, RVector3 = ts.types['geometry_msgs/msg/Twist'], ts.types['geometry_msgs/msg/Vector3']
+    commands = []
+    first_odom = True
+    for e in (*plan.prime, *plan.events):
+        if e.kind == 'odom' and first_odom:
+            first_odom = False
+            _spin_for(ex, 0.2 * SETTLE)                 # the state before the start
+        before = len(got)
+        out = predict.odom(e.msg) if e.kind == 'odom' else predict.reference(
+            REF_INDEX[e.kind], e.msg)
+        pubs[e.kind].publish(e.raw)
+        if out is not None:
+            wait(lambda: len(got) > before, f'command after {e.kind} at {e.receive_ns} ns')
+            c = got[before]
+            commands.append((e.receive_ns, RTwist(RVector3(c.linear.x, 0.0, 0.0),
+                                                  RVector3(0.0, 0.0, c.angular.z))))
+        else:
+            # no command expected: the node's events executor handles messages in
+            # arrival order, and one participant's samples arrive in publish order
+            ex.spin_once(timeout_sec=0.0)
+            if len(got) > before:
+                raise RunError(f'the tracker node published a command after {e.kind} '
+                               f'at {e.receive_ns} ns where the replay expects none')
+    return commands
