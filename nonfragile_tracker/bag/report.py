@@ -326,16 +326,7 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
             f'and no commands ({topics.CMD_VEL}, Twist or TwistStamped): nothing to report '
             f'(topics: {data.counts or "none"}). Name them with --odom/--cmd if they are '
             'recorded under other names.', [topics.ODOM, topics.CMD_VEL])
-    notes = []
-    if len(pose) == 0:
-        notes.append(f'no odometry ({topics.ODOM} or {topics.POSE}): reporting commands only '
-                     '(no tracking metrics, no timing of inputs)')
-    if len(ref) == 0:
-        notes.append(f'no reference ({topics.REF_POSE} + {topics.REF_TWIST} + '
-                     f'{topics.REF_ACCEL}, or a nav_msgs/Path): reporting timing and the path '
-                     'only (no tracking metrics)')
-    if len(cmd) == 0:
-        notes.append(f'no commands ({topics.CMD_VEL}): no command rate, latency or peaks')
+    notes = _missing_notes(pose, ref, cmd)
     starts = [a[0] for a in (pose.stamp_ns, ref.stamp_ns) if a.size]
     t0 = int(min(starts)) if starts else int(cmd.receive_ns[0])
     metrics, phases = None, None
@@ -382,6 +373,21 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
         files['commands.png'] = lambda: _plot_commands(tc, cmd.v, cmd.w, note)
     written = _write_figures(out, files, overwrite)
     return replace(report, plots=written, out_dir=out)
+
+
+def _missing_notes(pose: Any, ref: Any, cmd: Any) -> list[str]:
+    """What a report of a run without odometry, reference or commands leaves out."""
+    notes = []
+    if len(pose) == 0:
+        notes.append(f'no odometry ({topics.ODOM} or {topics.POSE}): reporting commands only '
+                     '(no tracking metrics, no timing of inputs)')
+    if len(ref) == 0:
+        notes.append(f'no reference ({topics.REF_POSE} + {topics.REF_TWIST} + '
+                     f'{topics.REF_ACCEL}, or a nav_msgs/Path): reporting timing and the path '
+                     'only (no tracking metrics)')
+    if len(cmd) == 0:
+        notes.append(f'no commands ({topics.CMD_VEL}): no command rate, latency or peaks')
+    return notes
 
 
 def _match(pose: Any, ref: Any, t0: int, notes: list[str]
