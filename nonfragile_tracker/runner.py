@@ -505,12 +505,6 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
     def start(name: str, extra: Sequence[str] = ()) -> None:
         procs[name] = NodeProcess(name, params_file, run_dir / f'{name}.log', env, extra)
 
-    def report_plant(reader: IO[str], final: bool = False) -> None:
-        for line in reader.readlines():
-            line = line.rstrip()
-            if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
-                progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
-
     realtime = _is_realtime(params)
     names = recorded_topics(params, recorder_topics, record_all)
     hand = realtime_handshake(record) if realtime else \
@@ -529,24 +523,8 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
                            _REALTIME_START_WAIT_S)
         start('reference', _ros_args(hand.get('reference', {})))
         start('plant', _ros_args(hand.get('plant', {})))
+        _watch_plant(procs, run_dir, t0 + timeout, progress)
         plant = procs['plant']
-        with open(run_dir / 'plant.log') as reader:
-            while plant.poll() is None:
-                report_plant(reader)
-                # the recorder closes its bag and exits 0 right after run_done, which can be
-                # before the plant's last poll here: that is the end of the run, not a death
-                dead = {n: p.poll() for n, p in procs.items()
-                        if n != 'plant' and p.poll() is not None
-                        and not (n == 'recorder' and p.poll() == 0)}
-                if dead:
-                    progress(f'[runner] node(s) exited early: {dead}; stopping the run '
-                             f'(logs in {run_dir})')
-                    break
-                if time.monotonic() - t0 > timeout:
-                    progress('[runner] timeout: stopping the run')
-                    break
-                time.sleep(0.05)
-            report_plant(reader)
         if plant.poll() is not None and record and realtime:
             time.sleep(_REALTIME_TAIL_S)          # the last messages in flight, then stop
             procs['recorder'].interrupt()
@@ -568,6 +546,37 @@ def run_processes(params: dict[str, Any], run_dir: Path, *, record: bool = True,
     steps = int(round(params['plant']['ros__parameters'].get('duration', 60.0)
                       / params['plant']['ros__parameters'].get('dt', 0.01)))
     return RunResult(run_dir, bag, codes, time.monotonic() - t0, steps)
+
+
+def _report_plant(reader: IO[str], progress: Callable[[str], object]) -> None:
+    """Pass the plant log's new progress, error and completion lines to ``progress``."""
+    for line in reader.readlines():
+        line = line.rstrip()
+        if 'progress:' in line or 'ERROR' in line or 'FATAL' in line or 'complete' in line:
+            progress(f'[plant] {line.split("] ", 1)[-1] if "] " in line else line}')
+
+
+def _watch_plant(procs: dict[str, NodeProcess], run_dir: Path, deadline: float,
+                 progress: Callable[[str], object]) -> None:
+    """Until the plant ends, another node dies or the (monotonic) deadline: its progress."""
+    plant = procs['plant']
+    with open(run_dir / 'plant.log') as reader:
+        while plant.poll() is None:
+            _report_plant(reader, progress)
+            # the recorder closes its bag and exits 0 right after run_done, which can be
+            # before the plant's last poll here: that is the end of the run, not a death
+            dead = {n: p.poll() for n, p in procs.items()
+                    if n != 'plant' and p.poll() is not None
+                    and not (n == 'recorder' and p.poll() == 0)}
+            if dead:
+                progress(f'[runner] node(s) exited early: {dead}; stopping the run '
+                         f'(logs in {run_dir})')
+                break
+            if time.monotonic() > deadline:
+                progress('[runner] timeout: stopping the run')
+                break
+            time.sleep(0.05)
+        _report_plant(reader, progress)
 
 
 def kill_with_stacks(proc: subprocess.Popen[Any], grace: float = 0.5) -> None:
