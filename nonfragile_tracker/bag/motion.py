@@ -24,7 +24,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from rosbags.rosbag2 import ReaderError
@@ -114,37 +114,7 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
                                      f'{ctopic} is {ctype}', [ctopic])
         conns = [c for c in reader.connections if c.topic in (ctopic, otopic)
                  and c.msgtype == available[c.topic]]
-        ts = jazzy_typestore()
-        crows: list[tuple[int, int, float, float]] = []
-        orows: list[tuple[int, int, float, float, float, float, float]] = []
-        try:
-            for conn, timestamp, raw in reader.messages(connections=conns):
-                # the connection's msgtype (checked against CMD_TYPES / ODOM_TYPES by
-                # pick_topic) decides the class deserialize_cdr returns
-                msg = ts.deserialize_cdr(raw, conn.msgtype)
-                if conn.topic == ctopic:
-                    tw: TwistMsg
-                    if ctype == TWIST_STAMPED:
-                        cmd = cast('TwistStampedMsg', msg)
-                        st = cmd.header.stamp
-                        stamp = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-                        tw = cmd.twist
-                    else:
-                        stamp, tw = 0, cast('TwistMsg', msg)
-                    crows.append((timestamp, stamp, float(tw.linear.x), float(tw.angular.z)))
-                else:
-                    odom = cast('OdometryMsg', msg)
-                    st = odom.header.stamp
-                    p = odom.pose.pose
-                    q = p.orientation
-                    orows.append((timestamp, int(st.sec) * 1_000_000_000 + int(st.nanosec),
-                                  float(p.position.x), float(p.position.y),
-                                  quaternion_to_yaw(q.x, q.y, q.z, q.w),
-                                  float(odom.twist.twist.linear.x),
-                                  float(odom.twist.twist.angular.z)))
-        except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
-            raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
-                           'damaged - try `nonfragile_tracker bag repair`') from None
+        crows, orows = _motion_rows(path, reader, conns, ctopic, ctype)
     finally:
         reader.close()
 
@@ -177,3 +147,42 @@ def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL
                       cmd_type=ctype, cmd_time='header stamp' if use_stamp else 'receive time',
                       odom_topic=otopic, odom_time='header stamp' if stamped else 'receive time',
                       odom_delay_s=delay, duplicates=int(np.count_nonzero(~keep)))
+
+
+def _motion_rows(path: Any, reader: Any, conns: list[Any], ctopic: str, ctype: str
+                 ) -> tuple[list[tuple[int, int, float, float]],
+                            list[tuple[int, int, float, float, float, float, float]]]:
+    """One pass over the command and odometry messages: their rows, receive time first."""
+    ts = jazzy_typestore()
+    crows: list[tuple[int, int, float, float]] = []
+    orows: list[tuple[int, int, float, float, float, float, float]] = []
+    try:
+        for conn, timestamp, raw in reader.messages(connections=conns):
+            # the connection's msgtype (checked against CMD_TYPES / ODOM_TYPES by
+            # pick_topic) decides the class deserialize_cdr returns
+            msg = ts.deserialize_cdr(raw, conn.msgtype)
+            if conn.topic == ctopic:
+                tw: TwistMsg
+                if ctype == TWIST_STAMPED:
+                    cmd = cast('TwistStampedMsg', msg)
+                    st = cmd.header.stamp
+                    stamp = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+                    tw = cmd.twist
+                else:
+                    stamp, tw = 0, cast('TwistMsg', msg)
+                crows.append((timestamp, stamp, float(tw.linear.x), float(tw.angular.z)))
+            else:
+                odom = cast('OdometryMsg', msg)
+                st = odom.header.stamp
+                p = odom.pose.pose
+                q = p.orientation
+                orows.append((timestamp, int(st.sec) * 1_000_000_000 + int(st.nanosec),
+                              float(p.position.x), float(p.position.y),
+                              quaternion_to_yaw(q.x, q.y, q.z, q.w),
+                              float(odom.twist.twist.linear.x),
+                              float(odom.twist.twist.angular.z)))
+    except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
+        raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                       'damaged - try `nonfragile_tracker bag repair`') from None
+    return crows, orows
+
