@@ -32,7 +32,7 @@ import bisect
 import fnmatch
 import math
 import os
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -434,30 +434,44 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
             if receive_time and how != 'time' and ta != tb:
                 add(Difference(topic, i, 'receive time (ns)', ta, tb))
                 bad = True
-            for (fa, va), (fb, vb) in zip(flatten(ma), flatten(mb)):
-                if fa != fb:
-                    add(Difference(topic, i, fa, 'field layout', fb))
-                    bad = True
-                    break
-                if isinstance(va, (int, float)) and isinstance(vb, (int, float)) \
-                        and not isinstance(va, bool):
-                    if math.isnan(va) and math.isnan(vb):
-                        continue
-                    err = abs(va - vb)
-                    worst = max(worst, err if math.isfinite(err) else math.inf)
-                    tol = rules.get(topic, fa)
-                    if not tol.ok(va, vb):
-                        add(Difference(topic, i, fa, va, vb, tol))
-                        summ.fields.add(fa)
-                        bad = True
-                elif va != vb:
-                    add(Difference(topic, i, fa, va, vb))
-                    summ.fields.add(fa)
-                    bad = True
+            differs, err = _compare_fields(topic, i, ma, mb, rules, summ, add)
+            worst = max(worst, err)
+            bad = bad or differs
             summ.differing += bad
         summ.max_abs_error = worst
         result.max_abs_error[topic] = worst
     return result
+
+
+def _compare_fields(topic: str, i: int, ma: Any, mb: Any, rules: '_Rules',
+                    summ: TopicSummary, add: Callable[[Difference], None]
+                    ) -> tuple[bool, float]:
+    """Compare two messages field by field; each difference to ``add``.
+
+    Returns whether any field differs (beyond its tolerance, or the layouts), and the
+    largest numeric difference of the fields compared (inf for a non-finite one).
+    """
+    worst, bad = 0.0, False
+    for (fa, va), (fb, vb) in zip(flatten(ma), flatten(mb)):
+        if fa != fb:
+            add(Difference(topic, i, fa, 'field layout', fb))
+            return True, worst
+        if isinstance(va, (int, float)) and isinstance(vb, (int, float)) \
+                and not isinstance(va, bool):
+            if math.isnan(va) and math.isnan(vb):
+                continue
+            err = abs(va - vb)
+            worst = max(worst, err if math.isfinite(err) else math.inf)
+            tol = rules.get(topic, fa)
+            if not tol.ok(va, vb):
+                add(Difference(topic, i, fa, va, vb, tol))
+                summ.fields.add(fa)
+                bad = True
+        elif va != vb:
+            add(Difference(topic, i, fa, va, vb))
+            summ.fields.add(fa)
+            bad = True
+    return bad, worst
 
 
 def _describe(how: str, item: Message, t0: int) -> str:
