@@ -244,24 +244,7 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
         raise BagExistsError(f'repair output {dst} exists already; it is never overwritten. '
                              'Pass another output directory (out=...) or remove it.')
     scans = [scan_mcap(m) for m in mcaps]
-    channels: dict[str, tuple[str, list[Qos] | None, str]] = {}   # topic -> type, qos, msgdef
-    foreign: dict[str, str] = {}          # topic -> encodings we cannot write into a bag
-    for scan in scans:
-        for ch in scan.channels.values():
-            schema = scan.schemas.get(ch.schema_id)
-            if schema is None:
-                continue
-            if ch.message_encoding != 'cdr' or schema.encoding != 'ros2msg':
-                foreign[ch.topic] = (f'{ch.topic} ({ch.message_encoding} messages, '
-                                     f'{schema.encoding or "no"} schema)')
-                continue
-            msgdef = schema.data.decode('utf-8', errors='replace')
-            prev = channels.get(ch.topic)
-            if prev is not None and prev[0] != schema.name:
-                raise BagError(f'topic {ch.topic} appears with two types, {prev[0]} and '
-                               f'{schema.name}; this tool writes one type per topic')
-            if prev is None or (prev[1] is None and _offered_qos(ch) is not None):
-                channels[ch.topic] = (schema.name, _offered_qos(ch), msgdef)
+    channels, foreign = _channels(scans)
     total = sum(len(s.messages) for s in scans)
     if not channels and foreign:
         raise BagError(f'{src} holds no ROS 2 data: {", ".join(sorted(foreign.values()))}; '
@@ -299,3 +282,31 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
         discarded_bytes=sum(s.discarded_bytes for s in scans), orphan_messages=orphans,
         problems=tuple(f'{s.path.name}: {s.problem}' for s in scans if s.problem)
         + tuple(f'skipped {v}: not ROS 2 (cdr + ros2msg)' for v in sorted(foreign.values())))
+
+def _channels(scans: list[McapScan]) -> tuple[dict[str, tuple[str, list[Qos] | None, str]],
+                                         dict[str, str]]:
+    """The topics of the scanned files: ROS 2 ones and the others.
+
+    Returns ``{topic: (type, offered QoS, message definition)}`` of the ROS 2 topics and
+    ``{topic: its encodings}`` of the others (a rosbag2 bag cannot hold them).
+    """
+    channels: dict[str, tuple[str, list[Qos] | None, str]] = {}   # topic -> type, qos, msgdef
+    foreign: dict[str, str] = {}          # topic -> encodings we cannot write into a bag
+    for scan in scans:
+        for ch in scan.channels.values():
+            schema = scan.schemas.get(ch.schema_id)
+            if schema is None:
+                continue
+            if ch.message_encoding != 'cdr' or schema.encoding != 'ros2msg':
+                foreign[ch.topic] = (f'{ch.topic} ({ch.message_encoding} messages, '
+                                     f'{schema.encoding or "no"} schema)')
+                continue
+            msgdef = schema.data.decode('utf-8', errors='replace')
+            prev = channels.get(ch.topic)
+            if prev is not None and prev[0] != schema.name:
+                raise BagError(f'topic {ch.topic} appears with two types, {prev[0]} and '
+                               f'{schema.name}; this tool writes one type per topic')
+            if prev is None or (prev[1] is None and _offered_qos(ch) is not None):
+                channels[ch.topic] = (schema.name, _offered_qos(ch), msgdef)
+    return channels, foreign
+
