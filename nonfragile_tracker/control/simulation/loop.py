@@ -886,16 +886,8 @@ class Tracker:
         self._ramp = (v, a, h)
         cmd_v = 0.5 * (v + v_next)
         if pred is not None and h > 0.0:
-            if c.predict_lag_v > 0.0:
-                cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, h)
-                if abs(cmd_v) > vmax:
-                    cmd_v, saturated = math.copysign(vmax, cmd_v), True
-            if c.predict_lag_w > 0.0:
-                w = invert_lag(w, p.w, c.predict_lag_w, h)
-                if abs(w) > c.max_angular_speed:
-                    w, saturated = math.copysign(c.max_angular_speed, w), True
-            if not (math.isfinite(cmd_v) and math.isfinite(w)):
-                cmd_v = w = 0.0
+            cmd_v, w, lagged = self._invert_lags(cmd_v, w, v_next, p, h)
+            saturated = saturated or lagged
         if c.rate_limited:
             since = h if self._last_cmd is None or passed is None else passed
             cmd_v, w, limited = self._rate_limit(cmd_v, w, v, since)
@@ -904,6 +896,27 @@ class Tracker:
             pred.record(p.t, cmd_v, w)
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
                        floored=floored)
+
+    def _invert_lags(self, cmd_v: float, w: float, v_next: float, p: Any, h: float
+                     ) -> tuple[float, float, bool]:
+        """The commands that take the predicted actual speeds ``p`` to the law's over ``h``.
+
+        Each within its speed limit (a clipped one counts as saturated); non-finite: stop.
+        """
+        c = self.config
+        saturated = False
+        vmax = c.max_linear_speed
+        if c.predict_lag_v > 0.0:
+            cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, h)
+            if abs(cmd_v) > vmax:
+                cmd_v, saturated = math.copysign(vmax, cmd_v), True
+        if c.predict_lag_w > 0.0:
+            w = invert_lag(w, p.w, c.predict_lag_w, h)
+            if abs(w) > c.max_angular_speed:
+                w, saturated = math.copysign(c.max_angular_speed, w), True
+        if not (math.isfinite(cmd_v) and math.isfinite(w)):
+            cmd_v = w = 0.0
+        return cmd_v, w, saturated
 
     def _rate_limit(self, cv: float, cw: float, v0: float, since: float
                     ) -> tuple[float, float, bool]:
