@@ -77,7 +77,6 @@ def cmd_bringup(args: argparse.Namespace) -> int:
                               else robot.input_timeout),
         'gains': str(gains.resolve()), 'problem': str(problem.resolve()),
         'robot': json.dumps(dataclasses.asdict(robot))}}}
-    procs: dict[str, subprocess.Popen[str]] = {}
     env = runner.isolated_env() if args.simulate else None
     if args.simulate:
         plant = runner.scenario_parameters(Path(args.simulate), None).get('plant', {}).get(
@@ -86,6 +85,20 @@ def cmd_bringup(args: argparse.Namespace) -> int:
                      robot.enable_stamped_cmd_vel)
         params['plant'] = {'ros__parameters': plant}
     params_file = runner.write_parameter_file(params, run_dir / 'params.yaml')
+    return _run_nodes(params_file, run_dir, robot, env, bool(args.simulate))
+
+
+def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str] | None,
+               simulate: bool) -> int:
+    """Run the bring-up node (and with ``simulate`` the simulated plant) to its end.
+
+    SIGINT and SIGTERM are passed on to the node, which commands zero and ends; a process
+    that does not end within :data:`STOP_WAIT_S` is killed after its stacks are asked for.
+    Returns the node's exit code (:data:`EXIT_INTERRUPTED` if stopped before it started
+    or if it ended 0 after a stop).
+    """
+    from .. import runner
+    procs: dict[str, subprocess.Popen[str]] = {}
     signals: list[int] = []
 
     def forward(signum: int, frame: object) -> None:
@@ -97,7 +110,7 @@ def cmd_bringup(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
     logs: list[Any] = []
     try:
-        if args.simulate:
+        if simulate:
             log = open(run_dir / 'plant.log', 'w')
             logs.append(log)
             procs['plant'] = subprocess.Popen(
@@ -140,7 +153,6 @@ def cmd_bringup(args: argparse.Namespace) -> int:
     if signals and code == 0:
         return EXIT_INTERRUPTED
     return int(code or 0)
-
 
 def register(subparsers: Subparsers) -> None:
     """Add ``bringup`` to the CLI.
