@@ -47,7 +47,9 @@ def register(subparsers: Subparsers) -> None:
         'lockstep and print what changed against their golden bags (--write replaces them)')
     g.add_argument('--scenario', action='append', metavar='FILE',
                    help='your scenario parameter file (plant/reference/tracker sections; '
-                   'repeatable); its golden bag is <out>/golden_<file stem>')
+                   'repeatable); its golden bag is <out>/golden_<file stem> (default: the '
+                   "package's own scenarios, paper and delta2, whose golden bags are in the "
+                   "source tree's test/data)")
     g.add_argument('--gains', help='gain file for --scenario (default config/tracker_gains.yaml)')
     g.add_argument('--out', help='directory of the golden bags (default: the source tree\'s '
                    'test/data, only for the package\'s own scenarios)')

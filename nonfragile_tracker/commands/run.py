@@ -134,7 +134,9 @@ def register(subparsers: Subparsers) -> None:
     r.add_argument('--paper', action='store_true',
                    help="the paper's configuration: its printed K_nf "
                    '(config/paper_gains_tracker.yaml), no delay compensation')
-    r.add_argument('--path', choices=['circle', 'figure_eight'], help='reference path')
+    r.add_argument('--path', choices=['circle', 'figure_eight'],
+                   help="reference path (default: the scenario's reference path; "
+                   'config/paper_scenario.yaml: circle)')
     r.add_argument('--trajectory', metavar='FILE',
                    help='follow a waypoint file (CSV/YAML: t, x, y[, yaw][, speed]) instead of '
                    'the path; the robot starts at its first pose, duration = its end + 3 s')

@@ -297,7 +297,10 @@ def register(subparsers: Subparsers) -> None:
     d.add_argument('--norm', type=positive_float,
                    help='||K||_2 budget (default options.gain_bound)')
     d.add_argument('--nominal', action='store_true', help='nominal condition (no E, F)')
-    d.add_argument('-o', '--output', help='tracker gain file to write')
+    d.add_argument('-o', '--output', help='tracker gain file to write, with its gain_design '
+                   'record and command-latency figures (never overwritten without --force); '
+                   'without it the gain and its figures are printed only, nothing is written '
+                   'and the latency figures are not computed')
     d.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     _add_saturation_args(d)
     d.set_defaults(func=cmd_design)
@@ -312,7 +315,9 @@ def register(subparsers: Subparsers) -> None:
     dd.add_argument('--gain-bound', type=positive_float,
                     help='||K||_2 bound (default options.gain_bound)')
     dd.add_argument('--nominal', action='store_true', help='nominal design (no E, F terms)')
-    dd.add_argument('-o', '--output', help='tracker gain file to write')
+    dd.add_argument('-o', '--output', help='tracker gain file to write (never overwritten '
+                    'without --force); without it the gain and its figures are printed only, '
+                    'nothing is written')
     dd.add_argument('--force', action='store_true', help='overwrite --output if it exists')
     dd.set_defaults(func=cmd_delay_dependent)
 

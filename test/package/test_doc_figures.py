@@ -2,8 +2,9 @@
 
 A quoted figure carries a tag right after it, invisible on GitHub and in Sphinx:
 ``0.2208 s<!-- fig:gain.lag_certified -->``.  Each tag names a source read here at test
-time - the shipped gain files' own ``gain_design`` record, or the demo's run recomputed in
-process (a lockstep run of the nodes equals it to 1e-9) - and the quoted number must be
+time - the shipped gain files' own ``gain_design`` record, the demo's run recomputed in
+process (a lockstep run of the nodes equals it to 1e-9), or a design the docs quote
+recomputed in process as its command runs it - and the quoted number must be
 that source rounded to the digits quoted (``ms``/``mm`` quote s/m in thousandths).  A gain
 file regenerated, or a default changed, fails here until every quote is updated.
 """
@@ -44,6 +45,20 @@ def _run(gains: str, compensation: bool):
     return run.metrics()
 
 
+@functools.lru_cache(maxsize=None)
+def _latency_design(h_max: float, lag: float):
+    """The figures ``latency-design`` records for ``[0, h_max]`` with ``lag``, in process.
+
+    As ``latency-design config/paper_problem.yaml --delay-interval 0 H_MAX --lag LAG
+    --gain-bound 8.67`` runs it; its recorded figures settle on a 3-digit grid, the same
+    under every BLAS kernel.
+    """
+    from nonfragile_tracker.control.synthesis.latency_design import design_for_latency
+    from nonfragile_tracker.control.synthesis.problem import load_problem
+    return design_for_latency(load_problem(CONFIG / 'paper_problem.yaml'), 0.0, h_max,
+                              gain_bound=8.67, lag=lag)
+
+
 SOURCES = {
     'gain.latency_hi': lambda: _design('tracker_gains.yaml')['latency_interval'][1],
     'gain.lag': lambda: _design('tracker_gains.yaml')['actuator_lag'],
@@ -51,7 +66,13 @@ SOURCES = {
     'gain.decay': lambda: _design('tracker_gains.yaml')['certified_decay_rate'],
     'gain.norm': lambda: _design('tracker_gains.yaml')['gain_norm'],
     'gain.margin': lambda: _design('tracker_gains.yaml')['true_delay_margin'],
+    'gain.worst_abscissa': lambda: _design('tracker_gains.yaml')['worst_abscissa_on_interval'],
+    'gain.bound': lambda: _design('tracker_gains.yaml')['gain_bound'],
+    'max_decay.decay': lambda: _design('max_decay_gains.yaml')['certified_value'],
     'max_decay.latency': lambda: _design('max_decay_gains.yaml')['certified_latency'],
+    'max_decay.margin': lambda: _design('max_decay_gains.yaml')['true_latency_margin'],
+    'design_0_03.decay': lambda: _latency_design(0.03, 0.05).decay_rate,
+    'design_0_03.lag_certified': lambda: _latency_design(0.03, 0.05).lag_certified_h_max,
     'demo.settle': lambda: _run('tracker_gains.yaml', True).settling_time,
     'demo.rms': lambda: _run('tracker_gains.yaml', True).rms_error_settled,
     'demo.final': lambda: _run('tracker_gains.yaml', True).final_error,
