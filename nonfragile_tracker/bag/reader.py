@@ -721,7 +721,7 @@ def _trajectory_reference(msgs: list[tuple[int, Any]], msgtype: str, topic: str,
 
     Each message is converted as the tracker converts it (:mod:`msgconv`) and sampled at
     each odometry stamp as :class:`control.simulation.follow.Follower` samples it
-    (:func:`control.simulation.follow.reference_at`); a stamp uses the latest message received no
+    (:func:`control.simulation.follow.trajectory_time`); a stamp uses the latest message received no
     later than its odometry (the first message before that); a trajectory first followed
     late is re-based as the Follower re-bases it
     (:func:`control.simulation.follow.start_offset`, the tracker's default

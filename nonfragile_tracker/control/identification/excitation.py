@@ -36,7 +36,7 @@ from .errors import IdentificationError
 
 __all__ = ['ExcitationError', 'Extent', 'Plan', 'plan_excitation', 'plan_trial',
            'DEFAULT_BOX', 'DEFAULT_SPEED', 'DEFAULT_TURN_RATE', 'GENTLE_LINEAR_ACCEL',
-           'GENTLE_ANGULAR_ACCEL', 'FAST_LINEAR_ACCEL', 'FAST_ANGULAR_ACCEL']
+           'GENTLE_ANGULAR_ACCEL', 'FAST_LINEAR_ACCEL']
 
 #: Default box: stay within this distance (m) of the start pose.
 DEFAULT_BOX = 1.0
@@ -47,9 +47,8 @@ DEFAULT_TURN_RATE = 1.0
 #: the base's limits (when no robot file gives them) do not bind.
 GENTLE_LINEAR_ACCEL = 0.4
 GENTLE_ANGULAR_ACCEL = 1.2
-#: Ramps of the acceleration segment: faster than a base follows, so its limits bind.
+#: Ramp of the acceleration segment: faster than a base follows, so its limit binds.
 FAST_LINEAR_ACCEL = 6.0
-FAST_ANGULAR_ACCEL = 18.0
 #: Speed levels of the staircase, as fractions of the plan's top speed.
 LEVELS = (0.5, 1.0, 0.6, 0.9, 0.4, 0.8, 0.55, 1.0)
 #: Fraction of the speed limits the reference uses: the rest is the feedback's.

@@ -334,13 +334,12 @@ def _gate(s: MonitorSettings, t: np.ndarray, y: tuple[np.ndarray, np.ndarray],
 class _Grid:
     """The model's time grid of a window.
 
-    Step ``res`` from ``g0`` (``n`` cells); ``ci`` the command in force in each cell,
-    ``nL`` latency candidates, ``base_idx`` each sample's cell and ``idx`` (nL, samples)
-    the cells each candidate latency reads.
+    Step ``res`` from the window start less the memory (``n`` cells); ``ci`` the command
+    in force in each cell, ``nL`` latency candidates, ``base_idx`` each sample's cell and
+    ``idx`` (nL, samples) the cells each candidate latency reads.
     """
 
     res: float
-    g0: float
     n: int
     ci: np.ndarray
     nL: int
@@ -359,7 +358,7 @@ class _Grid:
         nL = int(math.floor(s.max_latency / res)) + 1
         base_idx = np.floor((t - g0) / res + 1e-9).astype(int)   # grid cell of each sample
         shift = np.arange(nL)[:, None]
-        return cls(res, g0, grid_n, ci, nL, base_idx, base_idx[None, :] - shift)
+        return cls(res, grid_n, ci, nL, base_idx, base_idx[None, :] - shift)
 
 
 def _quiet(s: MonitorSettings, grid: _Grid, u: np.ndarray, recent: np.ndarray, c: int,

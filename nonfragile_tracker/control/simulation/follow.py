@@ -26,7 +26,7 @@ from .simulate import TrackingRun, report_override, run_loop
 from .trajectory import Trajectory
 
 __all__ = ['Follower', 'simulate_following', 'REST_SPEED', 'path_errors', 'trajectory_time',
-           'reference_at', 'start_offset', 'START_TOLERANCE', 'MAX_START_DISTANCE']
+           'start_offset', 'START_TOLERANCE', 'MAX_START_DISTANCE']
 
 #: Default speed (m/s) below which, after the trajectory's end, the robot is at rest.
 REST_SPEED = 0.01
@@ -114,25 +114,6 @@ def trajectory_time(stamp_ns: int, origin_ns: int) -> float:
     float
     """
     return (int(stamp_ns) - int(origin_ns)) * 1e-9
-
-
-def reference_at(trajectory: Trajectory, origin_ns: int, stamp_ns: int) -> RefSample:
-    """The reference :meth:`Follower.step` uses for the odometry stamped ``stamp_ns``.
-
-    Parameters
-    ----------
-    trajectory : Trajectory
-        The trajectory followed.
-    origin_ns : int
-        Its origin (ns).
-    stamp_ns : int
-        The odometry stamp (ns).
-
-    Returns
-    -------
-    RefSample
-    """
-    return trajectory.sample(trajectory_time(stamp_ns, origin_ns))
 
 
 class Follower:

@@ -781,8 +781,6 @@ class _Grid:
     h: float
     s: np.ndarray
     p: np.ndarray
-    p_s: np.ndarray
-    p_ss: np.ndarray
     kappa: np.ndarray
     dkappa: np.ndarray
     cap: np.ndarray
@@ -794,7 +792,7 @@ class _Grid:
         """``span`` of the piece at spacing about ``h`` (m), with the speed rows in ``xmax``."""
         n = max(int(math.ceil((span[1] - span[0]) / h)), 4)
         s = np.linspace(span[0], span[1], n + 1)
-        p, p_s, p_ss, kappa, dkappa = piece.evaluate(s)
+        p, _, _, kappa, dkappa = piece.evaluate(s)
         cap = piece.speed_cap(s)
         xmax = cap ** 2
         ak = np.abs(kappa)
@@ -808,7 +806,7 @@ class _Grid:
                 amax = limits.max_linear_accel if limits.max_linear_accel > 0 else math.inf
                 xmax = np.minimum(xmax, (limits.max_angular_accel + ak * amax) /
                                   np.abs(dkappa))
-        return cls(float(s[1] - s[0]), s, p, p_s, p_ss, kappa, dkappa, cap, xmax)
+        return cls(float(s[1] - s[0]), s, p, kappa, dkappa, cap, xmax)
 
 
 #: A large finite bound (a row that is absent: no limit given).
