@@ -44,6 +44,7 @@ GAIN_FILE = 'gains.yaml'
 REPORT_FILE = 'report.md'
 OUTCOME_FILE = 'analysis.json'
 
+
 class BringupRefusal(InputError):
     """The bring-up stops here: the cause and what to change (exit code 2, no gain written)."""
 

@@ -77,4 +77,3 @@ def exit_code(exc: BaseException) -> int:
                         NotADirectoryError, PermissionError)):
         return EXIT_BAD_INPUT
     return 1
-

@@ -720,4 +720,3 @@ def run_composed(params: dict[str, Any], run_dir: Path | None, *, record: bool =
                 close()
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
-

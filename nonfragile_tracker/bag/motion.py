@@ -185,4 +185,3 @@ def _motion_rows(path: Any, reader: Any, conns: list[Any], ctopic: str, ctype: s
         raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
                        'damaged - try `nonfragile_tracker bag repair`') from None
     return crows, orows
-

@@ -283,6 +283,7 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
         problems=tuple(f'{s.path.name}: {s.problem}' for s in scans if s.problem)
         + tuple(f'skipped {v}: not ROS 2 (cdr + ros2msg)' for v in sorted(foreign.values())))
 
+
 def _channels(scans: list[McapScan]) -> tuple[dict[str, tuple[str, list[Qos] | None, str]],
                                          dict[str, str]]:
     """The topics of the scanned files: ROS 2 ones and the others.
@@ -309,4 +310,3 @@ def _channels(scans: list[McapScan]) -> tuple[dict[str, tuple[str, list[Qos] | N
             if prev is None or (prev[1] is None and _offered_qos(ch) is not None):
                 channels[ch.topic] = (schema.name, _offered_qos(ch), msgdef)
     return channels, foreign
-

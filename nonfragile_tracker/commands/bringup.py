@@ -154,6 +154,7 @@ def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str]
         return EXIT_INTERRUPTED
     return int(code or 0)
 
+
 def register(subparsers: Subparsers) -> None:
     """Add ``bringup`` to the CLI.
 

@@ -607,4 +607,3 @@ def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = Non
             arm_exit_deadline(code)
             _tear_down(context, node, executor)
     return code
-

@@ -223,6 +223,8 @@ MONITOR_PARAMS = [
           '[lo, hi] (s) the predictor latency may be adapted within',
           type=ParameterType.PARAMETER_DOUBLE_ARRAY),
 ]
+
+
 @dataclass(frozen=True)
 class TrackerSettings:
     """The tracker node's validated parameters (see :data:`PARAMS`)."""

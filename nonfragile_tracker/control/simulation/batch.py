@@ -65,7 +65,6 @@ __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch'
            'segment_index']
 
 
-
 # ---------------------------------------------------------------------------------------------
 # Inputs
 

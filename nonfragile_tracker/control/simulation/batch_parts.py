@@ -661,9 +661,9 @@ class BatchPlant:
             self.pv, self.pw = v, w
 
 
-
 #: Steps per block of the metrics.
 BLOCK = 16
+
 
 def _compensated(buf: np.ndarray, count: np.ndarray, L: np.ndarray,
                  terms: list[list[tuple[int, float]]], qpos: Any, qvel: Any, qacc: Any,

@@ -141,7 +141,8 @@ class VectorLaw:
         v : numpy.ndarray
             Compensator speeds (n,).
         xpos, xvel, ud : array_like
-            The reference's position, velocity (each (2,) or (2, n)) and feedforward.
+            The reference's position, velocity and feedforward, each (2, 1) (shared) or
+            (2, n).
         h : float or numpy.ndarray
             The coming interval (s) of the speed ramp.
         out : numpy.ndarray

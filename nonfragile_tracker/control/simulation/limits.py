@@ -94,6 +94,8 @@ def valid_accel_fraction(fraction: object) -> bool:
     """
     return (not isinstance(fraction, bool) and isinstance(fraction, (int, float))
             and MIN_ACCEL_FRACTION <= fraction <= 1.0)
+
+
 #: Names of the limits, as the tracker's parameters spell them.
 LIMIT_NAMES = ('max_linear_speed', 'max_linear_accel', 'max_angular_speed',
                'max_angular_accel', 'min_turning_radius')
@@ -1104,8 +1106,6 @@ def _quintic_hermite(t: np.ndarray, R: np.ndarray) -> Any:
                   (10 * d - 4 * e * H + 0.5 * f * H ** 2) / H ** 3,
                   0.5 * a0, v0, p0])
     return PPoly(c, t)
-
-
 
 
 def _slowed_spans(slow: np.ndarray, tg: np.ndarray) -> list[tuple[float, float]]:

@@ -488,6 +488,7 @@ def _roots_at(ch: _Char, N: int, count: int) -> tuple[list[complex], list[float]
 # degree that converged last time, per (n, tau, count): the start of the adaptive rule
 _N_USED: dict[tuple[int, float, int], int] = {}
 
+
 def clear_caches() -> None:
     """Forget the remembered degrees and Arnoldi sizes (the next call starts afresh)."""
     _N_USED.clear()

@@ -98,7 +98,6 @@ class Problem(validate.StateInputShape):
     perturbations: Mapping[str, np.ndarray] = field(default_factory=dict)
     options: Mapping[str, Any] = field(default_factory=dict)
 
-
     def gain(self, K: Any) -> np.ndarray:
         """``K`` as a float array of this problem's gain shape ``(m, n)``: the one K-shape check.
 

@@ -326,4 +326,3 @@ def cached_programs() -> list[tuple[Hashable, Any]]:
 def clear_cache() -> None:
     """Drop every cached program (the next synthesis builds and compiles again)."""
     _LOCAL.cache.items.clear()
-

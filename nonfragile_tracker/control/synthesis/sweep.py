@@ -356,4 +356,3 @@ def records_for_json(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
     return [{**{k: clean(v) for k, v in r.items()}, 'pareto': i in front}
             for i, r in enumerate(records)]
-
