@@ -388,13 +388,8 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
     if not (math.isfinite(time_tolerance) and time_tolerance >= 0):
         raise BagError(f'time tolerance must be a finite number >= 0 s, got {time_tolerance!r}')
     names = sorted(topics) if topics is not None else sorted(set(expected) | set(got))
-
-    def start(side: Mapping[str, Sequence[Message]]) -> int:
-        firsts = [msgs[0][0] for msgs in side.values() if msgs]
-        return min(firsts) if firsts else 0
-
-    ta0 = start(expected) if expected_start_ns is None else expected_start_ns
-    tb0 = start(got) if got_start_ns is None else got_start_ns
+    ta0 = _first_ns(expected) if expected_start_ns is None else expected_start_ns
+    tb0 = _first_ns(got) if got_start_ns is None else got_start_ns
     result = Comparison(topics=names, messages={k: len(v) for k, v in expected.items()},
                         max_differences=max_differences)
 
@@ -409,11 +404,7 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
             add(Difference(topic, None, 'topic', 'present' if a is not None else 'absent',
                            'present' if b is not None else 'absent'))
             continue
-        how = align.get(topic, 'auto') if isinstance(align, Mapping) else align
-        if how not in ALIGNMENTS:
-            raise BagError(f'alignment {how!r} is not one of {", ".join(ALIGNMENTS)}')
-        if how == 'auto':
-            how = _auto(a, b)
+        how = _alignment(align, topic, a, b)
         summ = TopicSummary(how, len(a), len(b))
         result.summary[topic] = summ
         if len(a) != len(b):
@@ -441,6 +432,21 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
         summ.max_abs_error = worst
         result.max_abs_error[topic] = worst
     return result
+
+
+def _first_ns(side: Mapping[str, Sequence[Message]]) -> int:
+    """The earliest receive time (ns) of a side's messages (0 if it has none)."""
+    firsts = [msgs[0][0] for msgs in side.values() if msgs]
+    return min(firsts) if firsts else 0
+
+
+def _alignment(align: str | Mapping[str, str], topic: str, a: Sequence[Message],
+               b: Sequence[Message]) -> str:
+    """The alignment of ``topic`` (``auto`` resolved); :class:`BagError` for an unknown one."""
+    how = align.get(topic, 'auto') if isinstance(align, Mapping) else align
+    if how not in ALIGNMENTS:
+        raise BagError(f'alignment {how!r} is not one of {", ".join(ALIGNMENTS)}')
+    return _auto(a, b) if how == 'auto' else how
 
 
 def _compare_fields(topic: str, i: int, ma: Any, mb: Any, rules: '_Rules',

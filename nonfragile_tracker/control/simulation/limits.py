@@ -697,26 +697,9 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     chord = np.hypot(*np.diff(P, axis=0).T)
     gap = t[first[1:]] - t[last[:-1]]
     v = chord / gap
-    cap = np.empty(k)
-    # the speed at each point: slope of the parabola s(t) through it and the points
-    # SPEED_GAP s before and after it (exact for a constant acceleration, however the
-    # points are spaced; a duplicate logged 1 ms later is not a neighbour: its noise
-    # over 1 ms would be a large speed)
     S = np.concatenate([[0.0], np.cumsum(chord)])
     t_in, t_out = t[first], t[last]
-    j = np.arange(1, k - 1)
-    jm = np.minimum(np.searchsorted(t_out, t_in[j] - SPEED_GAP, side='right') - 1, j - 1)
-    jp = np.maximum(np.searchsorted(t_in, t_out[j] + SPEED_GAP, side='left'), j + 1)
-    jm, jp = np.maximum(jm, 0), np.minimum(jp, k - 1)
-    g1, g2 = t_in[j] - t_out[jm], t_in[jp] - t_out[j]
-    v1, v2 = (S[j] - S[jm]) / g1, (S[jp] - S[j]) / g2
-    cap[1:-1] = (v1 * g2 + v2 * g1) / (g1 + g2)
-    v0, v1 = traj.evaluate([traj.t_start, traj.t_end]).vx, traj.evaluate(
-        [traj.t_start, traj.t_end]).vy
-    cap[0], cap[-1] = math.hypot(v0[0], v1[0]), math.hypot(v0[1], v1[1])
-    cap[(t[last] - t[first]) >= REST_DWELL] = 0.0
-    cap[0] = min(cap[0], v[0])
-    cap[-1] = min(cap[-1], v[-1])
+    cap = _point_speeds(traj, S, t_in, t_out, v)
     # cusps: the direction of travel changes, or the chords turn back
     seg_dir = dirs[np.minimum(last[:-1], dirs.size - 1)]     # direction leaving each point
     d = np.diff(P, axis=0) / chord[:, None]
@@ -746,6 +729,33 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
         pieces.append(PathPiece(spl, u_tab, s_tab, s_all, t_all, c_all,
                                 float(seg_dir[min(a, k - 2)]), dev))
     return PathFit(tuple(pieces), tolerance)
+
+
+def _point_speeds(traj: Trajectory, S: np.ndarray, t_in: np.ndarray, t_out: np.ndarray,
+                  v: np.ndarray) -> np.ndarray:
+    """The planned speed at each merged point (arc length ``S``, times ``t_in``..``t_out``).
+
+    Inside: the slope of the parabola ``s(t)`` through the point and the points
+    :data:`SPEED_GAP` s before and after it (exact for a constant acceleration, however the
+    points are spaced; a duplicate logged 1 ms later is not a neighbour: its noise over 1 ms
+    would be a large speed); at the ends the trajectory's speed, within the first and last
+    chord's mean speed ``v``; 0 where the plan rests :data:`REST_DWELL` s or longer.
+    """
+    k = S.size
+    cap = np.empty(k)
+    j = np.arange(1, k - 1)
+    jm = np.minimum(np.searchsorted(t_out, t_in[j] - SPEED_GAP, side='right') - 1, j - 1)
+    jp = np.maximum(np.searchsorted(t_in, t_out[j] + SPEED_GAP, side='left'), j + 1)
+    jm, jp = np.maximum(jm, 0), np.minimum(jp, k - 1)
+    g1, g2 = t_in[j] - t_out[jm], t_in[jp] - t_out[j]
+    v1, v2 = (S[j] - S[jm]) / g1, (S[jp] - S[j]) / g2
+    cap[1:-1] = (v1 * g2 + v2 * g1) / (g1 + g2)
+    ends = traj.evaluate([traj.t_start, traj.t_end])
+    cap[0], cap[-1] = math.hypot(ends.vx[0], ends.vy[0]), math.hypot(ends.vx[1], ends.vy[1])
+    cap[(t_out - t_in) >= REST_DWELL] = 0.0
+    cap[0] = min(cap[0], v[0])
+    cap[-1] = min(cap[-1], v[-1])
+    return cap
 
 
 def _with_midpoints(s: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, cap: np.ndarray
