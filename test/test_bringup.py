@@ -12,7 +12,7 @@ from conftest import CONFIG
 from nonfragile_tracker.bringup import (BringupRefusal, analyse, bringup_limits, design_gain,
                                         identify_samples, write_robot_file)
 from nonfragile_tracker.control.identification.identify import read_identification_text
-from nonfragile_tracker.control.identification.recording import record_open_loop
+from recordings import record_open_loop
 from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file
 from nonfragile_tracker.control.simulation.loop import PlantConfig
 from nonfragile_tracker.errors import InputError

@@ -41,7 +41,7 @@ CHECKED = tuple(
         'batch_ideal', 'law', 'study', 'follow', 'limits', 'trajectory', 'loop', 'predictor', 'gains',
         'timing')]
     + [f'nonfragile_tracker.control.identification.{m}' for m in (
-        'identify', 'lag_fit', 'records', 'recording', 'monitor', 'excitation')]
+        'identify', 'lag_fit', 'records', 'monitor', 'excitation')]
     + [f'nonfragile_tracker.{m}' for m in (
         'files', 'resources', 'scenario', 'golden', 'reproduce', 'runner', 'replayer',
         'errors', 'topics', 'msgconv', 'parallel', 'cli', 'tracker_inputs', 'robot',

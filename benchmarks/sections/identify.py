@@ -2,7 +2,7 @@
 
 Run through ``benchmarks/run.py --only identify`` (or standalone:
 ``.venv/bin/python benchmarks/sections/identify.py [--quick]``).  For each case of
-``config/identify_cases.yaml`` (recorded in process by ``control.identification.recording``, 30 s,
+``config/identify_cases.yaml`` (recorded in process by ``test/recordings.py``, 30 s,
 seeds 1..3; quick: seed 1) the truth, today's ``identify`` (the code of the session
 start, commit d11fc49, loaded from git) and the new one side by side: latency (for the
 jitter case: the range), lags, and MET/MISSED for the issue's target - latency within one
@@ -27,6 +27,8 @@ if str(HERE.parent) not in sys.path:
     sys.path.insert(0, str(HERE.parent))
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+if str(ROOT / 'test') not in sys.path:
+    sys.path.insert(0, str(ROOT / 'test'))     # recordings.py, the synthetic recordings
 
 from harness import Table, log  # noqa: E402
 
@@ -94,7 +96,7 @@ def bench_identify(cfg, table: Table, raw: dict) -> None:
     """Rows 7.x: each case of config/identify_cases.yaml, today's identify and the new."""
     import numpy as np
     from nonfragile_tracker.control.identification.identify import identify_latency
-    from nonfragile_tracker.control.identification.recording import load_cases, record_case
+    from recordings import load_cases, record_case
     cases = load_cases(ROOT / 'config' / 'identify_cases.yaml')
     old = _old_identify()
     if old is None:

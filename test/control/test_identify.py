@@ -427,7 +427,7 @@ def test_cli_identify_writes_the_limits_it_sees_into_the_robot_file(run20, tmp_p
     (joystick steps on a base with 1 m/s^2 and 3 rad/s^2, config/identify_cases.yaml case ii)
     go into the robot file, made from the shipped one; a recording without them leaves the
     limits unknown; a bad robot file is refused before the work."""
-    from nonfragile_tracker.control.identification.recording import load_cases, record_case
+    from recordings import load_cases, record_case
     from nonfragile_tracker.robot import load_robot_file
     rec = record_case(load_cases(CONFIG / 'identify_cases.yaml')['ii'], seed=1, duration=20.0)
     c, o = rec.commands, rec.odometry

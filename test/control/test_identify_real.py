@@ -1,6 +1,6 @@
 """Identification on what real bases give (issue 22, item 4), ROS-free.
 
-The recordings are the plant's (control.simulation.loop.UnicyclePlant through control.identification.recording):
+The recordings are the plant's (control.simulation.loop.UnicyclePlant through test/recordings.py):
 cases of config/identify_cases.yaml - the default tracker on a base with acceleration
 limits (100 ms, and 180 ms where it is in its limit cycle), joystick steps with the
 limits binding 35-40 % of the time, a teleop drive with a 0.33 s stall, latency jitter
@@ -30,7 +30,7 @@ from nonfragile_tracker.control.synthesis.latency_design import (lagged_problem,
                                                                  plan_from_identification)
 from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
 from nonfragile_tracker.control.synthesis.problem import load_problem
-from nonfragile_tracker.control.identification.recording import (joystick_steps, load_cases,
+from recordings import (joystick_steps, load_cases,
                                                                  record_case, record_open_loop,
                                                                  record_tracking)
 from nonfragile_tracker.control.simulation.reference import figure_eight

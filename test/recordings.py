@@ -1,5 +1,8 @@
 """Synthetic recordings of a base: the commands sent and the odometry published, in process.
 
+Test and benchmark data, not part of the package (tests import it from test/, the
+identification benchmark puts test/ on its path).
+
 What ``identify`` reads from a bag, produced by the plant's step functions
 (:class:`control.simulation.loop.UnicyclePlant`, so command latency and its jitter, actuator lags,
 acceleration limits, stalls and odometry rate, latency and noise are the plant's), for
@@ -27,11 +30,11 @@ from typing import Any, Callable, cast
 import numpy as np
 import yaml
 
-from ...errors import InputError
-from .identify import CommandSamples, OdometrySamples
-from ..simulation.loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
+from nonfragile_tracker.errors import InputError
+from nonfragile_tracker.control.identification.identify import CommandSamples, OdometrySamples
+from nonfragile_tracker.control.simulation.loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
                                quaternion_to_yaw, step_time, yaw_to_quaternion)
-from ..simulation.reference import Path
+from nonfragile_tracker.control.simulation.reference import Path
 
 __all__ = ['Recording', 'record_tracking', 'record_open_loop', 'joystick_steps', 'load_cases',
            'record_case']
@@ -261,8 +264,8 @@ def record_case(spec: dict[str, Any], *, seed: int = 1, duration: float = 30.0) 
     duration : float
         Seconds recorded.
     """
-    from ..simulation.gains import read_gain_file
-    from ..simulation.reference import make_path
+    from nonfragile_tracker.control.simulation.gains import read_gain_file
+    from nonfragile_tracker.control.simulation.reference import make_path
     plant_kw = dict(spec['plant'])
     plant_kw['stalls'] = tuple(tuple(s) for s in plant_kw.get('stalls', ()))
     if 'odom_noise' in plant_kw:
