@@ -99,7 +99,8 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
     with tempfile.TemporaryDirectory(prefix='nf_replay_') as tmp:
         pfile = write_parameter_file({'tracker': {'ros__parameters': values}},
                                      Path(tmp) / 'p.yaml')
-        proc = NodeProcess('tracker', pfile, Path(tmp) / 'tracker.log', env,
+        log = Path(tmp) / 'tracker.log'
+        proc = NodeProcess('tracker', pfile, log, env,
                            ['-p', f'mode:={mode}', '-p', f'input_timeout:={NO_WATCHDOG}'])
         ctx = rclpy.Context()
         rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
@@ -116,7 +117,7 @@ def replay_over_dds(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str
                 if proc.poll() is not None:
                     raise RunError(f'the tracker node exited ({proc.poll()}) during the '
                                    f'replay; its log:\n'
-                                   f'{proc.log.read_text(errors="replace")[-2000:]}')
+                                   f'{log.read_text(errors="replace")[-2000:]}')
                 if time.monotonic() > end:
                     raise RunError(f'replay over DDS: no {what} within {timeout} s')
                 ex.spin_once(timeout_sec=0.005)

@@ -344,10 +344,11 @@ STOP_WAIT_S = 10.0
 class NodeProcess:
     """One node in a process of its own (``nodes.entry``), its output in a log file.
 
-    The one lifecycle of the runner's nodes and the replayer's tracker: started with a
-    parameter file; :meth:`interrupt` (SIGINT, as Ctrl-C), :meth:`wait`, and :meth:`stop`,
-    which interrupts, waits and - for a node that does not end - writes its stacks to its
-    log before killing it (:func:`kill_with_stacks`).
+    The one lifecycle of the runner's nodes, the replayer's tracker and the bring-up
+    command's nodes: started with a parameter file; :meth:`interrupt` (SIGINT, as Ctrl-C),
+    :meth:`wait`, and :meth:`stop`, which interrupts, waits and - for a node that does not
+    end - writes its stacks to its log (or the terminal) before killing it
+    (:func:`kill_with_stacks`).
 
     Parameters
     ----------
@@ -355,31 +356,39 @@ class NodeProcess:
         The node (``tracker``, ``plant``, ...), run by ``python -m nonfragile_tracker.nodes.entry``.
     params_file : pathlib.Path
         Its ROS 2 parameter file.
-    log : pathlib.Path
-        Its output (stdout and stderr), written from the start.
-    env : mapping
-        Its environment (:func:`isolated_env`).
+    log : pathlib.Path or None
+        Its output (stdout and stderr), written from the start (None: this process's
+        terminal).
+    env : mapping or None
+        Its environment (:func:`isolated_env`; None: this process's).
     extra : sequence of str, optional
-        More ``--ros-args`` (``-p name:=value``).
+        More ``--ros-args`` (``-p name:=value``, ``-r from:=to``).
     """
 
-    def __init__(self, name: str, params_file: Path, log: Path, env: Mapping[str, str],
-                 extra: Sequence[str] = ()) -> None:
+    def __init__(self, name: str, params_file: Path, log: Path | None,
+                 env: Mapping[str, str] | None, extra: Sequence[str] = ()) -> None:
         self.name, self.log = name, log
-        self._out = open(log, 'w')
+        self._out = open(log, 'w') if log is not None else None
         self.proc = subprocess.Popen(
             [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', name, '--ros-args',
              '--params-file', str(params_file), *extra],
-            env=env, stdout=self._out, stderr=subprocess.STDOUT, text=True)
+            env=env, stdout=self._out, stderr=subprocess.STDOUT if log is not None else None,
+            text=True)
 
     def poll(self) -> int | None:
         """Its exit code, None while it runs."""
         return self.proc.poll()
 
-    def interrupt(self) -> None:
-        """SIGINT (a node's clean shutdown), if it still runs."""
+    def interrupt(self, signum: int = signal.SIGINT) -> None:
+        """SIGINT (a node's clean shutdown; or ``signum``), if it still runs.
+
+        Parameters
+        ----------
+        signum : int, optional
+            The signal (SIGTERM ends a node cleanly too).
+        """
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.proc.send_signal(signum)
 
     def wait(self, timeout: float) -> bool:
         """Whether it ended within ``timeout`` s.
@@ -416,7 +425,8 @@ class NodeProcess:
 
     def close(self) -> None:
         """Close this side of its log file (after it has ended)."""
-        self._out.close()
+        if self._out is not None:
+            self._out.close()
 
 
 def _wait_for_line(log: Path, text: str, proc: NodeProcess, timeout: float) -> bool:

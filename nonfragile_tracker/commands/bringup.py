@@ -12,13 +12,12 @@ import argparse
 import dataclasses
 import json
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from ..errors import EXIT_INTERRUPTED, InputError
+from ..errors import EXIT_INTERRUPTED, EXIT_RUN, InputError
 from .argtypes import positive_float
 from .common import Subparsers
 
@@ -93,61 +92,47 @@ def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str]
     """Run the bring-up node (and with ``simulate`` the simulated plant) to its end.
 
     SIGINT and SIGTERM are passed on to the node, which commands zero and ends; a process
-    that does not end within :data:`STOP_WAIT_S` is killed after its stacks are asked for.
-    Returns the node's exit code (:data:`EXIT_INTERRUPTED` if stopped before it started
-    or if it ended 0 after a stop).
+    that does not end within :data:`STOP_WAIT_S` is killed after its stacks are asked for
+    (:class:`~nonfragile_tracker.runner.NodeProcess`).  Returns the node's exit code
+    (:data:`EXIT_INTERRUPTED` if stopped before it started or if it ended 0 after a stop;
+    :data:`EXIT_RUN` if the simulated plant ended first).
     """
-    from .. import runner
-    procs: dict[str, subprocess.Popen[str]] = {}
+    from ..runner import NodeProcess
+    procs: dict[str, NodeProcess] = {}
     signals: list[int] = []
 
     def forward(signum: int, frame: object) -> None:
         signals.append(signum)
         node = procs.get('bringup')
-        if node is not None and node.poll() is None:
-            node.send_signal(signum)
+        if node is not None:
+            node.interrupt(signum)
 
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
-    logs: list[Any] = []
+    code: int | None = EXIT_INTERRUPTED
     try:
         if simulate:
-            log = open(run_dir / 'plant.log', 'w')
-            logs.append(log)
-            procs['plant'] = subprocess.Popen(
-                [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', 'plant', '--ros-args',
-                 '--params-file', str(params_file), '-r', f'odom:={robot.odom_topic}', '-r',
-                 f'cmd_vel:={robot.cmd_vel_topic}'], env=env, stdout=log,
-                stderr=subprocess.STDOUT, text=True)
+            procs['plant'] = NodeProcess(
+                'plant', params_file, run_dir / 'plant.log', env,
+                ['-r', f'odom:={robot.odom_topic}', '-r', f'cmd_vel:={robot.cmd_vel_topic}'])
         if not signals:
-            procs['bringup'] = subprocess.Popen(
-                [sys.executable, '-m', 'nonfragile_tracker.nodes.entry', 'bringup',
-                 '--ros-args', '--params-file', str(params_file)], env=env, text=True)
+            procs['bringup'] = NodeProcess('bringup', params_file, None, env)
         node = procs.get('bringup')
-        while node is not None and node.poll() is None:
-            try:
-                node.wait(timeout=0.1)
-            except subprocess.TimeoutExpired:
-                pass
-            plant_proc = procs.get('plant')
-            if plant_proc is not None and plant_proc.poll() is not None and not signals:
-                print(f'error: the simulated plant ended (code {plant_proc.returncode}); see '
+        while node is not None and not node.wait(0.1):
+            plant = procs.get('plant')
+            if plant is not None and plant.poll() is not None and not signals:
+                print(f'error: the simulated plant ended (code {plant.poll()}); see '
                       f'{run_dir / "plant.log"}', file=sys.stderr)
+                code = EXIT_RUN
                 break
-        code = node.returncode if node is not None else EXIT_INTERRUPTED
+        else:
+            code = node.poll() if node is not None else EXIT_INTERRUPTED
     finally:
         deadline = time.monotonic() + STOP_WAIT_S
         for name in ('bringup', 'plant'):          # the node first: it commands zero
             p = procs.get(name)
-            if p is None:
-                continue
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-            try:
-                p.wait(timeout=max(deadline - time.monotonic(), 0.5))
-            except subprocess.TimeoutExpired:
-                runner.kill_with_stacks(p)
-        for log in logs:
-            log.close()
+            if p is not None:
+                p.stop(max(deadline - time.monotonic(), 0.5))
+                p.close()
         for s, h in previous.items():
             signal.signal(s, h)
     if signals and code == 0:

@@ -232,3 +232,55 @@ def test_an_error_stops(rig):
     log = r.log()
     assert 'injected fault in the control step' in log
     assert 'stopped (error); zero velocity commanded' in log
+
+
+def _cli_bringup(tmp_path: Path, env: dict, scenario: Path) -> tuple[subprocess.Popen, Path]:
+    """``nonfragile_tracker bringup --simulate SCENARIO`` (6 s excitation, no trial); its
+    output in ``cli.log``."""
+    out = tmp_path / 'cli.log'
+    with open(out, 'w') as f:
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'nonfragile_tracker.cli', 'bringup', '--simulate',
+             str(scenario), '--duration', '6', '--trial-duration', '0', '--out', str(tmp_path),
+             '--name', 'run'], env=env, stdout=f, stderr=subprocess.STDOUT, text=True)
+    return proc, out
+
+
+def test_the_command_passes_ctrl_c_to_the_node_and_leaves_no_process(tmp_path, ros_env):
+    proc, out = _cli_bringup(tmp_path, ros_env, CONFIG / 'latency_scenario.yaml')
+    try:
+        end = time.monotonic() + 60.0
+        while 'phase excite' not in out.read_text(errors='replace'):
+            assert proc.poll() is None and time.monotonic() < end, out.read_text()
+            time.sleep(0.05)
+        time.sleep(1.0)
+        nodes = _children(proc.pid)
+        assert len(nodes) == 2                      # the plant and the bring-up node
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 130         # EXIT_INTERRUPTED
+    finally:
+        if proc.poll() is None:
+            kill_with_stacks(proc)
+    assert _alive(nodes, 5.0) == []
+    log = out.read_text(errors='replace')
+    assert 'stopped (stop signal); zero velocity commanded' in log
+    assert 'Traceback' not in log
+    c = read_motion(tmp_path / 'run' / 'bag').commands
+    assert (float(c.v[-1]), float(c.w[-1])) == (0.0, 0.0)
+
+
+def test_the_command_fails_when_the_simulated_plant_ends(tmp_path, ros_env):
+    params = scenario_parameters(CONFIG / 'latency_scenario.yaml', None)
+    params['plant']['ros__parameters']['dt'] = -0.01        # the plant refuses it at start
+    scenario = write_parameter_file(params, tmp_path / 'bad_plant.yaml')
+    proc, out = _cli_bringup(tmp_path, ros_env, scenario)
+    try:
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            kill_with_stacks(proc)
+    log = out.read_text(errors='replace')
+    assert code == 5, log                            # EXIT_RUN
+    assert 'error: the simulated plant ended (code 2)' in log
+    assert 'Traceback' not in log
+    assert 'dt' in (tmp_path / 'run' / 'plant.log').read_text()
