@@ -108,7 +108,7 @@ def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str]
             node.interrupt(signum)
 
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
-    code: int | None = EXIT_INTERRUPTED
+    code: int | None = EXIT_INTERRUPTED            # stopped before the node started
     try:
         if simulate:
             procs['plant'] = NodeProcess(
@@ -125,7 +125,8 @@ def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str]
                 code = EXIT_RUN
                 break
         else:
-            code = node.poll() if node is not None else EXIT_INTERRUPTED
+            if node is not None:
+                code = node.poll()
     finally:
         deadline = time.monotonic() + STOP_WAIT_S
         for name in ('bringup', 'plant'):          # the node first: it commands zero

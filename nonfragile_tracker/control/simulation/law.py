@@ -16,8 +16,8 @@ same operations on arrays of cases, with the speed limits applied as the tracker
 them, for the batch's loops (:class:`control.simulation.batch_parts.BatchTracker` and
 :func:`control.simulation.batch_ideal.ideal_loop`).  ``ordered=True`` sums ``u`` in the
 scalar order, so a case equals the scalar law bit for bit
-(``test/control/test_batch.py``); ``ordered=False`` sums ``K e`` first (one ``einsum``),
-the same value to round-off with fewer operations.
+(``test/control/test_law.py``, ``test/control/test_batch.py``); ``ordered=False`` sums
+``K e`` first (one ``einsum``), the same value to round-off with fewer operations.
 """
 from __future__ import annotations
 
@@ -100,8 +100,6 @@ class VectorLaw:
         self._vabs = np.empty(n)
         self._vf = np.empty(n)
         self.ordered = ordered
-        self._cs: np.ndarray | None = None          # the last cos-sin buffer, and reversed
-        self._cs_rev: np.ndarray | None = None
         if ordered:
             self._prod = np.empty((2, 5, n))        # u* and the four K_j e_j terms
 
@@ -172,10 +170,7 @@ class VectorLaw:
         _add(uc0, uc1, out=cv)                      # a
         cv *= h
         cv += v                                     # v + a h
-        cs_rev = self._cs_rev
-        if cs is not self._cs or cs_rev is None:
-            self._cs, self._cs_rev = cs, (cs_rev := cs[::-1])
-        _mul(U, cs_rev, out=uc)                     # u1 sin, u2 cos
+        _mul(U, cs[::-1], out=uc)                   # u1 sin, u2 cos
         _sub(uc1, uc0, out=w)
         w /= vf
         _fmax(w, self.nwmax, out=w)                 # nan stays nan
