@@ -3,6 +3,7 @@
 #                 in the recommended configuration (the shipped latency-certified default gain
 #                 config/tracker_gains.yaml, delay compensation);
 #                 make demo ARGS=--paper: the paper's configuration (K_nf, no compensation)
+#                 make demo ARGS="--robot jackal": a MuJoCo base (turtlebot3, jackal_skid)
 #   make test   - create .venv if needed and run the whole test suite
 #   (make docs  - build the documentation in doc/ into doc/_build/html, warnings as errors)
 PYTHON ?= python3

@@ -70,6 +70,9 @@ if __name__ == '__main__':       # colcon, pip and setuptools run it as __main__
             ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
             ('share/' + package_name + '/config', glob('config/*.yaml')),
             ('share/' + package_name + '/config/trajectories', glob('config/trajectories/*')),
+            # the physics plant's MJCF bases (control/simulation/physics.py) and their scenarios
+            ('share/' + package_name + '/config/bases', glob('config/bases/*.xml')
+             + glob('config/bases/*.yaml')),
             ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
         ],
         install_requires=['setuptools'],

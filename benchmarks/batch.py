@@ -52,12 +52,12 @@ from nonfragile_tracker.control.simulation.batch import (BatchCases, PathBatch, 
                                               perturbation_schedule, sample_deltas,
                                               simulate_batch)
 from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file  # noqa: E402
-from nonfragile_tracker.control.simulation.loop import TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig  # noqa: E402
 from nonfragile_tracker.control.synthesis.problem import load_problem  # noqa: E402
 from nonfragile_tracker.control.simulation.reference import circle  # noqa: E402
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
 from nonfragile_tracker.control.simulation.study import StudySpec, default_jobs, run_study  # noqa: E402
-from nonfragile_tracker.scenario import paper_plant_config  # noqa: E402
+from nonfragile_tracker.interface.scenario import paper_plant_config  # noqa: E402
 
 CONFIG = ROOT / 'config'
 #: Target of the batch rows: case-steps/s over the single run's steps/s.

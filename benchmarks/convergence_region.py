@@ -18,8 +18,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file  # noqa: E402
-from nonfragile_tracker.control.simulation.loop import TrackerConfig  # noqa: E402
-from nonfragile_tracker.scenario import paper_plant_config  # noqa: E402
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig  # noqa: E402
+from nonfragile_tracker.interface.scenario import paper_plant_config  # noqa: E402
 from nonfragile_tracker.control.simulation.reference import circle  # noqa: E402
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
 

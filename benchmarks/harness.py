@@ -1,7 +1,7 @@
 """Harness of the benchmarks: paths, statistics, the one results table, process control.
 
 Shared by ``run.py`` and every module of ``sections/``; ROS environments and
-parameter files come from the package (``nonfragile_tracker.runner``).
+parameter files come from the package (``nonfragile_tracker.workflows.runner``).
 """
 from __future__ import annotations
 
@@ -53,6 +53,10 @@ TARGETS = {
     'retime_optimal': ('<=', 1.1, 'x toppra'),
     'retime_limits': ('<=', 1.01, 'x limit'),
     'retime_60s': ('<', 0.2, 's'),
+    # issue 38: ours after bring-up at or below the best peer on every cell; ours as shipped
+    # at or below every stock peer from 40 ms up (worst cell's RMS ratio)
+    'peers_bringup_ahead': ('<=', 1.0, 'x best peer'),
+    'peers_default_ahead': ('<=', 1.0, 'x best stock peer'),
 }
 
 
@@ -274,19 +278,19 @@ def baseline_tree(ref: str, prefix: str = 'nfbench_base_') -> Path | None:
 
 def ros_env(domain: int) -> dict:
     """Environment of a ROS measurement: the package's run environment on ``domain``."""
-    from nonfragile_tracker.runner import isolated_env
+    from nonfragile_tracker.workflows.runner import isolated_env
     return isolated_env(dict(os.environ, ROS_DOMAIN_ID=str(domain),
                              ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'))
 
 
 def write_params(path: Path, params: dict) -> Path:
     """Parameter file with ``/**/node`` keys (the package's writer: any namespace matches)."""
-    from nonfragile_tracker.runner import write_parameter_file
+    from nonfragile_tracker.workflows.runner import write_parameter_file
     return write_parameter_file(params, path)
 
 
 def realtime_params(rate: float) -> dict:
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     dt = 1.0 / rate
     return runner.scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml', {
         'plant': {'ros__parameters': {'mode': 'realtime', 'dt': dt, 'duration': 0.0}},

@@ -7,7 +7,7 @@ For command latencies of 100, 200 and 300 ms, a 50 ms first-order lag on v and w
 odometry at 50 Hz with 1 mm / 1 mrad noise, the figure eight (radius 1 m, 0.2 rad/s)
 with the shipped gain and no predictor, it records runs and identifies them:
 
-* ``sim``       the in-process loop (control.simulation.loop step functions, as a lockstep run);
+* ``sim``       the in-process loop (control.simulation.plant and .tracker step functions, as a lockstep run);
 * ``lockstep``  (``--ros``) the nodes composed in one process, lockstep, recorded bag;
 * ``realtime``  (``--realtime``) the nodes composed, real time (20 s), recorded bag.
 
@@ -59,9 +59,10 @@ def plant_parameters(latency: float, seed: int, duration: float, mode: str) -> d
 def record_sim(latency: float, seed: int, duration: float = 20.0):
     """Commands and odometry of the in-process loop, as the plant publishes them."""
     from nonfragile_tracker.control.simulation.gains import read_gain_file
-    from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                            UnicyclePlant, quaternion_to_yaw,
-                                                            step_time, yaw_to_quaternion)
+    from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+    from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
+    from nonfragile_tracker.control.simulation.model import quaternion_to_yaw, yaw_to_quaternion
+    from nonfragile_tracker.control.simulation.timing import step_time
     from nonfragile_tracker.control.simulation.reference import make_path
     plant = UnicyclePlant(PlantConfig(dt=DT, cmd_latency=latency, lag_v=LAG, lag_w=LAG,
                                       odom_rate=50.0, odom_noise=(1e-3, 1e-3, 1e-3),
@@ -85,7 +86,7 @@ def record_sim(latency: float, seed: int, duration: float = 20.0):
 
 def record_lockstep(latency: float, seed: int, tmp: Path):
     from nonfragile_tracker.bag.motion import read_motion
-    from nonfragile_tracker.runner import run_composed, scenario_parameters
+    from nonfragile_tracker.workflows.runner import run_composed, scenario_parameters
     params = scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml',
                                  plant_parameters(latency, seed, 20.0, 'lockstep'))
     res = run_composed(params, tmp)
@@ -105,14 +106,15 @@ def record_realtime(latency: float, seed: int, tmp: Path, duration: float = 20.0
     from nonfragile_tracker.nodes.recorder import Recorder
     from nonfragile_tracker.nodes.reference import ReferenceNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
-    from nonfragile_tracker.runner import isolated_env, scenario_parameters
+    from nonfragile_tracker.workflows.runner import reserved_domain, scenario_parameters
     params = scenario_parameters(CONFIG / 'paper_scenario.yaml', CONFIG / 'tracker_gains.yaml',
                                  plant_parameters(latency, seed, duration, 'realtime'))
 
     def over(name):
         return [Parameter(k, value=v) for k, v in params[name]['ros__parameters'].items()]
 
-    env = isolated_env()
+    domain = reserved_domain()
+    env = domain.__enter__()          # the domain is ours until the run's end (finally below)
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     nodes = []
@@ -136,6 +138,7 @@ def record_realtime(latency: float, seed: int, tmp: Path, duration: float = 20.0
                 close()
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
+        domain.__exit__(None, None, None)
     data = read_motion(tmp / 'bag')
     # the plant applies a command at its next timer tick: the effective latency is the
     # configured one plus the wait from receipt to that tick (ticks = pose stamps)

@@ -69,7 +69,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file  # noqa: E402
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig  # noqa: E402
 from nonfragile_tracker.control.simulation.reference import figure_eight  # noqa: E402
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
 
@@ -138,7 +139,7 @@ def bag_latency(bag: Path) -> float:
 
 def node_run(job: dict) -> dict:
     """One run through the nodes; returns the job with its RMS (and identified latency)."""
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     lat, assumed = job['latency'], job['assumed']
     predict = ({'predict_latency': 0.0, 'predict_lag_v': 0.0, 'predict_lag_w': 0.0}
                if assumed is None else {'predict_latency': assumed, 'predict_lag_v': LAG,
@@ -283,7 +284,8 @@ def base_sim(gains: Path, latency: float, seed: int, start: str, duration: float
              tracker: dict | None = None, record: bool = False):
     """In process on the real base; (RMS after 10 s in m, run[, commands, odometry])."""
     from nonfragile_tracker.control.identification.identify import CommandSamples, OdometrySamples
-    from nonfragile_tracker.control.simulation.loop import Tracker, step_time
+    from nonfragile_tracker.control.simulation.tracker import Tracker
+    from nonfragile_tracker.control.simulation.timing import step_time
     from nonfragile_tracker.control.simulation.simulate import run_loop
     x0, y0, th0, v0 = STARTS[start]
     pc = PlantConfig(dt=DT, tau=0.0, A_tau=np.zeros((4, 4)), x0=x0, y0=y0, th0=th0, v0=v0,
@@ -447,7 +449,7 @@ def base_node_run(job: dict) -> dict:
     """One run through the nodes on the real base (``job``: mode, latency, seed, gains,
     start, tracker overrides); returns the job with ``rms_m`` (and ``bag`` if kept)."""
     import os
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     x0, y0, th0, v0 = STARTS[job['start']]
     plant = {'cmd_latency': job['latency'], 'noise_seed': job['seed'],
              'duration': job['duration'], 'initial_pose': [x0, y0, th0],

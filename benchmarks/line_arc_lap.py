@@ -132,7 +132,7 @@ def realtime_run(out: Path, gains: Path, lap: str, variant: str, seed: int) -> d
     code = f'''
 import sys
 from pathlib import Path
-from nonfragile_tracker import runner
+from nonfragile_tracker.workflows import runner
 from nonfragile_tracker.control.simulation.trajectory import load_waypoints
 traj = load_waypoints({str(LAPS[lap])!r})
 s = traj.sample(traj.t_start)
@@ -165,7 +165,8 @@ def in_process(gains: Path, seeds: int) -> dict:
 
     from nonfragile_tracker.control.simulation.follow import simulate_following
     from nonfragile_tracker.control.simulation.limits import Limits
-    from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.simulation.plant import PlantConfig
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
     from nonfragile_tracker.control.simulation.trajectory import load_waypoints
     g = yaml.safe_load(gains.read_text())['/**/tracker']['ros__parameters']
     t = yaml.safe_load(SCENARIO.read_text())['/**/tracker']['ros__parameters']

@@ -47,8 +47,9 @@ from nonfragile_tracker.control.identification.identify import (CommandSamples, 
                                                  identify_latency)
 from nonfragile_tracker.control.synthesis.latency_design import (design_for_latency,  # noqa: E402
                                                        plan_from_identification)
-from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,  # noqa: E402
-                                             step_time)
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.identification.monitor import (ERROR, LEVEL_NAMES, Certificate,  # noqa: E402
                                                 MonitorSettings, MonitorWorker,
                                                 adapted_prediction, certificate_from_design,
@@ -166,7 +167,7 @@ def node_step_run(gain_file: Path, seed: int, duration: float, adapt: bool, run_
     import os
     import re
 
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     sys.path.insert(0, str(ROOT / 'benchmarks'))
     from latency import bag_rms_after
     ov = {'plant': {'ros__parameters': {

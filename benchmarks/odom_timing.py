@@ -46,7 +46,8 @@ for p in (ROOT, ROOT / 'benchmarks'):
         sys.path.insert(0, str(p))
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file  # noqa: E402
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig  # noqa: E402
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig  # noqa: E402
 from nonfragile_tracker.control.simulation.reference import figure_eight  # noqa: E402
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking  # noqa: E402
 
@@ -83,7 +84,7 @@ def run_inprocess(dt: float, rate: float, jitter: float, plant_dt: float, latenc
 def node_run(job: dict) -> dict:
     """One run through the nodes; the job with its ``rms_m``."""
     from latency import bag_rms_after
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     plant = {'cmd_latency': job['latency'], 'noise_seed': job['seed'],
              'duration': job['duration'], 'initial_pose': list(START), 'initial_speed': 0.0,
              'dt': job['plant_dt'], 'odom_rate': job['rate'], 'odom_jitter': job['jitter'],

@@ -65,7 +65,7 @@ def cmd_probe(args) -> int:
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
-    from nonfragile_tracker import topics
+    from nonfragile_tracker.interface import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     namespaces = [n for n in args.namespaces.split(',')] if args.namespaces else ['']
     pids = [int(p) for p in args.pids.split(',') if p] if args.pids else []
@@ -196,7 +196,7 @@ def _echo_node(rclpy, namespace: str = ''):
     """The bare echo: odom in (deserialized), one preallocated Twist out, nothing else."""
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
-    from nonfragile_tracker import topics
+    from nonfragile_tracker.interface import topics
     from nonfragile_tracker.nodes.common import DATA_QOS as qos
     node = rclpy.create_node('bench_echo', namespace=namespace)
     pub = node.create_publisher(Twist, topics.CMD_VEL, qos)
@@ -240,8 +240,8 @@ def cmd_callback(args) -> int:
     import rclpy
     from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
     from nav_msgs.msg import Odometry
-    from nonfragile_tracker import topics
-    from nonfragile_tracker.msgconv import fill_pose, ns_to_stamp
+    from nonfragile_tracker.interface import topics
+    from nonfragile_tracker.interface.msgconv import fill_pose, ns_to_stamp
     from nonfragile_tracker.nodes.tracker import TrackerNode
     rclpy.init(args=['--ros-args', '--params-file', args.params])
     tracker = TrackerNode()
@@ -315,7 +315,7 @@ def cmd_callback(args) -> int:
 
 
 def cmd_composed(args) -> int:
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     params = runner.scenario_parameters(Path(args.scenario), Path(args.gains), {
         'plant': {'ros__parameters': {'duration': float(args.duration)}}})
     t0 = time.monotonic()

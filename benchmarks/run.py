@@ -39,6 +39,7 @@ from sections.design import bench_design, worker_sweep  # noqa: E402
 from sections.fleet import bench_fleet  # noqa: E402
 from sections.identify import bench_identify  # noqa: E402
 from sections.lockstep import bench_lockstep  # noqa: E402
+from sections.peers import bench_peers  # noqa: E402
 from sections.quality import bench_quality  # noqa: E402
 from sections.realtime import bench_realtime  # noqa: E402
 from sections.recorder import bench_recorder  # noqa: E402
@@ -50,7 +51,7 @@ from sections.synthesis import bench_synthesis, worker_cold, worker_growth  # no
 
 SECTIONS = ('synthesis', 'scaling', 'delay', 'tdcpy', 'simulation', 'batch', 'lockstep',
             'realtime', 'recorder', 'quality', 'identify', 'fleet', 'design', 'retime',
-            'stop')
+            'stop', 'peers')
 
 
 def cpu_seconds() -> float:
@@ -124,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
                  ('fleet', lambda: bench_fleet(cfg, table, raw, domain, tmp)),
                  ('design', lambda: bench_design(cfg, table, raw)),
                  ('retime', lambda: bench_retime(cfg, table, raw)),
-                 ('stop', lambda: bench_stop(cfg, table, raw, domain, tmp))]
+                 ('stop', lambda: bench_stop(cfg, table, raw, domain, tmp)),
+                 ('peers', lambda: bench_peers(cfg, table, raw))]
         for name, fn in steps:
             if name not in only:
                 continue

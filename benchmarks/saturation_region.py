@@ -30,7 +30,7 @@ from nonfragile_tracker.control.synthesis.problem import load_problem  # noqa: E
 from nonfragile_tracker.control.synthesis.saturation import (SaturationLimits,  # noqa: E402
                                                              format_saturation,
                                                              saturation_certificate)
-from nonfragile_tracker.region_check import (RobotSetup, check_region,  # noqa: E402
+from nonfragile_tracker.control.simulation.region_check import (RobotSetup, check_region,  # noqa: E402
                                              reference_speeds, smallest_failing)
 
 GAINS = ('tracker_gains', 'max_decay_gains', 'paper_gains_tracker')

@@ -28,8 +28,18 @@ myst_enable_extensions = ['dollarmath', 'amsmath', 'deflist', 'colon_fence']
 myst_heading_anchors = 4
 
 # every reference must resolve: a broken one is a warning, and the suite builds with -W
-nitpicky = False
+nitpicky = True
 suppress_warnings: list[str] = []
+# third-party objects: numpy, scipy, the standard library, rclpy, rosbags and Dask are not
+# in this build (no intersphinx inventories offline), so references to them cannot resolve;
+# ``ndarray`` is numpydoc's short name for numpy.ndarray in Attributes types;
+# ``DataclassInstance`` is typeshed's protocol (``_typeshed``, no runtime object), the bound
+# of a settings TypeVar
+nitpick_ignore = [('py:class', 'ndarray'), ('py:class', 'DataclassInstance')]
+nitpick_ignore_regex = [
+    (r'py:.*', r'(numpy|scipy|pathlib|collections\.abc|argparse|concurrent\.futures|rclpy'
+               r'|rosbags|distributed)\..*'),
+]
 
 # members defined in each module (re-exports are documented where they are defined)
 autodoc_default_options = {'members': True, 'show-inheritance': True,
@@ -47,6 +57,19 @@ html_title = 'nonfragile_tracker'
 html_static_path: list[str] = []
 
 
+def _no_inline_attribute_type(app, what, name, obj, options, lines):
+    """Keep napoleon from reading an attribute's first line as ``type: description``.
+
+    Our attribute, data and property docstrings begin with prose (``#: Receive-time window
+    (s): a reference ...``), never with a type; napoleon would render the text before the
+    first colon as a type (a cross-reference to a class that does not exist) and drop it
+    from the description.  An empty comment (``..``) as the first line leaves napoleon no
+    inline type to find and renders as nothing.
+    """
+    if what in ('attribute', 'data', 'property') and lines and lines[0].strip():
+        lines[:0] = ['..', '']
+
+
 def setup(app):
     """Put the package of this source tree and doc/_ext on the path, load the extension.
 
@@ -58,3 +81,5 @@ def setup(app):
         if path not in sys.path:
             sys.path.insert(0, path)
     app.setup_extension('nonfragile_docs')
+    # before napoleon's own handler (priority 500)
+    app.connect('autodoc-process-docstring', _no_inline_attribute_type, priority=400)

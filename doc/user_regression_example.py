@@ -22,8 +22,8 @@ import pytest
 
 from nonfragile_tracker.bag import (bag_report, compare_bags, format_differences,
                                     format_replay, replay)
-from nonfragile_tracker.golden import golden_gains, run_scenario, scenario_from_file
-from nonfragile_tracker.resources import config_dir
+from nonfragile_tracker.workflows.golden import golden_gains, run_scenario, scenario_from_file
+from nonfragile_tracker.interface.resources import config_dir
 
 _DATA = Path(__file__).resolve().parent.parent / 'test' / 'data'
 MY_ROBOT_BAG = Path(os.environ.get('MY_ROBOT_BAG', _DATA / 'golden_paper'))

@@ -1,7 +1,6 @@
 """Bring up the tracker on a new robot: ``nonfragile_tracker bringup`` from ``ros2 launch``.
 
-    ros2 launch nonfragile_tracker bringup.launch.py robot:=robot.yaml box:=1.0 \\
-        accel_segment:=true
+    ros2 launch nonfragile_tracker bringup.launch.py robot:=robot.yaml box:=1.0
 
 Drives a designed excitation within ``box`` m of the start pose, identifies the base,
 designs a certified gain, verifies it in a short trial and writes the robot file, the gain
@@ -25,7 +24,7 @@ def generate_launch_description():
                               'limits); empty: odom, cmd_vel, Twist, no known limits'),
         DeclareLaunchArgument('box', default_value='1.0',
                               description='stay within this distance of the start pose (m)'),
-        DeclareLaunchArgument('accel_segment', default_value='false',
+        DeclareLaunchArgument('accel_segment', default_value='true',
                               choices=['true', 'false'],
                               description='allow steps faster than the base follows (its '
                               'acceleration limits are identified)'),
@@ -33,5 +32,6 @@ def generate_launch_description():
                               description='folder of the run folders'),
         ExecuteProcess(cmd=cmd + ['--accel-segment'], output='screen',
                        condition=IfCondition(accel)),
-        ExecuteProcess(cmd=cmd, output='screen', condition=UnlessCondition(accel)),
+        ExecuteProcess(cmd=cmd + ['--no-accel-segment'], output='screen',
+                       condition=UnlessCondition(accel)),
     ])

@@ -28,7 +28,7 @@ from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
 from launch_ros.parameter_descriptions import ParameterValue
 
-from nonfragile_tracker.topics import LEAN_TOPICS, TYPES
+from nonfragile_tracker.interface.topics import LEAN_TOPICS, TYPES
 
 
 def generate_launch_description():

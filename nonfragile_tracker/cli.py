@@ -4,6 +4,8 @@
 top-level ``--help`` lists them all with a line each (:data:`DESCRIPTION`, :data:`EPILOG`),
 and every command's ``--help`` shows each option's default.  :func:`main` maps errors to
 the exit codes of :mod:`nonfragile_tracker.errors`.
+
+See doc/cli.md (every command, the exit codes).
 """
 from __future__ import annotations
 
@@ -69,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv``, run the command, map its errors to an exit code (no traceback).
 
     ``NonfragileError`` and ``OSError`` print ``error: <message>`` and exit with
-    :func:`errors.exit_code` (2 for bad input); anything else is a bug: one
+    :func:`.errors.exit_code` (2 for bad input); anything else is a bug: one
     ``internal error`` line with the exception type, exit 1, and the traceback only
     when ``NONFRAGILE_DEBUG=1``.  Usage errors exit 2 from argparse.
 

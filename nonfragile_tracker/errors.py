@@ -1,23 +1,13 @@
 """The package's root error, its input and run errors, and the exit code each kind maps to.
 
-Every error the package raises on purpose derives from :class:`NonfragileError`
-and from the builtin that matches its meaning (as python-control does), so a
-caller can catch ``ValueError`` for bad input without knowing this module::
+Every error the package raises on purpose derives from :class:`NonfragileError` and from
+the builtin that matches its meaning (:class:`InputError` is a ``ValueError``, exit 2;
+:class:`RunError` a ``RuntimeError``, exit 5; the LMI errors live in
+:mod:`nonfragile_tracker.control.synthesis.errors`); each part keeps its own errors in its
+``errors`` module under these, and :func:`exit_code` is the one place that maps an
+exception to a process exit code.  No ROS import here.
 
-    NonfragileError                      exit 1
-    +-- InputError (ValueError)          exit 2  bad file, parameter, number or message
-    +-- LmiError (RuntimeError)                  control.synthesis.errors
-    |   +-- InfeasibleError              exit 3  no certified gain exists (as posed)
-    |   +-- SolverFailure                exit 4  solver missing or no usable status
-    |   +-- CertificateError             exit 4  a solver point failed independent verification
-    +-- RunError (RuntimeError)          exit 5  a run (nodes, lockstep) failed
-
-Each part of the package keeps its own errors in its ``errors`` module, under these
-(``ProblemError(InputError)`` and the LMI errors in ``control/synthesis/errors.py``,
-``LoopConfigError(InputError)`` ... in ``control/simulation/errors.py``,
-``IdentificationError(InputError)`` ... in ``control/identification/errors.py``,
-``BagError(InputError)`` in ``bag/errors.py``); :func:`exit_code` is the one place that
-maps an exception to a process exit code.  No ROS import here.
+See doc/cli.md, section "Exit codes and errors" (the hierarchy and the codes).
 """
 from __future__ import annotations
 

@@ -3,6 +3,8 @@
 A missing file, a directory, binary junk, a file that is not YAML or that holds the
 wrong kind of document becomes an :class:`~nonfragile_tracker.errors.InputError`
 (or the caller's subclass) naming the file and what was wrong - never a traceback.
+
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 
@@ -39,7 +41,8 @@ def read_yaml(path: str | os.PathLike[str], what: str, *, error: type[InputError
 
     Raises
     ------
-    InputError (or ``error``)
+    InputError
+        (Or ``error``, if given.)
         The file cannot be read (missing, a directory, no permission), is not UTF-8
         text, is not valid YAML, or (``mapping=True``) is not a mapping.
     """

@@ -1,25 +1,11 @@
 """One executor abstraction for the package's embarrassingly parallel jobs (no ROS import).
 
-Design sweeps (:mod:`.control.sweep`) and robustness studies (:mod:`.control.study`) are
-lists of independent tasks.  :func:`map_tasks` runs ``fn`` over them, results in the
-order of the tasks, on
+:func:`map_tasks` runs ``fn`` over a list of independent tasks (design sweeps, robustness
+studies), results in the order of the tasks, on local worker processes (default), a Dask
+distributed cluster (imported only when asked, :data:`DASK_HINT`) or any
+:class:`concurrent.futures.Executor` the caller made.  Tasks and ``fn`` must be picklable.
 
-* ``'local'`` (default): worker processes of this machine
-  (:class:`concurrent.futures.ProcessPoolExecutor`; ``fork`` where it is safe, i.e. on
-  POSIX with no other thread running, ``spawn`` otherwise), or in this process for one
-  worker or one task;
-* ``'dask'``: a Dask distributed cluster - the scheduler at ``scheduler``
-  (``tcp://host:8786``, started with ``dask scheduler`` / ``dask worker``), or a
-  :class:`distributed.LocalCluster` of ``workers`` single-threaded worker processes
-  started for the call.  Dask is an optional dependency, imported only here and only
-  when asked (:data:`DASK_HINT` says how to install it);
-* any :class:`concurrent.futures.Executor` the caller made (e.g.
-  ``distributed.Client(...).get_executor()``, a Ray or loky pool): the engine stays the
-  caller's choice.
-
-Tasks and ``fn`` must be picklable (``fn`` a module-level function).  Only
-``Executor.map`` is used: ``concurrent.futures.as_completed`` does not accept Dask's
-futures (dask/distributed #3695).
+See doc/developing.md, section "Parallel jobs".
 """
 from __future__ import annotations
 

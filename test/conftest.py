@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 # a node that did not end: its stacks into its log, then killed (the runner's helper)
-from nonfragile_tracker.runner import kill_with_stacks  # noqa: F401
+from nonfragile_tracker.workflows.runner import kill_with_stacks  # noqa: F401
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config'

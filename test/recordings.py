@@ -4,7 +4,7 @@ Test and benchmark data, not part of the package (tests import it from test/, th
 identification benchmark puts test/ on its path).
 
 What ``identify`` reads from a bag, produced by the plant's step functions
-(:class:`control.simulation.loop.UnicyclePlant`, so command latency and its jitter, actuator lags,
+(:class:`control.simulation.plant.UnicyclePlant`, so command latency and its jitter, actuator lags,
 acceleration limits, stalls and odometry rate, latency and noise are the plant's), for
 tests and benchmarks of the identification without a ROS run:
 
@@ -32,11 +32,13 @@ import yaml
 
 from nonfragile_tracker.errors import InputError
 from nonfragile_tracker.control.identification.identify import CommandSamples, OdometrySamples
-from nonfragile_tracker.control.simulation.loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
-                               quaternion_to_yaw, step_time, yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.tracker import Command, Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.model import quaternion_to_yaw, yaw_to_quaternion
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.simulation.reference import Path
 
-__all__ = ['Recording', 'record_tracking', 'record_open_loop', 'joystick_steps', 'load_cases',
+__all__ = ['Recording', 'record_tracking', 'record_open_loop', 'record_bringup', 'joystick_steps', 'load_cases',
            'record_case']
 
 
@@ -213,7 +215,7 @@ def joystick_steps(duration: float, *, period: float = 0.05, hold: tuple[float, 
 def load_cases(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """The recording cases of a YAML file (``config/identify_cases.yaml``), by name.
 
-    Each case has ``plant`` (:class:`~control.simulation.loop.PlantConfig` fields), ``drive``
+    Each case has ``plant`` (:class:`~control.simulation.plant.PlantConfig` fields), ``drive``
     (a tracker: ``gains`` - a gain file relative to the YAML file - ``dt``,
     ``max_angular_speed``, ``path``, ``radius``, ``rate``; or a joystick: ``period``,
     ``hold``, ``v_range``, ``w_range``) and ``title``.
@@ -282,3 +284,40 @@ def record_case(spec: dict[str, Any], *, seed: int = 1, duration: float = 30.0) 
                              v_range=tuple(d['v_range']), w_range=tuple(d['w_range']),
                              seed=seed)
     return record_open_loop(plant, t, v, w)
+
+
+def record_bringup(plant_config: PlantConfig, *, box: float = 1.0, max_speed: float = 0.3,
+                   max_turn_rate: float = 1.0, accel_segment: bool = True) -> Recording:
+    """The bring-up's excitation driven as its node drives it, in process (no ROS).
+
+    The plan of :func:`~nonfragile_tracker.control.identification.excitation.plan_excitation`
+    for the plant's odometry rate, followed closed loop by the node's follower and law with
+    the shipped gain (``config/tracker_gains.yaml``), the odometry period as the step and
+    the speed limits clamping every command; commands by their send time.
+    """
+    from nonfragile_tracker.control.identification.excitation import plan_excitation
+    from nonfragile_tracker.control.simulation.follow import Follower
+    from nonfragile_tracker.control.simulation.interfaces import make_controller
+    from nonfragile_tracker.interface.msgconv import tracker_config
+    from nonfragile_tracker.interface.resources import config_dir
+    from nonfragile_tracker.nodes.tracker import PARAMS
+    rate = plant_config.odom_rate
+    plan = plan_excitation(box, max_speed, max_turn_rate, accel_segment=accel_segment,
+                           odom_rate=rate)
+    full: dict[str, Any] = {p.name: p.default for p in PARAMS}
+    gains = yaml.safe_load((config_dir() / 'tracker_gains.yaml').read_text())
+    full.update(gains['/**/tracker']['ros__parameters'])
+    full.update(dt=1.0 / rate, max_linear_speed=max_speed, max_angular_speed=max_turn_rate)
+    follower = Follower(make_controller(tracker_config(full)), plan.trajectory(),
+                        max_start_distance=0.0)
+    dt = plant_config.dt
+
+    def decide(plant: UnicyclePlant, k: int, got: Any) -> tuple[float, float] | None:
+        if got is None:
+            return None
+        meas, th = got
+        cmd = follower.step(meas.x, meas.y, th, step_time(meas.step, dt), meas.v, meas.w)
+        return cmd.v, cmd.w
+
+    return _record(plant_config, int(round((plan.duration + 1.0) / dt)), decide,
+                   'measurement', None)

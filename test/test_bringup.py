@@ -9,14 +9,14 @@ import pytest
 import yaml
 
 from conftest import CONFIG
-from nonfragile_tracker.bringup import (BringupRefusal, analyse, bringup_limits, design_gain,
+from nonfragile_tracker.workflows.commissioning import (BringupRefusal, analyse, bringup_limits, design_gain,
                                         identify_samples, write_robot_file)
 from nonfragile_tracker.control.identification.identify import read_identification_text
 from recordings import record_open_loop
 from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file
-from nonfragile_tracker.control.simulation.loop import PlantConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
 from nonfragile_tracker.errors import InputError
-from nonfragile_tracker.robot import RobotConfig, load_robot_file, parse_robot_parameters
+from nonfragile_tracker.interface.robot import RobotConfig, load_robot_file, parse_robot_parameters
 
 BASE = PlantConfig(dt=0.01, cmd_latency=0.1, lag_v=0.05, lag_w=0.05, odom_rate=50.0,
                    odom_noise=(1e-3, 1e-3, 1e-3), noise_seed=3)
@@ -93,10 +93,43 @@ def test_informative_steps_are_identified():
     hold = np.repeat(rng.uniform(0.05, 0.3, 20), t.size // 20 + 1)[:t.size]
     turn = np.repeat(rng.uniform(-0.8, 0.8, 20), t.size // 20 + 1)[:t.size]
     rec = record_open_loop(BASE, t, hold, turn)
-    res = identify_samples(rec.commands, rec.odometry)
+    res = identify_samples(rec.commands, rec.odometry, accel_segment=False)
     assert abs(res.latency_s - 0.1) <= 0.02                      # one odometry period
     assert res.tau_v_s == pytest.approx(0.05, rel=0.2)
-    assert any('acceleration limits not identified' in n for n in res.notes)
+    assert any('linear and angular acceleration limit not seen (0 = unknown): the excitation '
+               'had no acceleration segment' in n for n in res.notes)
+
+
+def test_the_default_excitation_identifies_both_limits_or_says_not_seen(tmp_path):
+    """Issue 39's base that is not ours (120 ms, 60 ms lags, 0.8 m/s^2 / 2.5 rad/s^2,
+    30 Hz): the default excitation (its acceleration segment) makes both limits bind, and
+    they are identified within 10 % (a sweep of 10 bases, 0.5-3 m/s^2, 1.5-6 rad/s^2, 20-50
+    Hz, 0-150 ms: 0-2 % where a limit binds for several odometry periods, one 2 m/s^2 at
+    20 Hz +42 %) and written to the robot file; on a base without limits they are not seen,
+    said so, and stay 0."""
+    from nonfragile_tracker.workflows.commissioning import write_report
+    from recordings import record_bringup
+    base = PlantConfig(dt=0.01, cmd_latency=0.12, lag_v=0.06, lag_w=0.06, odom_rate=30.0,
+                       odom_noise=(1e-3, 1e-3, 1e-3), noise_seed=1, max_linear_accel=0.8,
+                       max_angular_accel=2.5)
+    for plant, limits in ((base, (0.8, 2.5)),
+                          (dataclasses.replace(base, max_linear_accel=0.0,
+                                               max_angular_accel=0.0), (0.0, 0.0))):
+        rec = record_bringup(plant)
+        res = identify_samples(rec.commands, rec.odometry, odom_period=1 / 30)
+        assert res.latency_s == pytest.approx(0.12, abs=1 / 30)
+        assert (res.max_linear_accel, res.max_angular_accel) == pytest.approx(limits, rel=0.1)
+        written = load_robot_file(write_robot_file(tmp_path / 'robot.yaml', RobotConfig(), res))
+        assert (written.max_linear_accel, written.max_angular_accel) == pytest.approx(
+            limits, rel=0.1)
+    assert sum('acceleration limit not seen (0 = unknown): it did not bind' in n
+               for n in res.notes) == 2
+    write_report(tmp_path, {'ok': True, 'latency_s': 0.12, 'latency_interval_s': [0.1, 0.13],
+                            'latency_range_s': [0.1, 0.13], 'tau_v_s': 0.06, 'tau_w_s': 0.06,
+                            'max_linear_accel': 0.0, 'max_angular_accel': 2.5, 'summary': ''},
+                 None, {})
+    text = (tmp_path / 'report.md').read_text()
+    assert 'acceleration limits not seen (0 = unknown) m/s^2, 2.5 rad/s^2' in text
 
 
 def test_latency_beyond_certifiable_is_refused_naming_the_latency(tmp_path):

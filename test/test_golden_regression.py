@@ -9,13 +9,13 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
-from nonfragile_tracker import golden
+from nonfragile_tracker.workflows import golden
 from nonfragile_tracker.bag.compare import compare_bags, format_differences
 from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.nodes.common import DATA_QOS
 from nonfragile_tracker.nodes.tracker import TrackerNode
-from nonfragile_tracker.scenario import node_parameters
+from nonfragile_tracker.interface.scenario import node_parameters
 
 from conftest import unique_domain_id
 

@@ -23,8 +23,9 @@ from nonfragile_tracker.control.identification.identify import (CommandSamples, 
 from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
 from nonfragile_tracker.control.synthesis.latency_design import (lagged_problem,
                                                                  plan_from_identification)
-from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                        step_time)
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.synthesis.problem import load_problem
 from nonfragile_tracker.control.simulation.reference import figure_eight
 from nonfragile_tracker.control.simulation.simulate import run_loop
@@ -190,7 +191,7 @@ def test_cli_design_writes_the_identified_limits_into_the_robot_file(tmp_path, c
     """latency-design --identification --robot-file: the limits into the robot file (the
     gain file keeps them too), the robot file's other keys and comments untouched."""
     from dataclasses import replace
-    from nonfragile_tracker.robot import load_robot_file
+    from nonfragile_tracker.interface.robot import load_robot_file
     prob = tmp_path / 'di.yaml'
     prob.write_text(DI_PROBLEM)
     lat = write_identification(tmp_path / 'lat.yaml', replace(

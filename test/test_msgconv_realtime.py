@@ -6,9 +6,9 @@ from types import SimpleNamespace as NS
 
 import pytest
 
-from nonfragile_tracker.control.simulation.loop import quaternion_to_yaw, yaw_to_quaternion
+from nonfragile_tracker.control.simulation.model import quaternion_to_yaw, yaw_to_quaternion
 from nonfragile_tracker.control.simulation.reference import RefSample
-from nonfragile_tracker.msgconv import pose_from_odom, reference_from_msgs
+from nonfragile_tracker.interface.msgconv import pose_from_odom, reference_from_msgs
 
 
 def pose(x, y, q):

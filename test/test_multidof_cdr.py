@@ -10,7 +10,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.control.simulation.trajectory import TrajectoryError, analytic_knots
-from nonfragile_tracker.msgconv import (multidof_arrays, multidof_cdr, multidof_from_cdr,
+from nonfragile_tracker.interface.msgconv import (multidof_arrays, multidof_cdr, multidof_from_cdr,
                                         multidof_to_trajectory)
 from nonfragile_tracker.nodes.trajectory_io import followed_to_multidof, states_to_multidof
 

@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker import reproduce
-from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.workflows import reproduce
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
 

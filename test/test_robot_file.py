@@ -1,5 +1,5 @@
 """The robot file (issue 30, item 2): the shipped config/robot.yaml, its loader and writer
-(nonfragile_tracker.robot), the tracker taking its topics from it, and the docs including
+(nonfragile_tracker.interface.robot), the tracker taking its topics from it, and the docs including
 the very file the tests load - so that the file, the docs and the code cannot drift."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import yaml
 
 from conftest import ROOT
 from nonfragile_tracker.errors import InputError
-from nonfragile_tracker.robot import (KEYS, RobotConfig, RobotFileError, identified_limits,
+from nonfragile_tracker.interface.robot import (KEYS, RobotConfig, RobotFileError, identified_limits,
                                       load_robot_file, robot_file, update_robot_file)
 
 SHIPPED = ROOT / 'config' / 'robot.yaml'
@@ -199,7 +199,7 @@ def test_the_tracker_takes_its_topics_from_the_robot_file_and_remapping_still_ap
     from conftest import unique_domain_id
     from nonfragile_tracker.nodes.common import StartupError
     from nonfragile_tracker.nodes.tracker import TrackerNode
-    from nonfragile_tracker.scenario import node_parameters
+    from nonfragile_tracker.interface.scenario import node_parameters
     gains = node_parameters('tracker', ROOT / 'config' / 'tracker_gains.yaml')
     robot = RobotConfig(odom_topic='/diff_drive_controller/odom',
                         cmd_vel_topic='/diff_drive_controller/cmd_vel',

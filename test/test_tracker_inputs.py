@@ -1,4 +1,4 @@
-"""The tracker's input rules (nonfragile_tracker.tracker_inputs), ROS-free: which odometry,
+"""The tracker's input rules (nonfragile_tracker.interface.tracker_inputs), ROS-free: which odometry,
 reference and trajectory message is taken or refused and why, and when a command is due.
 
 Messages are plain namespaces with the ROS field names (the rules read fields by name, as
@@ -12,11 +12,13 @@ from types import SimpleNamespace as NS
 import pytest
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.errors import InputError
-from nonfragile_tracker.tracker_inputs import (INPUT_DEFAULTS, REF_BUFFER, InputRules,
-                                               Rejection, TrackerInputs, input_rules,
+from nonfragile_tracker.control.identification.tuning import TuningSettings
+from nonfragile_tracker.interface.tracker_inputs import (INPUT_DEFAULTS, MONITOR_DEFAULTS,
+                                               REF_BUFFER, InputRules, Rejection,
+                                               TrackerInputs, input_rules, monitor_settings,
                                                stale_inputs)
 
 from conftest import CONFIG
@@ -254,7 +256,16 @@ def test_an_untimed_path_gets_the_time_law_from_the_rules(config):
 
 # ---------------------------------------------------------------------- settings
 def test_rules_from_parameter_values():
-    assert input_rules({}) == InputRules()
+    # the node's defaults tune the predictor (monitor_tune, monitor on): an estimate every
+    # monitor_period, the monitor's settings, no lag inverted without a certified_lag
+    tuned = input_rules({})
+    assert tuned == InputRules(tune=(monitor_settings({}), TuningSettings(
+        period=MONITOR_DEFAULTS['monitor_period'], max_latency=0.5, max_lag=0.0)))
+    assert INPUT_DEFAULTS['monitor_tune'] is True and INPUT_DEFAULTS['monitor'] is True
+    assert input_rules({'certified_lag': 0.03}).tune[1].max_lag == 0.03
+    # off, or without the monitor (whose estimates it follows): the plain rules
+    assert input_rules({'monitor_tune': False}) == input_rules({'monitor': False}) == \
+        InputRules()
     r = input_rules({'mode': 'lockstep', 'odom_frame': 'world', 'max_stamp_jump': 0.5,
                      'retime': False, 'max_linear_accel': 0.7})
     assert (r.mode, r.frame, r.max_stamp_jump, r.retime) == ('lockstep', 'world', 0.5, False)
@@ -290,3 +301,20 @@ def test_fork_diverges_without_touching_the_original(config):
     trial.odom(odom(T0 + 10 * MS))
     assert inputs.last_stamp == T0 and trial.last_stamp == T0 + 10 * MS
     assert inputs.tracker.v != 0.7 and trial.latest == inputs.latest
+
+
+def test_one_parameters_to_tracker_config_mapping():
+    """``tracker_config_from`` (the study, the reproduction) is the node's mapping with the
+    node's defaults: a scenario's gain compensation and rate limits are kept, not dropped."""
+    import numpy as np
+
+    from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS
+    from nonfragile_tracker.interface.msgconv import (LAW_DEFAULTS, tracker_config,
+                                                      tracker_config_from)
+    K = -np.array([[1.0, 1.5, 0.0, 0.0], [0.0, 0.0, 1.0, 1.5]])   # A + B K Hurwitz
+    params = {'gain_w': 1.5, 'max_angular_accel': 3.0, 'max_linear_speed': 0.4}
+    cfg = tracker_config_from(params, K)
+    assert (cfg.gain_w, cfg.max_angular_accel, cfg.max_linear_speed) == (1.5, 3.0, 0.4)
+    assert cfg == tracker_config({**TRACKER_DEFAULTS, **params, 'K': K.ravel().tolist(),
+                                  'K_shape': [2, 4]})
+    assert np.array_equal(np.asarray(cfg.K), K) and LAW_DEFAULTS.items() <= TRACKER_DEFAULTS.items()

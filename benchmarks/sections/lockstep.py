@@ -65,7 +65,7 @@ def _children_cpu() -> float:
 
 def _processes_run(cfg, env, duration: float, record: bool, record_all: bool = False) -> dict:
     """One lockstep run with one process per node: in-run steps/s, wall, CPU of the nodes."""
-    from nonfragile_tracker import runner
+    from nonfragile_tracker.workflows import runner
     params = runner.scenario_parameters(CONFIG / 'paper_scenario.yaml',
                                         CONFIG / 'tracker_gains.yaml',
                                         {'plant': {'ros__parameters': {

@@ -19,10 +19,10 @@ from harness import (
 
 def _quality_job(job: dict) -> dict:
     """One simulation (runs in a worker process)."""
-    from nonfragile_tracker.control.simulation.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
     from nonfragile_tracker.control.simulation.reference import circle, figure_eight
     from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-    from nonfragile_tracker.scenario import paper_plant_config
+    from nonfragile_tracker.interface.scenario import paper_plant_config
     pc = paper_plant_config()
     kw = {}
     if job['comp']:

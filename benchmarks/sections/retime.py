@@ -172,7 +172,8 @@ def _tracking(table: Table, before) -> dict:
     from nonfragile_tracker.control.simulation.follow import simulate_following
     from nonfragile_tracker.control.simulation.gains import read_gain_file
     from nonfragile_tracker.control.simulation.limits import Limits, within_limits
-    from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+    from nonfragile_tracker.control.simulation.plant import PlantConfig
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
     sc = yaml.safe_load((ROOT / 'config' / 'line_arc_scenario.yaml').read_text())
     pl, tp = sc['/**/plant']['ros__parameters'], sc['/**/tracker']['ros__parameters']
     K = read_gain_file(ROOT / 'config' / 'tracker_gains.yaml')

@@ -18,10 +18,10 @@ from harness import (
 
 def bench_simulation(cfg, table: Table, raw: dict) -> None:
     from nonfragile_tracker.control.simulation.gains import read_gain_file
-    from nonfragile_tracker.control.simulation.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
     from nonfragile_tracker.control.simulation.reference import circle
     from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-    from nonfragile_tracker.scenario import paper_plant_config
+    from nonfragile_tracker.interface.scenario import paper_plant_config
 
     log(f'simulation: {cfg.sim_steps} steps x {cfg.sim_reps}')
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')

@@ -110,7 +110,7 @@ def _catches_sigterm(pid: int) -> bool:
 
 def launch_stop(code: Path, run_dir: Path, domain: int, moment: float, seed: int) -> dict:
     """One Ctrl-C under an emulated ``ros2 launch`` (see 13.2); exit times per node (s)."""
-    from nonfragile_tracker.runner import (lockstep_handshake, scenario_parameters,
+    from nonfragile_tracker.workflows.runner import (lockstep_handshake, scenario_parameters,
                                            write_parameter_file)
     rng = random.Random(seed)
     hand = lockstep_handshake(record=True)

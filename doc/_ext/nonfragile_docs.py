@@ -14,16 +14,20 @@
 ``automodules PACKAGE``
     ``automodule`` for every module of a package, in name order, each under a rubric, so a
     new module appears in the API reference without editing the docs.
+``modules PACKAGE``
+    A list of a package's modules with their docstrings' first lines (the Layout section of
+    doc/developing.md), so a new module needs no entry there.
 """
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import re
 import pkgutil
+from pathlib import Path
 from typing import Any
 
 from docutils import nodes
-from docutils.parsers.rst import directives
 from docutils.statemachine import StringList
 from sphinx.util.docutils import SphinxDirective
 
@@ -226,22 +230,48 @@ class AutoModules(SphinxDirective):
 ``cli-help COMMAND [SUBCOMMAND]``
     The ``--help`` text of a command of ``nonfragile_tracker`` (argparse, as the user
     sees it), so the CLI reference lists every option of today's code.
-``automodules PACKAGE``: ``automodule`` for each module of the package."""
+``automodules PACKAGE``: ``automodule`` for each module of the package (its subpackages
+    have pages of their own, so a new module or folder needs no entry here)."""
 
     required_arguments = 1
-    option_spec = {'exclude': directives.unchanged}
 
     def run(self) -> list[nodes.Node]:
         package = importlib.import_module(self.arguments[0])
-        exclude = set((self.options.get('exclude') or '').split())
-        names = sorted(m.name for m in pkgutil.iter_modules(package.__path__)
-                       if m.name not in exclude)
+        names = sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.ispkg)
         lines = StringList()
         source = self.get_source_info()[0]
         for name in names:
             full = f'{package.__name__}.{name}'
             for text in (f'.. rubric:: ``{full}``', '', f'.. automodule:: {full}', ''):
                 lines.append(text, source)
+        container = nodes.container()
+        self.state.nested_parse(lines, self.content_offset, container)
+        return container.children
+
+
+class ModuleList(SphinxDirective):
+    """``modules PACKAGE``: a bullet list of the package's modules, each with the first line
+    of its docstring (read with ``ast``, nothing imported), so the Layout section of
+    doc/developing.md is derived from the modules and a new one needs no entry there."""
+
+    required_arguments = 1
+
+    def run(self) -> list[nodes.Node]:
+        import ast
+        spec = importlib.util.find_spec(self.arguments[0])
+        if spec is None or not spec.submodule_search_locations:
+            raise self.error(f'modules: {self.arguments[0]!r} is not a package')
+        folder = Path(next(iter(spec.submodule_search_locations)))
+        lines = StringList()
+        source = self.get_source_info()[0]
+        for path in sorted(folder.glob('*.py')):
+            if path.stem == '__init__':
+                continue
+            doc = ast.get_docstring(ast.parse(path.read_text())) or ''
+            summary = doc.strip().splitlines()[0] if doc.strip() else ''
+            # roles as plain literals: the list is parsed as the page's markup (MyST or rST)
+            summary = re.sub(r':[\w:]+:`~?([^`<]+?)(?: <[^>]+>)?`', r'``\1``', summary)
+            lines.append(f'- ``{path.stem}``: {summary}', source)
         container = nodes.container()
         self.state.nested_parse(lines, self.content_offset, container)
         return container.children
@@ -269,6 +299,7 @@ def setup(app: Any) -> dict[str, Any]:
     app.connect('autodoc-process-docstring', unique_citations)
     app.add_directive('node-parameters', NodeParameters)
     app.add_directive('automodules', AutoModules)
+    app.add_directive('modules', ModuleList)
     app.add_directive('cli-help', CliHelp)
     app.add_directive('launch-arguments', LaunchArguments)
     return {'version': '1', 'parallel_read_safe': True, 'parallel_write_safe': True}

@@ -1,25 +1,13 @@
 """Bags of tracking runs: write, read, report, compare, replay and repair (public API).
 
-* :mod:`.writer` - :class:`BagWriter` (raw CDR in, chunked flushes), :func:`new_run_dir`,
-  QoS helpers and the :class:`BagError` hierarchy (an ``InputError``: exit 2);
-* :mod:`.reader` - :func:`read_bag` (numpy arrays of a run), :func:`read_messages`;
-* :mod:`.report` - :func:`bag_report` (metrics, real-time timing, gaps, PNG plots),
-  :func:`format_report`;
-* :mod:`.compare` - :func:`compare_bags` (per topic/field tolerances, stamp/index/time
-  alignment), :func:`format_differences`;
-* :mod:`.replay` - :func:`replay` (recorded inputs into a fresh tracker, commands
-  compared), :func:`format_replay`;
-* :mod:`.repair` - :func:`repair_bag` for a bag whose recorder was killed or an MCAP
-  without metadata.yaml.
+The modules :mod:`.writer`, :mod:`.reader`, :mod:`.report`, :mod:`.compare`,
+:mod:`.replay` and :mod:`.repair`; a user's regression test needs only their public
+functions (``compare_bags``, ``replay``, ``bag_report``, ``format_differences``, ...).
+None of them imports rclpy; the ROS side is :mod:`nonfragile_tracker.nodes.recorder` and
+:func:`nonfragile_tracker.workflows.dds_replay.replay_over_dds`.
 
-A user's regression test needs only these, e.g.::
-
-    from nonfragile_tracker.bag import compare_bags, format_differences, replay
-    res = replay('my_robot_run', gains='new_gains.yaml')
-    assert res.comparison.equal, format_differences(res.comparison)
-
-None of these import rclpy; the ROS side is :mod:`nonfragile_tracker.nodes.recorder` and
-:func:`nonfragile_tracker.replayer.replay_over_dds`.
+See doc/bags.md, section "Bag regression for your own robot or scenario" (the API by
+module, an example).
 """
 from __future__ import annotations
 

@@ -1,30 +1,13 @@
 """Compare two runs topic by topic, field by field: the one comparison engine.
 
-Every message is flattened to its numeric and string leaves
-(``pose.pose.position.x`` ...).  Two runs agree when every compared topic has the
-same messages and every leaf agrees: numbers within ``atol + rtol * |expected|``
-(per topic and field with :class:`Tolerance` rules, see :func:`parse_tolerance`),
-strings exactly.
+Every message is flattened to its numeric and string leaves; two runs agree when every
+compared topic has the same messages and every leaf agrees (numbers within
+``atol + rtol * |expected|``, per topic and field by :class:`Tolerance` rules,
+:func:`parse_tolerance`; strings exactly).  Messages are paired per topic by header stamp,
+by index or by receive time (``align``, ``auto`` by default); :func:`format_differences`
+prints a readable diff.
 
-Messages are paired per topic by one of three alignments (``align``):
-
-* ``stamp`` - by header stamp (lockstep bags: every step has its own stamp);
-* ``index`` - the i-th message with the i-th (unstamped topics of a lockstep run,
-  replayed commands);
-* ``time`` - by receive time since the first message of each bag, each expected
-  message with the nearest unused one within ``time_tolerance`` seconds (real-time
-  bags, whose stamps differ from run to run);
-* ``auto`` (default) - ``stamp`` for a stamped topic whose stamps mostly agree
-  (>= half of the expected ones), else ``index`` when both sides have as many
-  messages, else ``time``.
-
-Header stamps are message fields and are compared unless a rule excludes them
-(``header.stamp`` with a large tolerance); the bag's receive timestamps are not
-(``receive_time=True`` compares them with index/stamp alignment).  A stamped message
-repeating a header stamp already seen on its topic (a lockstep step republished
-while the plant waited) is dropped before comparing, as :func:`reader.read_bag` does.
-:func:`format_differences` prints a readable diff: topic, message index, field,
-expected vs got, the first N differences and a per-topic summary.
+See doc/bags.md, section "``bag compare``" (the alignments, stamps and republished steps).
 """
 from __future__ import annotations
 
@@ -347,7 +330,7 @@ def compare_messages(expected: Mapping[str, Sequence[Message]],
     """The comparison engine: ``{topic: [(receive ns, message), ...]}`` on both sides.
 
     ``tolerances`` are rules from :func:`parse_tolerance` (or their strings); other
-    fields use ``atol``/``rtol``.  ``align`` is one of :data:`ALIGNMENTS` or a mapping
+    fields use ``atol``/``rtol``.  ``align`` is one of ``ALIGNMENTS`` or a mapping
     topic -> alignment.  Differences beyond ``max_differences`` are counted, not kept.
 
     Parameters

@@ -4,6 +4,8 @@ Every class is an :class:`~nonfragile_tracker.errors.InputError` (a :class:`Valu
 exit code 2); a subclass exists where a caller tells it apart: by the builtin of its
 meaning (:class:`FileExistsError`, :class:`FileNotFoundError`) or by what it carries (the
 missing topics).  The message says what was wrong and what to do.
+
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 

@@ -1,22 +1,13 @@
 """Velocity commands and odometry of any rosbag2 bag, for latency identification.
 
 :func:`read_motion` returns the series
-:func:`nonfragile_tracker.control.identification.identify.identify_latency` needs, from a
-bag of this package or of any robot:
-
-* commands: ``geometry_msgs/msg/Twist`` timed by the bag's receive (log) time, or
-  ``geometry_msgs/msg/TwistStamped`` timed by its header stamp (receive time if
-  the publisher left the stamp at zero);
-* odometry: ``nav_msgs/msg/Odometry`` from any node, timed by its header stamp
-  (the measurement time), with pose and body twist.
-
-Topics: ``cmd_topic`` / ``odom_topic`` are found by
-:func:`nonfragile_tracker.bag.reader.pick_topic`, the rule ``bag report`` uses too (in
-the namespace that holds most of the package's topics, ``/robot1/cmd_vel``, else at the
-root); if a *default* name is absent, the one topic of the right type is taken.  More
-than one candidate, a wrong type or nothing at all raises :class:`MissingTopicsError` (a
-:class:`BagError`) naming the topics the bag has.
+:func:`~nonfragile_tracker.control.identification.identify.identify_latency` needs, from a
+bag of this package or of any robot: commands (Twist by receive time, TwistStamped by
+header stamp) and odometry (by header stamp), on topics found as ``bag report`` finds them;
+a missing, ambiguous or wrongly typed topic raises :class:`~.errors.MissingTopicsError`.
 No ROS (rclpy) import; rosbags only.
+
+See doc/tutorial.md, section "Identify the latency (``identify``)".
 """
 from __future__ import annotations
 
@@ -29,10 +20,10 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from rosbags.rosbag2 import ReaderError
 
-from .. import topics
+from ..interface import topics
 from ..errors import InputError
 from ..control.identification.identify import CommandSamples, OdometrySamples
-from ..control.simulation.loop import quaternion_to_yaw
+from ..control.simulation.model import quaternion_to_yaw
 from .reader import MissingTopicsError, BagError, open_reader, pick_topic
 from .typestore import jazzy_typestore
 
@@ -74,14 +65,14 @@ class MotionData:
 
 def read_motion(path: str | os.PathLike[str], *, cmd_topic: str = topics.CMD_VEL,
                 odom_topic: str = topics.ODOM, cmd_time: str = 'auto') -> MotionData:
-    """Read velocity commands and odometry of a bag for :func:`identify_latency`.
+    """Read velocity commands and odometry of a bag for :func:`.identify_latency`.
 
     Parameters
     ----------
     path : path-like
         A rosbag2 bag directory (any storage rosbags reads: MCAP, sqlite3).
     cmd_topic, odom_topic : str
-        Topic names (defaults ``cmd_vel``, ``odom``; see :func:`pick_topic`).
+        Topic names (defaults ``cmd_vel``, ``odom``; see :func:`.pick_topic`).
     cmd_time : {'auto', 'receive', 'stamp'}
         How commands are timed: ``auto`` = header stamp of a TwistStamped (receive
         time if it is zero), receive time of a Twist.

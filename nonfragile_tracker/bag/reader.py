@@ -1,20 +1,14 @@
 """Read a recorded run back from a rosbag2 bag into numpy arrays.
 
-:func:`read_bag` returns per-topic message counts and receive times and a
-:class:`RunData` with the robot pose (``odom``, else ``pose``), the reference
-(``reference/pose`` + ``reference/twist`` + ``reference/accel`` matched by
-header stamp) and the commands (``cmd_vel``, by receive time).
-:func:`read_messages` yields ``(receive time, message)`` of one topic.
+:func:`read_bag` returns per-topic message counts and receive times and a :class:`RunData`
+with the robot pose, the reference (matched by header stamp) and the commands;
+:func:`read_messages` yields ``(receive time, message)`` of one topic.  Topics are found
+under their fully qualified names (a namespace given or guessed); a step republished with
+the same stamp is counted and dropped.  All errors are
+:class:`~nonfragile_tracker.bag.errors.BagError` subclasses that say what to do.  No ROS
+(rclpy) import; rosbags only.
 
-Topic names: bags made by the recorder hold fully qualified names
-(``/odom``, or ``/robot1/odom`` under a namespace).  The logical names of
-:mod:`nonfragile_tracker.topics` are looked up as stored, under ``namespace``
-if given, else under the namespace that matches most of them.
-
-Messages repeated with the same header stamp (the plant republishes a step
-while it waits) are counted in ``duplicates`` and dropped from the arrays
-(the first copy is kept).  All errors are :class:`BagError` subclasses that
-say what to do.  No ROS (rclpy) import; rosbags only.
+See doc/bags.md, section "Recording and golden bags" (reading).
 """
 from __future__ import annotations
 
@@ -31,11 +25,11 @@ from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefiniti
 from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.typesys.store import Typestore
 
-from .. import topics
+from ..interface import topics
 from ..control.simulation.follow import REST_SPEED, START_TOLERANCE, start_offset, trajectory_time
-from ..control.simulation.loop import quaternion_to_yaw
+from ..control.simulation.model import quaternion_to_yaw
 from ..control.simulation.trajectory import TrajectoryError
-from ..msgconv import multidof_to_trajectory, path_to_trajectory
+from ..interface.msgconv import multidof_to_trajectory, path_to_trajectory
 from .errors import BagError, BagNotFoundError, MissingTopicsError
 from .typestore import jazzy_typestore
 
@@ -266,7 +260,7 @@ def check_bag(path: str | os.PathLike[str]) -> Path:
 
 
 def open_reader(path: str | os.PathLike[str]) -> Reader:
-    """An opened rosbags :class:`Reader` after :func:`check_bag`; close it when done.
+    """An opened rosbags ``Reader`` after :func:`check_bag`; close it when done.
 
     Parameters
     ----------
@@ -281,7 +275,7 @@ def open_reader(path: str | os.PathLike[str]) -> Reader:
     Raises
     ------
     BagError
-        As :func:`check_bag`, or :class:`BagError` when rosbags cannot open it.
+        As :func:`check_bag`, or :class:`.BagError` when rosbags cannot open it.
     """
     target = check_bag(path)
     try:
@@ -353,7 +347,7 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
 
     A relative name ``n`` is looked up in ``namespace`` (``'/robot1'``: as ``/robot1/n``;
     the root: as stored, ``n``, or as ``/n``); without one, in the namespace that holds
-    the most logical names of :data:`topics.TYPES` (ties: the shorter, then the first).
+    the most logical names of :data:`.topics.TYPES` (ties: the shorter, then the first).
     Absolute names (``/clock``) are looked up as they are.
 
     Parameters
@@ -386,7 +380,7 @@ def resolve_topics(available: Iterable[str], names: Iterable[str],
 
 
 def _namespace_scores(avail: Iterable[str]) -> list[tuple[str, int]]:
-    """Namespaces by how many logical names of :data:`topics.TYPES` they hold, most first.
+    """Namespaces by how many logical names of :data:`.topics.TYPES` they hold, most first.
 
     Ties: the shorter, then the first in name order; the root alone when none match.
     """
@@ -413,7 +407,7 @@ def pick_topic(available: Mapping[str, str], name: str, types: Iterable[str], *,
     namespace guessed from the whole bag, so a report and an identification of one bag
     read the same topics), then at the root; if it is absent and ``by_type``, the one
     topic of an accepted type is taken.  A tie of namespaces holding ``name``, a wrong
-    type, several topics of the type or none raises :class:`MissingTopicsError` naming the
+    type, several topics of the type or none raises :class:`.MissingTopicsError` naming the
     topics the bag has and ``option``.
 
     Parameters
@@ -765,7 +759,7 @@ def read_bag(path: str | os.PathLike[str], *, strict: bool = True, namespace: st
     """Read a run: counts and receive times of every topic, and the run arrays.
 
     With ``strict`` (default) a bag without a pose (``odom`` or ``pose``), the
-    three reference topics or ``cmd_vel`` raises :class:`MissingTopicsError`
+    three reference topics or ``cmd_vel`` raises :class:`.MissingTopicsError`
     naming the missing ones; otherwise the missing arrays are empty and
     listed in ``BagData.missing``.
 

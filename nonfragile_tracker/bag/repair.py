@@ -1,21 +1,12 @@
 """Recover a bag whose recorder died without closing it (SIGKILL, power loss of the node).
 
-Such a bag directory holds an MCAP file without summary and end magic (and no
-metadata.yaml); rosbags cannot open it.  :func:`repair_bag` walks the MCAP
-records from the start, keeps every *complete* top-level record (a record
-whose length fits in the file), unpacks complete chunks with the ``mcap``
-package and stops at the first incomplete or damaged record.  It then writes
-a new, properly closed bag (default ``<path>_repaired``; never overwrites)
-with the same topics, message types, offered QoS profiles (from the MCAP
-channel metadata, else :func:`~nonfragile_tracker.bag.writer.default_qos`),
-timestamps (MCAP log time) and bytes.
+:func:`repair_bag` keeps every complete MCAP record of the file (complete chunks unpacked
+with the ``mcap`` package), stops at the first incomplete or damaged one and writes a new,
+properly closed bag (default ``<path>_repaired``; never overwrites) with the same topics,
+types, QoS profiles, timestamps and bytes.  An MCAP without a readable metadata.yaml and
+another recorder's MCAP are rebuilt the same way; a complete, readable bag is refused.
 
-A bag whose MCAP is complete but whose metadata.yaml is missing or unreadable is
-rebuilt the same way (nothing is lost), and so is an MCAP written by another
-recorder (e.g. the ``mcap`` writer, any profile) given as a directory or as the
-``.mcap`` file: its channels with CDR messages and ``ros2msg`` schemas become bag
-topics (others are skipped and named).  A complete, readable bag is refused
-(:class:`BagError`).
+See doc/bags.md, section "Robust reading and repair".
 """
 from __future__ import annotations
 
@@ -200,7 +191,7 @@ def repair_bag(path: str | os.PathLike[str], out: str | os.PathLike[str] | None 
     """Write a closed copy of a bag that was not closed; return what was recovered.
 
     ``out`` defaults to ``<path>_repaired``; an existing ``out`` is never
-    overwritten (:class:`BagExistsError`).  Every message of every complete
+    overwritten (:class:`.BagExistsError`).  Every message of every complete
     chunk is kept with its topic, type, receive timestamp and bytes; the
     chunk that was being filled when the recorder died is lost.
 

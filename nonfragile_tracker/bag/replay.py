@@ -1,27 +1,14 @@
 """Replay a recorded run into a fresh tracker and compare its commands with the recorded ones.
 
 The recorded odometry and reference (or trajectory) messages are fed to
-:class:`~nonfragile_tracker.tracker_inputs.TrackerInputs` - the tracker node's own input
-rules, ROS-free, around the same step functions (:class:`control.simulation.loop.Tracker`,
-:class:`control.simulation.follow.Follower`) - with the tracker's parameters (:func:`replay_rules`:
-its ``odom_frame``, ``max_stamp_jump``, time law, start rule and limits):
+:class:`~nonfragile_tracker.interface.tracker_inputs.TrackerInputs` - the tracker node's own input
+rules, ROS-free - with the tracker's parameters (:func:`replay_rules`), in stamp order for
+a lockstep bag and in the recorder's order for a real-time one (:func:`plan_replay`), and
+its commands are compared (:func:`~.compare.compare_messages`) with the recorded ones or
+an expected bag's.  The DDS variant (through a real tracker node) is
+:func:`nonfragile_tracker.workflows.dds_replay.replay_over_dds`.  No rclpy here.
 
-* lockstep bags (most odometry stamps equal a reference stamp): fed in stamp order (the
-  reference parts of a stamp before its odometry), a command when the odometry and the
-  three reference parts with the same stamp are all in;
-* real-time bags: in bag order (the recorder's receive order), a command at each
-  odometry message with the latest reference parts (what the tracker had received by
-  then; see :func:`plan_replay` for what the recorder cannot tell);
-* bags with a trajectory message: that message and the odometry, in bag order.
-
-Its commands are compared (:func:`compare.compare_messages`) with the recorded
-``cmd_vel`` (Twist or TwistStamped) or with those of an ``expected`` bag: by index
-when both have as many, else by time.  What the node does on its wall clock (the
-real-time watchdog's stop commands after a silence) is not replayed: those recorded
-stops show up as unpaired commands.
-
-The DDS variant (through a real tracker node) is
-:func:`nonfragile_tracker.replayer.replay_over_dds`.  No rclpy here.
+See doc/bags.md, section "``bag replay``" (the feeding order, real-time bags, lean bags).
 """
 from __future__ import annotations
 
@@ -37,15 +24,16 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .. import topics
+from ..interface import topics
 from ..control.simulation.gains import gain_from_file_data
-from ..control.simulation.loop import Command, TrackerConfig
+from ..control.simulation.tracker import Command, TrackerConfig
+from ..control.identification.tuning import format_script, parse_script
 from ..control.simulation.timing import WINDOW
 from ..files import node_key
-from ..msgconv import stamp_ns, tracker_config
-from ..resources import config_dir
+from ..interface.msgconv import LAW_DEFAULTS, stamp_ns, tracker_config
+from ..interface.resources import config_dir
 # the tracker's input rules: one home, shared with the tracker node
-from ..tracker_inputs import INPUT_DEFAULTS, InputRules, Step, TrackerInputs, input_rules
+from ..interface.tracker_inputs import INPUT_DEFAULTS, InputRules, Step, TrackerInputs, input_rules
 from .compare import Comparison, compare_messages, format_differences
 from .reader import MissingTopicsError, open_reader, resolve_topics, typestore_for
 from .errors import BagError
@@ -55,18 +43,11 @@ __all__ = ['ReplayEvent', 'ReplayResult', 'TrackerInputs', 'TRACKER_DEFAULTS',
            'read_replay_events', 'load_tracker_parameters', 'replay', 'format_replay',
            'bag_mode', 'compare_commands', 'REF_INDEX', 'ReplayPlan', 'plan_replay',
            'finish_replay', 'ORDER_WINDOW', 'START_SEARCH', 'START_CHECK', 'PRIME_SEARCH',
-           'replay_rules']
+           'replay_rules', 'recorded_tuning']
 
-#: The tracker node's defaults for the parameters the law uses (nodes/tracker.PARAMS;
-#: a test keeps the two equal).
-TRACKER_DEFAULTS: dict[str, Any] = {
-    'K_shape': [2, 4], 'dt': 0.0, 'max_linear_speed': 1.0, 'max_angular_speed': 2.0,
-    'min_speed': 1e-3, 'E': [1.0, 0.0, 0.0, 1.0], 'F': [0.0] * 8, 'Delta': [0.0] * 4,
-    'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0,
-    'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
-    'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
-    'min_turning_radius': 0.0, **INPUT_DEFAULTS,
-}
+#: The tracker node's defaults for the parameters the replay uses (the law's, then the
+#: input rules'; nodes/tracker.PARAMS: a test keeps the two equal).
+TRACKER_DEFAULTS: dict[str, Any] = {**LAW_DEFAULTS, 'min_turning_radius': 0.0, **INPUT_DEFAULTS}
 #: A command as replayed or recorded: (receive ns of its input, Twist or TwistStamped).
 Timed = tuple[int, Any]
 _KINDS = {topics.ODOM: 'odom', topics.REF_POSE: 'ref_pose', topics.REF_TWIST: 'ref_twist',
@@ -82,7 +63,8 @@ class ReplayEvent:
     """One recorded input or command, in bag order."""
 
     kind: str                  # odom, ref_pose, ref_twist, ref_accel, cmd, trajectory,
-                               # followed (tracker/trajectory: not fed, says where adopted)
+                               # followed (tracker/trajectory: not fed, says where adopted),
+                               # tuning (tracker/tuning: not fed, the tracker's retunes)
     receive_ns: int
     topic: str
     msgtype: str
@@ -116,8 +98,9 @@ def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = 
     """Odometry, reference parts and commands of a bag, in bag (receive) order.
 
     Also the trajectory message (``trajectory_multidof``, else ``trajectory``) when the
-    bag has one (kind ``trajectory``; the per-step samples are then not fed) and the
-    tracker's ``tracker/trajectory`` announcements (kind ``followed``).
+    bag has one (kind ``trajectory``; the per-step samples are then not fed), the
+    tracker's ``tracker/trajectory`` announcements (kind ``followed``) and its retunes
+    (``tracker/tuning``, kind ``tuning``: :func:`recorded_tuning`).
 
     Parameters
     ----------
@@ -141,7 +124,7 @@ def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = 
     try:
         by_topic = {c.topic: c for c in reader.connections}
         tmap = resolve_topics(by_topic, list(_KINDS) + list(_TRAJECTORY_TOPICS)
-                              + [topics.FOLLOWED_TRAJECTORY], namespace)
+                              + [topics.FOLLOWED_TRAJECTORY, topics.TUNING], namespace)
         missing = [n for n in (topics.ODOM, topics.REF_POSE, topics.REF_TWIST,
                                topics.REF_ACCEL) if n not in tmap]
         lean = [n for n in _TRAJECTORY_TOPICS if n in tmap]
@@ -160,6 +143,8 @@ def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = 
             if topics.FOLLOWED_TRAJECTORY in tmap:
                 # where the tracker adopted it (the odometry stamp of its first command)
                 kinds[tmap[topics.FOLLOWED_TRAJECTORY]] = 'followed'
+        if topics.TUNING in tmap:
+            kinds[tmap[topics.TUNING]] = 'tuning'
         ts = typestore_for(reader)
         conns = [c for c in reader.connections if c.topic in kinds]
         out = []
@@ -172,6 +157,39 @@ def read_replay_events(path: str | os.PathLike[str], *, namespace: str | None = 
                            'try `nonfragile_tracker bag repair`') from None
     finally:
         reader.close()
+    return out
+
+
+def recorded_tuning(events: Iterable[ReplayEvent], values: Mapping[str, Any]
+                    ) -> dict[str, Any]:
+    """``values`` with the retunes the bag recorded as the ``tuning_schedule``.
+
+    A tracker with ``monitor_tune`` tunes its predictor from its own commands and odometry
+    since it started; a recording that joined it later lacks them, so the replay applies
+    the retunes the tracker published (``tracker/tuning``, each at the odometry stamp it took
+    effect at) instead of estimating them again.  Without tuning messages, or with the
+    tuning off (or a schedule given), ``values`` unchanged.
+
+    Parameters
+    ----------
+    events : iterable of ReplayEvent
+        A bag's events (:func:`read_replay_events`).
+    values : mapping
+        The tracker's parameter values.
+
+    Returns
+    -------
+    dict
+    """
+    out = dict(values)
+    v = {**TRACKER_DEFAULTS, **out}
+    if not (v['monitor'] and v['monitor_tune']) or v.get('tuning_schedule'):
+        return out
+    script = sorted({(stamp_ns(e.msg.header.stamp), float(e.msg.vector.x),
+                      float(e.msg.vector.y), float(e.msg.vector.z))
+                     for e in events if e.kind == 'tuning'})
+    if script:
+        out['tuning_schedule'] = format_script(script)
     return out
 
 
@@ -406,6 +424,8 @@ class ReplayPlan:
     #: real-time bags that join a run: the odometry before the start, fed first without a
     #: reference (no command) so the tracker's period estimate is the running tracker's
     prime: tuple[ReplayEvent, ...] = ()
+    #: why the recorded commands cannot be reproduced, when the replay can tell
+    note: str = ''
 
 
 #: Receive-time window (s): a reference the recorder got this long after a command may have
@@ -541,8 +561,8 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     follows it whenever it has one; lockstep or real time, lean or full) is fed that
     message and the odometry in bag order.
 
-    The rules are the tracker's (:class:`~nonfragile_tracker.tracker_inputs.TrackerInputs`,
-    :func:`replay_rules`).
+    The rules are the tracker's
+    (:class:`~nonfragile_tracker.interface.tracker_inputs.TrackerInputs`, :func:`replay_rules`).
 
     Parameters
     ----------
@@ -567,7 +587,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     recorded = [(e.receive_ns, e.msg) for e in events if e.kind == 'cmd']
     fed: dict[str, int] = {}
     for e in events:
-        if e.kind != 'followed':
+        if e.kind not in ('followed', 'tuning'):
             fed[e.kind] = fed.get(e.kind, 0) + 1
     values = {**(values or {})}
     if max_stamp_jump is not None:
@@ -575,12 +595,24 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
     if 'trajectory' in fed:
         return _plan_follow(events, config, recorded, fed, values)
     mode = bag_mode(events)
-    data = [e for e in events if e.kind not in ('cmd', 'followed')]
+    data = [e for e in events if e.kind not in ('cmd', 'followed', 'tuning')]
+    note = ''
     if use_recorded and mode == 'realtime' and recorded:
-        plan = _plan_realtime(data, recorded, config, replay_rules(values, mode), atol)
-        if plan is not None:
-            plan.fed = fed
-            return plan
+        # a retune at or before the odometry of the first recorded command: the predictor it
+        # made held commands the bag lacks (no start reproduces it; none is searched)
+        script = parse_script(values.get('tuning_schedule') or '')
+        start = [stamp_ns(e.msg.header.stamp) for e in data
+                 if e.kind == 'odom' and e.receive_ns <= recorded[0][0]][-1:]
+        if script and start and script[0][0] <= start[0]:
+            note = (f'the tracker tuned its predictor (tracker/tuning, at the odometry '
+                    f'stamped {script[0][0] * 1e-9:.6f} s) before its first recorded command: '
+                    'the state of its predictor then (the commands it had sent) is not in the '
+                    'bag, so its commands cannot be reproduced exactly; fed in bag order')
+        else:
+            plan = _plan_realtime(data, recorded, config, replay_rules(values, mode), atol)
+            if plan is not None:
+                plan.fed = fed
+                return plan
     if mode == 'lockstep':
         # a lockstep step is defined by its stamp, not by the recorder's receive order: the
         # reference publishes its samples off the critical path (the tracker follows the
@@ -592,7 +624,7 @@ def plan_replay(events: list[ReplayEvent], config: TrackerConfig, *,
         step = _feed(inputs, e)
         if step is not None:
             commands.append((e.receive_ns, _twist_msg(step.command)))
-    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored))
+    return ReplayPlan(mode, data, commands, recorded, fed, dict(inputs.ignored), note=note)
 
 
 class _RefTimeline:
@@ -778,6 +810,7 @@ def replay(bag: str | os.PathLike[str], *, gains: str | os.PathLike[str] | None 
     """
     config, values = load_tracker_parameters(gains, params)
     events = read_replay_events(bag, namespace=namespace)
+    values = recorded_tuning(events, values)
     plan = plan_replay(events, config, use_recorded=expected is None, atol=max(atol, 1e-9),
                        values=values)
     return finish_replay(bag, plan, plan.commands, expected=expected, atol=atol, rtol=rtol,
@@ -859,6 +892,8 @@ def format_replay(res: ReplayResult) -> str:
     if plan is not None and plan.swaps:
         lines.append(f'{plan.swaps} odometry message(s) paired with another reference state '
                      'than the bag order gives (the one the recorded command shows)')
+    if plan is not None and plan.note:
+        lines.append(plan.note)
     if res.comparison.equal:
         lines.append(f'commands reproduced: max |diff| {res.max_abs_error:.3g} '
                      f'({res.comparison.summary[topics.CMD_VEL].align} alignment)')

@@ -1,20 +1,11 @@
 """Tracking report of a recorded run: metrics, message counts, gaps and plots.
 
-:func:`bag_report` reads a bag (:func:`~nonfragile_tracker.bag.reader.read_bag`),
-matches the robot pose (``odom``, else ``pose``) with the reference by header
-stamp and computes :func:`nonfragile_tracker.control.simulation.metrics.tracking_metrics`
-on the matched samples (peak ``|v|``, ``|w|`` from ``cmd_vel``).  Times are
-seconds since the first pose or reference stamp, so a simulated (sim time)
-run keeps its own time axis.  It finds stamp gaps on the pose topic and
-writes four PNG figures (matplotlib, Agg, no pyplot state):
+:func:`bag_report` reads a bag (:func:`~nonfragile_tracker.bag.reader.read_bag`), matches
+the robot pose with the reference, computes the tracking metrics (and, for a real-time
+run, its timing), finds stamp gaps and writes four PNG figures; :func:`format_report`
+renders a :class:`Report` as a text table.
 
-* ``xy.png`` - path in the x-y plane against the reference (paper Fig. 6);
-* ``errors.png`` - x, y and position error against time;
-* ``xi.png`` - ``xi = [x, v cos th, y, v sin th]`` against
-  ``xi_d = [x_d, vx_d, y_d, vy_d]`` (``v`` = odom twist.linear.x);
-* ``commands.png`` - commanded v and w against time.
-
-:func:`format_report` renders a :class:`Report` as a text table.
+See doc/bags.md, section "``bag report``" (the matching, the timing, the figures).
 """
 from __future__ import annotations
 
@@ -29,7 +20,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .. import topics
+from ..interface import topics
 from ..control.simulation.metrics import TrackingMetrics, tracking_metrics
 from .reader import MissingTopicsError, read_bag
 from .errors import BagError
@@ -286,7 +277,7 @@ def bag_report(path: str | os.PathLike[str], out_dir: str | os.PathLike[str] | N
     the reference's time span.  Figures go to ``out_dir`` (default ``<path>_report``;
     created); existing figures are never replaced unless ``overwrite``.  A bag without a
     reference still gets timing and the path (``notes`` say so); a bag with neither
-    odometry/pose nor commands raises :class:`MissingTopicsError`.
+    odometry/pose nor commands raises :class:`.MissingTopicsError`.
 
     Parameters
     ----------
@@ -731,19 +722,11 @@ def certificate_check(bag: str | os.PathLike[str], certificate: Certificate | No
     settings : control.identification.monitor.MonitorSettings, optional
         Default: from ``params`` as the tracker node builds them.
     """
-    from ..control.identification.monitor import (ERROR, STALE, MonitorSettings, estimate_latency,
-                                                  evaluate)
+    from ..control.identification.monitor import ERROR, STALE, estimate_latency, evaluate
+    from ..interface.tracker_inputs import monitor_settings
     from .motion import read_motion
     if settings is None:
-        settings = MonitorSettings(
-            window=float(params.get('monitor_window', 4.0)),
-            max_latency=float(params.get('monitor_max_latency', 0.5)),
-            max_linear_speed=float(params.get('max_linear_speed', 1.0)),
-            max_angular_speed=float(params.get('max_angular_speed', 2.0)),
-            max_linear_accel=float(params.get('max_linear_accel', 0.0) or 0.0),
-            max_angular_accel=float(params.get('max_angular_accel', 0.0) or 0.0),
-            warn_margin=float(params.get('monitor_warn_margin', 0.02)),
-            tolerance=float(params.get('monitor_tolerance', 0.01)))
+        settings = monitor_settings(params)
     data = read_motion(bag)
     c, o = data.commands, data.odometry
     if o.v is None or o.w is None:

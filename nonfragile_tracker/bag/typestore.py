@@ -1,6 +1,8 @@
 """The one ROS 2 Jazzy typestore of the ``bag`` package (rosbags).
 
 Readers and writers share it: message definitions and RIHS01 hashes are built once.
+
+See doc/bags.md, section "Recording and golden bags".
 """
 from __future__ import annotations
 

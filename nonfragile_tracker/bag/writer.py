@@ -1,20 +1,13 @@
 """Write rosbag2 (metadata version 9, MCAP storage) bags from raw CDR messages.
 
-:class:`BagWriter` wraps :class:`rosbags.rosbag2.Writer` with the ROS 2 Jazzy
-typestore and adds what a recorder needs:
-
-* it never overwrites (:class:`BagExistsError`, a :class:`FileExistsError`);
-* messages are written as received (raw CDR bytes, unchanged) under topics
-  that carry their real message type and the publishers' offered QoS
-  profiles (rosbag2 v9 form, see :func:`make_qos`);
-* data reaches the disk in small chunks while recording, so a recorder that
-  is killed loses little (see *Flush policy* in :class:`BagWriter`).
-
-Also :func:`new_run_dir`, which makes a fresh ``run_YYYYmmdd_HHMMSS[_N]``
-directory that is never reused.  The package's errors are in
-:mod:`nonfragile_tracker.bag.errors`, its typestore in :mod:`nonfragile_tracker.bag.typestore`.
-
+:class:`BagWriter` wraps rosbags' rosbag2 ``Writer`` with the ROS 2 Jazzy typestore and adds
+what a recorder needs: it never overwrites (:class:`~.errors.BagExistsError`), writes the
+raw CDR bytes unchanged under their real message type and the publishers' offered QoS
+profiles (:func:`make_qos`), and flushes small chunks while recording, so a killed recorder
+loses little.  :func:`new_run_dir` makes a fresh run directory that is never reused.
 Nothing here imports ROS (rclpy); only rosbags.
+
+See doc/bags.md, section "Recording and golden bags".
 """
 from __future__ import annotations
 
@@ -35,7 +28,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from .. import topics
+from ..interface import topics
 from .errors import BagExistsError, BagError
 from .typestore import jazzy_typestore
 
@@ -160,7 +153,7 @@ def default_qos(topic: str) -> Qos:
     """What the nodes of this package offer on ``topic`` (used when the publisher is unknown).
 
     ``run_done`` is reliable + transient_local, depth 1; every other topic is
-    reliable + volatile, keep_last :data:`topics.DEPTH`.
+    reliable + volatile, keep_last :data:`.topics.DEPTH`.
 
     Parameters
     ----------

@@ -3,4 +3,7 @@
 A command function takes the parsed ``args`` and returns an exit code; it calls
 library functions (``control``, ``runner``, ``reproduce``, ``golden``, ``bag``) and
 only formats their results.  Library modules never import this package.
+
+See doc/cli.md and doc/developing.md, section "Layout"
+(``nonfragile_tracker/commands/``).
 """

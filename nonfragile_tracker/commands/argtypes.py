@@ -2,6 +2,8 @@
 
 Each raises :class:`argparse.ArgumentTypeError`, so argparse prints the usage line
 and ``error: argument --x: ...`` naming the option and the value.
+
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 
@@ -71,7 +73,7 @@ nonnegative_int = _at_least(_integer, 0, False, 'an integer', 'nonnegative_int',
 
 
 def add_executor_arguments(p: argparse.ArgumentParser, workers: str = '--workers') -> None:
-    """``--executor local|dask`` and ``--scheduler ADDRESS`` (:mod:`..parallel`).
+    """``--executor local|dask`` and ``--scheduler ADDRESS`` (:mod:`.parallel`).
 
     Parameters
     ----------

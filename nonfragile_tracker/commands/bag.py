@@ -3,6 +3,8 @@
 Each function takes the parsed ``args`` and returns the exit code; errors
 (:class:`~nonfragile_tracker.errors.InputError` for an unreadable bag, exit 2) reach
 the user through ``cli.main``.
+
+See doc/cli.md, section "Bags", and doc/bags.md.
 """
 from __future__ import annotations
 
@@ -98,7 +100,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
               expected=Path(args.expected) if args.expected else None,
               atol=args.atol, rtol=args.rtol, max_differences=args.max_diffs)
     if args.ros:
-        from ..replayer import replay_over_dds
+        from ..workflows.dds_replay import replay_over_dds
         res = replay_over_dds(Path(args.bag), **kw)
     else:
         res = replay(Path(args.bag), **kw)

@@ -5,6 +5,8 @@ the bring-up node process (:mod:`nonfragile_tracker.nodes.bringup`) on the robot
 topics and waits for it, passing Ctrl-C and SIGTERM on (the node commands zero and
 ends).  ``--simulate SCENARIO`` starts the package's plant in real time with the
 scenario's plant parameters first (no robot needed).
+
+See doc/cli.md, section "bringup", and doc/tutorial.md, section "One command (bringup)".
 """
 from __future__ import annotations
 
@@ -35,10 +37,10 @@ def cmd_bringup(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``bringup``.
     """
-    from ..bringup import bringup_limits
-    from ..robot import RobotConfig, load_robot_file
+    from ..workflows.commissioning import bringup_limits
+    from ..interface.robot import RobotConfig, load_robot_file
     from ..control.identification.excitation import plan_excitation
-    from ..resources import config_dir
+    from ..interface.resources import config_dir
     robot = load_robot_file(args.robot) if args.robot else RobotConfig()   # '': none
     v, w = bringup_limits(robot, args.max_speed, args.max_turn_rate)
     plan = plan_excitation(args.box, v, w, accel_segment=args.accel_segment,
@@ -57,7 +59,7 @@ def cmd_bringup(args: argparse.Namespace) -> int:
             print(f'  {t0:6.1f} - {t1:6.1f} s  {name}')
         print('dry run: nothing moved')
         return 0
-    from .. import runner
+    from ..workflows import runner
     from ..bag.writer import new_run_dir
     gains = Path(args.gains) if args.gains else config_dir() / 'tracker_gains.yaml'
     problem = Path(args.problem) if args.problem else config_dir() / 'paper_problem.yaml'
@@ -76,7 +78,6 @@ def cmd_bringup(args: argparse.Namespace) -> int:
                               else robot.input_timeout),
         'gains': str(gains.resolve()), 'problem': str(problem.resolve()),
         'robot': json.dumps(dataclasses.asdict(robot))}}}
-    env = runner.isolated_env() if args.simulate else None
     if args.simulate:
         plant = runner.scenario_parameters(Path(args.simulate), None).get('plant', {}).get(
             'ros__parameters', {})
@@ -84,7 +85,10 @@ def cmd_bringup(args: argparse.Namespace) -> int:
                      robot.enable_stamped_cmd_vel)
         params['plant'] = {'ros__parameters': plant}
     params_file = runner.write_parameter_file(params, run_dir / 'params.yaml')
-    return _run_nodes(params_file, run_dir, robot, env, bool(args.simulate))
+    if not args.simulate:                    # a real robot: the caller's domain
+        return _run_nodes(params_file, run_dir, robot, None, False)
+    with runner.reserved_domain() as env:    # the simulated base on a domain of its own
+        return _run_nodes(params_file, run_dir, robot, env, True)
 
 
 def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str] | None,
@@ -93,11 +97,11 @@ def _run_nodes(params_file: Path, run_dir: Path, robot: Any, env: dict[str, str]
 
     SIGINT and SIGTERM are passed on to the node, which commands zero and ends; a process
     that does not end within :data:`STOP_WAIT_S` is killed after its stacks are asked for
-    (:class:`~nonfragile_tracker.runner.NodeProcess`).  Returns the node's exit code
+    (:class:`~nonfragile_tracker.workflows.runner.NodeProcess`).  Returns the node's exit code
     (:data:`EXIT_INTERRUPTED` if stopped before it started or if it ended 0 after a stop;
     :data:`EXIT_RUN` if the simulated plant ended first).
     """
-    from ..runner import NodeProcess
+    from ..workflows.runner import NodeProcess
     procs: dict[str, NodeProcess] = {}
     signals: list[int] = []
 
@@ -168,9 +172,10 @@ def register(subparsers: Subparsers) -> None:
                    help='limit on |v| (m/s; default 0.3, or the robot file\'s if lower)')
     p.add_argument('--max-turn-rate', type=positive_float,
                    help='limit on |w| (rad/s; default 1, or the robot file\'s if lower)')
-    p.add_argument('--accel-segment', action='store_true',
-                   help='allow a segment whose steps are faster than the base follows, so '
-                   'that its acceleration limits are identified')
+    p.add_argument('--accel-segment', action=argparse.BooleanOptionalAction, default=True,
+                   help='end the excitation with steps faster than the base follows, so '
+                   'that its acceleration limits bind and are identified (default; '
+                   '--no-accel-segment: every ramp gentle, the limits not identified)')
     p.add_argument('--duration', type=positive_float, default=55.0,
                    help='robot time of the excitation (s, default 55)')
     p.add_argument('--trial-duration', type=float, default=20.0,

@@ -3,6 +3,8 @@
 A command that writes files refuses an existing one without ``--force`` and a missing
 directory before it computes anything (exit 2 through ``cli.main``), with one message
 for every command.
+
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 
@@ -93,12 +95,13 @@ def check_robot_file(path: str | None) -> None:
     Raises
     ------
     InputError
-        The file is not a valid robot file (:class:`~nonfragile_tracker.robot.RobotFileError`)
-        or its directory does not exist.
+        The file is not a valid robot file
+        (:class:`~nonfragile_tracker.interface.robot.RobotFileError`) or its directory does not
+        exist.
     """
     if not path:
         return
-    from ..robot import load_robot_file
+    from ..interface.robot import load_robot_file
     if Path(path).exists():
         load_robot_file(path)
     elif not Path(path).resolve().parent.is_dir():
@@ -108,19 +111,19 @@ def check_robot_file(path: str | None) -> None:
 def write_robot_file(path: str, values: dict[str, float], note: str) -> None:
     """Write identified values into the robot file ``path`` and say what changed.
 
-    :func:`nonfragile_tracker.robot.update_robot_file`: the other keys and the comments are
-    kept; a missing file is made from the shipped ``config/robot.yaml``.
+    :func:`nonfragile_tracker.interface.robot.update_robot_file`: the other keys and the
+    comments are kept; a missing file is made from the shipped ``config/robot.yaml``.
 
     Parameters
     ----------
     path : str
         The robot file (``--robot-file``).
     values : dict
-        Robot-file keys and values (:func:`nonfragile_tracker.robot.identified_limits`).
+        Robot-file keys and values (:func:`nonfragile_tracker.interface.robot.identified_limits`).
     note : str
         Where they come from (put in brackets in each changed key's comment).
     """
-    from ..robot import update_robot_file
+    from ..interface.robot import update_robot_file
     existed = Path(path).exists()
     changes = update_robot_file(path, values, note=note)
     head = f'robot file {path}' + ('' if existed else ' (new: a copy of the shipped '

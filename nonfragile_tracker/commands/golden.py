@@ -1,4 +1,7 @@
-"""``nonfragile_tracker golden``: re-run golden scenarios, show what changed, replace them."""
+"""``nonfragile_tracker golden``: re-run golden scenarios, show what changed, replace them.
+
+See doc/cli.md, section "golden", and doc/bags.md, section "Recording and golden bags".
+"""
 from __future__ import annotations
 
 import argparse
@@ -19,7 +22,7 @@ def cmd_golden(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``golden``.
     """
-    from .. import golden
+    from ..workflows import golden
     if args.scenario:
         scenarios = [golden.scenario_from_file(p, args.gains) for p in args.scenario]
     else:
@@ -41,7 +44,7 @@ def register(subparsers: Subparsers) -> None:
     subparsers : argparse._SubParsersAction
         The CLI's sub-commands (``cli.build_parser``); ``golden`` is added to them.
     """
-    from ..golden import DURATION
+    from ..workflows.golden import DURATION
     g = subparsers.add_parser(
         'golden', help='re-run golden scenarios (the package\'s, or your --scenario files) in '
         'lockstep and print what changed against their golden bags (--write replaces them)')

@@ -1,4 +1,8 @@
-"""``identify BAG``: command-to-motion latency and actuator lags from a recorded run."""
+"""``identify BAG``: command-to-motion latency and actuator lags from a recorded run.
+
+See doc/cli.md, section "identify", and doc/tutorial.md, section "Identify the latency
+(``identify``)".
+"""
 from __future__ import annotations
 
 import argparse
@@ -87,7 +91,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         write_identification(args.output, res, overwrite=True)
         print(f'wrote {args.output}')
     if args.robot_file:
-        from ..robot import identified_limits
+        from ..interface.robot import identified_limits
         write_robot_file(args.robot_file, identified_limits(res), f'identified from {args.bag}')
     from ..control.synthesis.latency_design import plan_from_identification
     if math.isfinite(res.command_period_s):

@@ -1,4 +1,7 @@
-"""``nonfragile_tracker latency-design``: a tracker gain certified for a command latency."""
+"""``nonfragile_tracker latency-design``: a tracker gain certified for a command latency.
+
+See doc/cli.md, section "latency-design", and doc/theory.md, section "Synthesis choices".
+"""
 from __future__ import annotations
 
 import argparse
@@ -46,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
         print(plan.describe())
         h_min, h_max = plan.h_min, plan.h_max
         lag = plan.lag if args.lag is None else args.lag
-        extra = {**plan.tracker_parameters(), **plan.actuator_parameters()}
+        extra = {**plan.tracker_parameters(), **plan.actuator_parameters(),
+                 **plan.gain_parameters()}
         record = plan.metadata()
     else:
         h_min, h_max = args.delay_interval
@@ -55,6 +59,13 @@ def run(args: argparse.Namespace) -> int:
     summary = res.summary()
     print(summary)
     meta = {**res.metadata(), **record}
+    if args.identification is not None:
+        from ..control.synthesis.latency_design import gain_verdict
+        verdict = gain_verdict(plan, problem, res.K)
+        if verdict is not None:
+            print(verdict[0])
+            summary += '\n' + verdict[0]
+            meta.update(verdict[1])
     # the certificate for the tracker's monitor (control.identification.monitor; the hold is
     # the tracker's command period, its dt or the measured odometry period: not written)
     cert = certificate_from_design(meta, hold=0.0)
@@ -71,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
                   f'{k} = {v:.4g}' for k, v in extra.items() if k.startswith('predict_'))
                  + ')' if 'predict_latency' in extra else ''))
     if args.robot_file:
-        from ..robot import identified_limits
+        from ..interface.robot import identified_limits
         write_robot_file(args.robot_file, identified_limits(ident),
                          f'identified in {args.identification}')
     if args.json:

@@ -1,4 +1,7 @@
-"""``reproduce``: the paper's Section IV into an output directory (and ``doc/reproduction/``)."""
+"""``reproduce``: the paper's Section IV into an output directory (and ``doc/reproduction/``).
+
+See doc/cli.md, section "reproduce".
+"""
 from __future__ import annotations
 
 import argparse
@@ -20,7 +23,7 @@ def _docs_dir(value: str | None) -> Path:
         ``--docs`` without a directory when the package runs from an install (the
         installed package is never written into).
     """
-    from ..resources import source_root
+    from ..interface.resources import source_root
     if value:
         return Path(value)
     root = source_root()
@@ -38,8 +41,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``reproduce``.
     """
-    from .. import reproduce
-    from ..resources import config_dir
+    from ..workflows import reproduce
+    from ..interface.resources import config_dir
     docs = _docs_dir(args.docs) if args.docs is not None else None
     out = Path(args.out)
     if out.exists() and not out.is_dir():

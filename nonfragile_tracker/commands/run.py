@@ -1,4 +1,7 @@
-"""``run``: the main job - the scenario through the ROS nodes, a bag, a report and plots."""
+"""``run``: the main job - the scenario through the ROS nodes, a bag, a report and plots.
+
+See doc/cli.md, section "run".
+"""
 from __future__ import annotations
 
 import argparse
@@ -33,13 +36,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         The parsed command line of ``run``.
     """
-    from .. import runner
+    from ..workflows import runner
     from ..bag.writer import new_run_dir
     from ..control.simulation.gains import read_gain_file
-    from ..resources import config_dir
+    from ..interface.resources import config_dir
     if args.paper and (args.gains or args.delay_compensation):
         raise InputError('--paper is the paper\'s configuration (its K_nf, no delay '
                          'compensation): leave out --gains and --delay-compensation')
+    if args.robot:
+        from ..control.simulation.physics import BASES
+        if args.scenario:
+            raise InputError('--robot NAME runs that physics base\'s scenario '
+                             '(config/bases/NAME.yaml): leave out --scenario')
+        if args.robot not in BASES:
+            raise InputError(f'--robot {args.robot}: not a physics base; choose one of '
+                             f'{", ".join(sorted(BASES))}')
+        args.scenario = str(config_dir() / 'bases' / f'{args.robot}.yaml')
+        args.record_all = True          # the true pose (topic pose) beside the odometry
     scenario = Path(args.scenario) if args.scenario else config_dir() / 'paper_scenario.yaml'
     gains = (Path(args.gains) if args.gains else config_dir() / (
         'paper_gains_tracker.yaml' if args.paper else 'tracker_gains.yaml'))
@@ -49,7 +62,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.duration is not None:
         ov['plant']['ros__parameters']['duration'] = float(args.duration)
     if args.delta:
-        from ..scenario import paper_perturbations
+        from ..interface.scenario import paper_perturbations
         deltas = paper_perturbations()          # config/paper_problem.yaml perturbations
         if args.delta not in deltas:
             raise InputError(f'--delta {args.delta}: not a perturbation of the paper problem; '
@@ -119,6 +132,10 @@ def register(subparsers: Subparsers) -> None:
     r = subparsers.add_parser('run', help='the main job: paper scenario through the ROS nodes, '
                        'bag, report and plots')
     r.add_argument('--scenario', help='node parameter file (default config/paper_scenario.yaml)')
+    r.add_argument('--robot', metavar='NAME',
+                   help='a MuJoCo base of config/bases (turtlebot3, jackal, jackal_skid): its '
+                   'scenario (a figure eight, 40 ms latency, 50 Hz odometry), every topic '
+                   'recorded (the true pose beside the odometry); needs mujoco-core')
     r.add_argument('--gains', help='tracker gain file (default config/tracker_gains.yaml: '
                    'certified for command latency up to 0.15 s through a 50 ms lag; '
                    'config/max_decay_gains.yaml: fastest on ideal plants, lockstep; after '

@@ -1,4 +1,7 @@
-"""``study GAINS``: robustness study of a gain over sampled perturbations, latencies and poses."""
+"""``study GAINS``: robustness study of a gain over sampled perturbations, latencies and poses.
+
+See doc/cli.md, section "study", and doc/study.md.
+"""
 from __future__ import annotations
 
 import argparse
@@ -28,12 +31,12 @@ def cmd_study(args: argparse.Namespace) -> int:
     """
     from ..control.simulation.batch import PathBatch
     from ..control.simulation.gains import read_gain_design, read_gain_file
-    from ..control.simulation.loop import TrackerConfig
     from ..control.synthesis.problem import load_problem
     from ..control.simulation.study import StudySpec, case_records, plot_study, run_study, summarize
     from ..errors import InputError
-    from ..resources import config_dir
-    from ..scenario import node_parameters, plant_config
+    from ..interface.msgconv import tracker_config_from
+    from ..interface.resources import config_dir
+    from ..interface.scenario import node_parameters, plant_config
     check_outputs(args.force, args.json, args.plot)
     K = read_gain_file(args.gains)
     design = read_gain_design(args.gains)
@@ -50,12 +53,12 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise InputError(f'{scenario}: the study does not simulate the tracker\'s command rate '
                          'limit (max_linear_accel, max_angular_accel tracker parameters); use a '
                          'scenario without it (the plant\'s limits are simulated)')
-    tracker = TrackerConfig(
-        K=tuple(map(tuple, K.tolist())), dt=float(tparams.get('dt', plant.dt)),
-        max_linear_speed=float(tparams.get('max_linear_speed', 1.0)),
-        max_angular_speed=float(tparams.get('max_angular_speed', 2.0)),
-        min_speed=float(tparams.get('min_speed', 1e-3)),
-        delay_compensation=bool(args.delay_compensation), A_tau=plant.A_tau, tau=plant.tau)
+    # the tracker as the node maps its parameters (one mapping); the study samples Delta and
+    # takes the plant's delay term
+    tracker = tracker_config_from(
+        tparams, K, dt=float(tparams.get('dt', plant.dt)), Delta=[0.0] * 4,
+        delay_compensation=bool(args.delay_compensation),
+        A_tau=[v for row in plant.A_tau for v in row], tau=plant.tau)
     center = list(rparams.get('center', [0.0, 0.0]))
     path = PathBatch(str(rparams.get('path', 'circle')), float(rparams.get('radius', 0.5)),
                      float(rparams.get('rate', 0.01)), float(center[0]), float(center[1]),

@@ -1,4 +1,7 @@
-"""``sweep PROBLEM``: certified latency designs over a grid, in parallel, and their front."""
+"""``sweep PROBLEM``: certified latency designs over a grid, in parallel, and their front.
+
+See doc/cli.md, section "sweep".
+"""
 from __future__ import annotations
 
 import argparse

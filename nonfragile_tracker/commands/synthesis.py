@@ -1,4 +1,7 @@
-"""``synthesize``, ``design``, ``delay-dependent``, ``analyse`` and ``margins``."""
+"""``synthesize``, ``design``, ``delay-dependent``, ``analyse`` and ``margins``.
+
+See doc/cli.md, section "Gain synthesis and analysis".
+"""
 from __future__ import annotations
 
 import argparse
@@ -25,7 +28,7 @@ __all__ = ['register', 'cmd_synthesize', 'cmd_design', 'cmd_delay_dependent', 'c
 def _gains_from_args(args: argparse.Namespace) -> dict[str, np.ndarray]:
     """The gains named by ``--gains FILE`` (repeatable) and ``--paper``, by display name."""
     from ..control.simulation.gains import read_gain_file
-    from ..resources import load_paper_gains
+    from ..interface.resources import load_paper_gains
     gains: dict[str, np.ndarray] = {}
     if args.paper:
         gains.update({f'paper {k}': v for k, v in load_paper_gains().items()})
@@ -252,7 +255,7 @@ def cmd_analyse(args: argparse.Namespace, margins_only: bool = False) -> int:
         if sat:
             print(f'{r.name}: {sat}')
     if getattr(args, 'tracking', False):
-        from ..reproduce import TRACK_STEPS, paper_circle_tracking, track_pose
+        from ..workflows.reproduce import TRACK_STEPS, paper_circle_tracking, track_pose
         print(f'\ntracking on the paper circle, {TRACK_STEPS} steps of 0.01 s from (x, y, yaw, v) '
               f'= {tuple(round(v, 4) for v in track_pose())}, |w| <= 2 rad/s:')
         print(f'{"gain":<24} {"compensation":>12} {"first 1 cm (s)":>15} {"stays (s)":>10} '

@@ -5,6 +5,8 @@ or violation and what re-timing changes.
 
 Bad files exit 2 with the file, the point index and the value (``cli.main``); a trajectory
 that exceeds a limit exits 1 (after the margins and what re-timing would change).
+
+See doc/cli.md, section "trajectory check", and doc/trajectories.md.
 """
 from __future__ import annotations
 

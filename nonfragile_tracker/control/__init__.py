@@ -8,8 +8,8 @@
     Latency and lags from commands and odometry; the runtime certificate monitor.
 
 :mod:`~nonfragile_tracker.control.validate`, the one shape/number validator, is shared by
-the three.  Arrows: synthesis -> identification -> simulation; none between synthesis and
-simulation.  Nothing here imports rclpy, rosbags or the package's ROS layers.  Names are
-imported from their modules (``from nonfragile_tracker.control.simulation.loop import
-Tracker``); the packages themselves hold only their docstrings.
+the three.  Nothing here imports rclpy, rosbags or the package's ROS layers; names are
+imported from their modules, the packages hold only their docstrings.
+
+See doc/developing.md, sections "Lint and types" (the parts and their layers) and "Layout".
 """

@@ -3,6 +3,9 @@
 Every module that takes a matrix from a user - a problem file, a node parameter, a
 CLI option, a function argument - converts it here, so the message for a bad value
 is the same everywhere: the name, what was wrong, and what to write instead.
+
+See doc/cli.md, section "Exit codes and errors", and doc/developing.md, section
+"Architecture rules".
 """
 from __future__ import annotations
 
@@ -44,7 +47,8 @@ def as_matrix(value: Any, name: str, shape: Shape | None = None, *,
 
     Raises
     ------
-    InputError (or ``error``)
+    InputError
+        (Or ``error``, if given.)
         Naming ``name`` for non-numeric or complex entries, ragged rows, NaN/inf,
         too many dimensions or a wrong shape.
     """
@@ -108,7 +112,8 @@ def as_square(value: Any, name: str, n: int | None = None, *,
 
     Raises
     ------
-    InputError (or ``error``)
+    InputError
+        (Or ``error``, if given.)
         As :func:`as_matrix`, or when the matrix is not square.
     """
     arr = as_matrix(value, name, (n, n), error=error)
@@ -140,7 +145,8 @@ def as_finite_float(value: Any, name: str, *, low: float | None = None,
 
     Raises
     ------
-    InputError (or ``error``)
+    InputError
+        (Or ``error``, if given.)
         For a bool, a non-number, NaN or inf, or a value below the bound.
     """
     if isinstance(value, bool):

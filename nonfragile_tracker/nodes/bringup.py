@@ -1,26 +1,14 @@
 """``bringup``: drive a designed excitation, identify, design, verify - and stop safely always.
 
-A thin adapter over :mod:`nonfragile_tracker.control.identification.excitation` (the
-plan), :class:`control.simulation.follow.Follower` with the tracking law (closed loop,
-the shipped certified gain for the excitation, the designed one for the trial) and
-:mod:`nonfragile_tracker.bringup` (identify, design, files, report; run in a child
-process so that this node keeps its 0.1 s stop guarantee while the SDPs run).
+A thin adapter over :mod:`nonfragile_tracker.control.identification.excitation` (the plan),
+:class:`~nonfragile_tracker.control.simulation.follow.Follower` with the tracking law
+(closed loop) and :mod:`nonfragile_tracker.workflows.commissioning` (identify, design, files,
+report; in a child process).  Phases: ``wait`` -> ``excite`` (recorded to ``<run_dir>/bag``) ->
+``analyse`` -> ``trial`` (``<run_dir>/trial_bag``) -> ``report``.  On every exit path it
+publishes and records zero velocity and ends within 0.1 s.
 
-Phases: ``wait`` (odometry: the start pose and the odometry period) -> ``excite``
-(records ``cmd_vel`` and ``odom`` to ``<run_dir>/bag``, with the reference) ->
-``analyse`` (robot at rest: identify; refuse with the cause; design; refuse naming the
-latency) -> ``trial`` (the designed gain on the same figure eight, ``<run_dir>/trial_bag``)
--> ``report`` -> done.  Progress lines ``[bringup] phase ...`` go to stdout.
-
-Safety (every exit path): zero velocity is published (Twist or TwistStamped as
-configured) and recorded in the bag, and the process ends, on SIGINT/SIGTERM, odometry
-silence beyond ``odom_timeout`` while driving (at rest - analysis, report - zero is
-commanded every 0.5 s, silence is reported, and the trial starts only with fresh
-odometry), leaving the box (odometry farther than ``box_radius`` from the start pose), a
-refusal and any error, within 0.1 s: the main loop spins with a
-20 ms timeout and checks the stop flag (rclpy's own signal handlers are not installed,
-so the context stays up for the zero command).  Every command is clamped to
-``max_linear_speed`` and ``max_angular_speed``.
+See doc/tutorial.md, section "One command (bringup)" (the phases), and doc/safety.md,
+section "The bring-up (``bringup``)" (every exit path).
 """
 from __future__ import annotations
 
@@ -42,14 +30,15 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 
-from .. import bringup as steps
-from .. import topics
+from ..interface import topics
 from ..bag.writer import BagWriter
 from ..control.identification.excitation import Plan, plan_excitation, plan_trial
 from ..control.simulation.follow import Follower, path_errors
-from ..control.simulation.loop import Tracker, TrackerConfig, quaternion_to_yaw
+from ..control.simulation.interfaces import Controller, make_controller
+from ..control.simulation.tracker import TrackerConfig
+from ..control.simulation.model import quaternion_to_yaw
 from ..errors import EXIT_BAD_INPUT, EXIT_RUN, InputError
-from ..robot import RobotConfig, parse_robot_parameters
+from ..interface.robot import OUTCOME_FILE, REPORT_FILE, RobotConfig, parse_robot_parameters
 from .common import DATA_QOS, AdapterNode, Param, fill_pose, ns_to_stamp
 from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
 from .workarounds import arm_exit_deadline
@@ -74,7 +63,7 @@ PARAMS = [
           read_only=True),
     Param('max_angular_speed', 1.0, 'limit on |cmd_vel.angular.z| (rad/s)', low=1e-3,
           high=1e3, read_only=True),
-    Param('accel_segment', False, 'drive a segment whose steps are faster than the base '
+    Param('accel_segment', True, 'drive a segment whose steps are faster than the base '
           'follows (its acceleration limits are identified)', read_only=True),
     Param('excitation_duration', 55.0, 'robot time of the excitation (s)', low=5.0, high=600.0,
           read_only=True),
@@ -85,7 +74,7 @@ PARAMS = [
     Param('gains', '', 'the gain of the excitation (the shipped certified one)', read_only=True),
     Param('problem', '', 'the problem file of the design', read_only=True),
     Param('robot', '{}', 'the robot settings as JSON (the keys of '
-          'nonfragile_tracker.robot.RobotConfig)',
+          'nonfragile_tracker.interface.robot.RobotConfig)',
           read_only=True),
     Param('dry_plan_only', False, 'plan, print the extent and end without moving (tests)',
           read_only=True),
@@ -209,7 +198,8 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.last_odom = math.nan
         self.silence_said = False
         self.last_tick = time.monotonic()
-        self.deferred = False               # the last tick put the silence judgement off
+        self.grace_until = -math.inf        # after a stall of this node: judge no silence
+                                            # before this (monotonic s)
         self.last_stamp = 0
         self.stamps: list[int] = []
         self.start: tuple[float, float, float] | None = None
@@ -322,7 +312,8 @@ class BringupNode(AdapterNode[BringupConfig]):
             return
         if self.phase in ('excite', 'trial') and self.follower is not None:
             t = (stamp - self.origin_ns) * 1e-9
-            cmd = self.follower.step(x, y, th, t, float(msg.twist.twist.linear.x))
+            cmd = self.follower.step(x, y, th, t, float(msg.twist.twist.linear.x),
+                                     float(msg.twist.twist.angular.z))
             ref = self.follower.last_ref
             if ref is not None and self.recording is not None:
                 self._record_reference(stamp, ref)
@@ -354,10 +345,10 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.last_odom = self.phase_start
         _say(f'phase {phase}')
 
-    def _tracker(self, values: dict[str, Any]) -> Tracker:
+    def _tracker(self, values: dict[str, Any]) -> Controller:
         """The tracking law with the gain file's values, the odometry period, the limits."""
-        from ..msgconv import tracker_config
-        from ..nodes.tracker import PARAMS as TRACKER_PARAMS
+        from ..interface.msgconv import tracker_config
+        from .tracker import PARAMS as TRACKER_PARAMS
         cfg = self.config
         full = {p.name: p.default for p in TRACKER_PARAMS}
         full.update(values)
@@ -368,7 +359,7 @@ class BringupNode(AdapterNode[BringupConfig]):
             if getattr(robot, key) > 0:
                 full[key] = getattr(robot, key)
         tc: TrackerConfig = tracker_config(full)
-        return Tracker(tc)
+        return make_controller(tc)
 
     def _begin(self, x: float, y: float, th: float) -> None:
         cfg = self.config
@@ -411,7 +402,8 @@ class BringupNode(AdapterNode[BringupConfig]):
                 'settings': {'robot': self.config.robot.__dict__,
                              'problem': str(self.config.problem),
                              'odom_period': self.odom_period,
-                             'accel_segment': self.config.accel_segment}})
+                             'accel_segment': self.config.accel_segment},
+                'excitation': self.excitation_figs})
         elif self.phase == 'trial':
             self._trial_figures()
             self._start_child('report', {
@@ -420,16 +412,22 @@ class BringupNode(AdapterNode[BringupConfig]):
                 'excitation': self.excitation_figs})
 
     def _start_child(self, phase: str, spec: dict[str, Any]) -> None:
-        """Run :func:`nonfragile_tracker.bringup.run_child` on ``spec`` in a child process."""
-        out = self.config.run_dir / steps.OUTCOME_FILE
+        """Run ``spec`` in a child process (the analysis or the report).
+
+        The child runs :func:`nonfragile_tracker.workflows.commissioning.run_child`, a layer
+        above the nodes: called by its name, never imported; the run folder's files
+        (:mod:`nonfragile_tracker.interface.robot`'s names) are the contract.
+        """
+        out = self.config.run_dir / OUTCOME_FILE
         if phase == 'analyse' and out.exists():
             out.unlink()
         path = self.config.run_dir / f'{phase}_task.json'
         path.write_text(json.dumps(spec, default=float))
         # a session of its own: a terminal's Ctrl-C reaches this node, which kills the child
         self.child = subprocess.Popen(
-            [sys.executable, '-c', 'import sys; from nonfragile_tracker.bringup import '
-             'run_child; sys.exit(run_child(sys.argv[1]))', str(path)], start_new_session=True)
+            [sys.executable, '-c', 'import sys; from nonfragile_tracker.workflows.commissioning '
+             'import run_child; sys.exit(run_child(sys.argv[1]))', str(path)],
+            start_new_session=True)
         self._set_phase(phase)
 
     def _trial_figures(self) -> None:
@@ -448,7 +446,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.trial_figs['robot_time_total'] = self.robot_time
 
     def _after_analysis(self) -> None:
-        out = self.config.run_dir / steps.OUTCOME_FILE
+        out = self.config.run_dir / OUTCOME_FILE
         try:
             self.outcome = json.loads(out.read_text())
         except (OSError, ValueError):
@@ -460,13 +458,12 @@ class BringupNode(AdapterNode[BringupConfig]):
             _say(f'REFUSED ({self.outcome.get("phase")}): {self.outcome.get("refusal")}')
             if self.outcome.get('traceback'):
                 print(self.outcome['traceback'], file=sys.stderr)
-            steps.write_report(self.config.run_dir, self.outcome, None, self.excitation_figs)
             self.stop('refused: no gain written', EXIT_BAD_INPUT)
             return
         o = self.outcome
         _say(f'identified: latency {o["latency_s"]:.4f} s, lags {o["tau_v_s"]:.4f} / '
              f'{o["tau_w_s"]:.4f} s, accel limits {o["max_linear_accel"]:.3g} m/s^2 / '
-             f'{o["max_angular_accel"]:.3g} rad/s^2')
+             f'{o["max_angular_accel"]:.3g} rad/s^2 (0 = not seen)')
         _say(f'designed: ||K|| = {o["gain_norm"]:.3f}, certified residual up to '
              f'{o["certified_h_max"]:.4f} s with the lag {o["lag"]:.4f} s; wrote '
              f'{o["gain_file"]}')
@@ -510,16 +507,16 @@ class BringupNode(AdapterNode[BringupConfig]):
             return
         silent = now - self.last_odom
         own_gap, self.last_tick = now - self.last_tick, now
-        if silent > cfg.odom_timeout and own_gap > cfg.odom_timeout / 2 and not self.deferred:
+        if silent > cfg.odom_timeout and own_gap > cfg.odom_timeout / 2 \
+                and now >= self.grace_until:
             # this node itself stalled (a loaded machine): the odometry may be waiting unread
-            # in its queue, so the judgement waits one tick, for the queue to be taken (once:
-            # a node starved at every tick judges at the next)
-            self.deferred = True
+            # in its queue (or in the middleware's threads, stopped with this process), so
+            # it gets odom_timeout of this node's running time to be taken before a silence
+            # is judged (once: a node starved again within that time judges at its end)
+            self.grace_until = now + cfg.odom_timeout
             _say(f'warning: this node did not run for {own_gap:.2f} s (a loaded machine); '
-                 'the odometry silence is judged at the next tick')
-            return
-        self.deferred = False
-        if silent > cfg.odom_timeout:
+                 f'the odometry silence is judged after {cfg.odom_timeout:g} s more')
+        if silent > cfg.odom_timeout and now >= self.grace_until:
             if self.phase in ('excite', 'trial'):
                 self.stop(f'odometry silent for {silent:.2f} s (> odom_timeout '
                           f'{cfg.odom_timeout:g} s)', EXIT_SILENCE)
@@ -529,7 +526,7 @@ class BringupNode(AdapterNode[BringupConfig]):
                 _say(f'warning: odometry silent for {silent:.2f} s while the robot is at '
                      'rest; zero is still commanded, and the trial starts only with fresh '
                      'odometry')
-        else:
+        elif silent <= cfg.odom_timeout:
             self.silence_said = False
         if self.phase in ('analyse', 'report'):
             if now - self.last_progress > 0.5:
@@ -560,7 +557,7 @@ class BringupNode(AdapterNode[BringupConfig]):
     def _finish(self) -> None:
         cfg = self.config
         o = self.outcome or {}
-        report = cfg.run_dir / steps.REPORT_FILE
+        report = cfg.run_dir / REPORT_FILE
         try:
             res = json.loads((cfg.run_dir / 'report.json').read_text())
             status = res.get('certificate', '')
@@ -608,7 +605,7 @@ def main(args: list[str] | None = None) -> int:
     try:
         try:
             node = BringupNode()
-        except ValueError as exc:
+        except InputError as exc:
             print(f'[FATAL] {exc}', file=sys.stderr)
             return EXIT_BAD_INPUT
         executor = SingleThreadedExecutor()

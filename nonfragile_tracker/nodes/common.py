@@ -1,8 +1,11 @@
 """Shared ROS plumbing of the nodes.
 
 QoS, parameters with descriptors, message conversion (re-exported from
-:mod:`nonfragile_tracker.msgconv`), the nodes' base class (constructor shape, parameter
-flow) and the Jazzy shutdown pattern.  No control math lives here.
+:mod:`.msgconv`), the nodes' base class (constructor shape, parameter flow) and the Jazzy
+shutdown pattern.  No control math lives here.
+
+See doc/developing.md, section "Node shape", and doc/safety.md, section "Stopping: Ctrl-C,
+ros2 launch, systemd".
 """
 from __future__ import annotations
 
@@ -27,15 +30,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 
-from .. import topics
-from ..tracker_inputs import MODES as TRACKER_MODES
+from ..interface import topics
+from ..errors import InputError
+from ..interface.tracker_inputs import MODES as TRACKER_MODES
 # message conversions and the parameter -> config mapping are ROS-free (bag replay uses them)
 from .entry import catch_stop_signals, ignore_stop_signals, stop_requested
 # the workarounds of rclpy 7.1.6 / Fast DDS 2.14 faults, each with the condition to drop it
 from .workarounds import arm_exit_deadline, end_executor, guard_shutdown_race, spin_until
 # the nodes' errors (nodes/errors.py, ROS-free), where the nodes have always imported them
 from .errors import StartupError, StartupStopped
-from ..msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
+from ..interface.msgconv import (fill_pose, fill_reference, ns_to_stamp,  # noqa: F401
                       pose_from_odom, reference_from_msgs, stamp_ns)
 
 __all__ = ['DATA_QOS', 'LATCHED_QOS', 'Param', 'declare', 'stamp_ns', 'ns_to_stamp',
@@ -151,7 +155,7 @@ def settings_from(settings_class: type[S], values: Mapping[str, Any], /, **given
 
 
 def require_at_least(values: Mapping[str, Any], name: str, low: int) -> None:
-    """Refuse (:class:`StartupError`) an integer parameter below ``low``.
+    """Refuse (:class:`.StartupError`) an integer parameter below ``low``.
 
     Parameters
     ----------
@@ -167,7 +171,7 @@ def require_at_least(values: Mapping[str, Any], name: str, low: int) -> None:
 
 
 def check_mode(value: str, node_name: str | None = None) -> str:
-    """``value`` if it is one of :data:`MODES`, else :class:`StartupError`.
+    """``value`` if it is one of :data:`MODES`, else :class:`.StartupError`.
 
     Parameters
     ----------
@@ -232,6 +236,7 @@ def overrides(**values: Any) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
+#: A node's configuration type (``AdapterNode[XConfig]``, :attr:`AdapterNode.config`).
 C = TypeVar('C')
 
 
@@ -249,7 +254,7 @@ class AdapterNode(Node, Generic[C]):
     ``x_config(values) -> XConfig`` is a plain function of the parameter values (a dict by
     name) that validates them and raises :class:`~nonfragile_tracker.errors.InputError`.
     :meth:`bind_parameters` uses it three times: at start-up (a refusal is a
-    :class:`StartupError`, exit code 2), in the *on-set* callback to validate a proposed
+    :class:`.StartupError`, exit code 2), in the *on-set* callback to validate a proposed
     runtime change (a refusal keeps the old values and says why), and in the *post-set*
     callback to apply an accepted change (``self.config`` is replaced, then
     :meth:`apply_config` runs) - the ros2 demos' split of validation and side effects.
@@ -286,7 +291,7 @@ class AdapterNode(Node, Generic[C]):
                         configure: Callable[[dict[str, Any]], C]) -> C:
         """Declare ``params``, build the node's configuration, validate/apply runtime sets.
 
-        Returns ``configure(values)``; raises :class:`StartupError` (``'<node>: why'``) if
+        Returns ``configure(values)``; raises :class:`.StartupError` (``'<node>: why'``) if
         the values are refused.  Afterwards a set of a writable parameter is validated by
         ``configure`` with the proposed values (on-set callback) and applied (post-set
         callback: ``self.config = configure(values)``, then :meth:`apply_config`).
@@ -304,17 +309,54 @@ class AdapterNode(Node, Generic[C]):
         C
             The configuration at start-up.
         """
+        self.declare_bound(params, configure)
+        return self.configure_from_parameters()
+
+    def declare_bound(self, params: Sequence[Param],
+                      configure: Callable[[dict[str, Any]], C]) -> None:
+        """Declare ``params`` and route runtime sets through ``configure``; validate nothing yet.
+
+        The first half of :meth:`bind_parameters`, for a managed node that validates its
+        parameters in its configure transition (:meth:`configure_from_parameters`) rather
+        than in its constructor.  While :attr:`configured` is false a runtime set is only
+        checked by the descriptors (the configure transition validates the whole set).
+
+        Parameters
+        ----------
+        params : sequence of Param
+            The node's parameters.
+        configure : callable
+            ``configure(values) -> config`` (as for :meth:`bind_parameters`).
+        """
         params = list(params)
         declare(self, params)
         self._bound = {p.name for p in params}
         self._configure = configure
-        try:
-            config = configure(self.parameter_values())
-        except ValueError as exc:                  # InputError and its domain subclasses
-            raise StartupError(f'{self.get_name()}: {exc}') from None
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        return config
+
+    def configure_from_parameters(self) -> C:
+        """The configuration of the current parameter values; :class:`.StartupError` if refused.
+
+        The message is ``'<node>: why'`` (the refused key named by the validator).
+
+        Returns
+        -------
+        C
+        """
+        try:
+            return self._configure(self.parameter_values())
+        except InputError as exc:       # bad input only: a programming error keeps its traceback
+            raise StartupError(f'{self.get_name()}: {exc}') from None
+
+    @property
+    def configured(self) -> bool:
+        """Whether :attr:`config` is in force.
+
+        Always, except for a managed node before its configure transition and after its
+        clean-up.
+        """
+        return True
 
     def parameter_values(self, changes: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """Current values of the bound parameters (``None`` if unset), updated by ``changes``.
@@ -334,11 +376,11 @@ class AdapterNode(Node, Generic[C]):
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         changes = {p.name: p.value for p in params if p.name in self._bound}
-        if not changes:
+        if not changes or not self.configured:     # unconfigured: configure validates
             return SetParametersResult(successful=True)
         try:
             self._configure(self.parameter_values(changes))
-        except ValueError as exc:
+        except InputError as exc:
             reason = f'{exc}; keeping the old value'
             self.log('error', f'rejected parameter set: {reason}')
             return SetParametersResult(successful=False, reason=reason)
@@ -346,7 +388,7 @@ class AdapterNode(Node, Generic[C]):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         changed = sorted(p.name for p in params if p.name in self._bound)
-        if not changed:
+        if not changed or not self.configured:
             return
         old, self.config = self.config, self._configure(self.parameter_values())
         self.apply_config(old, self.config)
@@ -443,7 +485,7 @@ class AdapterNode(Node, Generic[C]):
                   f'{text}', file=sys.stderr)
 
     def check_stop(self) -> None:
-        """Raise :class:`StartupStopped` if a stop signal came (or the context is down).
+        """Raise :class:`.StartupStopped` if a stop signal came (or the context is down).
 
         For long start-up work (the constructor runs before the spin, where nothing else
         acts on a signal): called between its pieces, each well under a second, so the
@@ -519,25 +561,25 @@ def run(node_class: Callable[[], AdapterNode[Any]], args: list[str] | None = Non
     """Process main of a node: the Jazzy pattern (init, spin, destroy, try_shutdown).
 
     Exit code: 0 after SIGINT/SIGTERM or a normal end, the node's ``exit_code`` if it set
-    one (5: lockstep abort), 2 when it refuses to start (a :class:`StartupError` or other
+    one (5: lockstep abort), 2 when it refuses to start (a :class:`.StartupError` or other
     ``ValueError``, a bad parameter, arguments rcl cannot parse) with a ``[FATAL]`` line, 1
     after an unexpected error (its traceback printed before the tear-down).  The same code
-    ends the process if the DDS tear-down hangs (:func:`workarounds.arm_exit_deadline`).
+    ends the process if the DDS tear-down hangs (:func:`.workarounds.arm_exit_deadline`).
 
     Signals: rclpy's own handlers (installed by ``rclpy.init`` for SIGINT and SIGTERM)
     shut the context down from rclpy's signal thread; the executor then raises
     ``ExternalShutdownException`` between callbacks and the node is destroyed (the
     recorder closes its bag).  Python's KeyboardInterrupt is switched off first: SIGINT
-    and SIGTERM only set a flag (:func:`entry.catch_stop_signals`, to which rclpy's
+    and SIGTERM only set a flag (:func:`.entry.catch_stop_signals`, to which rclpy's
     handlers chain).  A KeyboardInterrupt would be raised wherever the interpreter
     happens to be - in a callback writing the bag, or in the clean-up when ``ros2
     launch`` forwards a second SIGINT after the terminal's - and print a traceback, so
     repeated signals during the clean-up are harmless.  The flag also covers the window
     before ``rclpy.init`` has installed its handlers (and, through the console scripts of
-    :mod:`entry`, the imports): a signal there ends the process with 0 before or right
+    :mod:`.entry`, the imports): a signal there ends the process with 0 before or right
     after the node is built, instead of being lost.
     Exceptions that are only the consequence of the shutdown racing the main thread
-    (rclpy 7.1: ros2/rclpy#1352, see :mod:`workarounds`) are not reported.
+    (rclpy 7.1: ros2/rclpy#1352, see :mod:`.workarounds`) are not reported.
 
     Parameters
     ----------

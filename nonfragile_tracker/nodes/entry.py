@@ -1,19 +1,14 @@
 """Process entry points of the nodes: a stop signal is honoured from the first line on.
 
-``ros2 run``/``ros2 launch`` start the executables ``reference``, ``plant``, ``tracker``
-and ``recorder`` (console scripts installed into ``lib/nonfragile_tracker``; their
-wrappers import only this module and call :func:`reference_main` ... :func:`recorder_main`,
-see ``setup.py``), which call :func:`main` (``python -m nonfragile_tracker.nodes.entry
-NAME [--ros-args ...]`` does the same).  This module
-imports nothing heavy: before anything else it notes SIGINT and SIGTERM in a flag
-instead of Python's default actions (KeyboardInterrupt with a traceback, or death by
-SIGTERM), then imports the node module (numpy, rclpy, rosbags: a second or more on a
-busy machine) and runs it.  A signal that arrives while the process is still importing
-or initialising - Ctrl-C on ``ros2 launch`` right after start, ``systemctl stop`` during
-boot - ends it with exit code 0 and no traceback, like a signal during the run
-(:func:`nonfragile_tracker.nodes.common.run`).  Without this, a SIGINT in the window
-before rclpy installs its handlers was either a traceback or lost (a recorder that never
-ended).  What remains is the interpreter's own start-up (tens of ms) before this module runs.
+The console scripts ``reference``, ``plant``, ``tracker`` and ``recorder`` (see
+``setup.py``) call :func:`reference_main` ... :func:`recorder_main`, which call
+:func:`main` (as does ``python -m nonfragile_tracker.nodes.entry NAME [--ros-args ...]``).
+This module imports nothing heavy: it notes SIGINT and SIGTERM in a flag first, then
+imports the node module and runs it, so a signal during the imports or the start-up ends
+the process with 0 and no traceback, like one during the run
+(:func:`.nodes.common.run`).
+
+See doc/safety.md, section "Stopping: Ctrl-C, ros2 launch, systemd".
 """
 from __future__ import annotations
 
@@ -64,24 +59,27 @@ def _import_node(name: str) -> Any:
     """
     if stop_requested():
         return None
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _stop_import)
-    # a signal that lands in code whose exceptions Python cannot raise (a weakref callback
-    # such as importlib's module-lock one, a __del__) is "Exception ignored in ...", with a
-    # traceback on stderr, and the import goes on: the stop is noted all the same (seen
-    # once in a suite run of Ctrl-C 0.2 s after launch), so that report is not printed
     unraisable = sys.unraisablehook
-    sys.unraisablehook = lambda u: None if isinstance(u.exc_value, _StopImport) \
-        else unraisable(u)
     try:
         try:
+            # (inside the try: a signal may be handled as soon as its handler is set)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, _stop_import)
+            # a signal that lands in code whose exceptions Python cannot raise (a weakref
+            # callback such as importlib's module-lock one, a __del__) is "Exception ignored
+            # in ...", with a traceback on stderr, and the import goes on: the stop is noted
+            # all the same (seen once in a suite run of Ctrl-C 0.2 s after launch), so that
+            # report is not printed
+            sys.unraisablehook = lambda u: None if isinstance(u.exc_value, _StopImport) \
+                else unraisable(u)
             return importlib.import_module(f'nonfragile_tracker.nodes.{name}')
         finally:
-            catch_stop_signals()            # only noted again from here on
             sys.unraisablehook = unraisable
+            catch_stop_signals()            # only noted again from here on
     except BaseException:
-        # _StopImport, or what an extension module's initialisation made of it (an
-        # ImportError or SystemError around it): any failure once a stop was requested
+        # _StopImport (also from a signal handled while the handlers are swapped), or what
+        # an extension module's initialisation made of it (an ImportError or SystemError
+        # around it): any failure once a stop was requested
         if stop_requested():
             return None
         raise
@@ -114,7 +112,7 @@ def dump_stacks_on_sigusr1() -> None:
     """Make SIGUSR1 write the Python stack of every thread to stderr (the node's log).
 
     It has no other effect on the run.  For a node that does not end after a stop
-    signal: :func:`nonfragile_tracker.runner.kill_with_stacks` sends SIGUSR1 before its
+    signal: :func:`nonfragile_tracker.workflows.runner.kill_with_stacks` sends SIGUSR1 before its
     SIGKILL, so the log tells where the node hung (``kill -USR1 PID`` does the same by
     hand).  The dump is written from C, also while the main thread is blocked inside rcl
     or DDS.

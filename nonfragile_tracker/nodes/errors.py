@@ -7,6 +7,8 @@ message says which and why.  A node that fails while running ends with the exit 
 ``exit_code`` (:class:`~nonfragile_tracker.nodes.common.AdapterNode`).  No ROS import here:
 the classes are importable (and catchable) without rclpy.  They stay importable from
 :mod:`nonfragile_tracker.nodes.common`, where the nodes have always taken them.
+
+See doc/cli.md, section "Exit codes and errors", and doc/safety.md.
 """
 from __future__ import annotations
 

@@ -1,28 +1,14 @@
 """``plant``: kinematic unicycle with the paper's delayed-state term; the run's clock.
 
-Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x = v, angular.z = w; or
-TwistStamped with ``enable_stamped_cmd_vel``, as a Jazzy diff_drive_controller).
-Publishes ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``,
-twist.linear.x = speed in force), ``pose`` (geometry_msgs/PoseStamped, ``odom``)
-and, in lockstep mode, ``/clock`` and ``run_done``.
+Subscribes ``cmd_vel`` (Twist or TwistStamped), publishes ``odom``, ``pose`` and, in
+lockstep, ``/clock`` and ``run_done``.  Lockstep (default): each step publishes the clock
+and the odometry due, then waits for the tracker's command (with retries, a timeout, and a
+recorder's start gate and back-pressure); real time: a wall timer steps with the latest
+command.  The physics (latency, lag, limits, odometry latency, rate and noise) is the
+in-process model, :class:`~nonfragile_tracker.control.simulation.plant.UnicyclePlant`.
 
-Lockstep (default): at each step ``k`` the plant publishes ``/clock`` and ``pose``
-(the true pose; each only when it has a subscriber - the tracker needs neither) and, if an
-odometry sample is due at ``k``, ``odom``; only then does it wait for the tracker's
-command before stepping ``k -> k+1`` (at steps without
-odometry the tracker has nothing to answer: the plant holds the command in force and
-steps on).  With the default plant odometry is due every step, so every step waits.
-The plant waits for its peers to be discovered, republishes step ``k`` every
-``lockstep_retry`` s while it waits (peers ignore repeats), and aborts with exit
-code 5 after ``lockstep_timeout`` s of silence.  With a recorder (``lockstep_recorder``)
-it starts once the recorder has announced ``recorder/ready`` and every ``/clock`` reader
-is matched, stays within ``lockstep_lead`` steps of ``recorder/progress`` (back-pressure:
-no queue overflows under load), and announces ``run_done/odom_count`` before
-``run_done``.  Real time: a wall timer steps at
-``1/dt`` with the latest command (zero after ``cmd_timeout``).  The physics,
-including command latency, actuator lag, acceleration limits and odometry latency,
-rate and noise, is :class:`control.simulation.loop.UnicyclePlant`; an odometry message carries
-the stamp of its measurement.
+See doc/ros-interface.md, sections "plant" (parameters, what it does) and "Time and
+lockstep".
 """
 from __future__ import annotations
 
@@ -40,19 +26,21 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
-from .. import topics
+from ..interface import topics
 from ..errors import EXIT_RUN
-from ..control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant, delay_steps,
-                            odometry_period_steps, step_time_ns)
-from ..control.validate import as_matrix
+from ..control.simulation.interfaces import DEFAULT_PLANT, Plant, load_factory, make_plant
+from ..control.simulation.plant import PlantConfig, delay_steps, odometry_period_steps
+from ..control.simulation.timing import step_time_ns
+from ..interface.scenario import plant_config
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, require_at_least, run, settings_from)
 
-LATENCY_PARAMS = ('cmd_latency', 'lag_v', 'lag_w', 'max_linear_accel', 'max_angular_accel',
-                  'odom_latency', 'odom_rate', 'odom_noise', 'noise_seed', 'odom_jitter')
 PARAMS = [
     Param('mode', 'lockstep', 'lockstep (deterministic, sim time) or realtime (wall timer)',
           read_only=True),
+    Param('model', DEFAULT_PLANT, 'the simulated base, "package.module:factory" (a factory of '
+          'the plant settings making a Plant); default the kinematic unicycle with the latency, '
+          'lag and odometry models below', read_only=True),
     Param('dt', 0.01, 'integration step (s)', low=1e-6, high=10.0, read_only=True),
     Param('tau', 0.0, 'state delay (s); rounded to a whole number of steps', low=0.0,
           high=1e3, read_only=True),
@@ -127,10 +115,11 @@ MAX_BURST = 10
 
 @dataclass(frozen=True)
 class PlantSettings:
-    """The plant node's validated parameters (see :data:`PARAMS`)."""
+    """The plant node's validated parameters (see ``PARAMS``)."""
 
     mode: str
     plant: PlantConfig
+    model: str                   #: the plant's factory, ``module:name``
     final_step: int
     lockstep_timeout: float
     startup_timeout: float
@@ -151,7 +140,7 @@ def plant_settings(values: dict[str, Any]) -> PlantSettings:
     Parameters
     ----------
     values : dict
-        :data:`PARAMS` by name (at start-up, or with a runtime set's proposed values).
+        ``PARAMS`` by name (at start-up, or with a runtime set's proposed values).
 
     Returns
     -------
@@ -175,12 +164,8 @@ def plant_settings(values: dict[str, Any]) -> PlantSettings:
                            f'keep the last {topics.DEPTH} messages), got '
                            f'{values["lockstep_lead"]}')
     require_at_least(values, 'lockstep_subscribers', 1)
-    cfg = PlantConfig(dt=values['dt'], tau=values['tau'],
-                      A_tau=tuple(map(tuple, as_matrix(values['A_tau'], 'A_tau', (4, 4),
-                                                       flat=True, error=LoopConfigError))),
-                      x0=pose0[0], y0=pose0[1], th0=pose0[2], v0=values['initial_speed'],
-                      cmd_latency_schedule=tuple(values['cmd_latency_schedule'] or ()),
-                      **{n: values[n] for n in LATENCY_PARAMS})
+    cfg = plant_config(values)
+    load_factory(values['model'], 'plant')     # a name that cannot be loaded: refused here
     odo = cfg.odometry
     if mode == 'lockstep' and max(odo.latency_steps, odo.period_steps) > MAX_FREE_STEPS:
         raise StartupError(
@@ -195,7 +180,7 @@ def plant_settings(values: dict[str, Any]) -> PlantSettings:
 
 
 class PlantNode(AdapterNode[PlantSettings]):
-    """ROS adapter around :class:`UnicyclePlant`.
+    """ROS adapter around a :class:`~nonfragile_tracker.control.simulation.interfaces.Plant`.
 
     Parameters
     ----------
@@ -222,7 +207,7 @@ class PlantNode(AdapterNode[PlantSettings]):
             self.log('warn', f'odom_rate = {cfg.odom_rate} Hz does not divide the plant '
                              f'rate {1 / cfg.dt:g} Hz: odometry every {period} steps '
                              f'= {rate:.6g} Hz')
-        self.plant = UnicyclePlant(cfg)
+        self.plant: Plant = make_plant(cfg, self.config.model)
         self.dt = cfg.dt
         self.dt_ns = step_time_ns(1, cfg.dt)
         self.final_step = self.config.final_step
@@ -433,7 +418,8 @@ class PlantNode(AdapterNode[PlantSettings]):
     def _advance(self) -> None:
         self.plant.advance()
         if self.plant.k % self.progress_every == 0:
-            self.log('info', f'progress: t = {self.plant.t:.2f} s of '
+            t = step_time_ns(self.plant.k, self.dt) * 1e-9
+            self.log('info', f'progress: t = {t:.2f} s of '
                              f'{self.final_step * self.dt:.2f} s')
 
     def _publish_step(self) -> None:
@@ -447,7 +433,7 @@ class PlantNode(AdapterNode[PlantSettings]):
     def _complete(self) -> None:
         held = f', waited for the recorder {self.holds} times' if self.paced else ''
         self.log('info', f'lockstep run complete: {self.plant.k} steps, '
-                         f't = {self.plant.t:.3f} s{held}')
+                         f't = {step_time_ns(self.plant.k, self.dt) * 1e-9:.3f} s{held}')
         self._finish()
 
     # ------------------------------------------------------------------ real time
@@ -479,7 +465,8 @@ class PlantNode(AdapterNode[PlantSettings]):
         while self.plant.k <= due:
             self._publish_state(self._rt_origin_ns + self.plant.k * self.dt_ns,
                                 publish=self.plant.k > quiet)
-            self.plant.step(v, w)
+            self.plant.command(v, w)
+            self.plant.advance()
             if self.final_step and self.plant.k >= self.final_step:
                 self._finish()
                 return

@@ -1,49 +1,13 @@
 """``recorder``: records the run's topics into a rosbag2 (v9, MCAP) bag, like ``ros2 bag record``.
 
-Subscribes every topic of the ``topics`` parameter (default: all of
-:data:`nonfragile_tracker.topics.TYPES`) with ``raw=True`` and writes the CDR
-bytes unchanged with :class:`nonfragile_tracker.bag.writer.BagWriter`, stamped
-with the node clock at reception (``get_clock().now()``: sim time in lockstep
-runs with ``use_sim_time``).  Subscriptions are reliable, volatile, keep_last
-:data:`topics.DEPTH` (``/clock`` too); ``run_done`` is recorded with reliable +
-transient_local so a late recorder still gets it.
+Subscribes the topics of its ``topics`` parameter raw and writes their CDR bytes unchanged,
+stamped with the node clock at reception; in lockstep it gates the plant's start
+(``recorder/ready``), reports its progress for the plant's back-pressure and drains the run's
+last steps before it closes the bag.  :class:`Recorder` is also used in process (composed
+runs).
 
-Topics in the bag are fully qualified (``/odom``, ``/robot1/odom``).  A
-topic's connection is created lazily, at its first message, with the QoS
-profiles its publishers offer at that moment
-(``get_publishers_info_by_topic``; the package defaults if none is
-visible) - so topics that never carried a message are not in the bag.
-
-Parameters (read-only): ``output`` (bag directory to create; empty: a new
-``runs/run_YYYYmmdd_HHMMSS[_N]/bag``), ``topics``, ``drain_timeout``,
-``chunk_size``, ``flush_period``; and the standard ``use_sim_time``.
-
-Lockstep start (``lockstep_gate``): DDS matches each side on its own, so the plant
-counting the recorder's subscriptions does not mean they receive yet.  The recorder
-publishes ``recorder/ready`` (latched) once each recorded lockstep topic's subscription
-has matched its publisher, and a plant with ``lockstep_recorder`` starts only then; a
-republished step (a stamp already recorded on that topic) is written once.  During the
-run it publishes ``recorder/progress`` (the stamp up to which every recorded per-step topic
-has arrived, every 10 messages and every 20 ms) and the plant stays at most
-``lockstep_lead`` steps ahead of it, so under load no queue (depth 100) overflows.
-
-Ending: SIGINT/SIGTERM close the bag cleanly (MCAP summary + metadata.yaml)
-and exit 0.  In a lockstep run the plant publishes ``run_done/odom_count`` = N (the
-odometry messages it sent: fewer than steps with ``odom_rate`` or ``odom_latency``) and
-``run_done`` = S (the last step); the recorder then waits until it has S+1 distinct
-stamps on each of ``pose``, ``reference/pose|twist|accel``, N distinct ``odom`` stamps
-and N ``cmd_vel`` messages (those it records), or ``drain_timeout`` wall seconds, logs
-what it got (a warning lists shortfalls), closes the bag and exits 0.  Chunks are
-flushed to disk every ``chunk_size`` bytes or ``flush_period`` s, so a killed
-recorder loses at most that much (``nonfragile_tracker bag repair``).
-
-In-process use: ``Recorder(node_name='recorder', **node_kwargs)`` takes the rclpy ``Node``
-keyword arguments like every node of the package, e.g.
-``Recorder(context=ctx, parameter_overrides=overrides(output=str(path)))``
-(:func:`nodes.common.overrides`); add it to an executor, watch ``recorder.done`` (a
-Future whose result is the message count per recorded topic, by logical name) or
-``recorder.finished``, and call
-``recorder.close()`` (also done by ``destroy_node()``).
+See doc/ros-interface.md, sections "recorder" (how it records, how it ends, in-process use)
+and "Time and lockstep" (the start gate and back-pressure).
 """
 from __future__ import annotations
 
@@ -64,7 +28,7 @@ from rclpy.task import Future
 from rclpy.timer import Timer
 from std_msgs.msg import UInt64
 
-from .. import topics
+from ..interface import topics
 from ..bag.errors import BagError
 from ..bag.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, BagWriter, default_qos,
                           make_qos, new_run_dir)
@@ -98,8 +62,9 @@ PARAMS = [
           'its subdirectory "bag"', read_only=True),
     Param('enable_stamped_cmd_vel', False, 'cmd_vel is geometry_msgs/TwistStamped (as the '
           'tracker publishes it with the same parameter)', read_only=True),
-    Param('topics', list(topics.TYPES), 'topics to record (names of nonfragile_tracker.topics; '
-          'relative names resolve in the node namespace)', read_only=True),
+    Param('topics', list(topics.TYPES), 'topics to record (names of '
+          'nonfragile_tracker.interface.topics; relative names resolve in the node '
+          'namespace)', read_only=True),
     Param('drain_timeout', 5.0, 'after run_done: longest wait (wall s) for the last messages',
           low=0.0, high=3600.0, read_only=True),
     Param('chunk_size', DEFAULT_CHUNK_SIZE, 'write a chunk to disk when it holds this many '
@@ -180,7 +145,7 @@ def _header_stamp_ns(raw: bytes) -> int | None:
 
 @dataclass(frozen=True)
 class RecorderSettings:
-    """The recorder's validated parameters (see :data:`PARAMS`)."""
+    """The recorder's validated parameters (see ``PARAMS``)."""
 
     topics: tuple[str, ...]
     output: str
@@ -198,7 +163,7 @@ def recorder_settings(values: dict[str, Any]) -> RecorderSettings:
     Parameters
     ----------
     values : dict
-        :data:`PARAMS` by name.
+        ``PARAMS`` by name.
 
     Returns
     -------
@@ -316,7 +281,7 @@ class Recorder(AdapterNode[RecorderSettings]):
     def _subscribe(self, name: str) -> None:
         qos = _LATCHED_QOS if name in (topics.RUN_DONE, topics.TRAJECTORY, topics.REF_PATH,
                                        topics.TRAJECTORY_MULTIDOF,
-                                       topics.FOLLOWED_TRAJECTORY) \
+                                       topics.FOLLOWED_TRAJECTORY, topics.TUNING) \
             else _DATA_QOS
         sub = self.create_subscription(self._types[name], name, self._make_callback(name),
                                        qos, raw=True)

@@ -1,37 +1,14 @@
 """``reference``: publishes the desired trajectory, and per-step samples of it.
 
-A trajectory reaches the tracker as one (transient-local) trajectory message, and the
-tracker samples it itself at each odometry stamp (:class:`control.simulation.follow.Follower`):
+The trajectory (a built-in analytic path as exact knots, a waypoint file, or a
+nav_msgs/Path relayed from a planner) goes to the tracker as one transient-local message,
+which the tracker samples itself at each odometry stamp; the node follows the trajectory
+rebuilt from the very message it published, shows it on ``reference/path`` and publishes
+its samples (``reference/pose|twist|accel``) for the bag and third parties, one per
+``/clock`` step in lockstep, at ``publish_rate`` in real time.
 
-* a built-in analytic path (``path``, default), in lockstep: as
-  trajectory_msgs/MultiDOFJointTrajectory on ``trajectory_multidof`` - knots with pose,
-  velocity and acceleration over ``[0, horizon]``
-  (:func:`control.simulation.trajectory.analytic_knots`:
-  spaced so that the quintic Hermite interpolant the tracker rebuilds is the exact path to
-  about 1e-14 m; published as its CDR bytes, :func:`msgconv.multidof_cdr`, made in a
-  fraction of a second also for an hour's 48,000 knots, with a check for a stop signal
-  between the pieces of the work).  In real time the built-in path goes as the samples
-  below (exact);
-* a waypoint file (``trajectory_file``, CSV or YAML: t, x, y[, yaw][, speed]), or
-* a nav_msgs/Path relayed from ``trajectory_topic`` (e.g. a planner's output): as
-  nav_msgs/Path on ``trajectory`` (poses at the knots, stamped origin + t).  With a relay
-  the built-in path is not published (the tracker waits at rest for the first plan; the
-  samples until then are those of the built-in path).
-
-The node follows the trajectory rebuilt from the very message it published (the same
-function as the tracker), so its samples are what the tracker follows.  Every source is
-also shown on ``reference/path`` (transient-local, for RViz).  A relayed Path that is not
-a valid trajectory is refused with the reason and the previous trajectory stays.
-
-Samples, for the bag and third-party consumers (off the tracker's critical path: the
-tracker does not wait for them): ``reference/pose`` (geometry_msgs/PoseStamped: position
-and tangent heading), ``reference/twist`` (geometry_msgs/TwistStamped: linear = desired
-velocity in ``odom``) and ``reference/accel`` (geometry_msgs/AccelStamped: linear = desired
-acceleration), all in frame ``odom``, stamped with the sample time.  Lockstep: one sample
-per ``/clock`` message at the clock's time (a step seen before the topics have
-``lockstep_subscribers`` matched subscribers is published once they have, so a recorder
-misses none); ``publish_samples: false`` drops them and the ``/clock`` subscription.  Real
-time: a wall timer at ``publish_rate``.
+See doc/ros-interface.md, section "reference" (its parameters, what it publishes) and
+"Time and lockstep".
 """
 from __future__ import annotations
 
@@ -46,7 +23,7 @@ from nav_msgs.msg import Path as PathMsg
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
-from .. import topics
+from ..interface import topics
 from ..control.simulation.reference import Path, make_path
 from ..control.simulation.trajectory import Trajectory, TrajectoryError, load_waypoints
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
@@ -55,7 +32,7 @@ from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, ch
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from ..control.simulation.trajectory import analytic_knot_times, path_samples
-from ..msgconv import multidof_cdr, multidof_from_cdr
+from ..interface.msgconv import multidof_cdr, multidof_from_cdr
 from .trajectory_io import multidof_to_trajectory, path_to_trajectory, trajectory_to_path
 
 PARAMS = [
@@ -99,7 +76,7 @@ PARAMS = [
 
 @dataclass(frozen=True)
 class ReferenceSettings:
-    """The reference node's validated parameters (see :data:`PARAMS`)."""
+    """The reference node's validated parameters (see ``PARAMS``)."""
 
     mode: str
     path: Path
@@ -123,8 +100,8 @@ def reference_settings(values: dict[str, Any]) -> ReferenceSettings:
     Parameters
     ----------
     values : dict
-        :data:`PARAMS` by name; the path's own parameters are checked by
-        :func:`~nonfragile_tracker.control.reference.make_path`.
+        ``PARAMS`` by name; the path's own parameters are checked by
+        :func:`~nonfragile_tracker.control.simulation.reference.make_path`.
 
     Returns
     -------
@@ -151,7 +128,7 @@ def reference_settings(values: dict[str, Any]) -> ReferenceSettings:
 class ReferenceNode(AdapterNode[ReferenceSettings]):
     """ROS adapter around the reference paths and trajectories.
 
-    :class:`control.simulation.reference.Path` and :mod:`control.simulation.trajectory`.
+    :class:`.control.simulation.reference.Path` and :mod:`.control.simulation.trajectory`.
 
     Parameters
     ----------

@@ -1,93 +1,59 @@
-"""``tracker``: the non-fragile tracking law with K from parameters.
+"""``tracker``: the non-fragile tracking law with K from parameters, as a managed node.
 
-Subscribes ``odom`` (``odom_topic``; nav_msgs/Odometry; its twist.linear.x initialises
-the compensator speed) and the trajectory topics (below; with ``wait_for_trajectory: false``
-also ``reference/pose``, ``reference/twist``, ``reference/accel``); publishes
-``cmd_vel`` (``cmd_vel_topic``; geometry_msgs/Twist, or TwistStamped with
-``enable_stamped_cmd_vel``: stamp = command time, frame = ``base_frame``),
-``tracker/error`` (geometry_msgs/Vector3Stamped: x along-track, y cross-track in m,
-z heading error in rad, in the reference point's frame; every step, when subscribed),
-``tracker/path`` (nav_msgs/Path, the travelled path) and ``tracker/reference_marker``
-(visualization_msgs/Marker, arrow at the current reference) every ``viz_period`` s of
-stamp time, and the status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray:
-loop period, deadline misses, odom age, rejected inputs, stale stops, saturated
-commands, trajectory state and end) every ``diagnostics_period`` s (stamp time in
-lockstep, which needs no clock: the tracker has no ``/clock`` subscription there).  The law is
-:class:`control.simulation.loop.Tracker`; the gain check is
-:func:`control.simulation.gains.gain_from_parameters`.
+A lifecycle node (``autostart`` configures and activates it at start; else a lifecycle
+manager does): configure validates the parameters (:func:`tracker_settings`) and makes the
+publishers, activate subscribes odometry and the trajectories, deactivate and errors send
+a zero command.  Each odometry message gets at most one command (``cmd_vel``) from
+:class:`.control.simulation.tracker.Tracker`, following the trajectory it samples itself
+(:class:`.control.simulation.follow.Follower`); which inputs it takes, and when a command is
+due, are the ROS-free rules of :mod:`.tracker_inputs`, shared with the bag replay.  It also
+publishes its errors, path, marker, the followed trajectory and ``/diagnostics`` (timing,
+refusals, the certificate monitor: :mod:`.control.identification.monitor`).
 
-Lockstep: a command is computed once per odom stamp, from the trajectory sampled at that
-stamp (repeats are ignored; an odometry message that arrives before the first trajectory
-is answered when it arrives).  With ``wait_for_trajectory: false`` and no trajectory yet,
-a command waits until the three reference parts with the odom stamp have arrived
-(reference samples are kept by stamp until the odometry measured at that time arrives,
-so a plant with odometry latency pairs each measurement with the reference of its
-measurement time).  With ``predict_latency`` / ``predict_odom_latency`` /
-``predict_lag_v`` / ``predict_lag_w`` the law is evaluated on the state predicted at
-the time the command acts (:mod:`control.simulation.predictor`; the tracker's *now* is the odom
-stamp plus ``predict_odom_latency``, never a clock, so lockstep stays deterministic).
-With ``max_linear_accel`` / ``max_angular_accel`` (the base's acceleration limits, 0 =
-unknown) each command differs from the previous by at most the limit times the time since
-the previous one and the predictor models the limits
-(:class:`control.simulation.loop.Tracker`).  Real time: a command per pose with the latest
-reference; if pose or reference is older than ``input_timeout`` the tracker publishes a stop
-(zero Twist), says so once, and re-initialises its compensator when fresh data returns.
-
-Trajectories (:mod:`control.simulation.trajectory`): a nav_msgs/Path on ``trajectory``
-(transient-local; stamps give the times, all zero: a trapezoidal time law with
-``cruise_speed``/``max_accel``) or a trajectory_msgs/MultiDOFJointTrajectory on
-``trajectory_multidof`` is turned into a trajectory that the tracker samples itself at
-each odometry stamp (:class:`control.simulation.follow.Follower`): no reference samples are needed
-then.  Each new valid trajectory starts a new run; an invalid one is refused with the
-reason (logged, counted in ``rejected``) and the previous trajectory stays.  After the
-trajectory's end the robot is brought to rest and the tracker says so.  In lockstep the
-reference publishes the built-in analytic paths as MultiDOFJointTrajectory knots (exact
-to about 1e-14 m) and lockstep runs set ``wait_for_trajectory`` (no sample subscriptions:
-a step is odom in, cmd_vel out); without a trajectory and with ``wait_for_trajectory:
-false`` the three reference topics are followed (real time: the built-in paths).
-
-Bad samples (non-finite values, non-unit quaternions, wrong frame, stamps that
-go backwards) are ignored and counted in ``rejected``; an odom stamp that jumps
-ahead by more than ``max_stamp_jump`` re-initialises the compensator (``jumps``).
-
-Timing: the law's step comes from the odometry stamps (``dt: 0``, the default;
-:mod:`control.simulation.timing`): /diagnostics reports the measured ``odometry period``, a
-period that moves by more than 20 % (WARN once, logged) and a ``dt`` override that
-disagrees with it by more than 20 % (WARN, logged once), each with the numbers; a
-deadline miss is an odometry interval above 1.5 times the period; the certificate
-monitor's command hold is the measured period.
+See doc/ros-interface.md, section "tracker" (its "Input rules" and "Certificate monitor"),
+and doc/nav2.md, section "The lifecycle".
 """
 from __future__ import annotations
 
 import math
+import os
+import traceback
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import partial
-from typing import Any
+from typing import Any, cast
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterType
+from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
 from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker
 
-from .. import topics
+from ..interface import topics
 from ..control.simulation.follow import Follower, path_errors
-from ..control.simulation.loop import Command, Tracker, TrackerConfig
+from ..control.simulation.interfaces import DEFAULT_CONTROLLER, Controller
+from ..control.simulation.tracker import Command, Tracker, TrackerConfig
+from ..control.simulation.predictor import LatencyPredictor
+from ..control.identification.tuning import Tuned
 from ..control.identification.monitor import (Certificate, LatencyEstimate, MonitorSettings,
                                               MonitorWorker, adapted_prediction,
                                               certificate_from_parameters, evaluate)
 from ..control.simulation.limits import MIN_ACCEL_FRACTION
 from ..control.simulation.reference import RefSample
+from ..control.simulation.replan import Nearest
 from ..control.simulation.timing import period_disagreement
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
-from ..msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
-from ..robot import check_topic_name
-from ..tracker_inputs import (INPUT_DEFAULTS, InputRules, Rejection, Step, TrackerInputs,
-                              input_rules, stale_inputs)
+from ..interface.msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
+from ..interface.robot import check_topic_name
+from ..interface.tracker_inputs import (INPUT_DEFAULTS, MONITOR_DEFAULTS, InputRules, Rejection,
+                                        Step, TrackerInputs, input_rules, monitor_settings,
+                                        stale_inputs)
 from .common import (DATA_QOS, LATCHED_QOS, AdapterNode, Param, StartupError, check_mode,
                      fill_pose, ns_to_stamp, require_at_least, run, settings_from)
 from .trajectory_io import followed_to_multidof
@@ -99,6 +65,9 @@ PARAMS = [
           '`nonfragile_tracker synthesize`', type=ParameterType.PARAMETER_DOUBLE_ARRAY),
     Param('mode', 'lockstep', 'lockstep (one command per stamp, sim time) or realtime',
           read_only=True),
+    Param('controller', DEFAULT_CONTROLLER, 'the tracking law, "package.module:factory" (a '
+          'factory of the tracker\'s settings making a Controller, as Nav2 names its plugins); '
+          'default our certified law', read_only=True),
     Param('K_shape', [2, 4], 'shape [rows, cols] of K', read_only=True),
     Param('dt', 0.0, 'step of the compensator v\' = a (s): 0 = from the odometry stamps (the '
           'interval that passed, the measured period); > 0 = an override used whatever the '
@@ -148,6 +117,12 @@ PARAMS = [
           '0 = none', low=0.0, high=10.0, read_only=True),
     Param('predict_lag_w', 0.0, 'assumed time constant of the base\'s angular speed (s); '
           '0 = none', low=0.0, high=10.0, read_only=True),
+    Param('gain_v', 1.0, 'the base\'s static speed gain (speed reached per commanded unit, '
+          'identify\'s gain_v): the command sent is the law\'s speed over it; 1 = none',
+          low=0.05, high=20.0, read_only=True),
+    Param('gain_w', 1.0, 'the base\'s static turn-rate gain (identify\'s gain_w; a '
+          'skid-steer turns at about 0.6-0.7 of its command): the command sent is the law\'s '
+          'turn rate over it; 1 = none', low=0.05, high=20.0, read_only=True),
     Param('lockstep_subscribers', 0, 'lockstep: answer an odometry step only once cmd_vel has '
           'this many matched subscribers (plant and recorder: 2); until then the step is left '
           'for the plant to republish; real time: adopt a trajectory re-timed in the '
@@ -190,29 +165,66 @@ PARAMS = [
           'and is first followed more than this (s) after its start stamp is re-based to start '
           'at that step (no chase after a reference or planner that started earlier); a start '
           'stamp in the future is waited for at rest', low=0.0, high=1e9, read_only=True),
+    Param('replan', _RULES['replan'], 'an untimed Path (a planner\'s plan, Nav2\'s /plan) that '
+          'arrives while a trajectory is driven continues the motion: cut at its point '
+          'nearest the reference, timed from the current reference speed, no new run (no stop '
+          'between plans); false: every trajectory starts a new run', read_only=True),
+    Param('replan_search_distance', _RULES['replan_search_distance'], 'replan: the nearest '
+          'point of a new plan is looked for within this arc length (m) of its start (Nav2: '
+          'max_robot_pose_search_dist)', low=1e-3, high=1e6, read_only=True),
+    Param('override_tolerance', _RULES['override_tolerance'], 'commands overridden downstream '
+          '(Nav2\'s collision_monitor between cmd_vel_nav and the base, scaling or zeroing '
+          'them): a measured speed more than this (m/s) below the last command for '
+          'override_time re-anchors the reference at the robot from its measured speed and '
+          'restarts the compensator there (no wind-up, no leap when released; reported on '
+          '/diagnostics); 0 = not watched', low=0.0, high=1e3, read_only=True),
+    Param('override_time', _RULES['override_time'], 'override_tolerance: how long (s) the '
+          'shortfall must last, and the period of re-anchoring while it does', low=1e-3,
+          high=1e3, read_only=True),
     Param('max_start_distance', _RULES['max_start_distance'], 'refuse a trajectory whose '
           'reference is further than this (m) from the robot when it starts; 0 = no check', low=0.0,
           high=1e9, read_only=True),
+    # the managed node (the nav2_util::LifecycleNode / nav2_lifecycle_manager pattern)
+    Param('autostart', True, 'configure and activate at start (ros2 run, the launch files; a '
+          'refused configure ends the process with exit 2); false: stay unconfigured until a '
+          'lifecycle manager (nav2_lifecycle_manager, lifecycle_msgs/srv/ChangeState) '
+          'configures and activates it', read_only=True),
 ]
-#: The certificate monitor's parameters (:mod:`control.identification.monitor`).
+#: The certificate monitor's parameters (:mod:`.control.identification.monitor`).
 MONITOR_PARAMS = [
-    Param('monitor', True, 'estimate the command-to-motion latency and lags online (a worker '
-          'thread) and report them against the gain\'s certificate on /diagnostics and '
-          f'{topics.CERTIFICATE}', read_only=True),
-    Param('monitor_window', 4.0, 'certificate monitor: sliding window of odometry (s)',
-          low=0.5, high=600.0),
-    Param('monitor_period', 1.0, 'certificate monitor: wall seconds between estimates',
+    Param('monitor', INPUT_DEFAULTS['monitor'], 'estimate the command-to-motion latency '
+          'and lags online (a worker thread; with monitor_tune on the odometry stamps) and '
+          'report them against the gain\'s certificate on /diagnostics and '
+          f'{topics.CERTIFICATE}; false: no estimates, so no monitor_tune', read_only=True),
+    Param('monitor_window', MONITOR_DEFAULTS['monitor_window'],
+          'certificate monitor: sliding window of odometry (s)', low=0.5, high=600.0),
+    Param('monitor_period', MONITOR_DEFAULTS['monitor_period'], 'certificate monitor: wall '
+          'seconds between estimates (with monitor_tune: seconds of odometry-stamp time)',
           low=0.05, high=3600.0, read_only=True),
-    Param('monitor_max_latency', 0.5, 'certificate monitor: largest latency searched (s)',
-          low=0.05, high=2.0),
-    Param('monitor_warn_margin', 0.02, 'certificate monitor: WARN when the latency is within '
-          'this of the certified upper end (s)', low=0.0, high=10.0),
-    Param('monitor_tolerance', 0.01, 'certificate monitor: an estimate this far below the '
+    Param('monitor_max_latency', MONITOR_DEFAULTS['monitor_max_latency'],
+          'certificate monitor: largest latency searched (s)', low=0.05, high=2.0),
+    Param('monitor_warn_margin', MONITOR_DEFAULTS['monitor_warn_margin'], 'certificate '
+          'monitor: WARN when the latency is within this of the certified upper end (s)',
+          low=0.0, high=10.0),
+    Param('monitor_tolerance', MONITOR_DEFAULTS['monitor_tolerance'], 'certificate monitor: '
+          'an estimate this far below the '
           'certified lower end still counts as inside (estimator precision, s)', low=0.0,
           high=1.0),
     Param('monitor_adapt', False, 'certificate monitor: set the predictor\'s latency to the '
           'estimate (minus its uncertainty), clamped to certified_adapt_range; needs the '
-          'predictor (predict_latency > 0); off: the commands never depend on the monitor'),
+          'predictor (predict_latency > 0); off: the monitor\'s worker never sets the '
+          'predictor (monitor_tune does, on the stamps)'),
+    Param('monitor_tune', INPUT_DEFAULTS['monitor_tune'], 'tune the predictor to the '
+          'monitor\'s estimate: every monitor_period of odometry-stamp time, in the odometry '
+          'callback (deterministic, also in lockstep), the predicted latency becomes the '
+          'estimate less its uncertainty and the lags the estimated ones within certified_lag; '
+          'a tracker on a base it was not told about compensates what it measures (the '
+          'monitor then reports these estimates; on by default; monitor false: no tuning); '
+          f'each retune is published on {topics.TUNING}', read_only=True),
+    Param('tuning_schedule', INPUT_DEFAULTS['tuning_schedule'], 'with monitor_tune: retunes '
+          'to apply instead of estimating, "stamp_ns latency lag_v lag_w" (ns, s) separated '
+          f'by ";", each at the first odometry stamped at or after it (a replay applies the '
+          f'ones a tracker published on {topics.TUNING}); empty: estimate', read_only=True),
     Param('certified_residual', None, 'certificate: the delay range [h_min, H] (s) the gain '
           'is certified for (latency - predict_latency + the hold of a command; written by '
           'latency-design); unset: the monitor reports the certificate as unknown',
@@ -227,11 +239,11 @@ MONITOR_PARAMS = [
 
 @dataclass(frozen=True)
 class TrackerSettings:
-    """The tracker node's validated parameters (see :data:`PARAMS`)."""
+    """The tracker node's validated parameters (see ``PARAMS``)."""
 
     mode: str
     tracker: TrackerConfig
-    rules: InputRules              #: the input rules (:mod:`nonfragile_tracker.tracker_inputs`)
+    rules: InputRules              #: the input rules (:mod:`.interface.tracker_inputs`)
     input_timeout: float
     lockstep_subscribers: int
     stamped_cmd_vel: bool
@@ -247,14 +259,14 @@ class TrackerSettings:
 def tracker_settings(values: dict[str, Any]) -> TrackerSettings:
     """Validate the tracker's parameter values (start-up and runtime sets); InputError if bad.
 
-    The law's configuration is :func:`nonfragile_tracker.msgconv.tracker_config` and the
-    input rules :func:`nonfragile_tracker.tracker_inputs.input_rules` (both shared with bag
-    replay); the rest are the node's own settings.
+    The law's configuration is :func:`nonfragile_tracker.interface.msgconv.tracker_config` and
+    the input rules :func:`nonfragile_tracker.interface.tracker_inputs.input_rules` (both shared
+    with bag replay); the rest are the node's own settings.
 
     Parameters
     ----------
     values : dict
-        The tracker's parameter values by name (:data:`PARAMS`, :data:`MONITOR_PARAMS`).
+        The tracker's parameter values by name (``PARAMS``, :data:`MONITOR_PARAMS`).
 
     Returns
     -------
@@ -282,6 +294,7 @@ class MonitorConfig:
     adapt: bool
     settings: MonitorSettings
     certificate: Certificate | None
+    tune: bool = False             #: ``monitor_tune`` as set (in effect only with the monitor)
 
 
 def monitor_config(values: dict[str, Any]) -> MonitorConfig:
@@ -299,17 +312,12 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
     -------
     MonitorConfig
     """
-    settings = MonitorSettings(
-        window=values['monitor_window'], max_latency=values['monitor_max_latency'],
-        max_linear_speed=values['max_linear_speed'],
-        max_angular_speed=values['max_angular_speed'],
-        max_linear_accel=values.get('max_linear_accel') or 0.0,
-        max_angular_accel=values.get('max_angular_accel') or 0.0,
-        warn_margin=values['monitor_warn_margin'], tolerance=values['monitor_tolerance'])
+    settings = monitor_settings(values)
     cert = certificate_from_parameters(values['certified_residual'], values['certified_lag'],
                                        values['certified_adapt_range'], hold=values['dt'])
     return MonitorConfig(enabled=values['monitor'], period=values['monitor_period'],
-                         adapt=values['monitor_adapt'], settings=settings, certificate=cert)
+                         adapt=values['monitor_adapt'], settings=settings, certificate=cert,
+                         tune=bool(values.get('monitor_tune')))
 
 
 #: Lockstep: a trajectory of more points is built and re-timed in the worker thread, its
@@ -324,13 +332,54 @@ def _points(msg: Any) -> int:
     return len(getattr(msg, 'points', None) or getattr(msg, 'poses', None) or ())
 
 
-class TrackerNode(AdapterNode[TrackerSettings]):
+def _where(exc: BaseException) -> str:
+    """Where ``exc`` was raised: ``file:line in function`` of its innermost frame."""
+    tb = traceback.extract_tb(exc.__traceback__)
+    if not tb:
+        return 'no traceback'
+    f = tb[-1]
+    return f'{os.path.basename(f.filename)}:{f.lineno} in {f.name}'
+
+
+def guard_transitions(node: LifecycleNodeMixin) -> None:
+    """Make ``node``'s ChangeState service refuse a transition its state does not offer.
+
+    rclpy 7.1.6 raises ``RCLError`` out of the service callback for one (``ros2 lifecycle
+    set tracker activate`` on an unconfigured node), which ends the executor's spin with a
+    traceback; refused here instead (``success: false``, logged).
+
+    Parameters
+    ----------
+    node : rclpy.lifecycle.LifecycleNodeMixin
+        A lifecycle node with its communication interface.
+    """
+    service = node._service_change_state   # noqa: SLF001 - rclpy's own service object
+    change = service.callback
+
+    def checked(req: Any, resp: Any) -> Any:
+        sm = node._state_machine            # noqa: SLF001
+        ids = {t[0]: t[1] for t in sm.available_transitions}
+        tid = req.transition.id
+        if req.transition.label:
+            tid = next((i for i, lab in ids.items() if lab == req.transition.label), -1)
+        if tid not in ids:
+            label = req.transition.label or str(req.transition.id)
+            Node.get_logger(cast(Node, node)).error(    # (rclpy's, untyped)
+                f'refused lifecycle transition {label!r} in state '
+                f'{sm.current_state[1]!r}; available: {sorted(ids.values())}')
+            resp.success = False
+            return resp
+        return change(req, resp)
+    service.callback = checked
+
+
+class TrackerNode(LifecycleNodeMixin, AdapterNode[TrackerSettings]):
     """ROS adapter around the tracking law and the trajectory follower.
 
-    :class:`control.simulation.loop.Tracker` and :class:`control.simulation.follow.Follower`.
+    :class:`.control.simulation.tracker.Tracker` and :class:`.control.simulation.follow.Follower`.
 
-    Its inputs go through the rules of :mod:`nonfragile_tracker.tracker_inputs`
-    (:attr:`inputs`, which holds the law and the input state).
+    Its inputs go through the rules of :mod:`nonfragile_tracker.interface.tracker_inputs`
+    (``inputs``, a :class:`.TrackerInputs`, which holds the law and the input state).
 
     Parameters
     ----------
@@ -342,22 +391,197 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     """
 
     def __init__(self, node_name: str = 'tracker', **node_kwargs: Any):
-        super().__init__(node_name, **node_kwargs)
-        self.config = cfg = self.bind_parameters(PARAMS + MONITOR_PARAMS, tracker_settings)
+        AdapterNode.__init__(self, node_name, **node_kwargs)
+        LifecycleNodeMixin.__init__(self)
+        guard_transitions(self)
+        self._configured = self._active = False
+        self._starting = True              # the constructor: a refusal is a StartupError
+        self._refusal = ''                 # why the last configure was refused
+        self._error: str | None = None     # an error while active (-> ErrorProcessing)
+        self._error_timer: Any = None
+        self._entities: list[Any] = []     # what activation made (subscriptions, timers)
+        self.declare_bound(PARAMS + MONITOR_PARAMS, tracker_settings)
+        self.autostart = bool(self.get_parameter('autostart').value)
+        if self.autostart:                 # ros2 run, the launch files: at once, as before
+            if self.trigger('configure') != TransitionCallbackReturn.SUCCESS:
+                raise StartupError(self._refusal or f'{self.get_name()}: configure failed')
+            if self.trigger('activate') != TransitionCallbackReturn.SUCCESS:
+                raise StartupError(self._refusal or f'{self.get_name()}: activate failed')
+        self._starting = False
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def configured(self) -> bool:
+        """Whether the node is configured (inactive or active): its configuration in force."""
+        return self._configured
+
+    @property
+    def active(self) -> bool:
+        """Whether the node is active: it subscribes its inputs and commands."""
+        return self._active
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Configure: validate the parameters, gain and robot file, make the outputs.
+
+        A refusal names the key (the validators' messages), is logged and leaves the node
+        unconfigured (``FAILURE``).
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state the transition starts from.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        try:
+            cfg = self.configure_from_parameters()
+        except StartupError as exc:
+            self._refusal = str(exc)
+            if not self._starting:         # the constructor's refusal is the [FATAL] line
+                self.log('error', f'configure refused: {exc}; staying unconfigured')
+            return TransitionCallbackReturn.FAILURE
+        return self._transition('configure', partial(self._make_outputs, cfg))
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Activate: subscribe the inputs; commands from the next odometry on.
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state the transition starts from.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        return self._transition('activate', self._subscribe)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Deactivate: command zero, unsubscribe, forget the trajectory (stays configured).
+
+        After an error while active (``_fail``) the same, then ``ERROR``: the state
+        machine goes on to ErrorProcessing (:meth:`on_error`).
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state the transition starts from.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        ret = self._transition('deactivate', self._unsubscribe)
+        return TransitionCallbackReturn.ERROR if self._error is not None else ret
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Clean up: release the outputs, workers and state (back to unconfigured).
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state the transition starts from.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        return self._transition('cleanup', self._release)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Shut down from any state: zero if active, release everything; the process ends.
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state the transition starts from.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        self.finished = True               # run(): the spin ends, exit code 0
+        return self._transition('shutdown', self._finalize)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """ErrorProcessing: command zero, release everything; back to unconfigured.
+
+        Parameters
+        ----------
+        state : rclpy.lifecycle.LifecycleState
+            The state whose transition failed.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        self.log('error', f'error processing ({self._error or "a transition failed"}): '
+                          'zero commanded, everything released; unconfigured (configure '
+                          'again to resume)')
+        ret = self._transition('error processing', self._finalize)
+        self._error = None
+        return ret
+
+    def _transition(self, name: str, work: Any) -> TransitionCallbackReturn:
+        """Run a transition's ``work``; an unexpected error is logged and is ``ERROR``.
+
+        rclpy turns an exception in a transition callback into ``ERROR`` without a word.
+        """
+        try:
+            work()
+        except Exception as exc:  # noqa: BLE001 - said here, then ErrorProcessing
+            if self._starting:
+                raise
+            self.log('error', f'{name} failed: {type(exc).__name__}: {exc} '
+                              f'({_where(exc)})')
+            return TransitionCallbackReturn.ERROR
+        if not self._starting:
+            self.log('info', f'{name}: {self.lifecycle_state()}')
+        return TransitionCallbackReturn.SUCCESS
+
+    def trigger(self, transition: str) -> TransitionCallbackReturn:
+        """Run a lifecycle transition as a manager's ChangeState would.
+
+        Parameters
+        ----------
+        transition : str
+            ``configure``, ``activate``, ``deactivate``, ``cleanup`` or ``shutdown``.
+
+        Returns
+        -------
+        rclpy.lifecycle.TransitionCallbackReturn
+        """
+        ret: TransitionCallbackReturn = getattr(self, f'trigger_{transition}')()
+        return ret
+
+    def lifecycle_state(self) -> str:
+        """The lifecycle state's label after the running transition (or now).
+
+        Returns
+        -------
+        str
+        """
+        if self.finished:
+            return 'finalized'
+        return 'active' if self._active else 'inactive' if self._configured else \
+            'unconfigured'
+
+    def _make_outputs(self, cfg: TrackerSettings) -> None:
+        """Configure's work: the rules and the law, the publishers, the monitor."""
+        if self._error_timer is not None:
+            self.destroy_timer(self._error_timer)
+            self._error_timer = None
+        self.config = cfg
         self.mode = cfg.mode
         # the input rules and the law: one ROS-free object, shared with bag replay
         self.inputs = TrackerInputs(cfg.tracker, cfg.rules, on_reject=self._on_reject,
-                                    on_jump=self._on_jump)
-        self.tracker: Tracker = self.inputs.tracker
-        self.create_subscription(Odometry, cfg.odom_topic, self._on_odom, DATA_QOS)
+                                    on_jump=self._on_jump, on_splice=self._on_splice,
+                                    on_override=self._on_override)
+        self.tracker: Controller = self.inputs.tracker
         self.frame = cfg.rules.frame
         self.wait_for_trajectory = cfg.rules.wait_for_trajectory
-        if not self.wait_for_trajectory:     # only then are the per-step samples read
-            self.create_subscription(PoseStamped, topics.REF_POSE, self._on_ref_pose, DATA_QOS)
-            self.create_subscription(TwistStamped, topics.REF_TWIST, self._on_ref_twist,
-                                     DATA_QOS)
-            self.create_subscription(AccelStamped, topics.REF_ACCEL, self._on_ref_accel,
-                                     DATA_QOS)
         self.last_retime = ''              # what re-timing the last trajectory changed
         self._pool: ThreadPoolExecutor | None = None    # real time: the re-timing thread
         # (future, origin, source) ready to adopt
@@ -365,11 +589,6 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self._announce = False             # tracker/trajectory due at the next step
         self.pub_followed = self.create_publisher(MultiDOFJointTrajectory,
                                                   topics.FOLLOWED_TRAJECTORY, LATCHED_QOS)
-        self.create_subscription(PathMsg, topics.TRAJECTORY, self._on_path, LATCHED_QOS)
-        # raw: the CDR bytes, read with numpy (multidof_from_cdr) - rclpy's deserialization
-        # of an hour's 48,000 knots is one C call of about 2 s in which no signal is acted on
-        self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
-                                 self._on_multidof, LATCHED_QOS, raw=True)
         # lockstep needs no clock: a command answers an odom stamp, and the time law of an
         # untimed Path starts at the latest odom stamp (no /clock subscription per step)
         self.commands = 0
@@ -406,13 +625,106 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         # of the node clock in real time
         self.diag_period_ns = int(cfg.diagnostics_period * 1e9)
         self._last_diag = -(1 << 62)
-        if self.mode == 'realtime':
-            self.create_timer(cfg.diagnostics_period, self._diagnostics)
+        self._outputs_made = [self.pub_followed, self.pub_cmd, self.pub_error, self.pub_path,
+                              self.pub_marker, self.pub_diag]
+        self._monitor_start()
+        if self.monitor is not None:
+            self._outputs_made.append(self.pub_cert)
+        self._configured = True
+
+    def _subscribe(self) -> None:
+        """Activate's work: the inputs' subscriptions and the real-time timers."""
+        cfg = self.config
+        guarded = self._guarded
+        add = self._entities.append
+        add(self.create_subscription(Odometry, cfg.odom_topic, guarded(self._on_odom),
+                                     DATA_QOS))
+        if not self.wait_for_trajectory:     # only then are the per-step samples read
+            add(self.create_subscription(PoseStamped, topics.REF_POSE,
+                                         guarded(self._on_ref_pose), DATA_QOS))
+            add(self.create_subscription(TwistStamped, topics.REF_TWIST,
+                                         guarded(self._on_ref_twist), DATA_QOS))
+            add(self.create_subscription(AccelStamped, topics.REF_ACCEL,
+                                         guarded(self._on_ref_accel), DATA_QOS))
+        add(self.create_subscription(PathMsg, topics.TRAJECTORY, guarded(self._on_path),
+                                     LATCHED_QOS))
+        # raw: the CDR bytes, read with numpy (multidof_from_cdr) - rclpy's deserialization
+        # of an hour's 48,000 knots is one C call of about 2 s in which no signal is acted on
+        add(self.create_subscription(MultiDOFJointTrajectory, topics.TRAJECTORY_MULTIDOF,
+                                     guarded(self._on_multidof), LATCHED_QOS, raw=True))
         if self.mode == 'realtime':
             self._last_odom_wall: int | None = None     # wall ns of the last input
             self._last_ref_wall: int | None = None
-            self.create_timer(0.05, self._watchdog)
-        self._monitor_start()
+            add(self.create_timer(cfg.diagnostics_period, guarded(self._diagnostics)))
+            add(self.create_timer(0.05, guarded(self._watchdog)))
+        self._active = True
+
+    def _unsubscribe(self) -> None:
+        """Deactivate's work: a zero command, the subscriptions and timers destroyed."""
+        was_active, self._active = self._active, False
+        if was_active:
+            self._publish(0.0, 0.0)
+        for entity in self._entities:
+            if isinstance(entity, Subscription):
+                self.destroy_subscription(entity)
+            else:
+                self.destroy_timer(entity)
+        self._entities.clear()
+        self._retimed.clear()
+        if self._configured:
+            self.inputs.release()          # the next activation starts a new run
+
+    def _release(self) -> None:
+        """Cleanup's work: the workers stopped, the publishers destroyed (unconfigured)."""
+        self._unsubscribe()
+        if not self._configured:
+            return
+        self._stop_workers()
+        for pub in self._outputs_made:
+            self.destroy_publisher(pub)
+        self._outputs_made = []
+        self._configured = False
+
+    def _finalize(self) -> None:
+        """Shutdown's and error processing's work: everything released, whatever the state."""
+        self._release()
+
+    def _guarded(self, callback: Any) -> Any:
+        """``callback``, an unexpected error in it going to ErrorProcessing (``_fail``)."""
+        def run(*args: Any) -> None:
+            if not self._active:
+                return                     # a message taken before the deactivation
+            try:
+                callback(*args)
+            except Exception as exc:  # noqa: BLE001 - zero, then ErrorProcessing
+                if self.stopping:
+                    raise                  # the shutdown race (guard_shutdown_race)
+                self._fail(exc)
+        return run
+
+    def _fail(self, exc: BaseException) -> None:
+        """An error while active: zero now, then deactivate -> ErrorProcessing -> unconfigured.
+
+        The transition runs from a one-shot timer, outside the callback that failed (whose
+        subscription it destroys).
+        """
+        if self._error is not None:
+            return
+        self._error = f'{type(exc).__name__}: {exc}'
+        self.log('error', f'error while active: {self._error} ({_where(exc)}); commanding '
+                          'zero, going to ErrorProcessing')
+        self._publish(0.0, 0.0)
+        self._active = False               # nothing more is commanded
+
+        def to_error() -> None:
+            if self._error_timer is not None:
+                self._error_timer.cancel()
+            if self._state_machine.current_state[1] != 'active':
+                self._error = None         # a manager took it down meanwhile: done
+                return
+            self._active = True            # the deactivation's zero and clean-up run
+            self.trigger('deactivate')
+        self._error_timer = self.create_timer(0.001, to_error)
 
     def apply_config(self, old: TrackerSettings, new: TrackerSettings) -> None:
         """An accepted runtime set (post-set callback): the new gains, limits and rules.
@@ -422,11 +734,33 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         old, new : TrackerSettings
             The settings before and after the change.
         """
-        self.tracker.config = new.tracker
+        law = self._law
+        if law is not None:                        # another law keeps its own settings
+            c = law.config                         # a tuned prediction stays as tuned
+            law.config = new.tracker if self._tuned is None else replace(
+                new.tracker, predict_latency=c.predict_latency, predict_lag_v=c.predict_lag_v,
+                predict_lag_w=c.predict_lag_w)
         self.inputs.rules = new.rules
         self.max_path_poses = new.max_path_poses
         if self.monitor is not None:
             self.monitor.settings = new.monitor.settings
+
+    @property
+    def _tuned(self) -> Tuned | None:
+        """The tuning around our law (``monitor_tune``), if any."""
+        return self.tracker if isinstance(self.tracker, Tuned) else None
+
+    @property
+    def _law(self) -> Tracker | None:
+        """Our law (inside the tuning, if any); None for another controller."""
+        law = self.tracker.tracker if isinstance(self.tracker, Tuned) else self.tracker
+        return law if isinstance(law, Tracker) else None
+
+    @property
+    def _predictor(self) -> LatencyPredictor | None:
+        """Our law's latency predictor (None without one, or for another controller)."""
+        law = self._law
+        return None if law is None else law.predictor
 
     # ------------------------------------------------------------------ certificate monitor
     def _monitor_start(self) -> None:
@@ -435,31 +769,56 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         self.monitor: MonitorWorker | None = None
         self._monitor_last_level = -1
         if not m.enabled:
+            if m.tune:
+                self.log('info', 'monitor off: the predictor is not tuned online (monitor_tune '
+                                 'needs the monitor\'s estimates)')
             return
-        self.monitor = MonitorWorker(m.settings, m.period)
+        tuned = self.inputs.tracker
+        # with monitor_tune the law's own estimator is the monitor: estimates on the stamps,
+        # in the odometry callback; the node neither feeds it nor runs a thread for it
+        self.monitor = tuned.worker if isinstance(tuned, Tuned) else MonitorWorker(m.settings,
+                                                                                 m.period)
         self.pub_cert = self.create_publisher(DiagnosticArray, topics.CERTIFICATE, DATA_QOS)
+        if isinstance(tuned, Tuned):
+            self._tunings = tuned.changes
+            self.pub_tuning = self.create_publisher(Vector3Stamped, topics.TUNING, LATCHED_QOS)
         if m.certificate is None:
             self.log('info', 'certificate monitor: no certified_residual given (the gain '
                              'file records no certificate): latency is estimated and '
                              'reported, the certificate as unknown')
-        if m.adapt and self.tracker.predictor is None:
+        if m.adapt and self._predictor is None:
             self.log('warn', 'monitor_adapt needs the predictor (predict_latency > 0 or a '
                              'predict_* parameter): not adapting')
-        self.monitor.start()
+        if not isinstance(tuned, Tuned):
+            self.monitor.start()
+
+    def _publish_tuning(self) -> None:
+        """Publish a retune of the step just taken (``monitor_tune``) on tracker/tuning."""
+        tuned = self._tuned
+        if tuned is None or tuned.changes == self._tunings or tuned.last_change is None:
+            return
+        self._tunings = tuned.changes
+        stamp, latency, lag_v, lag_w = tuned.last_change
+        msg = Vector3Stamped()
+        ns_to_stamp(stamp, msg.header.stamp)       # (no frame: times, not a spatial vector)
+        msg.vector.x, msg.vector.y, msg.vector.z = latency, lag_v, lag_w
+        self.pub_tuning.publish(msg)
+        self.log('info', f'predictor tuned: latency {latency:.4f} s, lags {lag_v:.4f} / '
+                         f'{lag_w:.4f} s (from the odometry stamped {stamp * 1e-9:.6f} s)')
 
     def _monitor_command(self, stamp: int | None, v: float, w: float) -> None:
         """Record a command sent: at the tracker's *now* (lockstep) or the clock (real time)."""
-        if self.monitor is None:
+        if self.monitor is None or isinstance(self.inputs.tracker, Tuned):
             return
         if stamp is None or self.mode == 'realtime':
             t = self.get_clock().now().nanoseconds * 1e-9
         else:
-            t = stamp * 1e-9 + self.tracker.config.predict_odom_latency
+            t = stamp * 1e-9 + self.config.tracker.predict_odom_latency
         self.monitor.window.add_command(t, v, w)
 
     def _monitor_odom(self, stamp: int, msg: Odometry) -> None:
         """Record the odometry twist measured at ``stamp`` (ns)."""
-        if self.monitor is None:
+        if self.monitor is None or isinstance(self.inputs.tracker, Tuned):
             return
         v, w = msg.twist.twist.linear.x, msg.twist.twist.angular.z
         if math.isfinite(v) and math.isfinite(w):
@@ -471,7 +830,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if mon is None:
             return []
         m = self.config.monitor
-        pred = self.tracker.predictor
+        pred = self._predictor
         adapting = m.adapt and pred is not None
         P = pred.cmd_latency if pred is not None else 0.0
         est = mon.latest
@@ -490,8 +849,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                                   else 'waiting for the trajectory\'s start' if not f.refused
                                   else 'trajectory refused') + '): no excitation')
         cert = m.certificate
-        if cert is not None and not self.tracker.config.dt and self.tracker.hold:
-            cert = replace(cert, hold=self.tracker.hold)     # the measured command period
+        hold = self.config.tracker.dt or (self.tracker.timing.period or 0.0)
+        if cert is not None and not self.config.tracker.dt and hold:
+            cert = replace(cert, hold=hold)     # the measured command period
         verdict = evaluate(est, cert, P, m.settings, adapting=adapting)
         if verdict.level != self._monitor_last_level:
             self._monitor_last_level = verdict.level
@@ -515,6 +875,11 @@ class TrackerNode(AdapterNode[TrackerSettings]):
 
         A re-timing in progress is not waited for.
         """
+        self._stop_workers()
+        super().close()
+
+    def _stop_workers(self) -> None:
+        """The monitor's and the re-timing's threads stopped (idempotent)."""
         mon = getattr(self, 'monitor', None)
         if mon is not None:
             # not waited for long: the node ends within a second of a stop signal (an
@@ -525,7 +890,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
-        super().close()
+        self.monitor = None
 
     # ------------------------------------------------------------------ inputs
     def _on_reject(self, r: Rejection) -> None:
@@ -539,6 +904,25 @@ class TrackerNode(AdapterNode[TrackerSettings]):
             self._diagnostics()
         elif self.inputs.rejected <= 10 or self.inputs.rejected % 1000 == 0:
             self.log('warn', f'ignored {r} (rejected so far: {self.inputs.rejected})')
+
+    def _on_splice(self, near: Nearest, speed: float) -> None:
+        """Say that a plan was spliced onto the motion (the first 3, then every 100th)."""
+        n = self.inputs.splices
+        if n <= 3 or n % 100 == 0:
+            self.log('info', f'plan {n} spliced onto the motion at {near.s:.3f} m along it '
+                             f'({near.distance * 1e3:.1f} mm from the reference), from '
+                             f'{speed:.3f} m/s: no new run')
+
+    def _on_override(self, event: str, commanded: float, measured: float) -> None:
+        """Say that the commands are overridden downstream, or no longer."""
+        if event == 'held':
+            self.log('warn', f'commands overridden downstream (a collision monitor?): '
+                             f'{measured:.3f} m/s measured for {commanded:.3f} m/s commanded '
+                             f'for {self.inputs.rules.override_time:g} s; holding the reference '
+                             'at the robot, the compensator at its speed')
+        elif event == 'released':
+            self.log('info', f'commands no longer overridden ({measured:.3f} m/s measured): '
+                             'resuming from where the robot is')
 
     def _on_jump(self, gap: float) -> None:
         self.log('warn', f'odom stamp jumped {gap:.3f} s ahead: re-initialising the '
@@ -627,6 +1011,8 @@ class TrackerNode(AdapterNode[TrackerSettings]):
     def _adopt(self, traj: Trajectory, origin: int, source: str) -> None:
         self.inputs.adopt(traj, origin)
         self._announce = True                 # at the step that first follows it
+        if traj.spliced:
+            return                            # said by _on_splice (the first ones)
         self.log('info', f'new trajectory from {source}: {len(traj.knots)} points '
                          f'({traj.kind}), {traj.duration:.3f} s from stamp '
                          f'{origin * 1e-9:.3f} s: starting a new run')
@@ -725,6 +1111,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                     'a new trajectory')
                 self._diagnostics()
         self._publish(step.command.v, step.command.w, step.stamp)
+        self._publish_tuning()
         self._outputs(step.stamp, step.pose, step.ref, step.command)
 
     def _started(self, f: Follower, stamp: int, announce: bool) -> None:
@@ -761,7 +1148,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         lockstep, the node clock's now in real time (what diff_drive_controller checks
         against its cmd_vel_timeout) - and the body frame.
         """
-        c = self.tracker.config
+        c = self.config.tracker
         if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
             v = w = 0.0
         self._cmd.linear.x = max(-c.max_linear_speed, min(c.max_linear_speed, v))
@@ -836,6 +1223,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
         if self.inputs.stopped:
             level = DiagnosticStatus.WARN
             msgs.append('inputs stale: stopped')
+        if self.inputs.override.overridden:
+            level = DiagnosticStatus.WARN
+            msgs.append('commands overridden downstream: holding the reference at the robot')
         if self.inputs.rejected > self._rejected_reported:
             level = max(level, DiagnosticStatus.WARN)
             msgs.append(f'{self.inputs.rejected - self._rejected_reported} input(s) rejected')
@@ -848,7 +1238,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                               message='; '.join(msgs),
                               hardware_id=self.get_fully_qualified_name())
         measured = self.tracker.timing.period
-        dt = self.tracker.config.dt
+        dt = self.config.tracker.dt
         vals = {'loop period (s)': f'{period:.6f}',
                 'odometry period (s)': f'{measured:.6f}' if measured else 'unknown',
                 'tracker step (s)': f'{dt:g} (dt override)' if dt else
@@ -863,7 +1253,9 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                 'trajectory end (s)': f'{f.trajectory.t_end:.3f}' if f else 'none',
                 'trajectory re-based by (s)': f'{f.offset:.6f}' if f else 'none',
                 'last refused trajectory': self.inputs.last_refusal or 'none',
-                'last re-timed trajectory': self.last_retime or 'none'}
+                'last re-timed trajectory': self.last_retime or 'none',
+                'plans spliced': self.inputs.splices,
+                'overridden downstream': self.inputs.override.count}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -884,7 +1276,7 @@ class TrackerNode(AdapterNode[TrackerSettings]):
                    f'{now:.4f} s ({1 / now:.1f} Hz)')
             self.log('warn', msg)
             notes.append(msg)
-        wrong = period_disagreement(self.tracker.config.dt, timing.period)
+        wrong = period_disagreement(self.config.tracker.dt, timing.period)
         if wrong is not None:
             if not self._dt_disagreement:
                 self.log('warn', wrong)

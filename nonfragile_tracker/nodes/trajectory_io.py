@@ -1,19 +1,11 @@
 """Trajectory messages <-> the core's arrays (nav_msgs/Path, MultiDOFJointTrajectory).
 
-The core (:mod:`control.simulation.trajectory`) takes arrays; this module only reads and fills
-messages.  Times are kept in integer nanoseconds relative to an *origin* stamp, so the
-tracker samples at ``(odom stamp - origin) * 1e-9`` exactly as
-:func:`control.simulation.follow.simulate_following` does.
+The core (:mod:`nonfragile_tracker.control.simulation.trajectory`) takes arrays; this module
+only reads and fills messages, with times in integer nanoseconds relative to an *origin*
+stamp (so the tracker samples exactly as the in-process simulation does).
 
-nav_msgs/Path: the poses' stamps are the times (absolute, the first one is the origin);
-when every pose stamp is zero the times come from a trapezoidal time law (cruise speed,
-acceleration limit) and the origin is the Path's header stamp.  Every pose must be in
-the Path's frame, which must be the odometry frame (no tf here).
-
-trajectory_msgs/MultiDOFJointTrajectory: one joint (the planar base): transforms[0]
-gives the pose, velocities[0].linear / accelerations[0].linear (in the trajectory
-frame) the velocity and acceleration, ``time_from_start`` the time after the header
-stamp (the origin).  Points without velocities are interpolated by the cubic spline.
+See doc/trajectories.md, section "Sources" (messages to arrays: the stamps, the origin,
+the frames, the fields read).
 """
 from __future__ import annotations
 
@@ -24,10 +16,10 @@ import numpy as np
 from nav_msgs.msg import Path as PathMsg
 from numpy.typing import ArrayLike
 
-from ..control.simulation.loop import yaw_to_quaternion
+from ..control.simulation.model import yaw_to_quaternion
 from ..control.simulation.trajectory import Trajectory, TrajectorySamples
 # the message -> trajectory conversions are ROS-free (bag/ reconstructs references with them)
-from ..msgconv import multidof_cdr, multidof_to_trajectory, path_to_trajectory, stamp_ns
+from ..interface.msgconv import multidof_cdr, multidof_to_trajectory, path_to_trajectory, stamp_ns
 
 __all__ = ['path_to_trajectory', 'trajectory_to_path', 'multidof_to_trajectory',
            'states_to_multidof', 'followed_to_multidof', 'stamp_ns']
@@ -41,13 +33,13 @@ def followed_to_multidof(traj: Trajectory, origin_ns: int, frame: str,
                          header_ns: int | None = None) -> bytes:
     """MultiDOFJointTrajectory of a bounded trajectory at its knots (pose, velocity, accel).
 
-    As its CDR bytes (:func:`~nonfragile_tracker.msgconv.multidof_cdr`; a publisher sends
+    As its CDR bytes (:func:`~nonfragile_tracker.interface.msgconv.multidof_cdr`; a publisher sends
     them as is): made in milliseconds also for 50,000 knots, where the message object
     took seconds in the tracker's callback.
 
     Stamped ``origin_ns + t_start`` with times from ``t_start`` (or stamped ``header_ns``
     with times from there: the same knots at the same absolute times); its quintic Hermite
-    rebuild (:func:`multidof_to_trajectory`) is the trajectory itself (a cubic or quintic
+    rebuild (:func:`.multidof_to_trajectory`) is the trajectory itself (a cubic or quintic
     piece is matched exactly by its end values), sampled at the same stamps.
 
     Parameters
@@ -125,9 +117,9 @@ def states_to_multidof(t_ns: Sequence[int] | np.ndarray, samples: TrajectorySamp
     """trajectory_msgs/MultiDOFJointTrajectory of timed states (one joint, the planar base).
 
     ``t_ns``: integer nanoseconds after ``origin_ns`` (the header stamp); ``samples``: a
-    :class:`~control.simulation.trajectory.TrajectorySamples` (position, velocity, acceleration in
-    ``frame`` and heading) - e.g. :func:`control.simulation.trajectory.analytic_knots`.
-    :func:`multidof_to_trajectory` turns it back into the quintic Hermite trajectory.
+    :class:`~.control.simulation.trajectory.TrajectorySamples` (position, velocity, acceleration in
+    ``frame`` and heading) - e.g. :func:`.control.simulation.trajectory.analytic_knots`.
+    :func:`.multidof_to_trajectory` turns it back into the quintic Hermite trajectory.
 
     Parameters
     ----------

@@ -1,49 +1,14 @@
 """Workarounds of upstream faults of the node processes, each with the condition to drop it.
 
-The rclpy 7.1.6 wheels (ROS 2 Jazzy) with their Fast DDS 2.14; none of this is control
-logic.  Lean at import (the standard library only, rclpy types for the type checker):
+For the rclpy 7.1.6 wheels (ROS 2 Jazzy) with their Fast DDS 2.14; none of this is control
+logic: the exit without finalization (:func:`exit_without_finalization`), the kept
+executors (:func:`end_executor`), the tear-down deadline (:func:`arm_exit_deadline`), the
+finite spin timeout (:func:`spin_until`) and the shutdown race under a callback
+(:func:`guard_shutdown_race`).  Lean at import (the standard library only):
 :mod:`nonfragile_tracker.nodes.entry` imports it before the heavy imports.
 
-1. **The process leaves with** ``os._exit`` after its clean-up
-   (:func:`exit_without_finalization`).  rclpy's EventsExecutor (experimental;
-   ros2/rclpy#1391, in Jazzy since rclpy 7.1.4 through ros2/rclpy#1435) aborts in the
-   destructor of its callback manager when callbacks are still registered ('Destroying
-   callback manager with callbacks remaining', then ``abort()``), which the
-   interpreter's finalization could reach after a signal right after start (about 1 in
-   30 stops; also before this package handled signals).  No upstream issue for this
-   abort was found.  Drop when the EventsExecutor unregisters its callbacks on
-   destruction (or leaves ``rclpy.experimental``) in the rclpy the package pins, or
-   when the nodes use the ``SingleThreadedExecutor`` (``NONFRAGILE_EXECUTOR=single``).
-2. **The ended executors are kept alive** (:func:`end_executor`): the node is removed and
-   the executor shut down while it lives, and it is never destroyed before the process
-   leaves (the same abort, item 1).  Drop with item 1.
-3. **The DDS tear-down has a deadline** (:func:`arm_exit_deadline`).  With Fast DDS 2.14,
-   destroying the last node destroys the participant, whose ``set_listener(nullptr)``
-   waits forever when a discovery callback (a peer removing an endpoint, e.g. every node
-   of a launch file stopping at once) runs at that moment: a deadlock of two middleware
-   threads, about once in a few hundred stops under load, that otherwise ends only with
-   SIGKILL.  No upstream issue for this deadlock was found; eProsima/Fast-DDS#6193
-   (deadlock on reader/writer destruction with several participants in one process) is
-   the closest report.  Drop when the pinned Fast DDS destroys a participant without
-   waiting on its discovery listener (a release whose notes name the fix, checked by
-   ``make soak`` without a ``Timeout`` line in the node logs).
-4. **The spin has a finite timeout** (:func:`spin_until`).  The EventsExecutor's
-   ``spin_once()`` without a timeout does not return once the context is shut down from
-   another thread (rclpy's signal thread does that on SIGINT): checked here with rclpy
-   7.1.6, a ``try_shutdown()`` from a timer thread 1 s after the start left it spinning
-   at most of a core until SIGKILL, where the ``SingleThreadedExecutor`` raised
-   ``ExternalShutdownException`` at once.  With a timeout the loop also looks at its own
-   end conditions between spins (a node's ``finished``, a stop signal rclpy's handlers
-   did not act on).  No upstream issue found.  Drop the workaround part (keep a timeout
-   for those checks) when the pinned rclpy's EventsExecutor returns from an untimed
-   ``spin_once()`` on an external shutdown.
-5. **A shutdown under a callback ends it quietly** (:func:`guard_shutdown_race`).
-   rclpy's signal thread shuts the context down while the main thread runs a callback;
-   whatever that callback then touches (a publish, a log to rosout) raises - rclpy 7.1
-   races its own shutdown (ros2/rclpy#1352, fixed by ros2/rclpy#1353 after Jazzy's
-   7.1.x; rcl's 'Failed to publish log message to rosout: publisher's context is
-   invalid', ros2/rclcpp#812).  Drop when the pinned rclpy includes ros2/rclpy#1353 and
-   a signal during a callback leaves no traceback in ``make soak``.
+See doc/safety.md, "Workarounds of upstream faults": each fault, its upstream report and
+the condition to drop its workaround.
 """
 from __future__ import annotations
 
@@ -71,7 +36,7 @@ _ENDED_EXECUTORS: list[Executor] = []
 
 
 def mark_node_process() -> None:
-    """Mark this process as a node process started by :func:`nodes.entry.main`.
+    """Mark this process as a node process started by :func:`.nodes.entry.main`.
 
     Only then does :func:`arm_exit_deadline` arm its deadline (never in a test or an
     embedding process).

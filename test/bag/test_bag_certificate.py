@@ -10,14 +10,15 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 
-from nonfragile_tracker import topics
+from nonfragile_tracker.interface import topics
 from nonfragile_tracker.bag.report import (certificate_check, certificate_source,
                                            format_certificate)
 from nonfragile_tracker.bag.writer import BagWriter
 from nonfragile_tracker.cli import main
 from nonfragile_tracker.control.simulation.gains import write_gain_file
-from nonfragile_tracker.control.simulation.loop import (PlantConfig, UnicyclePlant, step_time_ns,
-                                                        yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.timing import step_time_ns
+from nonfragile_tracker.control.simulation.model import yaw_to_quaternion
 
 #: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
 pytestmark = pytest.mark.numerical

@@ -5,7 +5,8 @@ import pytest
 import yaml
 
 from conftest import CONFIG
-from nonfragile_tracker import cli, golden
+from nonfragile_tracker import cli
+from nonfragile_tracker.workflows import golden
 
 #: Not marked ``numerical``: every comparison here is of two runs of the same scenario on the
 #: same machine and kernel (exact by construction), so a second BLAS kernel checks nothing new.

@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from nonfragile_tracker import cli, golden
-from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, load_tracker_parameters, replay
+from nonfragile_tracker import cli
+from nonfragile_tracker.workflows import golden
+from nonfragile_tracker.bag.replay import (TRACKER_DEFAULTS, format_replay, load_tracker_parameters,
+                                           replay)
 from nonfragile_tracker.bag.writer import BagWriter, jazzy_typestore
-from nonfragile_tracker.control.simulation.loop import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
 from nonfragile_tracker.control.simulation.reference import make_path
-from nonfragile_tracker.tracker_inputs import InputRules, TrackerInputs
+from nonfragile_tracker.interface.tracker_inputs import InputRules, TrackerInputs, input_rules
 
 #: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
 pytestmark = pytest.mark.numerical
@@ -44,7 +46,8 @@ def _pose(x, y, th):
 
 
 def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
-                           odom_from=0, refs_from=0, jitter=0.0, backlog=0, lead=0.2):
+                           odom_from=0, refs_from=0, jitter=0.0, backlog=0, lead=0.2,
+                           tune=False, tuning_topic=True):
     """A real-time run simulated in process and written as the recorder would see it.
 
     Odometry k is stamped T0 + 10k ms (plus a uniform jitter of +-``jitter`` ms, seeded);
@@ -57,12 +60,20 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
     started while the recorder ran); the plant is at rest until its first command.  Its
     first ``backlog`` commands reach the recorder in a burst after the odometry of the
     last of them (a tracker working off a queue of odometry as it starts, under load).
+    ``tune``: the tracker tunes its predictor online (the node's default rules) on a plant
+    with 50 ms lags and 20 ms latency, on a faster circle; its retunes are recorded on
+    tracker/tuning unless ``tuning_topic`` is False (the recorder, joined late, got the one
+    in effect when it joined, as a transient-local subscriber does).  Returns the number
+    of recorded commands (and with ``tune`` the steps at which the tracker retuned).
     """
     jit = np.random.default_rng(7).uniform(-jitter, jitter, steps)
-    config, _ = load_tracker_parameters(params=params)
-    tracker = TrackerInputs(config, InputRules('realtime'))
-    plant = UnicyclePlant(PlantConfig())
-    ref_path = make_path('circle', radius=0.5, rate=0.01)
+    config, values = load_tracker_parameters(params=params)
+    tracker = TrackerInputs(config, input_rules(values, 'realtime') if tune
+                            else InputRules('realtime'))
+    plant = UnicyclePlant(PlantConfig(lag_v=0.05, lag_w=0.05, cmd_latency=0.02) if tune
+                          else PlantConfig())
+    ref_path = make_path('circle', radius=0.5, rate=0.4 if tune else 0.01)
+    retunes, tunings = [], []
     cov = np.zeros(36)
     true_order, bag = [], []            # (time, kind, msg) for the tracker / the recorder
     first_cmd = None                    # the step of the tracker's first command
@@ -110,22 +121,40 @@ def simulated_realtime_bag(path, *, steps=300, late=20, swapped=60, params=None,
         plant.step(cmd.v, cmd.w)
         first_cmd = k if first_cmd is None else first_cmd
         t_cmd = recv + 2 * MS
+        law = tracker.tracker
+        if tune and law.changes > len(retunes):
+            retunes.append(k)
+            stamp, *pred = law.last_change
+            tunings.append((max(t_cmd, bag_start_ns(late)), T['geometry_msgs/msg/Vector3Stamped'](
+                header=_hdr(stamp), vector=T['geometry_msgs/msg/Vector3'](*pred))))
         if k < first_cmd + backlog:             # in the burst after step first_cmd + backlog
             t_cmd = T0 + (first_cmd + backlog) * 10 * MS + 4 * MS + (k - first_cmd) * 10_000
         if k >= late:
             bag.append((t_cmd, 'cmd', T['geometry_msgs/msg/Twist'](
                 linear=_vec(cmd.v), angular=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0,
                                                                              z=cmd.w))))
+    if tuning_topic:
+        # a late transient-local subscriber gets the one in effect when it joins
+        joined = [b for b in tunings if b[0] <= bag_start_ns(late)][-1:]
+        bag += [(t, 'tuning', m) for t, m in joined + [b for b in tunings
+                                                        if b[0] > bag_start_ns(late)]]
     topic = {'odom': ('/odom', 'nav_msgs/msg/Odometry'),
              'ref_pose': ('/reference/pose', 'geometry_msgs/msg/PoseStamped'),
              'ref_twist': ('/reference/twist', 'geometry_msgs/msg/TwistStamped'),
              'ref_accel': ('/reference/accel', 'geometry_msgs/msg/AccelStamped'),
-             'cmd': ('/cmd_vel', 'geometry_msgs/msg/Twist')}
+             'cmd': ('/cmd_vel', 'geometry_msgs/msg/Twist'),
+             'tuning': ('/tracker/tuning', 'geometry_msgs/msg/Vector3Stamped')}
     with BagWriter(path, connections=dict(topic.values())) as w:
         for t, kind, m in sorted(bag, key=lambda b: b[0]):
             name, msgtype = topic[kind]
             w.write(name, t, bytes(TS.serialize_cdr(m, msgtype)))
-    return sum(1 for b in bag if b[1] == 'cmd')
+    n = sum(1 for b in bag if b[1] == 'cmd')
+    return (n, retunes) if tune else n
+
+
+def bag_start_ns(late):
+    """When the recorder joined the tracker's commands (its first recorded one, about)."""
+    return T0 + late * 10 * MS
 
 
 @pytest.mark.parametrize('lead', [0.2, 7.0])
@@ -168,7 +197,7 @@ def test_replay_reproduces_a_run_with_acceleration_limits(tmp_path):
     """The tracker's limits are recorded parameters: replay with them reproduces the
     run; a replay that does not know them does not (the limits bound the first turn)."""
     import yaml
-    from nonfragile_tracker.scenario import scenario_file
+    from nonfragile_tracker.interface.scenario import scenario_file
     data = yaml.safe_load(scenario_file().read_text())
     data['/**/tracker']['ros__parameters'].update(max_linear_accel=0.5, max_angular_accel=1.5)
     params = tmp_path / 'params.yaml'
@@ -201,7 +230,29 @@ def test_replay_cli(tmp_path, capsys):
 
 @pytest.mark.ros
 def test_replay_defaults_are_the_nodes():
-    from nonfragile_tracker.nodes.tracker import PARAMS
-    node = {p.name: p.default for p in PARAMS}
+    from nonfragile_tracker.nodes.tracker import MONITOR_PARAMS, PARAMS
+    node = {p.name: p.default for p in PARAMS + MONITOR_PARAMS}
     for name, value in TRACKER_DEFAULTS.items():
         assert node[name] == value, name
+
+
+def test_a_late_recorder_of_a_tuning_tracker_is_replayed_with_its_recorded_retunes(tmp_path):
+    """The tracker tunes its predictor online (the default) and retuned 4 s after it started;
+    the recorder joined 0.5 s after it.  A fresh tracker's tuning would run on another
+    schedule and window, so the replay applies the retunes the tracker published on
+    tracker/tuning (at their odometry stamps); a bag without them is not reproduced."""
+    n, retunes = simulated_realtime_bag(tmp_path / 'rt', steps=800, late=50, tune=True)
+    assert retunes and retunes[0] > 50           # the retune came after the join
+    res = replay(tmp_path / 'rt')
+    assert res.comparison.equal, res.comparison.differences[:3]
+    assert len(res.commands) == len(res.recorded) == n
+    simulated_realtime_bag(tmp_path / 'bare', steps=800, late=50, tune=True,
+                           tuning_topic=False)
+    bare = replay(tmp_path / 'bare')
+    assert not bare.comparison.equal and bare.max_abs_error > 1e-3
+    # the recorder joined after the retune: the predictor's state (the commands it had sent)
+    # is not in the bag; the replay says so instead of claiming a reproduction
+    simulated_realtime_bag(tmp_path / 'after', steps=800, late=450, tune=True)
+    after = replay(tmp_path / 'after')
+    assert not after.comparison.equal
+    assert 'tuned its predictor' in format_replay(after)

@@ -18,17 +18,18 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 
 from conftest import ROOT
-from nonfragile_tracker import topics
+from nonfragile_tracker.interface import topics
 from nonfragile_tracker.bag.reader import (BagError, BagNotFoundError, MissingTopicsError,
                                            read_bag, read_messages, resolve_topics)
 from nonfragile_tracker.bag.repair import scan_mcap
 from nonfragile_tracker.bag.writer import (BagExistsError, BagWriter, make_qos, new_run_dir,
                                            qos_to_dicts)
-from nonfragile_tracker.control.simulation.loop import (TrackerConfig, step_time_ns,
-                                                        yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
+from nonfragile_tracker.control.simulation.timing import step_time_ns
+from nonfragile_tracker.control.simulation.model import yaw_to_quaternion
 from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 DT = 0.01
 TYPES = {f'/{n}': t for n, t in topics.TYPES.items() if not n.startswith('/')}

@@ -16,12 +16,13 @@ from nonfragile_tracker.control.simulation.batch import (BatchCases, BatchError,
                                                          segment_index, simulate_batch,
                                                          simulate_delay_loop_batch)
 from nonfragile_tracker.control.simulation.gains import read_gain_design, read_gain_file
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.synthesis.problem import load_problem
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.simulate import simulate_delay_loop, simulate_tracking
 from nonfragile_tracker.control.simulation.study import StudySpec, run_study, summarize
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 CONFIG = ROOT / 'config'
 GAINS = CONFIG / 'max_decay_gains.yaml'     # its record: Theorem 1's certified_latency

@@ -10,9 +10,10 @@ import pytest
 
 from batch_checks import assert_metrics_equal, gain, perturbations, single_runs, trace_deviation
 from nonfragile_tracker.control.simulation.batch import BatchCases, simulate_batch
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle, figure_eight
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 
 def check_against_single_runs(plant, tracker, path, steps, cases, exact, steady_from=None):

@@ -1,7 +1,7 @@
-"""The batch loop's specialised path for odometry of the plant's own state at every step
-(no delay compensation, no actuator dynamics, ``exact=False``) against single runs and
-against the exact mode: with and without the paper's state delay, with command latencies,
-per-case analytic paths, speeds starting below ``min_speed`` and switching perturbations."""
+"""The batch plant's fast step (``VectorPlant._advance_fast``: odometry of the plant's own
+state at every step, no actuator dynamics, ``exact=False``) against single runs and against
+the exact mode: with and without the paper's state delay, with command latencies, per-case
+analytic paths, speeds starting below ``min_speed`` and switching perturbations."""
 from __future__ import annotations
 
 import math
@@ -11,24 +11,25 @@ import pytest
 
 from batch_checks import (FIELDS, assert_metrics_equal, gain, perturbations, single_runs,
                           trace_deviation)
-from nonfragile_tracker.control.simulation import batch as batch_mod
 from nonfragile_tracker.control.simulation.batch import BatchCases, PathBatch, simulate_batch
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig, VectorPlant
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 
 @pytest.fixture
 def ideal_calls(monkeypatch):
-    """Counts the runs that took the specialised loop."""
+    """Counts the runs whose plant took the fast step (one entry per run)."""
     calls = []
-    inner = batch_mod.ideal_loop
+    inner = VectorPlant._advance_fast
 
-    def spy(*args, **kw):
-        calls.append(1)
-        return inner(*args, **kw)
+    def spy(self, k, *args):
+        if k == 0:
+            calls.append(1)
+        return inner(self, k, *args)
 
-    monkeypatch.setattr(batch_mod, 'ideal_loop', spy)
+    monkeypatch.setattr(VectorPlant, '_advance_fast', spy)
     return calls
 
 
@@ -79,7 +80,7 @@ def test_no_state_delay_and_per_case_paths_equal_single_runs(ideal_calls):
 
 def test_switching_perturbation_agrees_with_the_exact_mode(ideal_calls):
     """Random time-varying Delta (5 segments of 0.5 s) on 40 cases with latencies: the
-    specialised loop against the exact mode (a single run's operations, bit for bit)."""
+    fast step against the exact mode (a single run's operations, bit for bit)."""
     rng = np.random.default_rng(23)
     n = 40
     cases = BatchCases(n, perturbation=perturbations(rng, n, 5), hold=0.5,

@@ -6,10 +6,10 @@ from nonfragile_tracker.control.synthesis import delay
 from nonfragile_tracker.control.synthesis.design import (max_decay_rate, max_perturbation_scale,
                                                          min_gain_norm, shifted_problem)
 from nonfragile_tracker.control.synthesis.lmi import InfeasibleError, certify_gain
-from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 #: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).
 pytestmark = pytest.mark.numerical

@@ -12,7 +12,8 @@ from nonfragile_tracker.control.identification.excitation import (
     plan_trial)
 from nonfragile_tracker.control.simulation.follow import simulate_following
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 
 
 @pytest.mark.parametrize('box', [0.4, 1.0, 3.0])
@@ -42,8 +43,8 @@ def test_extent_inside_the_box_and_the_limits(box, vmax, wmax, rate, accel):
 
 
 def test_ramps_gentle_without_the_accel_segment_fast_with_it():
-    gentle = plan_excitation(1.0).extent()
-    fast = plan_excitation(1.0, accel_segment=True).extent()
+    gentle = plan_excitation(1.0, accel_segment=False).extent()
+    fast = plan_excitation(1.0).extent()                  # the default: with it
     assert gentle.max_linear_accel == pytest.approx(GENTLE_LINEAR_ACCEL)
     assert fast.max_linear_accel == pytest.approx(FAST_LINEAR_ACCEL)
     # known limits (robot file): never exceeded, and no acceleration segment needed

@@ -13,9 +13,9 @@ import pytest
 from conftest import CONFIG
 from nonfragile_tracker.control.simulation.follow import Follower, simulate_following, start_offset
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.trajectory import from_waypoints, load_waypoints
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 LAP = CONFIG / 'trajectories' / 'lap.csv'
 

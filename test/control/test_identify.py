@@ -26,7 +26,7 @@ from nonfragile_tracker.control.identification.identify import (CommandSamples,
                                                                 IdentificationError, identify_latency,
                                                                 read_identification,
                                                                 write_identification)
-from nonfragile_tracker.control.simulation.loop import yaw_to_quaternion
+from nonfragile_tracker.control.simulation.model import yaw_to_quaternion
 from nonfragile_tracker.errors import InputError
 
 STEP = 0.01     # command period = one plant step of the generator
@@ -176,8 +176,12 @@ def test_refuses_unrelated_odometry_and_limits():
     rng = np.random.default_rng(1)
     noise = OdometrySamples(odom.t, odom.x, odom.y, odom.yaw, rng.normal(0.3, 0.1, odom.t.size),
                             rng.normal(0.0, 0.5, odom.t.size))
+    # a twist of noise beside the base's poses: measured from the poses (issue 39)
+    res = identify_latency(cmd, noise, bootstrap=50)
+    assert (res.source_v, res.source_w) == ('pose', 'pose')
+    assert any('does not integrate to its poses' in n for n in res.notes)
     with pytest.raises(IdentificationError, match='explains only'):
-        identify_latency(cmd, noise, bootstrap=50)
+        identify_latency(cmd, noise, bootstrap=50, source='twist')
     slow = fopdt_unicycle(latency=0.4, duration=12.0)
     with pytest.raises(IdentificationError, match='search limit'):
         identify_latency(*samples(slow, twist=True), max_latency_s=0.3, bootstrap=50)
@@ -428,7 +432,7 @@ def test_cli_identify_writes_the_limits_it_sees_into_the_robot_file(run20, tmp_p
     go into the robot file, made from the shipped one; a recording without them leaves the
     limits unknown; a bad robot file is refused before the work."""
     from recordings import load_cases, record_case
-    from nonfragile_tracker.robot import load_robot_file
+    from nonfragile_tracker.interface.robot import load_robot_file
     rec = record_case(load_cases(CONFIG / 'identify_cases.yaml')['ii'], seed=1, duration=20.0)
     c, o = rec.commands, rec.odometry
     bag = tmp_path / 'limits'
@@ -459,7 +463,7 @@ def test_cli_identify_writes_the_limits_it_sees_into_the_robot_file(run20, tmp_p
 
 
 # ---------------------------------------------------------------------------------------------
-# Our plant (control.simulation.loop step functions with command latency, actuator lag, 50 Hz noisy odom)
+# Our plant (control.simulation.plant step functions with command latency, actuator lag, 50 Hz noisy odom)
 
 def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: float = 0.01,
                      odom_rate: float = 50.0, noise: float = 1e-3):
@@ -471,9 +475,10 @@ def record_our_plant(latency: float, lag: float, *, duration: float = 20.0, dt: 
     """
     import yaml
 
-    from nonfragile_tracker.control.simulation.loop import (PlantConfig, Tracker, TrackerConfig,
-                                                            UnicyclePlant, quaternion_to_yaw,
-                                                            step_time)
+    from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+    from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
+    from nonfragile_tracker.control.simulation.model import quaternion_to_yaw
+    from nonfragile_tracker.control.simulation.timing import step_time
     from nonfragile_tracker.control.simulation.reference import make_path
     params = yaml.safe_load((CONFIG / 'tracker_gains.yaml').read_text())
     K = np.array(params['/**/tracker']['ros__parameters']['K'], float).reshape(2, 4)
@@ -533,7 +538,7 @@ def test_golden_lockstep_bag_of_our_plant_has_no_latency():
 def test_lockstep_ros_run_of_our_plant_identified(tmp_path):
     """One lockstep run of the nodes (composed) with 100 ms command latency, 50 ms lag on v
     and w, odometry at 50 Hz with 1 mm noise, figure eight; the recorded bag through the CLI."""
-    from nonfragile_tracker.runner import run_composed, scenario_parameters
+    from nonfragile_tracker.workflows.runner import run_composed, scenario_parameters
     ov = {'plant': {'ros__parameters': dict(
               cmd_latency=0.1, lag_v=0.05, lag_w=0.05, odom_rate=50.0,
               odom_noise=[0.001, 0.001, 0.001], noise_seed=3, duration=8.0)},
@@ -554,13 +559,18 @@ def test_lockstep_ros_run_of_our_plant_identified(tmp_path):
 
 def test_cli_cross_check_flags_a_twist_that_echoes_the_command(run20, tmp_path, capsys):
     """A base whose odometry twist is the last command (no latency, no lag) while the poses
-    move 100 ms late: the twist fit says ~0 s, the poses say 0.1 s, and the CLI warns."""
+    move 100 ms late: ``auto`` sees that the twist does not integrate to the poses and
+    measures from the poses (0.1 s); forced to the twist it says ~0 s and the CLI warns."""
     (tc, v, w), (to, x, y, yaw, _, _) = run20
     j = np.searchsorted(tc, to, side='right') - 1
     echo = ((tc, v, w), (to, x, y, yaw, v[np.maximum(j, 0)], w[np.maximum(j, 0)]))
     bag = tmp_path / 'echo'
     write_motion_bag(bag, echo)
     assert main(['identify', str(bag), '--bootstrap', '60']) == 0
+    text = capsys.readouterr().out
+    assert 'latency  L     = 0.1' in text and '(from differenced poses;' in text
+    assert 'does not integrate to its poses' in text and 'cross-check' not in text
+    assert main(['identify', str(bag), '--bootstrap', '60', '--source', 'twist']) == 0
     text = capsys.readouterr().out
     assert 'latency  L     = 0.00' in text
     assert 'cross-check from the poses alone: latency 0.1' in text

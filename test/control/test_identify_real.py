@@ -1,6 +1,6 @@
 """Identification on what real bases give (issue 22, item 4), ROS-free.
 
-The recordings are the plant's (control.simulation.loop.UnicyclePlant through test/recordings.py):
+The recordings are the plant's (control.simulation.plant.UnicyclePlant through test/recordings.py):
 cases of config/identify_cases.yaml - the default tracker on a base with acceleration
 limits (100 ms, and 180 ms where it is in its limit cycle), joystick steps with the
 limits binding 35-40 % of the time, a teleop drive with a 0.33 s stall, latency jitter
@@ -28,7 +28,8 @@ from nonfragile_tracker.control.identification.identify import (CommandSamples, 
 from nonfragile_tracker.control.synthesis.input_delay import certify_input_delay
 from nonfragile_tracker.control.synthesis.latency_design import (lagged_problem,
                                                                  plan_from_identification)
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.synthesis.problem import load_problem
 from recordings import (joystick_steps, load_cases,
                                                                  record_case, record_open_loop,
@@ -244,8 +245,15 @@ def test_a_base_that_saturates_below_the_commands_is_modelled():
     o = rec.odometry
     wc = np.clip(o.w, -0.3, 0.3)
     yaw = np.concatenate([[0.0], np.cumsum(0.5 * (wc[1:] + wc[:-1]) * np.diff(o.t))])
-    res = identify_latency(rec.commands, OdometrySamples(o.t, o.x, o.y, yaw, o.v, wc),
+    # the positions of that heading (the poses integrate the twist, as a driver's do: the
+    # identification checks that they agree)
+    step = 0.5 * (o.v[1:] + o.v[:-1]) * np.diff(o.t)
+    mid = 0.5 * (yaw[1:] + yaw[:-1])
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(mid))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(mid))])
+    res = identify_latency(rec.commands, OdometrySamples(o.t, x, y, yaw, o.v, wc),
                            bootstrap=50)
+    assert res.source_v == res.source_w == 'twist'
     assert abs(res.latency_s - 0.05) <= DT
     assert abs(res.tau_v_s - 0.05) < 0.01
     assert 0.95 < res.gain_w < 1.05 and res.r2_w > 0.95
@@ -268,7 +276,7 @@ def test_plant_jitter_and_stalls():
     """The plant's latency jitter (whole steps in [L, L + J], commands in order) and stalls
     (commands ignored, braking at the limits); the batch simulation refuses both."""
     from nonfragile_tracker.control.simulation.batch import BatchError, simulate_batch
-    from nonfragile_tracker.control.simulation.loop import LoopConfigError
+    from nonfragile_tracker.control.simulation.errors import LoopConfigError
     rec = record_case(CASES['iv'], seed=4, duration=10.0)
     lat = np.round(rec.latencies / DT).astype(int)
     assert set(lat) == {12, 13, 14, 15}

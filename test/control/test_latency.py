@@ -8,13 +8,14 @@ import pytest
 
 from nonfragile_tracker.control.simulation.actuator import ActuatorModel, first_order_step
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, Tracker,
-                                                        TrackerConfig, UnicyclePlant)
+from nonfragile_tracker.control.simulation.errors import LoopConfigError
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.predictor import LatencyPredictor, extrapolate_reference
 from nonfragile_tracker.control.simulation.reference import circle, figure_eight
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG
 

@@ -29,7 +29,8 @@ def test_the_simulation_runs_without_the_synthesis_or_cvxpy():
     out = _run(
         'import sys\n'
         'from nonfragile_tracker.control.simulation.gains import read_gain_file\n'
-        'from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig\n'
+        'from nonfragile_tracker.control.simulation.plant import PlantConfig\n'
+        'from nonfragile_tracker.control.simulation.tracker import TrackerConfig\n'
         'from nonfragile_tracker.control.simulation.reference import circle\n'
         'from nonfragile_tracker.control.simulation.simulate import simulate_tracking\n'
         'from nonfragile_tracker.control.identification import monitor\n'
@@ -67,7 +68,7 @@ ERRORS = {
                   'CertificateError': (RuntimeError, 4, ['lmi', 'delay_dependent'])},
     'simulation': {'PathError': (ValueError, 2, ['reference']),
                    'TrajectoryError': (ValueError, 2, ['trajectory', 'limits']),
-                   'LoopConfigError': (ValueError, 2, ['loop', 'gains']),
+                   'LoopConfigError': (ValueError, 2, ['tracker', 'plant', 'gains']),
                    'BatchError': (ValueError, 2, ['batch', 'study'])},
     'identification': {'IdentificationError': (ValueError, 2, ['identify']),
                        'NotEnoughDataError': (ValueError, 2, ['identify']),

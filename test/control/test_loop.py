@@ -4,15 +4,16 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, Tracker,
-                                                        TrackerConfig, UnicyclePlant, delay_steps,
-                                                        quaternion_to_yaw, step_time, validate_gain,
-                                                        yaw_to_quaternion)
+from nonfragile_tracker.control.simulation.errors import LoopConfigError
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant, delay_steps
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig, validate_gain
+from nonfragile_tracker.control.simulation.model import quaternion_to_yaw, yaw_to_quaternion
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.simulation.model import double_integrator_model
 from nonfragile_tracker.control.simulation.reference import (RefSample, circle, figure_eight,
                                                              make_path, PathError)
 from nonfragile_tracker.control.simulation.simulate import simulate_delay_loop, simulate_tracking
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 K_NF = [[-4.4453, -4.8047, -1.4766, -1.5234], [-1.4766, -1.5234, -4.4453, -4.8047]]
 NO_DELAY = dict(A_tau=np.zeros((4, 4)), tau=0.0)

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, UnicyclePlant,
-                                                        step_time)
+from nonfragile_tracker.control.simulation.errors import LoopConfigError
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.identification.monitor import (ERROR, OK, STALE, WARN, Certificate,
                                                                LatencyEstimate, MonitorError,
                                                                MonitorSettings, MonitorWorker,

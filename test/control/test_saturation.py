@@ -15,7 +15,7 @@ from nonfragile_tracker.control.synthesis.saturation import (SaturationLimits, p
                                                              saturation_certificate,
                                                              verify_saturation)
 from nonfragile_tracker.errors import InputError
-from nonfragile_tracker.region_check import (RobotSetup, check_region, reference_speeds,
+from nonfragile_tracker.control.simulation.region_check import (RobotSetup, check_region, reference_speeds,
                                              simulate_start)
 
 #: Depends on linear algebra: make test runs it again under a second BLAS kernel (Makefile).

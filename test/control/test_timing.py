@@ -14,8 +14,10 @@ import pytest
 
 from conftest import CONFIG
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, Tracker,
-                                                        TrackerConfig, UnicyclePlant, step_time)
+from nonfragile_tracker.control.simulation.errors import LoopConfigError
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.timing import step_time
 from nonfragile_tracker.control.simulation.reference import figure_eight
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.control.simulation.timing import (PeriodEstimator, WINDOW,

@@ -8,8 +8,9 @@ import pytest
 
 from nonfragile_tracker.control.simulation.actuator import ActuatorModel
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import (LoopConfigError, PlantConfig, Tracker,
-                                                        TrackerConfig, UnicyclePlant)
+from nonfragile_tracker.control.simulation.errors import LoopConfigError
+from nonfragile_tracker.control.simulation.plant import PlantConfig, UnicyclePlant
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.predictor import LatencyPredictor
 from nonfragile_tracker.control.simulation.reference import figure_eight
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle, figure_eight
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.control.simulation.trajectory import (Trajectory, TrajectoryError,

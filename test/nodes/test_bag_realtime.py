@@ -18,7 +18,7 @@ from nonfragile_tracker.bag.report import bag_report
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-TOPICS = "['odom','reference/pose','reference/twist','reference/accel','cmd_vel']"
+TOPICS = "['odom','reference/pose','reference/twist','reference/accel','cmd_vel','tracker/tuning']"
 INPUTS = ('odom', 'reference/pose', 'reference/twist', 'reference/accel')
 
 
@@ -147,7 +147,7 @@ def test_replay_in_process_reproduces_recorded_commands(realtime_bag):
 
 
 def test_replay_over_dds_reproduces_recorded_commands(realtime_bag, tmp_path):
-    from nonfragile_tracker.replayer import replay_over_dds
+    from nonfragile_tracker.workflows.dds_replay import replay_over_dds
     env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id('bag_replay_dds')))
     t0 = time.monotonic()
     res = replay_over_dds(realtime_bag, env=env)

@@ -22,8 +22,8 @@ import pytest
 
 from conftest import CONFIG, kill_with_stacks
 from nonfragile_tracker.bag.motion import read_motion
-from nonfragile_tracker.robot import RobotConfig
-from nonfragile_tracker.runner import scenario_parameters, write_parameter_file
+from nonfragile_tracker.interface.robot import RobotConfig
+from nonfragile_tracker.workflows.runner import scenario_parameters, write_parameter_file
 
 #: Injects an error into the control step after 30 odometry messages (the error path).
 FAULTY = '''

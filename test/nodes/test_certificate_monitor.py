@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import PlantConfig, TrackerConfig
+from nonfragile_tracker.control.simulation.plant import PlantConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.follow import simulate_following
 
 from conftest import CONFIG
@@ -38,7 +39,7 @@ def test_latency_step_turns_the_certificate_status_to_error(ros_context):  # noq
     from nonfragile_tracker.nodes.plant import PlantNode
     from nonfragile_tracker.nodes.reference import ReferenceNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
-    from nonfragile_tracker.runner import scenario_parameters
+    from nonfragile_tracker.workflows.runner import scenario_parameters
 
     ctx = ros_context
     params = scenario_parameters(CONFIG / 'latency_scenario.yaml', CONFIG / 'tracker_gains.yaml',

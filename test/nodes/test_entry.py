@@ -187,3 +187,32 @@ def test_a_stop_signal_in_a_callback_during_the_import_ends_quietly():
     assert 'imported' in out.stdout            # the import went on past the signal
     assert out.returncode == 0 and 'Traceback' not in out.stderr, out.stderr
     assert 'Exception ignored' not in out.stderr, out.stderr
+
+
+def test_a_signal_handled_as_its_import_handler_is_set_stops_quietly(monkeypatch):
+    """A stop signal pending (or arriving) right when _import_node swaps in its raising
+    handler is handled at once, inside signal.signal's return: the _StopImport must not
+    escape as a traceback (seen once: Ctrl-C 0.3 s after ros2 launch, the reference node
+    exited 1 with a traceback from line ``signal.signal(sig, _stop_import)``)."""
+    from nonfragile_tracker.nodes import entry
+    real = signal.signal
+    imported = []
+
+    def delivering(sig, handler):
+        old = real(sig, handler)
+        if handler is entry._stop_import and sig == signal.SIGINT:
+            handler(sig, None)                      # the pending signal, handled now
+        return old
+
+    monkeypatch.setattr(entry.signal, 'signal', delivering)
+    monkeypatch.setattr(entry.importlib, 'import_module', lambda n: imported.append(n))
+    monkeypatch.setattr(entry, '_received', [])
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert entry._import_node('reference') is None
+        assert imported == [] and entry.stop_requested()
+        # the handlers only note again afterwards
+        assert all(signal.getsignal(s) is entry._note for s in (signal.SIGINT, signal.SIGTERM))
+    finally:
+        for s, h in saved.items():
+            real(s, h)

@@ -12,8 +12,8 @@ import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.cli import main
-from nonfragile_tracker import runner
-from nonfragile_tracker.runner import run_processes, scenario_parameters
+from nonfragile_tracker.workflows import runner
+from nonfragile_tracker.workflows.runner import run_processes, scenario_parameters
 
 from conftest import CONFIG, ROOT, domain_ids, unique_domain_id
 
@@ -34,6 +34,7 @@ def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path
     env = dict(os.environ, ROS_DOMAIN_ID=str(unique_domain_id(f'kill{int(sig)}')))
     hit = threading.Event()
     lines = []
+    killed: list[float] = []                # when the tracker was stopped or killed
 
     def progress(line):
         lines.append(line)
@@ -42,6 +43,7 @@ def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path
                                  capture_output=True, text=True)
             for pid in out.stdout.split():
                 os.kill(int(pid), sig)
+                killed.append(time.monotonic())
                 hit.set()
 
     start = time.monotonic()
@@ -51,7 +53,10 @@ def test_dead_or_hung_tracker_ends_the_lockstep_run_with_a_readable_bag(tmp_path
     p.setdefault('recorder', {}).setdefault('ros__parameters', {})['drain_timeout'] = 1.0
     res = run_processes(p, tmp_path, env=env, progress=progress)
     assert hit.is_set(), (lines[-10:], runner.log_tail(tmp_path, 'plant'))
-    assert time.monotonic() - start < 60                                 # no hang
+    # no hang: the run ends soon after the tracker stopped (timeout 4 s, the runner's wait
+    # 3 s, the drain 1 s, teardown); the start-up before it is not what is judged here (it
+    # took up to a minute with the whole suite on two cores)
+    assert time.monotonic() - killed[0] < 30, time.monotonic() - start
     if sig == signal.SIGSTOP:
         assert res.exit_codes['plant'] == 5
         log = (tmp_path / 'plant.log').read_text()
@@ -123,8 +128,8 @@ def test_two_systems_on_two_domains_do_not_cross_talk(tmp_path):
     a.start(); b.start(); a.join(); b.join()
     bags = {k: read_bag(v.bag) for k, v in results.items()}
     from nonfragile_tracker.control.simulation.gains import read_gain_file
-    from nonfragile_tracker.control.simulation.loop import TrackerConfig
-    from nonfragile_tracker.scenario import paper_plant_config
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
+    from nonfragile_tracker.interface.scenario import paper_plant_config
     from nonfragile_tracker.control.simulation.reference import circle
     from nonfragile_tracker.control.simulation.simulate import simulate_tracking
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')

@@ -10,16 +10,16 @@ from rclpy.parameter import Parameter
 
 from nonfragile_tracker.bag.reader import read_messages
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.follow import simulate_following
 from nonfragile_tracker.control.simulation.trajectory import Trajectory
 from nonfragile_tracker.nodes.common import StartupError
 from nonfragile_tracker.nodes.plant import PlantNode
 from nonfragile_tracker.nodes.tracker import TrackerNode
-from nonfragile_tracker.runner import run_composed, run_processes, scenario_parameters
+from nonfragile_tracker.workflows.runner import run_composed, run_processes, scenario_parameters
 
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG, unique_domain_id
 

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from nonfragile_tracker import topics
+from nonfragile_tracker.interface import topics
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.bag.replay import replay
 from nonfragile_tracker.bag.report import bag_report
-from nonfragile_tracker.runner import (lockstep_parameters, recorded_topics, records_samples,
+from nonfragile_tracker.workflows.runner import (lockstep_parameters, recorded_topics, records_samples,
                                        run_composed, scenario_parameters)
 
 from conftest import CONFIG

@@ -15,13 +15,13 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt64
 
-from nonfragile_tracker import topics
+from nonfragile_tracker.interface import topics
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.nodes.common import DATA_QOS, LATCHED_QOS, ns_to_stamp, overrides
 from nonfragile_tracker.nodes.plant import PlantNode
 from nonfragile_tracker.nodes.recorder import Recorder
 from nonfragile_tracker.nodes.tracker import TrackerNode
-from nonfragile_tracker.runner import lockstep_handshake
+from nonfragile_tracker.workflows.runner import lockstep_handshake
 
 from conftest import CONFIG, unique_domain_id
 

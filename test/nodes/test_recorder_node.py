@@ -24,7 +24,7 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt64
 
 from conftest import ROOT, domain_ids
-from nonfragile_tracker import topics
+from nonfragile_tracker.interface import topics
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag, read_messages
 from nonfragile_tracker.bag.repair import repair_bag, scan_mcap
 

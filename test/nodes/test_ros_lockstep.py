@@ -7,11 +7,11 @@ import pytest
 
 from nonfragile_tracker.bag.reader import read_bag
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.reference import circle
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-from nonfragile_tracker.runner import run_composed, run_processes, scenario_parameters
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.workflows.runner import run_composed, run_processes, scenario_parameters
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG
 

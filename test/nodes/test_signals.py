@@ -29,7 +29,7 @@ import pytest
 
 from conftest import CONFIG, ROOT, domain_ids, kill_with_stacks, unique_domain_id
 from nonfragile_tracker.bag.reader import mcap_is_complete, read_bag
-from nonfragile_tracker.runner import lockstep_handshake, scenario_parameters, write_parameter_file
+from nonfragile_tracker.workflows.runner import lockstep_handshake, scenario_parameters, write_parameter_file
 
 NODES = ('recorder', 'tracker', 'reference', 'plant')
 #: (pattern, mode, trials): 20 trials in all
@@ -109,10 +109,12 @@ class Launch:
         return (self.dir / f'{name}.log').read_text()
 
     def wait_ready(self, timeout: float = 60.0) -> None:
-        """Until the loop is closed: the recorder got the first odom and command."""
+        """Until the loop is closed and recorded: the recorder got the first message on
+        odom, the command and the three reference topics (a tracking bag needs all five)."""
         deadline = time.monotonic() + timeout
         while not all(f'first message on /{t}' in self.log('recorder')
-                      for t in ('odom', 'cmd_vel')):
+                      for t in ('odom', 'cmd_vel', 'reference/pose', 'reference/twist',
+                                'reference/accel')):
             dead = {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
             assert not dead, (dead, {n: self.log(n)[-1500:] for n in dead})
             assert time.monotonic() < deadline, {n: self.log(n)[-800:] for n in NODES}

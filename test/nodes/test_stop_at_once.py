@@ -14,13 +14,13 @@ import rclpy
 from conftest import CONFIG, unique_domain_id
 from nonfragile_tracker.control.simulation.reference import make_path
 from nonfragile_tracker.control.simulation.trajectory import analytic_knots
-from nonfragile_tracker.msgconv import multidof_cdr, multidof_from_cdr, multidof_to_trajectory
+from nonfragile_tracker.interface.msgconv import multidof_cdr, multidof_from_cdr, multidof_to_trajectory
 from nonfragile_tracker.nodes import entry
 from nonfragile_tracker.nodes.common import overrides
 from nonfragile_tracker.nodes.errors import StartupStopped
 from nonfragile_tracker.nodes.reference import ReferenceNode
 from nonfragile_tracker.nodes.tracker import SYNC_POINTS, TrackerNode
-from nonfragile_tracker.scenario import node_parameters
+from nonfragile_tracker.interface.scenario import node_parameters
 
 HOUR = dict(path='figure_eight', radius=1.0, rate=0.2, horizon=3600.0)
 

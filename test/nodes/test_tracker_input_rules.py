@@ -12,11 +12,12 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 
-from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, ReplayEvent, plan_replay
+from nonfragile_tracker.bag.replay import TRACKER_DEFAULTS, ReplayEvent, plan_replay, replay_rules
+from nonfragile_tracker.control.identification.tuning import Tuned
 from nonfragile_tracker.bag.typestore import jazzy_typestore
 from nonfragile_tracker.control.simulation.gains import read_gain_file
 from nonfragile_tracker.control.simulation.reference import circle
-from nonfragile_tracker.msgconv import fill_pose, fill_reference, ns_to_stamp, tracker_config
+from nonfragile_tracker.interface.msgconv import fill_pose, fill_reference, ns_to_stamp, tracker_config
 from nonfragile_tracker.nodes.common import overrides
 from nonfragile_tracker.nodes.tracker import TrackerNode
 
@@ -102,9 +103,9 @@ def values() -> dict:
             'odom_frame': FRAME}
 
 
-def through_node(context, mode: str, seq):
+def through_node(context, mode: str, seq, **params):
     node = TrackerNode(context=context, parameter_overrides=overrides(
-        K=values()['K'], mode=mode, odom_frame=FRAME, monitor=False))
+        K=values()['K'], mode=mode, odom_frame=FRAME, **params))
     sent = []
     node.pub_cmd.publish = lambda msg: sent.append((msg.linear.x, msg.angular.z))
     try:
@@ -112,12 +113,13 @@ def through_node(context, mode: str, seq):
               'ref_twist': node._on_ref_twist, 'ref_accel': node._on_ref_accel}
         for kind, msg in seq:
             on[kind](msg)
+        assert isinstance(node.tracker, Tuned) == (node.config.rules.tune is not None)
         return sent, dict(node.inputs.ignored), node.inputs.rejected, node.inputs.jumps
     finally:
         node.destroy_node()
 
 
-def through_replay(seq):
+def through_replay(seq, **params):
     ts = jazzy_typestore()
     events = []
     for i, (kind, msg) in enumerate(seq):
@@ -125,7 +127,7 @@ def through_replay(seq):
         raw = serialize_message(msg)
         events.append(ReplayEvent(kind, T0 + i * MS, topic, msgtype, raw,
                                   ts.deserialize_cdr(raw, msgtype)))
-    v = values()
+    v = {**values(), **params}
     plan = plan_replay(events, tracker_config(v), use_recorded=False, values=v)
     return plan, [(m.linear.x, m.angular.z) for _, m in plan.commands]
 
@@ -134,6 +136,8 @@ def through_replay(seq):
                                             ('lockstep', lockstep_sequence)])
 def test_node_and_replay_decide_alike(context, mode, sequence):
     seq = sequence()
+    # both with the node's defaults: the predictor tuned online (monitor_tune, monitor on)
+    assert replay_rules(values(), mode).tune is not None
     sent, ignored, rejected, jumps = through_node(context, mode, seq)
     plan, replayed = through_replay(seq)
     assert plan.mode == mode
@@ -155,3 +159,24 @@ def test_node_and_replay_decide_alike(context, mode, sequence):
         # that arrives until the next odometry replaces it (3 of the next step): 4 refusals
         assert rejected == 9 and sum(n for r, n in ignored.items()
                                      if r.startswith('reference twist')) == 4
+
+
+def test_without_the_monitor_there_is_no_tuning_in_the_node_nor_the_replay(context, capfd):
+    """``monitor: false`` means no online tuning (its estimates are the monitor's): the node
+    starts (saying so when ``monitor_tune`` is set) and the replay of the same parameters
+    does not tune either; the two still decide alike."""
+    params = dict(monitor=False, monitor_tune=True)
+    node = TrackerNode(context=context, parameter_overrides=overrides(
+        K=values()['K'], mode='lockstep', odom_frame=FRAME, **params))
+    try:
+        assert node.lifecycle_state() == 'active'
+        assert not isinstance(node.tracker, Tuned) and node.monitor is None
+        assert node.config.rules.tune is None
+    finally:
+        node.destroy_node()
+    assert 'the predictor is not tuned online' in capfd.readouterr().err
+    assert replay_rules(params, 'lockstep').tune is None
+    assert replay_rules(dict(params, monitor=True), 'lockstep').tune is not None
+    seq = lockstep_sequence()
+    sent = through_node(context, 'lockstep', seq, **params)[0]
+    assert through_replay(seq, **params)[1] == sent and len(sent) == 36

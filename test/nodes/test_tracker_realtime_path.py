@@ -11,9 +11,10 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
-from nonfragile_tracker import runner, topics
-from nonfragile_tracker.control.simulation.loop import Tracker
-from nonfragile_tracker.msgconv import fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs
+from nonfragile_tracker.workflows import runner
+from nonfragile_tracker.interface import topics
+from nonfragile_tracker.control.simulation.tracker import Tracker
+from nonfragile_tracker.interface.msgconv import fill_pose, ns_to_stamp, pose_from_odom, reference_from_msgs
 from nonfragile_tracker.nodes.tracker import TrackerNode
 
 from conftest import CONFIG, ROOT

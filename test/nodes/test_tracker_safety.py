@@ -10,12 +10,12 @@ from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import Tracker, TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.reference import RefSample, circle
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
 from nonfragile_tracker.nodes.common import fill_pose, fill_reference, ns_to_stamp
 from nonfragile_tracker.nodes.tracker import TrackerNode
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG
 
@@ -105,10 +105,11 @@ def test_stamps_backwards_and_duplicates_are_ignored(node):
     assert len(node.sent) == 2 and node.inputs.rejected == before
     feed(node, *messages(base - 5, 0.5, 0.0, 1.57, 0.05, ref))      # backwards: rejected
     assert len(node.sent) == 2 and node.inputs.rejected == before + 1
-    node.tracker.v = 0.9                                              # a stale compensator
+    law = node._law                                # our law (inside the default tuning)
+    law.v = 0.9                                                       # a stale compensator
     feed(node, *messages(base + 500, 0.5, 0.0, 1.57, 0.05, ref))    # 4.99 s jump ahead
     assert node.inputs.jumps == j0 + 1 and len(node.sent) == 3
-    assert node.tracker.v == pytest.approx(0.05, abs=0.05)           # re-initialised from odom
+    assert law.v == pytest.approx(0.05, abs=0.05)                     # re-initialised from odom
 
 
 def test_core_tracker_never_returns_non_finite():

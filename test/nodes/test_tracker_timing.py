@@ -123,7 +123,7 @@ def test_the_real_time_plant_stamps_the_time_of_its_motion_when_a_tick_is_late()
     each with its own stamp (a burst), and never stamps ahead of its clock - the stamps
     stay the time of the motion, which the tracker integrates over.  After a stall of
     seconds it integrates every step but publishes only the last MAX_BURST."""
-    from nonfragile_tracker.msgconv import stamp_ns
+    from nonfragile_tracker.interface.msgconv import stamp_ns
     from nonfragile_tracker.nodes.plant import MAX_BURST, PlantNode
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=unique_domain_id('plant_timing'))

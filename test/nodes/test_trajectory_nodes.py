@@ -11,9 +11,9 @@ import pytest
 
 from nonfragile_tracker.control.simulation.follow import simulate_following
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.control.simulation.loop import TrackerConfig
+from nonfragile_tracker.control.simulation.tracker import TrackerConfig
 from nonfragile_tracker.control.simulation.trajectory import load_waypoints
-from nonfragile_tracker.scenario import paper_plant_config
+from nonfragile_tracker.interface.scenario import paper_plant_config
 
 from conftest import CONFIG, ROOT, unique_domain_id
 
@@ -28,7 +28,7 @@ GAINS = CONFIG / 'max_decay_gains.yaml'
 
 
 def scenario(**reference):
-    from nonfragile_tracker.runner import scenario_parameters
+    from nonfragile_tracker.workflows.runner import scenario_parameters
     ov = {'plant': {'ros__parameters': {'duration': DURATION, 'initial_pose': POSE0,
                                         'initial_speed': 0.0}},
           'reference': {'ros__parameters': reference},
@@ -54,7 +54,7 @@ def as_sent(traj, origin_ns=0):
 def test_csv_lap_through_the_nodes_equals_the_simulation(tmp_path, stamped):
     """The lap through the nodes (recorded; with TwistStamped commands too)."""
     from nonfragile_tracker.bag.reader import read_bag
-    from nonfragile_tracker.runner import run_composed
+    from nonfragile_tracker.workflows.runner import run_composed
     params = scenario(trajectory_file=str(LAP))
     if stamped:
         for node in ('tracker', 'plant', 'recorder'):
@@ -237,7 +237,7 @@ def test_twist_and_twist_stamped_both_move_the_plant(ros_context, stamped):
     from nonfragile_tracker.nodes.plant import PlantNode
     from nonfragile_tracker.nodes.reference import ReferenceNode
     from nonfragile_tracker.nodes.tracker import TrackerNode
-    from nonfragile_tracker.runner import scenario_parameters
+    from nonfragile_tracker.workflows.runner import scenario_parameters
 
     ctx = ros_context
     duration = 3.0
@@ -624,7 +624,7 @@ def test_replay_reproduces_a_waypoint_run_with_predictor_and_retiming(tmp_path, 
     trajectory message is fed, not the per-step samples)."""
     import yaml
     from nonfragile_tracker.bag.replay import replay
-    from nonfragile_tracker.runner import run_composed, scenario_parameters
+    from nonfragile_tracker.workflows.runner import run_composed, scenario_parameters
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     gains = tmp_path / 'g.yaml'
     gains.write_text(yaml.safe_dump({'/**/tracker': {'ros__parameters': {

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nonfragile_tracker.control.simulation.gains import read_gain_file
-from nonfragile_tracker.msgconv import stamp_ns
+from nonfragile_tracker.interface.msgconv import stamp_ns
 
 from conftest import CONFIG, unique_domain_id
 
@@ -29,7 +29,7 @@ def test_replay_reproduces_a_real_time_waypoint_run_re_timed_in_the_background(t
     message and command in the bag."""
     import yaml
     from nonfragile_tracker.bag.replay import replay
-    from nonfragile_tracker.runner import realtime_overrides, run_processes, scenario_parameters
+    from nonfragile_tracker.workflows.runner import realtime_overrides, run_processes, scenario_parameters
     K = read_gain_file(CONFIG / 'tracker_gains.yaml')
     gains = tmp_path / 'g.yaml'
     gains.write_text(yaml.safe_dump({'/**/tracker': {'ros__parameters': {

@@ -33,10 +33,10 @@ def _design(name: str) -> dict:
 def _run(gains: str, compensation: bool):
     """The metrics of the paper scenario's 60 s circle as ``make demo`` runs it, in process."""
     from nonfragile_tracker.control.simulation.gains import read_gain_file
-    from nonfragile_tracker.control.simulation.loop import TrackerConfig
+    from nonfragile_tracker.control.simulation.tracker import TrackerConfig
     from nonfragile_tracker.control.simulation.reference import circle
     from nonfragile_tracker.control.simulation.simulate import simulate_tracking
-    from nonfragile_tracker.scenario import paper_plant_config
+    from nonfragile_tracker.interface.scenario import paper_plant_config
     pc = paper_plant_config()
     K = read_gain_file(CONFIG / gains)
     tc = TrackerConfig(K=tuple(map(tuple, np.asarray(K).tolist())), max_angular_speed=2.0,

@@ -167,6 +167,29 @@ def test_full_docs_build_without_warnings(site):
 
 
 @pytest.mark.slow
+def test_the_layout_lists_every_module_with_its_summary(site):
+    """developing.md's Layout is generated per folder (``modules``): every module of the
+    package is there, with its docstring's first line."""
+    import ast
+    out, _ = site
+    html = (out / 'developing.html').read_text()
+    import html as _html
+    text = _html.unescape(re.sub(r'<[^>]+>', '', html))
+    for smart, plain in (('\u2019', "'"), ('\u2018', "'"), ('\u201c', '"'), ('\u201d', '"')):
+        text = text.replace(smart, plain)
+    missing = []
+    for path in sorted(PKG.rglob('*.py')):
+        if path.stem == '__init__' or path.parent == PKG:
+            continue
+        summary = (ast.get_docstring(ast.parse(path.read_text())) or '').splitlines()[0]
+        words = re.sub(r':[\w:]+:`~?([^`<]+?)(?: <[^>]+>)?`', r'\1', summary)
+        words = words.replace('``', '').replace('`', '').split()[:4]
+        if f'{path.stem}: ' + ' '.join(words) not in ' '.join(text.split()):
+            missing.append(f'{path.relative_to(PKG)}: {" ".join(words)}')
+    assert not missing, missing
+
+
+@pytest.mark.slow
 def test_pages_build_without_warnings(site):
     """The narrative pages of the same build: a broken link, a missing anchor or bad
     markup is a warning, and a warning fails; the generated tables are in them."""

@@ -35,7 +35,7 @@ def arguments(path):
                             'scenario',
                             'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
     ('robot.launch.py', {'robot', 'gains', 'trajectory', 'trajectory_topic', 'namespace',
-                         'use_sim_time'}),
+                         'use_sim_time', 'autostart', 'nav2'}),
     ('bringup.launch.py', {'robot', 'box', 'accel_segment', 'out'}),
 ])
 def test_launch_arguments(name, expected):
@@ -73,7 +73,7 @@ def test_tracking_launch_gates_the_start_on_the_recorder_in_both_modes():
     """The handshake of runner.lockstep_handshake/realtime_handshake: the recorder announces
     its matched subscriptions (lockstep_gate, in both modes) and the plant waits for it
     (lockstep_recorder in lockstep, realtime_recorder in real time) when recording."""
-    from nonfragile_tracker.runner import realtime_handshake
+    from nonfragile_tracker.workflows.runner import realtime_handshake
     text = (LAUNCH / 'tracking.launch.py').read_text()
     hand = realtime_handshake(True)
     assert hand['plant']['realtime_recorder'] and hand['recorder']['lockstep_gate']
@@ -128,7 +128,7 @@ def robot_launch(monkeypatch, **arguments):
 
 
 def test_robot_launch_gives_the_tracker_the_robot_file_and_no_paper_scenario(monkeypatch):
-    from nonfragile_tracker.robot import load_robot_file
+    from nonfragile_tracker.interface.robot import load_robot_file
     tree = ast.parse((LAUNCH / 'robot.launch.py').read_text())
     doc = ast.get_docstring(tree, clean=False)
     strings = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
@@ -150,7 +150,7 @@ def test_robot_launch_gives_the_tracker_the_robot_file_and_no_paper_scenario(mon
 
 
 def test_robot_launch_with_a_users_robot_file_and_a_trajectory(monkeypatch, tmp_path):
-    from nonfragile_tracker.robot import RobotFileError
+    from nonfragile_tracker.interface.robot import RobotFileError
     mine = tmp_path / 'my_robot.yaml'
     mine.write_text('/**/tracker:\n  ros__parameters:\n    odom_frame: world\n'
                     '    odom_topic: /diff_drive_controller/odom\n')
@@ -169,9 +169,21 @@ def test_robot_launch_with_a_users_robot_file_and_a_trajectory(monkeypatch, tmp_
         robot_launch(monkeypatch, robot=str(mine))
 
 
+def test_robot_launch_in_a_nav2_system(monkeypatch):
+    """nav2:=true: cmd_vel -> cmd_vel_nav (collision_monitor), trajectory -> Nav2's plan,
+    overrides watched; autostart:=false leaves the bring-up to a lifecycle manager."""
+    tracker, reference = robot_launch(monkeypatch, nav2='true', autostart='false')
+    assert reference is None
+    assert tracker.kwargs['remappings'] == [('cmd_vel', 'cmd_vel_nav'), ('trajectory', 'plan')]
+    own = tracker.kwargs['parameters'][2]
+    assert own['autostart'] is False and own['override_tolerance'] == 0.1
+    tracker, _ = robot_launch(monkeypatch, nav2='true')
+    assert 'autostart' not in tracker.kwargs['parameters'][2]    # the default: at once
+
+
 def test_bringup_launch_runs_the_cli_command():
     """The launch file is the CLI's ``bringup`` (one implementation, its safety included),
-    with ``--accel-segment`` only when asked."""
+    with ``--no-accel-segment`` only when asked."""
     tree, _, _ = arguments(LAUNCH / 'bringup.launch.py')
     runs = calls(tree, 'ExecuteProcess')
     assert len(runs) == 2

@@ -1,15 +1,13 @@
 """The identification's errors: a run that gives no estimate, a bad file or monitor setting.
 
-All are bad input (:class:`nonfragile_tracker.errors.InputError`, a ``ValueError``; the
-CLI exits 2), each message saying what is missing or wrong::
+All are bad input (:class:`nonfragile_tracker.errors.InputError`, a ``ValueError``; the CLI
+exits 2), each message saying what is missing or wrong: :class:`IdentificationError` (the
+run cannot give a latency estimate, or a file is malformed) with :class:`NotEnoughDataError`,
+:class:`InsufficientExcitationError` and :class:`PoorFitError`, and :class:`MonitorError`
+(a monitor setting or certificate record).
 
-    InputError
-    +-- IdentificationError     the run cannot give a latency estimate (too few samples,
-    |   |                       too little excitation, a poor fit) or a file is malformed
-    |   +-- NotEnoughDataError           too few samples (the bring-up names the cause)
-    |   +-- InsufficientExcitationError  a command that hardly varies
-    |   +-- PoorFitError                 a poor fit or an estimate at a search limit
-    +-- MonitorError            a monitor setting or certificate record
+See doc/cli.md, section "Exit codes and errors", and doc/tutorial.md, section "Identify
+the latency (``identify``)" (the refusals).
 """
 from __future__ import annotations
 
@@ -30,8 +28,9 @@ class IdentificationError(InputError):
 class NotEnoughDataError(IdentificationError):
     """Too few commands or odometry samples, or too short an overlap, to estimate from.
 
-    Caught by the bring-up (:func:`nonfragile_tracker.bringup.identify_samples`), which
-    says what to change.
+    Caught by the bring-up
+    (:func:`~nonfragile_tracker.workflows.commissioning.identify_samples`), which says what to
+    change.
     """
 
 

@@ -1,27 +1,15 @@
 """The bring-up's designed excitation: a reference that is informative and stays in a box.
 
-``nonfragile_tracker bringup`` drives the robot closed-loop (the shipped certified gain,
-:class:`~nonfragile_tracker.control.simulation.loop.Tracker`) along the reference planned
-here, records commands and odometry, and identifies latency, lags and limits from them
-(:mod:`nonfragile_tracker.control.identification.identify`).  What makes a recording
-informative is a matter of the commands: distinct steps in ``v`` and in ``w``, each held
-long enough for the response to settle (several lags, many odometry samples), and - for
-the acceleration limits - steps faster than the base can follow.  The plan is pure (numpy
-only, no ROS): ``bringup --dry-run`` prints its extent without moving anything.
+``nonfragile_tracker bringup`` drives the robot closed-loop along the reference planned
+here, records commands and odometry and identifies latency, lags and limits from them
+(:mod:`nonfragile_tracker.control.identification.identify`).  The plan is a figure eight
+of two circles touching at the start pose, sized to the box, with a staircase of speed
+levels (steps in ``v`` and ``w``) and (``accel_segment``, the default) steps faster than a
+base follows, so that its acceleration limits bind; :func:`plan_trial` plans the trial
+after the design on the same figure eight.  Pure numpy, no ROS.
 
-The geometry is a figure eight of two circles of radius ``r`` that touch at the start
-pose (heading 0 there), so every point of it lies within ``2 r`` of the start; ``r`` is
-chosen so that ``2 r`` plus a margin for the tracking error stays inside the box.  The
-curvature flips between ``+1/r`` and ``-1/r`` through a clothoid at the crossing, which
-is a step in ``w`` (``w = kappa v``) ramped at the angular-acceleration rate allowed;
-the time law along the path is a staircase of speed levels (steps in ``v``, and with
-them in ``w``) ramped at the linear-acceleration rate allowed.  With ``accel_segment``
-the last part repeats the steps with ramps far faster than a base follows, so that its
-acceleration limits bind and can be identified.  The path itself does not depend on the
-time law: speed steps never move the robot off the figure eight.
-
-The trial after the design (:func:`plan_trial`) continues on the same figure eight from
-where the excitation stopped, at a moderate constant speed.
+See doc/tutorial.md, section "One command (bringup)" (the phases and why this
+excitation).
 """
 from __future__ import annotations
 
@@ -49,6 +37,15 @@ GENTLE_LINEAR_ACCEL = 0.4
 GENTLE_ANGULAR_ACCEL = 1.2
 #: Ramp of the acceleration segment: faster than a base follows, so its limit binds.
 FAST_LINEAR_ACCEL = 6.0
+#: Speed levels of the acceleration segment's steps (fractions of the top speed), each
+#: held :data:`FAST_HOLD` s, over :data:`FAST_SHARE` of the excitation: steps of 0.8 of
+#: the top speed (0.19 m/s, 0.48 rad/s on the default box) in 30 ms, so that a limit below
+#: about 2 m/s^2 / 5 rad/s^2 binds behind a lag up to 80 ms for several odometry periods.
+FAST_LEVELS = (0.2, 1.0)
+#: How long (s) each level of the acceleration segment is held.
+FAST_HOLD = 1.0
+#: The acceleration segment's share of the excitation's duration.
+FAST_SHARE = 0.3
 #: Speed levels of the staircase, as fractions of the plan's top speed.
 LEVELS = (0.5, 1.0, 0.6, 0.9, 0.4, 0.8, 0.55, 1.0)
 #: Fraction of the speed limits the reference uses: the rest is the feedback's.
@@ -260,7 +257,7 @@ def _integrate(v: np.ndarray, a: np.ndarray, dt: float, radius: float, transitio
 
 
 def plan_excitation(box_radius: float = DEFAULT_BOX, max_speed: float = DEFAULT_SPEED,
-                    max_turn_rate: float = DEFAULT_TURN_RATE, *, accel_segment: bool = False,
+                    max_turn_rate: float = DEFAULT_TURN_RATE, *, accel_segment: bool = True,
                     odom_rate: float = 50.0, max_linear_accel: float = 0.0,
                     max_angular_accel: float = 0.0, duration: float = 55.0) -> Plan:
     """The excitation: speed and turn-rate steps on a figure eight inside the box.
@@ -276,7 +273,8 @@ def plan_excitation(box_radius: float = DEFAULT_BOX, max_speed: float = DEFAULT_
         Largest ``|w|`` (rad/s).
     accel_segment : bool
         Add a segment whose steps are faster than a base follows (its acceleration
-        limits bind and are identified); otherwise every ramp is gentle.
+        limits bind and are identified; the default, unless the robot file knows both);
+        False: every ramp is gentle.
     odom_rate : float
         Odometry rate (Hz): each level is held for at least 25 odometry periods.
     max_linear_accel, max_angular_accel : float
@@ -338,7 +336,7 @@ def _plan(radius: float, box: float, vmax: float, wmax: float, rate: float, a_li
     transition = 2.0 * v_top ** 2 / (radius * a_ang)
     hold = max(2.5, 25.0 / rate)
     levels: list[tuple[float, float, float]] = []
-    seg_main = total * (0.7 if fast else 1.0)
+    seg_main = total * (1.0 - FAST_SHARE if fast else 1.0)
     spent = 0.0
     i = 0
     while spent < seg_main - hold:
@@ -351,10 +349,10 @@ def _plan(radius: float, box: float, vmax: float, wmax: float, rate: float, a_li
     if fast:
         a_fast = FAST_LINEAR_ACCEL if lin == 0 else lin
         j = 0
-        while spent < total - 1.5:
-            lv = (0.5 if j % 2 == 0 else 1.0) * v_top
-            levels.append((lv, 1.5, a_fast))
-            spent += 1.5
+        while spent < total - FAST_HOLD:
+            lv = FAST_LEVELS[j % len(FAST_LEVELS)] * v_top
+            levels.append((lv, FAST_HOLD, a_fast))
+            spent += FAST_HOLD
             j += 1
     levels.append((0.0, 0.5, a_lin))
     v, a = _speed_profile(levels, PLAN_DT)

@@ -1,36 +1,21 @@
 """Command-to-motion latency and actuator lag identified from recorded commands and odometry.
 
-Model: first order plus dead time (FOPDT) per channel ``v``, ``w``, with one
-command-to-motion latency ``L`` shared by both channels, the actuator time constants
-``tau_v``, ``tau_w`` and static gains, fitted to the odometry twist (or to pose differences
-over windows) on a fine time grid by linear least squares for all delays at once, then
-polished together; the intervals come from a block bootstrap over time.  Speed saturation,
-acceleration limits, stalls and glitches, latency jitter and commands not driven by the
-odometry are detected and modelled or named.  The model, the measurements, the estimation,
-the uncertainty and what is done about real recordings are in the documentation:
-doc/theory.md, section "Latency identification" (#latency-identification).
+Model: first order plus dead time (FOPDT) per channel ``v``, ``w``, one latency ``L``
+shared by both, fitted on a fine time grid for all delays at once, then polished; the
+intervals come from a block bootstrap over time; acceleration limits, stalls and glitches,
+latency jitter and commands not driven by the odometry are modelled or named.  Refusals
+(:class:`~.errors.IdentificationError`) name the likely cause.  The fit itself is
+:mod:`.lag_fit`; the inputs, the result and the file are :mod:`.records`; ``latency-design
+--identification FILE`` turns the result into the delay interval it certifies.  Nothing
+here imports ROS; numpy and scipy only.
 
-Refusals (:class:`IdentificationError`, an :class:`~nonfragile_tracker.errors.InputError`):
-too few samples or too short an overlap of commands and odometry, a channel whose command
-hardly varies, a model that explains less than half of the measured variation or an
-estimate at a search limit (the message names the likely cause: a base that does not
-reach the commanded speeds, an odometry unrelated to the commands, or a response that is
-not a lag; it never advises widening a search limit that would only fit a wrong model).
-
-The fit itself (the model on the fine grid, saturation, acceleration limits, gross
-errors, jitter) is :mod:`.lag_fit`; the inputs, the result and the file the
-latency-aware design reads are :mod:`.records` (:func:`~.records.write_identification`,
-:func:`~.records.read_identification`).
-
-``latency-design --identification FILE`` turns this into the delay interval it
-certifies (:func:`.latency_design.plan_from_identification`).
-
-Nothing here imports ROS; numpy and scipy only.
+See doc/theory.md, section "Latency identification" (#latency-identification), and
+doc/tutorial.md, section "Identify the latency (``identify``)" (the refusals).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
@@ -48,7 +33,8 @@ from .records import (FILE_KEY, CommandSamples, Identification, OdometrySamples,
 __all__ = ['IdentificationError', 'CommandSamples', 'OdometrySamples', 'Identification',
            'identify_latency', 'write_identification', 'read_identification',
            'read_identification_text', 'with_source', 'measurement_to_command_delay',
-           'commands_follow_odometry', 'MIN_EVENTS', 'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2']
+           'commands_follow_odometry', 'MIN_EVENTS', 'FILE_KEY', 'MIN_ODOM_SAMPLES', 'MIN_R2',
+           'twist_disagreement']
 
 #: Fewest odometry samples (after the overlap with the commands) a fit accepts.
 MIN_ODOM_SAMPLES = 30
@@ -80,8 +66,10 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
         Grid step of the model and of the latency search (sub-step refined).
     source : {'auto', 'twist', 'pose'}
         What the speeds are measured from: the odometry twist when present
-        (``auto``: per channel, if not all zero) or differences of poses over
-        windows of ``window_s``.
+        (``auto``: per channel, if not all zero and it integrates to the poses,
+        :func:`twist_disagreement`; else the poses, and a refusal names both when
+        the poses do not fit either) or differences of poses over windows of
+        ``window_s``.
     window_s : float
         Shortest pose window (at least one odometry period) for ``source='pose'``.
     confidence : float
@@ -121,11 +109,69 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     extended where the recording needs it (``Fit``: saturation, acceleration
     limits, excluded segments, jitter), the fit's quality checked
     (``_check_quality``), the block bootstrap (``_bootstrap``) and the
-    :class:`Identification` assembled (``_report``).
+    :class:`.Identification` assembled (``_report``).
     """
     _check_options(max_latency_s, max_tau_s, resolution_s, window_s, confidence, bootstrap,
                    source, command_timeout_s)
     data = _gather(commands, odometry, max_latency_s, source, window_s)
+    args = (max_latency_s, max_tau_s, resolution_s, confidence, bootstrap, seed,
+            command_timeout_s, min_excitation)
+    if not data.disagree:
+        return _identify(commands, odometry, data, *args)
+    # the twist does not integrate to the poses: the source whose fit is the base's motion
+    try:
+        by_pose = _identify(commands, odometry, data, *args)
+    except IdentificationError as exc:
+        raise type(exc)(f'{"; ".join(data.disagree.values())}; the poses alone do not '
+                        f'identify the base either: {exc}. Neither source is fitted (the '
+                        "twist is not the base's motion): check what the driver publishes "
+                        "as the twist, or force one with source 'twist' / --source twist"
+                        ) from None
+    try:
+        by_twist = _identify(commands, odometry, _gather(commands, odometry, max_latency_s,
+                                                         source, window_s, check=False), *args)
+    except IdentificationError:
+        return by_pose
+    return _choose_source(by_twist, by_pose, data.disagree)
+
+
+#: The twist's and the poses' fits agree when the latencies are this close (s) and each lag
+#: within this (s) or :data:`AGREE_LAG_REL` of the larger.
+AGREE_LATENCY_S = 0.01
+#: Absolute agreement of the two fits' lags (s).
+AGREE_LAG_S = 0.01
+#: Relative agreement of the two fits' lags (of the larger).
+AGREE_LAG_REL = 0.2
+
+
+def _choose_source(by_twist: Identification, by_pose: Identification,
+                   disagree: dict[str, str]) -> Identification:
+    """The twist's fit if the poses' gives the same timing, else the poses' fit (noted).
+
+    The same timing: the disagreement does not bias it, and the twist is the less noisy
+    measurement of the two.
+    """
+    def timing(r: Identification) -> str:
+        return (f'latency {r.latency_s:.4f} s, lags {r.tau_v_s:.4f} / {r.tau_w_s:.4f} s, '
+                f'gains {r.gain_v:.3f} / {r.gain_w:.3f}')
+    agree = abs(by_twist.latency_s - by_pose.latency_s) <= AGREE_LATENCY_S and all(
+        abs(a - b) <= max(AGREE_LAG_S, AGREE_LAG_REL * max(a, b))
+        for a, b in ((by_twist.tau_v_s, by_pose.tau_v_s), (by_twist.tau_w_s, by_pose.tau_w_s)))
+    if agree:
+        notes = [n for n in by_twist.notes] + [
+            f'{d}; the poses give the same timing ({timing(by_pose)}): the twist is kept'
+            for d in disagree.values()]
+        return replace(by_twist, notes=tuple(notes))
+    return replace(by_pose, notes=tuple(by_pose.notes) + (
+        f'the twist alone gives another timing ({timing(by_twist)}); the poses give '
+        f'{timing(by_pose)}',))
+
+
+def _identify(commands: CommandSamples, odometry: OdometrySamples, data: FitData,
+              max_latency_s: float, max_tau_s: float, resolution_s: float, confidence: float,
+              bootstrap: int, seed: int, command_timeout_s: float | None,
+              min_excitation: tuple[float, float]) -> Identification:
+    """The stages of :func:`identify_latency` after the samples are gathered."""
     _check_excitation(data, max_latency_s, min_excitation)
     fit = Fit(data, float(resolution_s), max_latency_s, max_tau_s, command_timeout_s)
     # 1. the linear FOPDT
@@ -135,10 +181,11 @@ def identify_latency(commands: CommandSamples, odometry: OdometrySamples, *,
     fit.model_saturation()
     fit.model_limits()
     excluded = fit.exclude_gross_errors()
+    fit.drop_unseen_limits()
     events, _, _ = fit.model_jitter(excluded)
     quality = _check_quality(fit, excluded, max_latency_s, max_tau_s)
-    pos_b, tau_b = _bootstrap(fit, np.random.default_rng(seed), int(bootstrap))
-    return _report(commands, odometry, fit, quality, (pos_b, tau_b), events,
+    replicates = _bootstrap(fit, np.random.default_rng(seed), int(bootstrap))
+    return _report(commands, odometry, fit, quality, replicates, events,
                    float(confidence), int(bootstrap))
 
 
@@ -187,9 +234,86 @@ def _twist_present(val: np.ndarray | None) -> bool:
     return val is not None and bool(np.all(np.isfinite(val))) and bool(np.any(val != 0.0))
 
 
+#: Window (s) over which the twist's integral is compared with the motion of the poses.
+TWIST_CHECK_S = 0.25
+#: A twist disagrees with the poses when this fraction of the windows (and at least
+#: :data:`TWIST_CHECK_MIN_S` of them) differ beyond the noise.
+TWIST_CHECK_FRACTION = 0.01
+#: The least total time (s) of disagreeing windows that counts as a disagreement.
+TWIST_CHECK_MIN_S = 0.1
+
+
+def twist_disagreement(c: str, t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
+                       twist: np.ndarray, t_first: float, t_last: float) -> str | None:
+    """Whether channel ``c``'s twist integrates to the poses; ``None``, else what differs.
+
+    Over windows of :data:`TWIST_CHECK_S` the trapezoidal integral of the twist is compared
+    with the distance (``v``) or heading change (``w``) of the poses.  Pose noise enters a
+    window only at its two ends, so the differences of one odometry interval give its scale
+    (a robust one: their median absolute deviation).  A window differs when it is off by more
+    than 5 of those plus 2 % of the motion plus 0.5 mm (mrad); the twist disagrees when
+    :data:`TWIST_CHECK_FRACTION` of the windows (at least :data:`TWIST_CHECK_MIN_S` of them)
+    differ: a twist that echoes the command or the firmware's setpoint, one stamped at
+    another time, one that keeps reporting through a stall of the base.
+
+    Parameters
+    ----------
+    c : {'v', 'w'}
+        The channel.
+    t, x, y, yaw, twist : numpy.ndarray
+        The odometry (sorted, distinct stamps) and the channel's twist.
+    t_first, t_last : float
+        The span looked at (s).
+
+    Returns
+    -------
+    str or None
+    """
+    sel = (t >= t_first - TWIST_CHECK_S) & (t <= t_last + TWIST_CHECK_S)
+    t, x, y, th, tw = t[sel], x[sel], y[sel], np.unwrap(yaw[sel]), twist[sel]
+    if t.size < 20:
+        return None
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    span = max(2, int(math.ceil(TWIST_CHECK_S / period - 1e-9)))
+    if t.size <= span + 10:
+        return None
+    dth = np.diff(th)
+    if c == 'v':
+        thm = 0.5 * (th[1:] + th[:-1])
+        moved = (np.diff(x) * np.cos(thm) + np.diff(y) * np.sin(thm)) / np.sinc(
+            dth / (2 * np.pi))
+    else:
+        moved = dth
+    integral = 0.5 * (tw[1:] + tw[:-1]) * dt
+    e1 = moved - integral
+    sigma = 1.4826 * float(np.median(np.abs(e1 - np.median(e1))))
+    pc = np.concatenate([[0.0], np.cumsum(moved)])
+    tc = np.concatenate([[0.0], np.cumsum(integral)])
+    by_twist = tc[span:] - tc[:-span]
+    e = (pc[span:] - pc[:-span]) - by_twist
+    tol = 5.0 * sigma + 0.02 * np.abs(by_twist) + 5e-4
+    # a twist averaged over the interval before its stamp (or after it) is a convention,
+    # not a disagreement: half an interval either way (the rectangle rules) is allowed
+    # (they differ by half an interval times the change of the twist over the window)
+    bad = np.abs(e) > tol + 0.5 * period * np.abs(tw[span:] - tw[:-span])
+    n_bad = int(np.count_nonzero(bad))
+    if n_bad < max(TWIST_CHECK_FRACTION * e.size, TWIST_CHECK_MIN_S / period):
+        return None
+    i = int(np.argmax(np.abs(e) - tol))
+    unit, what = ('m', 'moved') if c == 'v' else ('rad', 'turned')
+    return (f'the odometry twist ({NAMES[c]}) does not integrate to its poses: in '
+            f'{100 * n_bad / e.size:.0f} % of the {TWIST_CHECK_S:g} s windows they differ '
+            f'beyond the poses\' noise ({sigma:.2g} {unit} per sample), most over '
+            f'{t[i]:.2f}-{t[i + span]:.2f} s, where the twist says the base {what} '
+            f'{by_twist[i]:.3g} {unit} and the poses {by_twist[i] + e[i]:.3g} {unit}')
+
+
 def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: float,
-            source: str, window_s: float) -> FitData:
+            source: str, window_s: float, check: bool = True) -> FitData:
     """Sort the samples, choose each channel's source and keep the measurements fitted.
+
+    ``check``: a twist is checked against the poses (:func:`twist_disagreement`).
 
     Raises :class:`IdentificationError` for too few commands or odometry samples or too
     short an overlap, :class:`InputError` for non-finite values or a missing twist.
@@ -227,11 +351,23 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
 
     # -- channels and their measurements
     use = {}
+    notes: list[str] = []
+    disagree: dict[str, str] = {}
     for c in CHANNELS:
         if source == 'twist' and not _twist_present(twist[c]):
             raise InputError(f'source twist: the odometry has no {NAMES[c]} twist (missing or '
                              "all zero); use source 'pose' or 'auto'")
         use[c] = 'twist' if source != 'pose' and _twist_present(twist[c]) else 'pose'
+        if use[c] == 'twist' and check:
+            found = twist_disagreement(c, to, x, y, yaw, cast(np.ndarray, twist[c]),
+                                       t_first, t_last)
+            if found is not None and source == 'auto':
+                use[c] = 'pose'
+                disagree[c] = found
+                notes.append(f'{found}: the {NAMES[c]} is measured from the poses (what the '
+                             'base did, and what the tracker closes its loop on)')
+            elif found is not None:
+                notes.append(f'{found} (source twist: the twist is fitted as asked)')
     span = max(1, int(math.ceil(window_s / odom_period - 1e-9)))
     wa, wb, width, zv_pose, zw_pose = _window_measurements(to, x, y, yaw, span)
 
@@ -263,7 +399,7 @@ def _gather(commands: CommandSamples, odometry: OdometrySamples, max_latency_s: 
             f'{max_latency_s:g} s; at least {MIN_BLOCKS * 0.25:g} s are needed for the '
             'uncertainty (block bootstrap): record a longer run')
     return FitData(tc, cmd, to, odom_rate, use, meas, t_begin, t_end, duration, block_len,
-                 n_blocks)
+                   n_blocks, notes, disagree)
 
 
 def _check_excitation(data: FitData, max_latency_s: float,
@@ -364,10 +500,10 @@ def _check_quality(fit: Fit, excluded: list[tuple[float, float]], max_latency_s:
 
 
 def _bootstrap(fit: Fit, rng: np.random.Generator, bootstrap: int
-               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+               ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Block bootstrap on a local grid (widened while estimates pile at an edge).
 
-    Returns the replicates' latency grid positions and time constants.
+    Returns the replicates' latency grid positions, time constants and static gains.
     """
     pos, tau_hat, d_max, n_blocks = fit.pos, fit.tau_hat, fit.d_max, fit.data.n_blocks
     half = max(10, fit.step)
@@ -378,13 +514,16 @@ def _bootstrap(fit: Fit, rng: np.random.Generator, bootstrap: int
         grids = {c: fit.local_taus(c, tau_hat[c], spread) for c in CHANNELS}
         stats = fit.grid_fit(shifts, grids, True)
         pos_b, tau_b = np.empty(bootstrap), {c: np.empty(bootstrap) for c in CHANNELS}
+        gain_b = {c: np.empty(bootstrap) for c in CHANNELS}
         for b in range(bootstrap):
             wts = np.bincount(rng.integers(0, n_blocks, n_blocks),
                               minlength=n_blocks).astype(float)
-            p, t_, _, _ = fit.estimate(stats, wts, shifts, grids)
+            gains: dict[str, float] = {}
+            p, t_, _, _ = fit.estimate(stats, wts, shifts, grids, gains)
             pos_b[b] = p
             for c in CHANNELS:
                 tau_b[c][b] = t_[c]
+                gain_b[c][b] = gains[c]
         edge = np.mean((pos_b <= shifts[0] + 0.5) & (shifts[0] > 0)) + \
             np.mean((pos_b >= shifts[-1] - 0.5) & (shifts[-1] < d_max))
         tedge = max(np.mean((tau_b[c] >= grids[c][-1] - 1e-12) & (grids[c][-1] < fit.max_tau_s))
@@ -399,13 +538,14 @@ def _bootstrap(fit: Fit, rng: np.random.Generator, bootstrap: int
     else:
         fit.notes.append('bootstrap estimates reach the edge of the local search grid: the '
                          'intervals may be too narrow')
-    return pos_b, tau_b
+    return pos_b, tau_b, gain_b
 
 
 def _report(commands: CommandSamples, odometry: OdometrySamples, fit: Fit, q: _Quality,
-            replicates: tuple[np.ndarray, dict[str, np.ndarray]], events: np.ndarray,
+            replicates: tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]],
+            events: np.ndarray,
             confidence: float, bootstrap: int) -> Identification:
-    """Assemble the :class:`Identification`.
+    """Assemble the :class:`.Identification`.
 
     Intervals at ``confidence`` from the bootstrap ``replicates``, the latency range from
     the command steps' ``events``, the commands' period and age, and the notes.
@@ -413,7 +553,7 @@ def _report(commands: CommandSamples, odometry: OdometrySamples, fit: Fit, q: _Q
     data, h, pos, tau_hat, lat_c, accel = fit.data, fit.h, fit.pos, fit.tau_hat, fit.lat_c, \
         fit.accel
     notes, tc, max_latency_s = fit.notes, data.tc, fit.max_latency_s
-    pos_b, tau_b = replicates
+    pos_b, tau_b, gain_b = replicates
     latency = pos * h
     alpha = 0.5 * (1.0 - confidence)
 
@@ -425,6 +565,10 @@ def _report(commands: CommandSamples, odometry: OdometrySamples, fit: Fit, q: _Q
     lat_lo, lat_hi = interval(pos_b * h, latency)
     tv_lo, tv_hi = interval(tau_b['v'], tau_hat['v'])
     tw_lo, tw_hi = interval(tau_b['w'], tau_hat['w'])
+    # the gains' intervals: the replicates' quantiles, containing the point estimate
+    gain_iv = {c: (min(float(np.quantile(gain_b[c], alpha)), q.gains[c]),
+                   max(float(np.quantile(gain_b[c], 1.0 - alpha)), q.gains[c]))
+               for c in CHANNELS}
     if abs(lat_c['v'] - lat_c['w']) * h > max(lat_hi - lat_lo, 2 * h) * 2:
         notes.append(f'the channels alone give different latencies (v {lat_c["v"] * h:.4f} s, '
                      f'w {lat_c["w"] * h:.4f} s)')
@@ -462,7 +606,9 @@ def _report(commands: CommandSamples, odometry: OdometrySamples, fit: Fit, q: _Q
         tau_w_s=tau_hat['w'], tau_w_low_s=tw_lo, tau_w_high_s=tw_hi,
         odom_rate_hz=data.odom_rate, samples=int(max(ch.z.size for ch in fit.chans.values())),
         residual_rms_v=q.resid['v'], residual_rms_w=q.resid['w'],
-        gain_v=q.gains['v'], gain_w=q.gains['w'], r2_v=q.r2['v'], r2_w=q.r2['w'],
+        gain_v=q.gains['v'], gain_w=q.gains['w'], gain_v_low=gain_iv['v'][0],
+        gain_v_high=gain_iv['v'][1], gain_w_low=gain_iv['w'][0], gain_w_high=gain_iv['w'][1],
+        r2_v=q.r2['v'], r2_w=q.r2['w'],
         source_v=data.use['v'], source_w=data.use['w'],
         latency_v_s=lat_c['v'] * h, latency_w_s=lat_c['w'] * h,
         confidence=float(confidence), resolution_s=h, duration_s=data.duration,

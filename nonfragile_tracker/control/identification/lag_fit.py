@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = ['Fit', 'FitData', 'Measurement', 'binding_fraction', 'CHANNELS', 'NAMES',
            'UNITS', 'ACCEL_UNITS', 'MIN_BINDING', 'MIN_EVENTS', 'JITTER_REFIT_S',
-           'JITTER_GAIN']
+           'RAMP_FIRST_GAIN', 'JITTER_GAIN']
 
 #: An acceleration limit is identified only if it binds at least this fraction of the time.
 MIN_BINDING = 0.02
@@ -30,6 +30,9 @@ JITTER_REFIT_S = 0.005
 #: ... and kept only if it lowers the normalized residual below this fraction of the
 #: one-delay fit's (a spread from noise does not).
 JITTER_GAIN = 0.8
+#: The limit is placed before the lag (the command ramped first) only if that lowers the
+#: limited fit's residual below this fraction of the rate-limited lag's.
+RAMP_FIRST_GAIN = 0.8
 #: Fewest command steps fitted one by one for a measured latency range.
 MIN_EVENTS = 10
 #: The channels: linear speed and yaw rate.
@@ -78,6 +81,10 @@ class _Channel:
         self.width, self.t_mid = width, t_mid
         self.sigma2 = 1.0
         self.accel = 0.0            # acceleration limit of the model (0: none, linear)
+        #: The limit's place: False, the lag's rate saturates (a rate-limited lag); True, the
+        #: command is ramped first and the ramp lagged (a firmware's setpoint ramp in front
+        #: of its wheel-speed loop)
+        self.ramp_first = False
 
     @classmethod
     def build(cls, name: str, source: str, u_avg: np.ndarray, h: float, z: np.ndarray,
@@ -96,7 +103,7 @@ class _Channel:
         sub = _Channel.build(self.name, self.source, self.u_avg, self.h, self.z[sl], self.pos,
                              self.ia[sl], None if self.ib is None else self.ib[sl],
                              None if self.width is None else self.width[sl], self.t_mid[sl])
-        sub.accel = self.accel
+        sub.accel, sub.ramp_first = self.accel, self.ramp_first
         return sub
 
     def signals(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
@@ -108,7 +115,12 @@ class _Channel:
         from scipy.signal import lfilter      # here: scipy.signal costs ~0.8 s to import
         n = self.u_avg.size + 1
         a = math.exp(-self.h / tau) if tau > 0 else 0.0
-        if self.accel > 0:
+        if self.accel > 0 and self.ramp_first:
+            forced = np.empty(n)
+            forced[0] = 0.0
+            forced[1:] = lfilter([1.0 - a], [1.0, -a],
+                                 _ramp_limited_input(self.u_avg, self.h, self.accel))
+        elif self.accel > 0:
             forced = _rate_limited_response(self.u_avg, self.h, tau, self.accel)
         else:
             forced = np.empty(n)
@@ -274,35 +286,65 @@ def _rate_limited_response(u: np.ndarray, h: float, tau: float, accel: float) ->
     return out
 
 
+def _ramp_limited_input(u: np.ndarray, h: float, accel: float) -> np.ndarray:
+    """Cell averages of ``u`` (held per cell) through a rate limiter ``|r'| <= accel`` from rest.
+
+    Per run of equal inputs the ramp is closed form (towards the run's value at ``accel``,
+    then held); a cell's average is taken at its midpoint (exact but in the cell where the
+    ramp ends).
+    """
+    n = u.size
+    if n == 0:
+        return np.empty(0)
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(u))))
+    starts = np.concatenate([[0], np.flatnonzero(np.abs(np.diff(u)) > tol) + 1])
+    lens = np.diff(np.append(starts, n))
+    cs = u[starts]
+    r0 = np.empty(starts.size)
+    r = 0.0
+    for i, (c, m) in enumerate(zip(cs.tolist(), lens.tolist())):
+        r0[i] = r
+        step = accel * m * h
+        r = c if abs(c - r) <= step else r + math.copysign(step, c - r)
+    idx = np.repeat(np.arange(starts.size), lens)
+    t = (np.arange(n) - starts[idx] + 0.5) * h
+    level, first = cs[idx], r0[idx]
+    return cast(np.ndarray, first + np.clip(level - first, -accel * t, accel * t))
+
+
 def _fit_gain(ch: _Channel, pos: float, tau: float) -> float:
     """The static gain of the channel's fit at grid position ``pos``."""
     return float(_sse(_stats(ch, tau, np.array([pos]), None, 0), float(ch.z @ ch.z))[1][0])
 
 
 def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[str, float],
-                   max_tau_s: float, max_latency_s: float) -> dict[str, float]:
+                   max_tau_s: float, max_latency_s: float
+                   ) -> tuple[dict[str, float], dict[str, float]]:
     """Per channel, the acceleration limit of a rate-limited FOPDT, or 0 if none explains more.
 
     Candidates around a high percentile (99 %) of the measured ``|ds/dt|`` (over 40 ms),
     each fitted over a local grid of latencies (the linear fit's ``pos`` - 0.1 s to
-    + 0.03 s: a binding limit makes the linear fit late) and time constants; a limit is
-    kept only if it lowers the residual by at least 5 % and binds at least
-    :data:`MIN_BINDING` of the time; its value is refined by a parabola in ``log a``
-    through the best candidate and its neighbours.
+    + 0.03 s: a binding limit makes the linear fit late) and time constants, in both places
+    of the limit (``_Channel.ramp_first``: the lag's rate saturating, or the command ramped
+    before the lag as a firmware ramps its wheel-speed setpoint - fitted as the other, such
+    a base's limit comes out 25-30 % low); a limit is kept only if it lowers the residual by
+    at least 5 % and binds at least :data:`MIN_BINDING` of the time; its value is refined by
+    a parabola in ``log a`` through the best candidate and its neighbours.  Returns the
+    limits of either place (0: none); :meth:`Fit.model_limits` chooses on the full fits.
     """
-    out = {}
+    out: dict[str, float] = {}
+    first: dict[str, float] = {}
     for c, ch in chans.items():
         h = ch.h
         z, tm = ch.z, ch.t_mid
         dtm = float(np.median(np.diff(tm))) if tm.size > 1 else h
         lag = max(1, int(round(0.04 / max(dtm, 1e-9))))
+        out[c] = first[c] = 0.0
         if z.size <= lag + 10:
-            out[c] = 0.0
             continue
         slope = np.abs(z[lag:] - z[:-lag]) / np.maximum(tm[lag:] - tm[:-lag], 1e-9)
         a0 = float(np.percentile(slope, 99))
         if not a0 > 0:
-            out[c] = 0.0
             continue
         sub = ch.subset(max(1, z.size // 800))
         zz = float(sub.z @ sub.z)
@@ -313,29 +355,34 @@ def _choose_limits(chans: dict[str, '_Channel'], latency: float, tau_hat: dict[s
                                                    min(max_tau_s, 1.5 * tau_hat[c] + 0.02), 8)])
         factors = 2.0 ** (np.arange(-4, 3) / 3.0)
         cands = np.concatenate([[0.0], a0 * factors])
-        best_sse, best_tau = np.empty(cands.size), np.empty(cands.size)
-        for i, a in enumerate(cands):
-            sub.accel = float(a)
+
+        def fitted(a: float, ramp_first: bool) -> tuple[float, float]:
+            sub.accel, sub.ramp_first = float(a), ramp_first
             per_tau = [float(_sse(_stats(sub, tau, shifts, None, 0), zz)[0].min())
                        for tau in grid]
             k = int(np.argmin(per_tau))
-            best_sse[i], best_tau[i] = per_tau[k], grid[k]
-        sub.accel = 0.0
-        i = int(np.argmin(best_sse))
-        if i == 0 or not best_sse[i] < 0.95 * best_sse[0]:
-            out[c] = 0.0
-            continue
-        la = np.log(cands[1:])
-        j = i - 1
-        off = _parabola_min(best_sse[1:], j) if 0 < j < la.size - 1 else 0.0
-        a = float(np.exp(la[j] + off * (la[1] - la[0])))
-        # a limit that binds for a moment only (the steepest steps of a plain lag) is not
-        # one: at least MIN_BINDING of the time
-        ch.accel = a
-        binds = binding_fraction(ch, float(best_tau[i]), 0.0, 0.0, ch.u_avg.size * ch.h)
-        ch.accel = 0.0
-        out[c] = a if binds >= MIN_BINDING else 0.0
-    return out
+            return per_tau[k], float(grid[k])
+
+        none = fitted(0.0, False)[0]
+        for ramp_first in (False, True):
+            res = [fitted(a, ramp_first) for a in cands[1:]]
+            sse = np.array([none] + [r[0] for r in res])
+            i = int(np.argmin(sse))
+            if i == 0 or not sse[i] < 0.95 * none:
+                continue
+            la = np.log(cands[1:])
+            j = i - 1
+            off = _parabola_min(sse[1:], j) if 0 < j < la.size - 1 else 0.0
+            a = float(np.exp(la[j] + off * (la[1] - la[0])))
+            # a limit that binds for a moment only (the steepest steps of a plain lag) is
+            # not one: at least MIN_BINDING of the time
+            ch.accel, ch.ramp_first = a, ramp_first
+            binds = binding_fraction(ch, float(res[j][1]), 0.0, 0.0, ch.u_avg.size * ch.h)
+            ch.accel, ch.ramp_first = 0.0, False
+            if binds >= MIN_BINDING:
+                (first if ramp_first else out)[c] = a
+        sub.accel, sub.ramp_first = 0.0, False
+    return out, first
 
 
 def _speed_saturation(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, float]
@@ -377,7 +424,7 @@ def binding_fraction(ch: _Channel, tau: float, pos: float, t0: float, t1: float)
     Parameters
     ----------
     ch : _Channel
-        A channel of :attr:`Fit.chans` (its acceleration limit ``accel``; 0: none).
+        A channel of ``Fit.chans`` (its acceleration limit ``accel``; 0: none).
     tau : float
         Its time constant (s).
     pos : float
@@ -391,7 +438,8 @@ def binding_fraction(ch: _Channel, tau: float, pos: float, t0: float, t1: float)
     """
     if ch.accel <= 0:
         return 0.0
-    sig = _rate_limited_response(ch.u_avg, ch.h, tau, ch.accel)
+    sig = (np.concatenate([[0.0], _ramp_limited_input(ch.u_avg, ch.h, ch.accel)])
+           if ch.ramp_first else _rate_limited_response(ch.u_avg, ch.h, tau, ch.accel))
     rate = np.abs(np.diff(sig)) / ch.h
     a = max(0, int(t0 / ch.h - pos))
     b = max(a + 1, min(rate.size, int(t1 / ch.h - pos)))
@@ -549,7 +597,7 @@ def _event_latencies(chans: dict[str, _Channel], pos: float, tau_hat: dict[str, 
 
 @dataclass
 class FitData:
-    """The samples of a run, sorted and gated into what the fit uses (see :func:`_gather`).
+    """The samples of a run, sorted and gated into what the fit uses (see ``_gather``).
 
     ``tc``, ``cmd``: the commands by time; ``to``: the odometry times; ``use``: each
     channel's source (``twist`` or ``pose``); ``meas``: each channel's measurements in
@@ -569,13 +617,16 @@ class FitData:
     block_len: float
     n_blocks: int
     notes: list[str] = field(default_factory=list)
+    #: Channels whose twist does not integrate to the poses (-> the finding): measured from
+    #: the poses instead (``source='auto'``).
+    disagree: dict[str, str] = field(default_factory=dict)
 
 
 class Fit:
     """The FOPDT fit of a run: the grid, the channels and the current estimate.
 
     The held commands are cell-averaged on a grid of step ``h`` (``u_grid``);
-    :meth:`_make_channels` builds the channels (:class:`_Channel`) from them and the
+    ``_make_channels`` builds the channels (``_Channel``) from them and the
     measurements (``keep``: the samples left after exclusions), :meth:`search` fits
     ``(latency, tau_v, tau_w)`` on the current channels ``chans``.  The estimate is
     ``pos`` (the latency in grid steps), ``tau_hat``, ``lat_c`` (each channel's own
@@ -615,6 +666,8 @@ class Fit:
         self.hc = h * max(1, int(round(0.005 / h))) if h < 0.005 else h
         self.coarse_inputs: dict[str, np.ndarray] = {}
         self.no_limit = {c: 0.0 for c in CHANNELS}
+        #: Each channel's place of its limit (``_Channel.ramp_first``).
+        self.ramp_first: dict[str, bool] = {c: False for c in CHANNELS}
         self.keep: dict[str, np.ndarray] | None = None
         self.chans = self._make_channels(None, self.no_limit)
         self.d_max = int(round(max_latency_s / h))
@@ -653,6 +706,7 @@ class Fit:
                 ch = _Channel.build(c, data.use[c], self.coarse_inputs[c], hh, z,
                                     (data.to - tc[0]) / hh, ia, ib, wd, tm)
             ch.accel = float(accel[c])
+            ch.ramp_first = self.ramp_first[c]
             out[c] = ch
         return out
 
@@ -719,7 +773,8 @@ class Fit:
         return out
 
     def estimate(self, stats: dict[str, tuple[np.ndarray, Any]], weights: np.ndarray | None,
-                 shifts: np.ndarray, grids: dict[str, np.ndarray]
+                 shifts: np.ndarray, grids: dict[str, np.ndarray],
+                 gains: dict[str, float] | None = None
                  ) -> tuple[float, dict[str, float], dict[str, float], Any]:
         """The estimate from (weighted) statistics.
 
@@ -733,6 +788,9 @@ class Fit:
             The latencies of ``stats`` (grid steps).
         grids : dict
             The time constants of ``stats`` per channel (s).
+        gains : dict, optional
+            Filled with each channel's static gain at the grid cell of the estimate (a
+            bootstrap replicate's gain).
 
         Returns
         -------
@@ -741,12 +799,12 @@ class Fit:
         """
         j: Any = 0.0                    # + the profiles: an array of the latency grid
         tau_hat, lat_c = {}, {}
-        sse_all = {}
+        sse_all, gain_all = {}, {}
         for c in CHANNELS:
             st, zz = stats[c]
             if weights is not None:
                 st, zz = st @ weights, zz @ weights
-            sse = _sse(st, zz)[0]                              # (nd, ntau)
+            sse, gain_all[c] = _sse(st, zz)                    # (nd, ntau) each
             sse_all[c] = sse
             prof = sse.min(axis=1)
             j = j + prof / self.chans[c].sigma2
@@ -759,6 +817,8 @@ class Fit:
             k = int(np.argmin(row))
             g = grids[c]
             tau_hat[c] = float(g[k] + _parabola_min(row, k) * (g[1] - g[0]))
+            if gains is not None:
+                gains[c] = float(gain_all[c][i, k])
         return pos, tau_hat, lat_c, j
 
     def search(self, near: float | None = None
@@ -926,13 +986,64 @@ class Fit:
 
     def model_limits(self) -> None:
         """Acceleration limits: a rate-limited FOPDT where it explains the motion better."""
-        accel = _choose_limits(self._make_channels(None, self.no_limit, self.hc),
-                               self.pos * self.h, self.tau_hat, self.max_tau_s,
-                               self.max_latency_s)
-        if any(accel.values()):
+        accel, ramped = _choose_limits(
+            self._make_channels(None, self.no_limit, self.hc), self.pos * self.h,
+            self.tau_hat, self.max_tau_s, self.max_latency_s)
+        if any(ramped.values()):
+            # the limit's place chosen per channel on the full fits (the coarse search's
+            # subset and grid cannot tell them apart): the command ramped first where it
+            # lowers the channel's residual below RAMP_FIRST_GAIN of the rate-limited lag's
+            start = (self.pos, self.tau_hat, self.lat_c)
+            fits = {}
+            for place in (False, True):
+                self.pos, self.tau_hat, self.lat_c = start
+                self.ramp_first = {c: place and ramped[c] > 0 for c in CHANNELS}
+                lim = {c: ramped[c] if self.ramp_first[c] else accel[c] for c in CHANNELS}
+                self._refit(None, lim)
+                fits[place] = (self.chans, self.pos, self.tau_hat, self.lat_c, {
+                    c: float(self.channel_sse(c, self.pos, self.tau_hat[c])[0][0])
+                    for c in CHANNELS})
+            choice = {c: ramped[c] > 0 and (not accel[c] > 0 or fits[True][4][c] <
+                                             RAMP_FIRST_GAIN * fits[False][4][c])
+                      for c in CHANNELS}
+            if all(choice[c] == (ramped[c] > 0) for c in CHANNELS):
+                self.chans, self.pos, self.tau_hat, self.lat_c = fits[True][:4]
+                self.ramp_first = {c: ramped[c] > 0 for c in CHANNELS}
+            elif not any(choice.values()):
+                self.chans, self.pos, self.tau_hat, self.lat_c = fits[False][:4]
+                self.ramp_first = {c: False for c in CHANNELS}
+            else:
+                self.pos, self.tau_hat, self.lat_c = start
+                self.ramp_first = choice
+                self._refit(None, {c: ramped[c] if choice[c] else accel[c]
+                                   for c in CHANNELS})
+            accel = {c: self.chans[c].accel for c in CHANNELS}      # polished
+        elif any(accel.values()):
             self._refit(None, accel)
             accel = {c: self.chans[c].accel for c in CHANNELS}      # polished
         self.accel = accel
+
+    def drop_unseen_limits(self) -> None:
+        """Drop a limit that no longer binds :data:`MIN_BINDING` of the time after the refits.
+
+        The exclusions and polishes refit a limit chosen on all the data; where the spans
+        it bound in were excluded (a closed loop's short binding steps look like a hiccup
+        to a model with the limit too high), it drifts up unconstrained: one that binds
+        for a moment at most is not seen (0), and the fit is repeated without it.
+        """
+        drop = [c for c, ch in self.chans.items() if ch.accel > 0 and binding_fraction(
+            ch, self.tau_hat[c], self.pos, 0.0, ch.u_avg.size * ch.h) < MIN_BINDING]
+        if not drop:
+            return
+        for c in drop:
+            self.notes.append(f'the {"linear" if c == "v" else "angular"} acceleration limit '
+                              f'refitted to {self.chans[c].accel:.3g} binds less than '
+                              f'{100 * MIN_BINDING:.0f} % of the time: not seen')
+        self.ramp_first = {c: self.ramp_first[c] and c not in drop
+                           for c in CHANNELS}
+        self._refit(self.keep, {c: 0.0 if c in drop else self.chans[c].accel
+                                for c in CHANNELS})
+        self.accel = {c: self.chans[c].accel for c in CHANNELS}
 
     def exclude_gross_errors(self) -> list[tuple[float, float]]:
         """Exclude the segments where the base did not follow the commands at all.
@@ -976,7 +1087,7 @@ class Fit:
         -------
         tuple of numpy.ndarray
             The steps' latencies (grid steps) and the first and last of the spans
-            they were fitted over (:func:`_event_latencies`).
+            they were fitted over (``_event_latencies``).
         """
         data, h = self.data, self.h
         tc, cmd = data.tc, data.cmd

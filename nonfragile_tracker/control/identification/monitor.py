@@ -1,22 +1,15 @@
 """Runtime monitor of the latency certificate: is the robot inside what K was certified for.
 
-A gain from ``latency-design`` is certified for a range of *residual* delay: the
-command-to-motion latency ``L`` minus what the tracker's predictor compensates
-(``predict_latency``), plus the sample-and-hold of the command period ``T`` and the
-spread of the odometry age.  Latency drifts at run time (network, CPU, battery); this
-module estimates it from the tracker's own command history and the odometry twist over a
-sliding window and compares it with the certificate.
+A gain from ``latency-design`` is certified for a range of *residual* delay (the latency
+minus what the predictor compensates, plus the command period's hold and the odometry
+age's spread); latency drifts at run time.  :func:`estimate_latency` fits the
+identification's model to the tracker's own command history and odometry over a sliding
+window, with validity gates (STALE, with the reason, when too little is left or the
+commands have not varied); :func:`evaluate` gives OK, WARN, ERROR or STALE against the
+certified interval; :func:`adapted_prediction` moves the predictor's latency to the
+estimate.  Nothing here imports ROS; numpy and scipy only.
 
-Estimator (:func:`estimate_latency`): the identification's model (first order plus dead
-time per channel) fitted by a small grid search over the window, the samples it cannot
-explain gated out (saturated commands, binding acceleration limits, odometry gaps); no
-estimate (STALE, with the reason) when too little is left, or when the commands have not
-varied over the window's latest half (data without excitation - a robot at rest after its
-trajectory - is STALE, never WARN or ERROR).  Status (:func:`evaluate`): OK,
-WARN, ERROR or STALE against the certified latency interval; adaptation
-(:func:`adapted_prediction`) moves the predictor's latency to the estimate.  The fit, the
-gates and the status are in the documentation: doc/theory.md, section "Latency monitor"
-(#latency-monitor).  Nothing here imports ROS; numpy and scipy only.
+See doc/theory.md, section "Latency monitor" (#latency-monitor).
 """
 from __future__ import annotations
 
@@ -840,6 +833,23 @@ class SampleWindow:
             while self._odom and self._odom[0][0] < t - self.span:
                 self._odom.popleft()
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> SampleWindow:
+        """A copy with the same samples and a lock of its own (a replay's trial forks)."""
+        twin = SampleWindow(self.span)
+        with self._lock:
+            twin._cmd, twin._odom = deque(self._cmd), deque(self._odom)
+        return twin
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The samples without the lock (pickling: a replay's trials in other processes)."""
+        with self._lock:
+            return {'span': self.span, '_cmd': deque(self._cmd), '_odom': deque(self._odom)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """The samples, with a lock of their own."""
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
     def clear(self) -> None:
         """Forget everything (e.g. after a stamp jump)."""
         with self._lock:
@@ -856,15 +866,15 @@ class SampleWindow:
 class MonitorWorker:
     """A background thread that re-estimates the latency every ``period`` s (wall clock).
 
-    The owner appends samples to :attr:`window` from its callbacks and reads
-    :attr:`latest` whenever it reports; the estimate (a few milliseconds of numpy) never
+    The owner appends samples to ``window`` from its callbacks and reads
+    ``latest`` whenever it reports; the estimate (a few milliseconds of numpy) never
     runs in the owner's callbacks.  :meth:`update` is the same work, synchronously (for
     simulations and tests).
 
     Parameters
     ----------
     settings : MonitorSettings
-        Estimator settings (replace :attr:`settings` to change them at run time).
+        Estimator settings (replace ``settings`` to change them at run time).
     period : float
         Seconds between estimates.
     """
@@ -880,7 +890,7 @@ class MonitorWorker:
         self._thread: threading.Thread | None = None
 
     def update(self) -> LatencyEstimate:
-        """One estimate from the samples now in the window (stored in :attr:`latest`)."""
+        """One estimate from the samples now in the window (stored in ``latest``)."""
         t0 = time.perf_counter()
         s = self.settings
         self.window.span = s.window + s.memory + 1.0
@@ -893,6 +903,22 @@ class MonitorWorker:
         self.estimates += 1
         self.compute_seconds += time.perf_counter() - t0
         return est
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The settings, the window and the estimates, without the thread and its signal.
+
+        A copy (``copy.deepcopy``, pickle: a replay's trial runs) has no thread running;
+        :meth:`start` starts its own.
+        """
+        state = dict(self.__dict__)
+        del state['_stop'], state['_thread']
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """The state, with a stop signal of its own and no thread."""
+        self.__dict__.update(state)
+        self._stop = threading.Event()
+        self._thread = None
 
     def _loop(self) -> None:
         while not self._stop.wait(self.period):

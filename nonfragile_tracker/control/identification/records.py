@@ -2,39 +2,14 @@
 
 :class:`CommandSamples` and :class:`OdometrySamples` are what
 :func:`~nonfragile_tracker.control.identification.identify.identify_latency` fits;
-:class:`Identification` is its result.  The file the latency-aware design reads
-(:func:`write_identification`, :func:`read_identification`)::
+:class:`Identification` is its result, with two latency figures: ``latency_interval_s``,
+the uncertainty of the mean latency, and ``latency_range_s``, the range it takes from
+command to command (what the design certifies).  :func:`write_identification` and
+:func:`read_identification` write and read (validating every field) the identification
+file.  Nothing here imports ROS; numpy and PyYAML only.
 
-    identification:
-      source: runs/run_x/bag
-      latency_s: 0.100
-      latency_interval_s: [0.090, 0.110]
-      tau_v_s: 0.050
-      tau_v_interval_s: [0.045, 0.056]
-      tau_w_s: 0.050
-      tau_w_interval_s: [0.044, 0.057]
-      odom_rate_hz: 50.0
-      samples: 1234
-      residual_rms: {v: 0.0012, w: 0.0031}
-      command_period_s: 0.02          # optional: median period of the commands
-      command_age_s: [0.0, 0.0]       # optional: age of the newest odometry at a command
-                                      # (1st and 99th percentile; absent when the commands
-                                      # were not driven by the odometry)
-      latency_range_s: [0.119, 0.152] # optional: the range the latency VARIES over (per
-                                      # command step, contains latency_interval_s)
-      latency_range_from: 32 command steps (2.5-97.5 %)   # optional
-      max_linear_accel: 1.0           # optional: m/s^2, 0 = not seen to bind (unknown)
-      max_angular_accel: 3.0          # optional: rad/s^2, 0 = unknown
-      accel_limits_from: rate-limited FOPDT fit (v binding 31 %, w binding 33 % ...)
-      commands_follow_odometry: false # optional: a tracker (true) or a joystick (false)
-      excluded_s: 0.33                # optional: seconds left out (stalls, glitches)
-
-Two different latency figures: ``latency_interval_s`` is the uncertainty of the MEAN
-latency (bootstrap: it shrinks with a longer recording); ``latency_range_s`` is the range
-the latency actually takes from command to command (jitter: it does not shrink).  The
-plan (:func:`.latency_design.plan_from_identification`) certifies the range.
-
-Nothing here imports ROS; numpy and PyYAML only.
+See doc/tutorial.md, section "Identify the latency (``identify``)" (the file, field by
+field), and doc/theory.md, section "Latency identification".
 """
 from __future__ import annotations
 
@@ -124,7 +99,7 @@ class Identification:
     """Identified latency and actuator lags with intervals (all times in s).
 
     The first block is what the identification file holds; the fields after
-    ``source`` are diagnostics of :func:`identify_latency` (NaN, ``''`` or 0 when
+    ``source`` are diagnostics of :func:`.identify_latency` (NaN, ``''`` or 0 when
     read back from a file).
     """
 
@@ -145,6 +120,11 @@ class Identification:
     #: static gains g_v, g_w (measured / commanded at steady state)
     gain_v: float = math.nan
     gain_w: float = math.nan
+    #: their intervals at ``confidence`` (block bootstrap; NaN: unknown)
+    gain_v_low: float = math.nan
+    gain_v_high: float = math.nan
+    gain_w_low: float = math.nan
+    gain_w_high: float = math.nan
     #: fraction of the measured variance explained by the model
     r2_v: float = math.nan
     r2_w: float = math.nan
@@ -163,7 +143,7 @@ class Identification:
     #: median period of the commands (s; NaN: unknown) - the sample-and-hold of the loop
     command_period_s: float = math.nan
     #: age of the newest odometry when a command is sent, 1st / 99th percentile (s; NaN:
-    #: unknown), see :func:`measurement_to_command_delay`
+    #: unknown), see :func:`.measurement_to_command_delay`
     command_age_low_s: float = math.nan
     command_age_high_s: float = math.nan
     #: the range the latency varies over from command to command (s; NaN: not measured,
@@ -219,7 +199,7 @@ def write_identification(path: str | os.PathLike[str], result: Identification, *
     path : path-like
         File to write (YAML; the format is in the module docstring).
     result : Identification
-        What :func:`identify_latency` returned (``source`` set by the caller, e.g.
+        What :func:`.identify_latency` returned (``source`` set by the caller, e.g.
         ``dataclasses.replace(result, source=str(bag))``).
     overwrite : bool
         If False, an existing file raises ``FileExistsError``.

@@ -1,47 +1,17 @@
 """Batch simulation: the tracking loop (and the linear delay loop) for N cases at once.
 
-:func:`simulate_batch` runs the lockstep sequence of :func:`control.simulation.simulate.run_loop`
-with :class:`control.simulation.loop.Tracker` and
-:class:`control.simulation.loop.UnicyclePlant` for ``N``
-cases in parallel, every quantity a numpy array over cases, with the operations of the
-scalar step functions in the same order (``exact=False`` allows a few cheaper forms of
-the same values: the yaw is not sent through a quaternion, the arc's sine and cosines
-come from series and angle addition, the heading's cosine and sine are carried from step
-to step by angle addition and evaluated afresh every 16 steps, the metrics are taken on
-the squared error).  Each step is a fixed sequence of whole-array operations on
-preallocated buffers: at about 1,000 cases numpy's per-call overhead dominates, so
-throughput grows with ``N``; the loop runs in the calling process (the study splits large
-batches over processes, :func:`control.simulation.study.run_study`).  Case ``i`` of a batch equals
-:func:`control.simulation.simulate.simulate_tracking` with :meth:`BatchCases.configs` ``(i)`` to
-round-off (the test checks 1e-12; bit for bit with ``exact=True``, about 1e-14 without,
-away from rest).
-Per case (:class:`BatchCases`; any field left ``None`` takes the base configuration's
-value):
+:func:`simulate_batch` runs the lockstep sequence of the single run
+(:func:`~nonfragile_tracker.control.simulation.simulate.simulate_tracking`) for ``N`` cases
+(:class:`BatchCases`: gains and perturbation schedules, latency, lag, limits, odometry,
+initial state, the reference) in parallel, every quantity a numpy array over cases; case
+``i`` equals the single run to round-off (bit for bit with ``exact=True``).
+:func:`simulate_delay_loop_batch` does the same for the linear delay loop.  Each piece is the
+vector twin beside its scalar step (``VectorTracker`` in :mod:`~.simulation.tracker`,
+``VectorPlant`` in :mod:`~.simulation.plant`, ``VectorOdometer``, ``VectorCommandLine``,
+``VectorActuator``): one loop.
 
-* the gain ``K`` and its perturbation schedule ``E Delta(t) F``: ``S`` matrices, the
-  one in force at a command computed at ``t`` being number ``floor(t / hold) mod S``
-  (``S = 1``: constant; ``S = 2``: periodic switching; ``S`` large with random
-  ``Delta``: random time-varying, see :func:`sample_deltas`);
-* command latency, actuator lag and acceleration limits of ``v`` and ``w``;
-* odometry latency, rate (the tracker's step is the odometry period, as the tracker
-  measures it from the stamps; a ``dt`` override is used as set and warned about when it
-  disagrees, as the tracker node reports it) and noise (the per-case seed draws the same
-  sequence as :class:`control.simulation.sensors.Odometer`);
-* initial pose and speed;
-* the reference: a shared path (any object with ``sample(t) -> RefSample``, e.g. a
-  :class:`control.simulation.trajectory.Trajectory`, sampled once per step) or per-case
-  parameters of the analytic circle / figure eight (:class:`PathBatch`).
-
-Shared by all cases: the plant step ``dt``, the state delay ``tau`` and ``A_tau``,
-the tracker's speed limits and delay compensation.  Not vectorized (refused with
-:class:`BatchError`): the tracker's latency predictor.
-
-Per-case metrics are accumulated while running (no ``N x steps`` arrays unless
-``record=True``).  :func:`simulate_delay_loop_batch` is
-:func:`control.simulation.simulate.simulate_delay_loop` for ``N`` matrices ``A0`` at once.
-The vectorized pieces of the single run's state (odometry, tracker, command line, plant)
-are in :mod:`control.simulation.batch_parts`, the fast path for ideal odometry in
-:mod:`control.simulation.batch_ideal`.
+See doc/study.md, section "The batch simulation" (what is per case and shared, agreement
+with the single run, the loop and its speed).
 """
 from __future__ import annotations
 
@@ -52,13 +22,18 @@ from typing import Any
 
 import numpy as np
 
-from .loop import (PlantConfig, TrackerConfig, delay_steps, odometry_period_steps, step_time,
-                   step_time_ns)
-from .reference import PATHS, Path
+from .plant import PlantConfig, delay_steps, odometry_period_steps
+from .tracker import TrackerConfig
+from .timing import step_time, step_time_ns
 from .errors import BatchError
 from .timing import period_disagreement
-from .batch_parts import BLOCK, BatchPlant, BatchTracker, CommandLine, Odometry, per_value
-from .batch_ideal import IdealRun, ideal_loop
+from .batch_data import (BLOCK, BatchRun, Metrics, PathBatch, Reference, Schedule, Settings,
+                         per_case_vector, segment_index)
+from .batch_data import per_value
+from .command_line import VectorCommandLine
+from .plant import VectorPlant
+from .tracker import VectorTracker
+from .sensors import VectorOdometer
 
 __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch',
            'perturbation_schedule', 'sample_deltas', 'simulate_delay_loop_batch',
@@ -67,62 +42,6 @@ __all__ = ['BatchError', 'BatchCases', 'PathBatch', 'BatchRun', 'simulate_batch'
 
 # ---------------------------------------------------------------------------------------------
 # Inputs
-
-@dataclass(frozen=True)
-class PathBatch:
-    """Per-case parameters of an analytic path (:mod:`control.simulation.reference`).
-
-    ``kind`` is ``'circle'`` or ``'figure_eight'``; each parameter is a scalar or an
-    array of ``N`` values (broadcast).
-    """
-
-    kind: str = 'circle'
-    radius: Any = 0.5
-    rate: Any = 0.01
-    center_x: Any = 0.0
-    center_y: Any = 0.0
-    phase: Any = 0.0
-
-    def path(self, i: int) -> Path:
-        """The single-run :class:`control.simulation.reference.Path` of case ``i``.
-
-        Parameters
-        ----------
-        i : int
-            Case index.
-
-        Returns
-        -------
-        Path
-        """
-        factory = PATHS.get(self.kind)
-        if factory is None:
-            raise BatchError(f'path kind {self.kind!r}: choose {_KINDS}')
-        return factory(**{name: float(_pick(getattr(self, name), i)) for name in _PATH_FIELDS})
-
-    def take(self, idx: Any) -> 'PathBatch':
-        """The cases ``idx`` (index array) as a new :class:`PathBatch`.
-
-        Parameters
-        ----------
-        idx : array_like of int
-            Indices of the cases kept (scalar parameters stay scalars).
-
-        Returns
-        -------
-        PathBatch
-        """
-        return replace(self, **{name: _pick(getattr(self, name), idx) for name in _PATH_FIELDS})
-
-
-_PATH_FIELDS = ('radius', 'rate', 'center_x', 'center_y', 'phase')
-_KINDS = ' or '.join(PATHS)
-
-
-def _pick(value: Any, i: Any) -> Any:
-    """``value[i]`` for a per-case array, ``value`` for a scalar."""
-    arr = np.asarray(value, float)
-    return arr if arr.ndim == 0 else arr[i]
 
 
 @dataclass(frozen=True)
@@ -189,7 +108,7 @@ class BatchCases:
         Returns
         -------
         tuple of (PlantConfig, TrackerConfig)
-            What :func:`control.simulation.simulate.simulate_tracking` runs for case ``i``.
+            What :func:`.control.simulation.simulate.simulate_tracking` runs for case ``i``.
 
         Raises
         ------
@@ -215,53 +134,6 @@ _PER_CASE = ('x0', 'y0', 'th0', 'v0', 'cmd_latency', 'lag_v', 'lag_w', 'max_line
              'max_angular_accel', 'odom_latency', 'odom_rate', 'noise_seed')
 
 
-def _vector(value: Any, name: str, n: int, *, low: float | None = None) -> np.ndarray:
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise BatchError(f'{name}: expected numbers, got {value!r}') from None
-    if arr.ndim > 1 or (arr.ndim == 1 and arr.size != n):
-        raise BatchError(f'{name}: expected a number or {n} numbers (one per case), got shape '
-                         f'{arr.shape}')
-    arr = np.broadcast_to(arr, (n,)).copy()
-    bad = ~np.isfinite(arr)
-    if low is not None:
-        bad |= arr < low
-    if bad.any():
-        i = int(np.argmax(bad))
-        need = 'finite' if low is None else f'finite and >= {low:g}'
-        raise BatchError(f'{name}[{i}] is {arr[i]!r}; every value must be {need}')
-    return arr
-
-
-@dataclass
-class Settings:
-    """Resolved per-case arrays of a batch, as the parts of :mod:`.batch_parts` read them.
-
-    Internal to the batch (built by :func:`simulate_batch` from :class:`BatchCases`); a
-    per-case value not named as a field is in ``vals`` (read as an attribute).
-    """
-
-    n: int
-    K: np.ndarray          # (N, 2, 4)
-    P: np.ndarray          # (N, S, 2, 4)
-    hold_ns: int
-    vals: dict[str, np.ndarray]
-    noise: np.ndarray      # (N, 3)
-    seed: np.ndarray       # (N,) int
-    cmd_d: np.ndarray      # (N,) int steps
-    odom_d: np.ndarray
-    period: np.ndarray
-    tdt: np.ndarray        # the tracker's step per case (its dt, else the odometry period)
-    comp_n: np.ndarray     # compensation history length per case
-
-    def __getattr__(self, name: str) -> np.ndarray:
-        try:
-            return self.vals[name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-
 def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> Settings:
     n = cases.n
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -275,7 +147,8 @@ def _resolve(cases: BatchCases, plant: PlantConfig, tracker: TrackerConfig) -> S
     for name in _PER_CASE:
         given = getattr(cases, name)
         low = None if name in ('x0', 'y0', 'th0', 'v0') else 0.0
-        vals[name] = _vector(getattr(plant, name) if given is None else given, name, n, low=low)
+        vals[name] = per_case_vector(getattr(plant, name) if given is None else given, name, n,
+                                     low=low)
     seed = vals['noise_seed']
     if np.any(seed != np.round(seed)):
         raise BatchError('noise_seed: every seed must be an integer >= 0')
@@ -409,137 +282,8 @@ def sample_deltas(rng: np.random.Generator, n: int, segments: int, shape: tuple[
     return out
 
 
-def segment_index(k: Any, dt: float, hold_ns: int, segments: int) -> Any:
-    """Perturbation segment in force at step ``k``: ``floor(t_k / hold) mod segments``.
-
-    Parameters
-    ----------
-    k : int or array_like of int
-        Plant step(s).
-    dt : float
-        Plant step (s).
-    hold_ns : int
-        Segment length (ns).
-    segments : int
-        Number of segments ``S``.
-
-    Returns
-    -------
-    int or numpy.ndarray
-        The segment index(es), in ``0 .. S - 1``.
-    """
-    return (step_time_ns(k, dt) // hold_ns) % segments
-
-
-class Reference:
-    """Reference samples at step indices: a shared table or per-case analytic formulas.
-
-    Internal to the batch (its loops and :mod:`control.simulation.batch_ideal`).
-
-    Parameters
-    ----------
-    path : Path-like or PathBatch
-        Shared reference (``sample(t)``, sampled once per step) or per-case parameters.
-    n : int
-        Number of cases.
-    steps : int
-        Plant steps of the run.
-    dt : float
-        Plant step (s).
-    """
-
-    def __init__(self, path: Any, n: int, steps: int, dt: float):
-        self.n = n
-        self.dt_ns = int(round(dt * 1e9))
-        if isinstance(path, PathBatch) and all(np.ndim(getattr(path, f)) == 0
-                                               for f in _PATH_FIELDS):
-            path = path.path(0)             # the same path for every case: one table
-        if isinstance(path, PathBatch):
-            if path.kind not in PATHS:
-                raise BatchError(f'path kind {path.kind!r}: choose {_KINDS}')
-            self.table = None
-            self.kind = path.kind
-            self.r = _vector(path.radius, 'radius', n)
-            if np.any(self.r <= 0):
-                raise BatchError('radius: every radius must be > 0 m')
-            self.w = _vector(path.rate, 'rate', n)
-            self.cx = _vector(path.center_x, 'center_x', n)
-            self.cy = _vector(path.center_y, 'center_y', n)
-            self.ph = _vector(path.phase, 'phase', n)
-        else:
-            if not callable(getattr(path, 'sample', None)):
-                raise BatchError(f'path must have sample(t) or be a PathBatch, got {path!r}')
-            rows = [path.sample(step_time_ns(k, dt) * 1e-9) for k in range(steps + 1)]
-            tab = np.array([(s.x, s.y, s.vx, s.vy, s.ax, s.ay) for s in rows], dtype=float)
-            # (steps + 1, 2, 1) each: position, velocity, acceleration as column pairs
-            self.table = tuple(tab[:, j:j + 2, None].copy() for j in (0, 2, 4))
-            self.rows = list(zip(*self.table))      # (position, velocity, acceleration)
-
-    def at(self, k: Any) -> tuple[Any, Any, Any]:
-        """Position, velocity, acceleration ``(2, 1)`` (shared) or ``(2, N)`` at step ``k``.
-
-        Parameters
-        ----------
-        k : int or numpy.ndarray
-            The step, or an array of N steps (per-case odometry stamps).
-
-        Returns
-        -------
-        tuple
-            Position, velocity and acceleration.
-        """
-        if self.table is not None:
-            if np.ndim(k) == 0:
-                row: tuple[Any, Any, Any] = self.rows[k]
-                return row
-            return tuple(col[k][:, :, 0].T for col in self.table)
-        t = (np.asarray(k, dtype=np.int64) * self.dt_ns) * 1e-9
-        r, w, cx, cy = self.r, self.w, self.cx, self.cy
-        a = w * t + self.ph
-        if self.kind == 'circle':
-            c, s = np.cos(a), np.sin(a)
-            return (np.stack((cx + r * c, cy + r * s)), np.stack((-r * w * s, r * w * c)),
-                    np.stack((-r * w * w * c, -r * w * w * s)))
-        s1, c1 = np.sin(a), np.cos(a)
-        s2, c2 = np.sin(2 * a), np.cos(2 * a)
-        return (np.stack((cx + r * s1, cy + 0.5 * r * s2)), np.stack((r * w * c1, r * w * c2)),
-                np.stack((-r * w * w * s1, -2 * r * w * w * s2)))
-
-
 # ---------------------------------------------------------------------------------------------
 # Result
-
-@dataclass(frozen=True)
-class BatchRun:
-    """Per-case results of :func:`simulate_batch` (arrays of N; SI units).
-
-    Metrics follow :func:`control.simulation.metrics.tracking_metrics` on the position error
-    sampled at every step: ``settling_time`` (nan: not within ``tolerance`` at the end),
-    ``first_within``, ``final_error``, ``rms_error``, ``steady_error`` (max error over
-    ``t >= steady_from``), ``peak_abs_v``/``peak_abs_w`` (commands), ``finite`` (False if
-    the state became non-finite).  With ``record=True``, ``trace`` holds ``(steps + 1, N)``
-    arrays ``t, x, y, th, speed, xd, yd, cmd_v, cmd_w, commanded`` (rows as
-    :class:`control.simulation.simulate.TrackingRun`).
-    """
-
-    steps: int
-    dt: float
-    tolerance: float
-    steady_from: float
-    settling_time: np.ndarray
-    first_within: np.ndarray
-    final_error: np.ndarray
-    rms_error: np.ndarray
-    steady_error: np.ndarray
-    peak_abs_v: np.ndarray
-    peak_abs_w: np.ndarray
-    finite: np.ndarray
-    trace: dict[str, np.ndarray] | None = None
-
-    @property
-    def n(self) -> int:
-        """Number of cases."""
-        return int(self.final_error.size)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -559,7 +303,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
         Shared reference (``sample(t)``) or per-case analytic path parameters.
     steps : int
         Plant steps (``steps + 1`` samples, as
-        :func:`control.simulation.simulate.simulate_tracking`).
+        :func:`.control.simulation.simulate.simulate_tracking`).
     cases : BatchCases, optional
         Per-case settings (default: one case, the base configuration).
     tolerance : float
@@ -571,7 +315,7 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     exact : bool
         True (default): every transcendental function evaluated as the single run does
         (the yaw through a quaternion with libm's ``atan2`` element by element, the arc's
-        sine and cosines); a case equals :func:`control.simulation.simulate.simulate_tracking` bit
+        sine and cosines); a case equals :func:`.control.simulation.simulate.simulate_tracking` bit
         for bit in every configuration tested.  False: cheaper forms of the same values
         (about 3 x faster; numpy's own ``arctan2`` already differs from libm's by an ulp
         for some arguments), for statistics over many cases; their
@@ -591,12 +335,10 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     Notes
     -----
     The run is set up from parts that each hold one piece of the single run's state for
-    every case (``Odometry``, ``BatchTracker``, ``CommandLine``,
-    ``BatchPlant`` of :mod:`control.simulation.batch_parts`, ``Metrics``) and stepped by
-    ``_loop``; the common
-    configuration of odometry of the plant's own state, no delay compensation and no
-    actuator dynamics (without ``exact``) takes the specialised ``ideal_loop``
-    (:mod:`control.simulation.batch_ideal`).
+    every case (the vector twins ``VectorOdometer``, ``VectorTracker``, ``VectorCommandLine``,
+    ``VectorPlant`` beside their scalar steps, and ``Metrics``) and stepped by
+    ``_loop``; for odometry of the plant's own state without actuator dynamics (and
+    without ``exact``) the plant takes fewer operations a step (``VectorPlant``).
     """
     _check_run(tracker, steps, tolerance)
     steps = int(steps)
@@ -604,30 +346,16 @@ def simulate_batch(plant: PlantConfig, tracker: TrackerConfig, path: Any, steps:
     s = _resolve(cases, plant, tracker)
     metrics = Metrics(s.n, steps, plant.dt, tolerance, steady_from, exact)
     ref = Reference(path, s.n, steps, plant.dt)
-    odom = Odometry(s)
-    body = BatchPlant(plant, s, exact, odom.ideal, tracker.max_angular_speed)
+    odom = VectorOdometer(s)
+    body = VectorPlant(plant, s, exact, odom.ideal, tracker.max_angular_speed)
     schedule = Schedule(s.K, s.P, s.hold_ns, plant.dt)
     tdt = float(s.tdt[0]) if np.all(s.tdt == s.tdt[0]) else s.tdt   # a scalar when shared
     trace = {name: np.zeros((steps + 1, s.n)) for name in _TRACE} if record else None
-    # odometry of the plant's own state every step, no compensation, no actuator dynamics,
-    # no or the paper's delay form: fewer operations per step (ideal_loop)
-    delay = body.delay
-    ideal = (body.recur and not tracker.delay_compensation and not body.act.on
-             and isinstance(tdt, float) and (not delay.on or (delay.diag and delay.Nd > 0)))
     with np.errstate(all='ignore'):
-        if ideal:
-            run = IdealRun(steps, plant.dt, float(tdt), ref, schedule,
-                            (tracker.max_linear_speed, tracker.max_angular_speed,
-                             tracker.min_speed),
-                            (delay.Nd, delay.ax, delay.ay) if delay.on else None,
-                            s.cmd_d if np.any(s.cmd_d) else None, tracker.dt == 0)
-            pos, th, err = ideal_loop(run, body.pos, body.th, body.pv, metrics, trace)
-            finite = np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
-        else:
-            trk = BatchTracker(s, tracker, schedule, tdt, metrics.cblk, exact, body.recur,
-                                odom.ideal)
-            line = CommandLine(s.cmd_d, s.v0, bool(np.any(s.cmd_d) and odom.ideal))
-            err, finite = _loop(_Parts(ref, odom, trk, line, body, metrics), steps, trace)
+        trk = VectorTracker(s, tracker, schedule, tdt, metrics.cblk, exact, body.recur,
+                            odom.ideal)
+        line = VectorCommandLine(s.cmd_d, s.v0, bool(np.any(s.cmd_d) and odom.ideal))
+        err, finite = _loop(_Parts(ref, odom, trk, line, body, metrics), steps, trace)
     return metrics.result(err, finite, trace)
 
 
@@ -642,6 +370,10 @@ def _check_run(tracker: TrackerConfig, steps: Any, tolerance: Any) -> None:
                          'limit (max_linear_accel, max_angular_accel of the tracker; the '
                          'plant\'s limits are simulated); set them to 0 or use '
                          'simulate_tracking for single runs')
+    if tracker.compensates:
+        raise BatchError('the batch simulation does not vectorize the tracker\'s gain '
+                         'compensation (gain_v, gain_w); set them to 1 or use '
+                         'simulate_tracking for single runs')
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise BatchError(f'steps must be an integer >= 1, got {steps!r}')
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
@@ -649,7 +381,7 @@ def _check_run(tracker: TrackerConfig, steps: Any, tolerance: Any) -> None:
 
 
 #: The per-step arrays of ``BatchRun.trace`` (rows as
-#: :class:`control.simulation.simulate.TrackingRun`).
+#: :class:`.control.simulation.simulate.TrackingRun`).
 _TRACE = ('t', 'x', 'y', 'th', 'speed', 'xd', 'yd', 'cmd_v', 'cmd_w', 'commanded')
 
 
@@ -658,10 +390,10 @@ class _Parts:
     """The state of a batch run, one part per piece of the single run (see :func:`_loop`)."""
 
     ref: Reference
-    odometry: Odometry
-    tracker: BatchTracker
-    commands: CommandLine
-    plant: BatchPlant
+    odometry: VectorOdometer
+    tracker: VectorTracker
+    commands: VectorCommandLine
+    plant: VectorPlant
     metrics: Metrics
 
 
@@ -669,7 +401,7 @@ def _loop(parts: _Parts, steps: int, trace: dict[str, np.ndarray] | None
           ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`simulate_batch`'s general loop; the last error row and which cases stayed finite.
 
-    Every step in the order of :func:`control.simulation.simulate.run_loop`: the odometry due, the
+    Every step in the order of :func:`.control.simulation.simulate.run_loop`: the odometry due, the
     tracker's command (cases whose odometry is due), the command sent into the plant's
     command line, the log row and metrics, then the plant's advance with the command in
     force and the next measurement.
@@ -720,199 +452,12 @@ def _loop(parts: _Parts, steps: int, trace: dict[str, np.ndarray] | None
     return err, np.isfinite(pos[0]) & np.isfinite(pos[1]) & np.isfinite(th)
 
 
-@dataclass(frozen=True)
-class Schedule:
-    """Per-case gains ``K`` (N, 2, 4) and perturbations ``P`` (N, S, 2, 4) by segment.
-
-    Internal to the batch: the gain in force at each step, for its loops and
-    :class:`control.simulation.batch_parts.BatchTracker`.
-    """
-
-    K: np.ndarray
-    P: np.ndarray
-    hold_ns: int
-    dt: float
-
-    @property
-    def segments(self) -> int:
-        """Number of perturbation segments ``S``."""
-        return int(self.P.shape[1])
-
-    def segment(self, k: int) -> int:
-        """The segment in force at step ``k`` (:func:`segment_index`).
-
-        Parameters
-        ----------
-        k : int
-            Plant step.
-
-        Returns
-        -------
-        int
-        """
-        S = self.P.shape[1]
-        return segment_index(k, self.dt, self.hold_ns, S) if S > 1 else 0
-
-    def gain(self, seg: int) -> np.ndarray:
-        """``K + P[:, seg]`` of every case as one contiguous ``(2, 4, N)`` array.
-
-        Parameters
-        ----------
-        seg : int
-            Segment index.
-
-        Returns
-        -------
-        numpy.ndarray
-        """
-        return np.ascontiguousarray((self.K + self.P[:, seg]).transpose(1, 2, 0))
-
-
-class Metrics:
-    """Per-case metrics updated from blocks of per-step rows (see :func:`simulate_batch`).
-
-    Without ``exact`` on the squared error (square roots at the end).  The error and the
-    command of each step are written to a row of a block of ``BLOCK`` steps (``eblk``,
-    ``cblk``), whose rows are reduced at once when it is full (:meth:`flush`).  Internal
-    to the batch (its loops and :mod:`control.simulation.batch_ideal`).
-
-    Parameters
-    ----------
-    n, steps : int
-        Cases and plant steps of the run.
-    dt : float
-        Plant step (s).
-    tolerance : float
-        Error tolerance (m) of the settling time.
-    steady_from : float or None
-        Start (s) of the window of the steady error (None: half the run).
-    exact : bool
-        The error itself (else its square, square roots at the end).
-    """
-
-    def __init__(self, n: int, steps: int, dt: float, tolerance: float,
-                 steady_from: float | None, exact: bool):
-        self.steps, self.dt, self.tolerance, self.exact = steps, dt, tolerance, exact
-        self.dt_ns = dt_ns = int(round(dt * 1e9))
-        t_end = steps * dt_ns * 1e-9
-        self.steady_from = 0.5 * t_end if steady_from is None else float(steady_from)
-        self.thr = tolerance if exact else tolerance * tolerance
-        self.last_out = np.full(n, -1, dtype=np.int64)
-        self.first_in = np.full(n, -1, dtype=np.int64)
-        self.sqblk = np.zeros((BLOCK + 1, n))      # row 0: the sum of squares so far
-        self.eblk = np.empty((BLOCK, n)) if exact else self.sqblk[1:]
-        self.cblk = np.zeros((BLOCK, 2, n))        # commands sent (0: none)
-        self.steady = np.zeros(n)
-        steady_k = max(0, int(self.steady_from / (dt_ns * 1e-9)) - 2)   # first k: t_k >= from
-        while steady_k <= steps and step_time_ns(steady_k, dt) * 1e-9 < self.steady_from:
-            steady_k += 1
-        self.steady_k = steady_k
-        self.peak = np.zeros((2, n))
-        self.searching = True
-        self.cabs = np.empty_like(self.cblk)
-        self.sums = np.empty_like(self.steady)
-        self.out = np.empty(self.eblk.shape, dtype=bool)
-        self.sq = np.empty((2, n))
-
-    def error(self, j: int, dp: np.ndarray) -> np.ndarray:
-        """Row ``j`` of the block: the position error ``|dp|`` (its square without exact).
-
-        Parameters
-        ----------
-        j : int
-            Row of the block.
-        dp : numpy.ndarray
-            Position error (2, N).
-
-        Returns
-        -------
-        numpy.ndarray
-            The row (written in place).
-        """
-        err: np.ndarray = self.eblk[j]
-        if self.exact:
-            np.hypot(dp[0], dp[1], out=err)
-            np.multiply(err, err, out=self.sqblk[j + 1])
-        else:
-            np.multiply(dp, dp, out=self.sq)
-            np.add(self.sq[0], self.sq[1], out=err)
-        return err
-
-    def flush(self, k0: int, m: int) -> None:
-        """Take the first ``m`` rows, those of steps ``k0 .. k0 + m - 1``.
-
-        Every update equals the step-by-step one: the sum of squares adds the rows in
-        order after the running sum (a reduction over the first axis adds row by row), the
-        others are maxima and first/last indices.
-
-        Parameters
-        ----------
-        k0 : int
-            Step of the first row.
-        m : int
-            Number of rows.
-        """
-        rows = self.eblk[:m]
-        np.add.reduce(self.sqblk[:m + 1], axis=0, out=self.sums)
-        self.sqblk[0] = self.sums
-        out = np.greater(rows, self.thr, out=self.out[:m])   # nan: never back within
-        hit = np.logical_or.reduce(out, axis=0)
-        if hit.any():
-            last = (k0 + m - 1) - np.argmax(out[::-1], axis=0)
-            np.copyto(self.last_out, last, where=hit)
-        if self.searching:
-            inside = ~out
-            fin = (self.first_in < 0) & inside.any(axis=0)
-            if fin.any():
-                np.copyto(self.first_in, k0 + np.argmax(inside, axis=0), where=fin)
-            self.searching = bool((self.first_in < 0).any())
-        if k0 + m - 1 >= self.steady_k:
-            lo = max(0, self.steady_k - k0)
-            np.fmax(self.steady, np.fmax.reduce(rows[lo:], axis=0), out=self.steady)
-        cabs = np.abs(self.cblk[:m], out=self.cabs[:m])
-        np.fmax(self.peak, np.fmax.reduce(cabs, axis=0), out=self.peak)
-
-    def result(self, err: np.ndarray, finite: np.ndarray,
-               trace: dict[str, np.ndarray] | None) -> BatchRun:
-        """The :class:`BatchRun` of the run whose last error row is ``err``.
-
-        Parameters
-        ----------
-        err : numpy.ndarray
-            The last error row.
-        finite : numpy.ndarray
-            Which cases stayed finite.
-        trace : dict or None
-            The per-step arrays (``record=True``).
-
-        Returns
-        -------
-        BatchRun
-        """
-        steady = self.steady
-        if not self.exact:
-            err = np.sqrt(err)
-            steady = np.sqrt(steady)
-        dt_ns = self.dt_ns
-        last_out, first_in = self.last_out, self.first_in
-        within_end = err <= self.tolerance
-        settle = np.where(within_end, ((last_out + 1) * dt_ns) * 1e-9, np.nan)
-        first = np.where(first_in >= 0, (first_in * dt_ns) * 1e-9, np.nan)
-        steady = np.where(finite, steady, np.nan)
-        return BatchRun(steps=self.steps, dt=self.dt, tolerance=float(self.tolerance),
-                        steady_from=self.steady_from, settling_time=settle,
-                        first_within=first, final_error=err.copy(),
-                        rms_error=np.sqrt(self.sqblk[0] / (self.steps + 1)),
-                        steady_error=steady, peak_abs_v=self.peak[0].copy(),
-                        peak_abs_w=self.peak[1].copy(), finite=finite, trace=trace)
-
-
 # ---------------------------------------------------------------------------------------------
 # Linear delay loop
 
 def simulate_delay_loop_batch(A0: Any, A1: Any, tau: float, xi0: Any, duration: float,
                               dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`control.simulation.simulate.simulate_delay_loop` for N loops at once.
+    """:func:`.control.simulation.simulate.simulate_delay_loop` for N loops at once.
 
     The history before time 0 is constant.
 

@@ -1,13 +1,12 @@
 """The simulation's errors: bad plant, tracker, path, trajectory, gain or batch settings.
 
-All are bad input (:class:`nonfragile_tracker.errors.InputError`, a ``ValueError``; the
-CLI exits 2), each message naming the setting and what to do::
+All are bad input (:class:`nonfragile_tracker.errors.InputError`, a ``ValueError``; the CLI
+exits 2), each message naming the setting and what to do: :class:`PathError` (an unknown
+path name or invalid path parameter), :class:`TrajectoryError` (a trajectory cannot be built
+from the given points), :class:`LoopConfigError` (a plant, tracker or gain setting, a gain
+file) and :class:`BatchError` (a batch setting invalid or not supported).
 
-    InputError
-    +-- PathError               unknown path name or invalid path parameter
-    +-- TrajectoryError         a trajectory cannot be built from the given points
-    +-- LoopConfigError         a plant, tracker or gain setting (a gain file) is invalid
-    +-- BatchError              a batch setting is invalid or not supported
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 

@@ -2,16 +2,12 @@
 
 :class:`Follower` is the one step function of a tracker that samples its trajectory
 itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
-:class:`~control.simulation.trajectory.Trajectory` at ``t`` and calls
-:meth:`control.simulation.loop.Tracker.step`.
-Before the trajectory's first time the robot waits at rest (zero command).  After
-the trajectory's last time the sample holds the end point at rest; once the
-commanded speed has fallen below ``rest_speed`` the follower commands zero and stays
-at rest (``finished``) until it is given a new trajectory - near ``v = 0`` the
-linearizing law's ``w = (...)/v`` would otherwise keep turning the robot on the spot.
+:class:`~.trajectory.Trajectory` at ``t`` and calls :meth:`.tracker.Tracker.step`; it waits
+at rest before the trajectory's first time and, after its end, commands zero once the
+speed is below ``rest_speed``.  :func:`simulate_following` is the in-process run with
+exactly the node's sequence, so a lockstep ROS run and it agree to round-off.  No ROS import.
 
-:func:`simulate_following` is the in-process run with exactly the node's sequence,
-so a lockstep ROS run and it agree to round-off.  No ROS import.
+See doc/trajectories.md, section "Start, end and bad input".
 """
 from __future__ import annotations
 
@@ -20,7 +16,10 @@ from typing import Any
 
 
 from .limits import ACCEL_FRACTION, Limits, within_limits
-from .loop import Command, PlantConfig, Tracker, TrackerConfig, step_time_ns
+from .interfaces import Controller, ControllerFactory, PlantFactory, make_controller, make_plant
+from .tracker import Command, TrackerConfig
+from .plant import PlantConfig
+from .timing import step_time_ns
 from .reference import RefSample
 from .simulate import TrackingRun, report_override, run_loop
 from .trajectory import Trajectory
@@ -121,8 +120,8 @@ class Follower:
 
     Parameters
     ----------
-    tracker : Tracker
-        The tracking law (its compensator is reset on :meth:`set_trajectory`).
+    tracker : Controller
+        The tracking law (:class:`~.interfaces.Controller`; reset on :meth:`set_trajectory`).
     trajectory : Trajectory
         What to follow; time ``t`` of :meth:`step` is trajectory time (s).
     rest_speed : float
@@ -132,10 +131,10 @@ class Follower:
         start time is re-based to start then (:func:`start_offset`).
     max_start_distance : float
         At the first step, a robot further than this (m) from the reference refuses the
-        trajectory (:attr:`refused`); 0 = no check.
+        trajectory (``refused``); 0 = no check.
     """
 
-    def __init__(self, tracker: Tracker, trajectory: Trajectory, rest_speed: float = REST_SPEED,
+    def __init__(self, tracker: Controller, trajectory: Trajectory, rest_speed: float = REST_SPEED,
                  *, start_tolerance: float = START_TOLERANCE,
                  max_start_distance: float = MAX_START_DISTANCE):
         if not (math.isfinite(rest_speed) and rest_speed > 0):
@@ -168,14 +167,31 @@ class Follower:
         self.refused: str | None = None    # why the trajectory was refused at its start
         self.tracker.reset()
 
+    def splice(self, trajectory: Trajectory) -> None:
+        """Continue the motion on ``trajectory`` (a replanned path): no new run.
+
+        The compensator, the start (and its re-basing offset) and the time base are kept;
+        ``trajectory`` is timed on from the follower's time now
+        (:func:`~.replan.splice_path`).
+
+        Parameters
+        ----------
+        trajectory : Trajectory
+            The trajectory to follow from now on.
+        """
+        self.trajectory = trajectory
+        self.finished = self.ended = False
+        self.finished_at = None
+
     def step(self, x: float, y: float, th: float, t: float,
-             measured_speed: float | None = None) -> Command:
+             measured_speed: float | None = None, measured_rate: float | None = None
+             ) -> Command:
         """Command for the pose ``(x, y, th)`` measured at trajectory time ``t``.
 
-        With the tracker's predictor the pose is predicted to ``t + horizon`` (the time
-        the command acts) and the trajectory is sampled there; the times the predictor
-        sees are trajectory times (consistent: it uses differences only, and a new
-        trajectory resets it).
+        With a controller's ``horizon`` > 0 (our law's predictor) the trajectory is sampled
+        at ``t + horizon`` (the time the command acts); the times the controller sees are
+        trajectory times (consistent: it uses differences only, and a new trajectory
+        resets it).
 
         Parameters
         ----------
@@ -187,6 +203,8 @@ class Follower:
             Trajectory time of the measurement (s, :func:`trajectory_time`).
         measured_speed : float, optional
             Measured speed (m/s; initialises the tracker's speed state).
+        measured_rate : float, optional
+            Measured yaw rate (rad/s), passed to the controller.
 
         Returns
         -------
@@ -205,14 +223,13 @@ class Follower:
             # on the spot); the compensator starts from the measured speed at t_start
             self.tracker.reset()
             return Command(v=0.0, w=0.0)
-        pred = self.tracker.predictor
-        if pred is None:
-            cmd = self.tracker.step(x, y, th, ref, measured_speed)
-        else:
-            # the predictor evaluates the law at the time the command acts: sample the
+        horizon = self.tracker.horizon
+        if horizon > 0.0:
+            # a predictor evaluates the law at the time the command acts: sample the
             # trajectory there (exact, also across its end) instead of extrapolating
-            ahead = self.trajectory.sample(t + pred.horizon)
-            cmd = self.tracker.step(x, y, th, ahead, measured_speed, stamp=t)
+            ref = self.trajectory.sample(t + horizon)
+        cmd = self.tracker.step(x, y, th, ref, measured_speed, stamp=t,
+                                measured_rate=measured_rate)
         if t > self.trajectory.t_end:
             self.ended = True
             if abs(cmd.v) < self.rest_speed:
@@ -244,13 +261,15 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
                        start_tolerance: float = START_TOLERANCE,
                        max_start_distance: float = MAX_START_DISTANCE,
                        limits: Limits | None = None,
-                       accel_fraction: float = ACCEL_FRACTION) -> TrackingRun:
+                       accel_fraction: float = ACCEL_FRACTION,
+                       controller: str | ControllerFactory | None = None,
+                       plant: str | PlantFactory | None = None) -> TrackingRun:
     """In-process run of a :class:`Follower`, the ROS lockstep sequence step by step.
 
     Step ``k`` is stamped ``t_k`` (integer nanoseconds); the trajectory is sampled at
     ``(t_k - origin_ns) * 1e-9`` as the tracker node does.  With ``limits`` the
     trajectory is first re-timed within them as the tracker node (``retime: true``) does
-    (:func:`control.simulation.limits.within_limits`).
+    (:func:`.limits.within_limits`).
 
     Parameters
     ----------
@@ -275,6 +294,9 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     accel_fraction : float, optional
         With ``limits``: the share of the acceleration limits the trajectory may use
         (the tracker's ``trajectory_accel_fraction``).
+    controller, plant : str or callable, optional
+        The controller and the plant (:func:`~.interfaces.make_controller`,
+        :func:`~.interfaces.make_plant`; default our law and the unicycle).
 
     Returns
     -------
@@ -283,7 +305,7 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
     if limits is not None:
         trajectory = within_limits(trajectory, limits, accel_fraction)[0]
     report_override(plant_config, tracker_config)
-    follower = Follower(Tracker(tracker_config), trajectory, rest_speed,
+    follower = Follower(make_controller(tracker_config, controller), trajectory, rest_speed,
                         start_tolerance=start_tolerance, max_start_distance=max_start_distance)
     dt = plant_config.dt
 
@@ -291,7 +313,7 @@ def simulate_following(plant_config: PlantConfig, tracker_config: TrackerConfig,
         return (step_time_ns(k, dt) - origin_ns) * 1e-9
 
     def command(meas: Any, th: float, k: int, ref: RefSample) -> Command:
-        return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v)
+        return follower.step(meas.x, meas.y, th, traj_time(meas.step), meas.v, meas.w)
 
-    return run_loop(plant_config, steps, command,
+    return run_loop(make_plant(plant_config, plant), steps, command,
                     lambda k: trajectory.sample(traj_time(k) - follower.offset))

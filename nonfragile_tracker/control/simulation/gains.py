@@ -1,27 +1,10 @@
 """The tracker's gain parameter format: one reader, one writer, one check.
 
-A gain file is a ROS 2 parameter file for the ``tracker`` node (in any namespace)::
+A gain file is a ROS 2 parameter file for the ``tracker`` node (``K`` row-major as doubles,
+``K_shape``), optionally with a ``gain_design`` section no node reads that records what the
+gain was designed for (:func:`read_gain_design`).
 
-    /**/tracker:
-      ros__parameters:
-        K: [-4.4453, -4.8047, ...]   # row-major, doubles
-        K_shape: [2, 4]
-
-Values are always written as floats (a YAML ``[1, 0, ...]`` would be an
-INTEGER_ARRAY, which a DOUBLE_ARRAY parameter rejects).
-
-A file may also record what the gain was designed for, machine-readable, in a section
-of its own that no node reads (a top-level key other than a node section with
-``ros__parameters`` is rejected by ``--params-file``, so the record is one)::
-
-    gain_design:
-      ros__parameters:
-        method: input-delay LMI ...
-        latency_interval: [0.0, 0.1]
-        certified_h_max: 0.31
-        ...
-
-:func:`read_gain_design` returns that mapping (``None`` if absent).
+See doc/ros-interface.md, section "tracker" (the gain file).
 """
 from __future__ import annotations
 
@@ -33,7 +16,7 @@ import numpy as np
 import yaml
 
 from ...files import read_yaml
-from .loop import validate_gain
+from .tracker import validate_gain
 from .errors import LoopConfigError
 
 __all__ = ['LoopConfigError', 'gain_from_parameters', 'gain_parameters', 'write_gain_file',
@@ -62,7 +45,7 @@ def gain_from_parameters(flat: Sequence[Any], shape: Sequence[Any] = (2, 4)) -> 
     ------
     LoopConfigError
         A bad shape or a non-numeric entry.
-        A gain the tracker refuses (:func:`control.simulation.loop.validate_gain`).
+        A gain the tracker refuses (:func:`.control.simulation.tracker.validate_gain`).
     """
     try:
         shp = tuple(int(s) for s in shape)
@@ -178,7 +161,7 @@ def gain_from_file_data(data: Any, path: str | os.PathLike[str],
     """``K`` from a parameter file's parsed content (:func:`read_gain_file` after the read).
 
     For a caller that has read the file already for its other parameters; the result and
-    the :class:`LoopConfigError` for a content without ``K`` are those of
+    the :class:`.LoopConfigError` for a content without ``K`` are those of
     :func:`read_gain_file`.
 
     Parameters

@@ -1,23 +1,12 @@
 """The tracking law, defined once: a scalar form and its vectorised form, operation for operation.
 
-With the pose ``(x, y, th)``, the compensator speed ``v`` (the dynamic extension
-``v' = a``), the reference ``xi_d = (x_d, x_d', y_d, y_d')`` and its feedforward
-``u* = (x_d'', y_d'')``::
+:func:`feedback` is the scalar form (the tracker runs it with its limits, timing, delay
+compensation and predictor around it); :class:`VectorLaw` is the same operations on arrays
+of cases, with the speed limits applied as the tracker applies them, for the batch's loops.
+``ordered=True`` sums in the scalar order, so a case equals the scalar law bit for bit;
+``ordered=False`` sums ``K e`` first, the same value to round-off with fewer operations.
 
-    e = (x - x_d, v cos th - x_d', y - y_d, v sin th - y_d')
-    u = u* + K e                      (u_i = u*_i + K_i0 e_0 + K_i1 e_1 + K_i2 e_2 + K_i3 e_3)
-    a = u1 cos th + u2 sin th
-    w = (u2 cos th - u1 sin th) / v_f
-
-where ``v_f`` is ``v`` floored to ``|v_f| >= min_speed`` (keeping its sign; ``+`` at 0).
-:func:`feedback` is the scalar form (:class:`control.simulation.loop.Tracker` runs it with
-its limits, timing, delay compensation and predictor around it); :class:`VectorLaw` is the
-same operations on arrays of cases, with the speed limits applied as the tracker applies
-them, for the batch's loops (:class:`control.simulation.batch_parts.BatchTracker` and
-:func:`control.simulation.batch_ideal.ideal_loop`).  ``ordered=True`` sums ``u`` in the
-scalar order, so a case equals the scalar law bit for bit
-(``test/control/test_law.py``, ``test/control/test_batch.py``); ``ordered=False`` sums
-``K e`` first (one ``einsum``), the same value to round-off with fewer operations.
+See doc/theory.md, section "Model" (the law's equations).
 """
 from __future__ import annotations
 
@@ -72,8 +61,8 @@ def feedback(x: float, y: float, cth: float, sth: float, v: float,
 class VectorLaw:
     """:func:`feedback` for ``n`` cases at once, with the speed limits, into given buffers.
 
-    Per call of :meth:`command`: the error ``e`` (:attr:`E`, rows ``x, x', y, y'``), the input
-    ``u`` (:attr:`U`), then ``v_next = clip(v + a h, +-max_linear_speed)`` and
+    Per call of :meth:`command`: the error ``e`` (``E``, rows ``x, x', y, y'``), the input
+    ``u`` (``U``), then ``v_next = clip(v + a h, +-max_linear_speed)`` and
     ``w = clip(w, +-max_angular_speed)`` (``nan`` stays ``nan``) written into ``out``.
 
     Parameters

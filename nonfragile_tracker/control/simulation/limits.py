@@ -1,19 +1,14 @@
 """Trajectories within a robot's limits: check, margins and time-optimal re-timing.
 
-A base has limits on its speed ``|v|``, its linear acceleration ``|v'|``, its turn rate
-``|w|``, its angular acceleration ``|w'|`` and, car-like, its curvature ``|w / v| <=
-1 / min_turning_radius`` (a bicycle model steered by ``delta``: ``w = v tan(delta) / L``,
-so ``min_turning_radius = L / tan(delta_max)``; De Luca, Oriolo and Samson, LNCIS 229).
-A value of 0 means *unknown / none*: not checked.
-
+The limits are speed, linear acceleration, turn rate, angular acceleration and, car-like,
+curvature (``1 / min_turning_radius``); 0 means *unknown / none*: not checked.
 :func:`check` samples a bounded trajectory and returns, per limit, the peak, its time and
 place, the margin and the first violation.  :func:`retime` re-times it at the cost the
-limits demand: the path from the points' geometry (:func:`fit_path`: a smoothing spline
-within :data:`PATH_TOLERANCE` of every point, whatever the sampling), then the
-time-optimal ``s(t)`` on it under the limits and the plan's own speed (TOPP-RA, Pham and
-Pham 2018, closed-form passes: :func:`_passes`), checked again to 1 %.  The fit, the rows,
-the passes and the check against ``toppra`` (test-only) are derived in doc/theory.md,
-section "Re-timing within limits" (#topp-ra).
+limits demand: the path from the points' geometry (:func:`fit_path`), then the time-optimal
+timing on it (TOPP-RA, closed-form passes), checked again to 1 %.
+
+See doc/trajectories.md, section "Within the robot's limits", and the derivation in
+doc/theory.md, section "Re-timing within limits" (#topp-ra).
 """
 from __future__ import annotations
 
@@ -73,7 +68,7 @@ REST_KNOT = 1e-3
 #: ramp at the limit, fall behind and overshoot (measured: the line-arc lap on bases with
 #: 80 ms of lag and 0.5 m/s^2 / 1.5 rad/s^2, 2.8-3.5 mm cross-track RMS at the whole limit,
 #: 1.2-1.4 mm at 80 %; the saturation certificate's premise ``||u_d|| < u_max``,
-#: :mod:`..synthesis.saturation`, says the same).
+#: :mod:`.synthesis.saturation`, says the same).
 ACCEL_FRACTION = 0.8
 #: The smallest share accepted (a trajectory at less than 5 % of the limits barely moves).
 MIN_ACCEL_FRACTION = 0.05
@@ -354,7 +349,7 @@ def check(traj: Trajectory, limits: Limits, *, step: float = 1e-3,
 
 def refuse_tight_turns(traj: Trajectory, limits: Limits, *, step: float = 1e-3,
                        path: PathFit | None = None) -> None:
-    """Raise :class:`TrajectoryError` if the path turns tighter than ``min_turning_radius``.
+    """Raise :class:`.TrajectoryError` if the path turns tighter than ``min_turning_radius``.
 
     No timing fixes a curvature: the message names the place, the planned time and the
     curvature.  The curvature is the path's, taken from the points' geometry
@@ -650,14 +645,14 @@ def fit_path(traj: Trajectory, tolerance: float = PATH_TOLERANCE) -> PathFit:
     within ``tolerance / 2`` of one another are merged (near-duplicates, a rest's samples);
     the path is split at cusps (the direction of travel changes, or the chords turn back by
     more than :data:`CUSP_ANGLE`); each piece is a cubic smoothing spline over the chord
-    length, as smooth as the tolerance allows (:func:`_smooth_fit`): continuous curvature,
+    length, as smooth as the tolerance allows (``_smooth_fit``): continuous curvature,
     bounded ``dkappa/ds``, whatever the sampling - uniform in time or in space, uneven, a
     final point appended a few milliseconds after the one before.  The planned speed at
     each point is the slope there of the parabola ``s(t)`` through it and the points
     :data:`SPEED_GAP` s before and after (exact for a constant acceleration); where the
     plan rests (within ``tolerance / 2`` for :data:`REST_DWELL` s or longer), at the ends
     and at cusps it is the plan's speed there (at rest: 0); in the middle of each interval
-    it is the speed that takes the planned time over it (:func:`_with_midpoints`).
+    it is the speed that takes the planned time over it (``_with_midpoints``).
 
     Parameters
     ----------
@@ -937,7 +932,7 @@ def retime(traj: Trajectory, limits: Limits, *, ds: float = 0.005, knot_step: fl
 
     The path comes from the points' geometry (:func:`fit_path`: within ``tolerance`` of
     every point, continuous curvature), the timing from TOPP-RA's passes on it
-    (:func:`_passes`) under the limits and the planned speed; the result is checked
+    (``_passes``) under the limits and the planned speed; the result is checked
     (:func:`check`, 1 %: :data:`TOLERANCE`; a trajectory within the limits to that is
     returned unchanged) and, where the interpolation between the knots exceeds a limit,
     timed again with that limit tightened (at most :data:`ITERATIONS` passes).
@@ -1151,7 +1146,7 @@ def within_limits(traj: Trajectory, limits: Limits, accel_fraction: float = ACCE
     -------
     (Trajectory, str)
         The trajectory to follow and what changed ('' when nothing did).  A path tighter
-        than ``min_turning_radius`` raises :class:`TrajectoryError` (place, curvature).
+        than ``min_turning_radius`` raises :class:`.TrajectoryError` (place, curvature).
     """
     share = limits.accel_share(accel_fraction)
     if traj.is_analytic or not any(getattr(limits, n) for n in LIMIT_NAMES):

@@ -1,4 +1,7 @@
-"""Tracking metrics from sampled runs (simulation arrays or a bag)."""
+"""Tracking metrics from sampled runs (simulation arrays or a bag).
+
+See doc/bags.md, section "``bag report``".
+"""
 from __future__ import annotations
 
 import math

@@ -1,15 +1,12 @@
 """Unicycle model, its exact linearization by dynamic extension, and eq. (4).
 
-The unicycle (paper eq. 2) with the dynamic extension ``v' = a`` has state
-``(x, y, th, v)`` and inputs ``(a, w)``.  With ``xi = [x, v cos th, y, v sin th]``
-and ``u = [a cos th - w v sin th, a sin th + w v cos th]`` it becomes the pair
-of double integrators ``xi' = A xi + B u`` of eq. (4) (Oriolo, De Luca,
-Vendittelli, IEEE TCST 10(6), 2002).  The map ``(a, w) -> u`` has the decoupling
-matrix ``[[cos th, -v sin th], [sin th, v cos th]]`` whose determinant is ``v``:
-it cannot be inverted at ``v = 0``; :func:`inputs_from_u` raises
-:class:`InputError` there instead of dividing by zero.
+The unicycle (paper eq. 2) with the dynamic extension ``v' = a`` becomes, in
+``xi = [x, v cos th, y, v sin th]``, the pair of double integrators of eq. (4); the map back
+from ``u`` to ``(a, w)`` cannot be inverted at ``v = 0``, where :func:`inputs_from_u` raises
+:class:`~nonfragile_tracker.errors.InputError` instead of dividing by zero.  Plain numpy /
+math; no ROS.
 
-Everything here is plain numpy / math; no ROS.
+See doc/theory.md, section "Model".
 """
 from __future__ import annotations
 
@@ -21,10 +18,8 @@ import numpy as np
 from ...errors import InputError
 from ..validate import StateInputShape
 
-__all__ = [
-    'LinearizedModel', 'double_integrator_model',
-    'xi_from_state', 'u_from_inputs', 'inputs_from_u',
-]
+__all__ = ['LinearizedModel', 'double_integrator_model', 'xi_from_state', 'u_from_inputs',
+           'inputs_from_u', 'wrap', 'wrap_due', 'yaw_to_quaternion', 'quaternion_to_yaw']
 
 
 @dataclass(frozen=True)
@@ -145,3 +140,89 @@ def inputs_from_u(th: float, v: float, u1: float, u2: float,
             'the decoupling matrix has determinant v. Apply a speed floor or start with v != 0.')
     c, s = math.cos(th), math.sin(th)
     return (u1 * c + u2 * s, (u2 * c - u1 * s) / v)
+
+
+_PI, _TAU = math.pi, math.tau
+
+
+def wrap_due(th: np.ndarray, k: int, wstep: float) -> tuple[np.ndarray, int]:
+    """Wrap the headings ``th`` into [-pi, pi] if any left it; the next step to look again.
+
+    ``wstep`` bounds the heading change per step, so no heading can leave [-pi, pi]
+    before the returned step; a non-finite heading (nan) is looked at every step.
+
+    Parameters
+    ----------
+    th : numpy.ndarray
+        Headings (rad), one per case.
+    k : int
+        The current step.
+    wstep : float
+        Bound of the heading change per step (rad).
+
+    Returns
+    -------
+    (numpy.ndarray, int)
+        The headings (wrapped or as given) and the next step to look again.
+    """
+    m = float(np.abs(th).max())
+    if m > _PI:
+        th = wrap(th)
+        m = float(np.abs(th).max())
+    return th, (k + 1 + int((_PI - m) / wstep) if m <= _PI else k + 1)
+
+
+def wrap(x: np.ndarray) -> np.ndarray:
+    """``math.remainder(x, tau)`` element-wise (exact: one subtraction, Sterbenz).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Angles (rad).
+
+    Returns
+    -------
+    numpy.ndarray
+        The angles in [-pi, pi] (``x`` itself when none left it).
+    """
+    ax = np.abs(x)
+    over = ax > _PI
+    if not over.any():
+        return x
+    out = np.where(over, x - np.copysign(_TAU, x), x)
+    far = ax >= 3.0 * _PI
+    if far.any():
+        for i in np.flatnonzero(far):
+            out[i] = math.remainder(float(x[i]), _TAU)
+    return out
+
+
+def yaw_to_quaternion(th: float) -> tuple[float, float, float, float]:
+    """Quaternion (x, y, z, w) of a rotation by ``th`` about z (REP-103).
+
+    Parameters
+    ----------
+    th : float
+        Yaw (rad).
+
+    Returns
+    -------
+    (float, float, float, float)
+    """
+    return (0.0, 0.0, math.sin(0.5 * th), math.cos(0.5 * th))
+
+
+def quaternion_to_yaw(qx: float, qy: float, qz: float, qw: float) -> float:
+    """Yaw (rotation about z) of a quaternion; valid for any non-zero norm.
+
+    Parameters
+    ----------
+    qx, qy, qz, qw : float
+        The quaternion.
+
+    Returns
+    -------
+    float
+        Yaw (rad) in ``[-pi, pi]``.
+    """
+    return math.atan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)

@@ -7,7 +7,7 @@ runs stay deterministic) and the command acts from ``t_act = stamp + L_o + L_c``
 unicycle (and the actuator lag) from the measured pose through them to ``t_act``, and
 extrapolates the reference there (third order); :func:`invert_lag` is the command that brings
 a first-order actuator exactly to a target within one command interval.  The law evaluated
-on the prediction is in :class:`control.simulation.loop.Tracker`.  Plain floats.
+on the prediction is in :class:`.control.simulation.tracker.Tracker`.  Plain floats.
 
 The three steps and their error terms are in the documentation: doc/theory.md, section
 "Latency predictor" (#latency-predictor).
@@ -136,6 +136,22 @@ class LatencyPredictor:
         self._anchor: tuple[float, float, float] | None = None   # (t, v, w) of the model
         self._ref_prev: RefSample | None = None
         self._ref_last: RefSample | None = None
+
+    def seed(self, t: float, v: float, w: float) -> None:
+        """Start the model at ``t`` with the actuator at ``(v, w)``, commanded ``(v, w)``.
+
+        A predictor made while the tracker runs (online tuning) starts from the last
+        command, not from a yaw rate of 0.
+
+        Parameters
+        ----------
+        t : float
+            Time (s) the command acts from.
+        v, w : float
+            Speed (m/s) and yaw rate (rad/s) commanded and reached.
+        """
+        self._segs = deque([(float(t), float(v), float(w))])
+        self._anchor = (float(t), float(v), float(w))
 
     # ------------------------------------------------------------------ state
     def _run(self, x: float, y: float, th: float, v: float, w: float, cv: float, cw: float,

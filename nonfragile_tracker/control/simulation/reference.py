@@ -4,6 +4,8 @@ The paper's circle is ``x_d = 0.5 cos(0.01 t)``, ``y_d = 0.5 sin(0.01 t)``.  Its
 ``theta_d(t) = t`` is not the heading of that circle (the tangent heading is
 ``0.01 t + pi/2``); the linearized law does not use ``theta_d`` at all, and here
 the heading is always the tangent of the path (``atan2(y_d', x_d')``).
+
+See doc/theory.md, section "What the numbers say".
 """
 from __future__ import annotations
 
@@ -183,7 +185,7 @@ def make_path(name: str, **params: float) -> Path:
     Parameters
     ----------
     name : str
-        A key of :data:`PATHS`.
+        A key of ``PATHS``.
     **params
         The path function's parameters (:func:`circle`, :func:`figure_eight`).
 

@@ -1,28 +1,26 @@
 """Odometry as a real base delivers it: late, at a lower rate than the plant, noisy.
 
-:class:`Odometer` is called by :class:`control.simulation.loop.UnicyclePlant` once per plant step
-``k`` (in order).  At every ``period``-th step (``k % period == 0``) it takes a
-measurement of the true state - pose plus Gaussian noise drawn from a seeded
-``numpy.random.Generator`` (three draws ``x, y, yaw`` per measurement, always in that
-order, so changing one standard deviation leaves the others' sequence alone) - and
-releases it ``latency`` steps later.  The sample keeps the step (hence the stamp) of
-the measurement time, as real odometry does: a message published at step
-``k + latency`` carries the stamp of step ``k``.  With ``jitter_steps`` ``J`` the
-``n``-th measurement is taken at step ``n period + o_n`` instead, ``o_n`` drawn uniformly
-from the whole steps in ``[-J, J]`` (a generator of its own, seeded ``[seed, 2]``: the
-noise's sequence is unchanged), its stamp that true time: odometry whose intervals jitter.
-Plain floats; no ROS.
+:class:`Odometer` is called by the plant
+(:class:`~nonfragile_tracker.control.simulation.plant.UnicyclePlant`) once per step: every
+``period``-th step it measures the true pose with seeded Gaussian noise, optionally
+jittered in time, and releases the measurement ``latency`` steps later with the stamp of
+its measurement time, as real odometry does.  Plain floats; no ROS.
+
+See doc/ros-interface.md, section "plant" (the odometry parameters and model).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import NamedTuple, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
-__all__ = ['OdometryModel', 'OdometrySample', 'Odometer']
+from .batch_data import Settings
+from .model import wrap
+
+__all__ = ['OdometryModel', 'OdometrySample', 'Odometer', 'VectorOdometer']
 
 
 @dataclass(frozen=True)
@@ -133,3 +131,106 @@ class Odometer:
         if pending and pending[0].step + self.model.latency_steps == k:
             return pending[0]
         return None
+
+
+# ---------------------------------------------------------------------------------------------
+# The vector twin of Odometer: the same step for N cases at once
+# (the batch; test/control/test_twins.py checks each pair)
+
+class VectorOdometer:
+    """:class:`.control.simulation.sensors.Odometer` for every case: rate, latency and noise.
+
+    ``ideal``: every case measures the plant's own state at every step, without noise or
+    latency (nothing is buffered).  Otherwise the measurements go into a ring of
+    ``max(odom_latency) + 1`` steps (:meth:`measure`) from which :meth:`read` takes those
+    published at a step.
+
+    Parameters
+    ----------
+    s : control.simulation.batch_data.Settings
+        The resolved per-case settings (period, latency, noise and seed of the odometry).
+    """
+
+    def __init__(self, s: Settings):
+        n = s.n
+        self.idx = np.arange(n)
+        period, odom_d = self.period, self.odom_d = s.period, s.odom_d
+        self.noise = s.noise
+        self.noisy = np.any(s.noise != 0.0, axis=1)
+        self.any_noise = bool(self.noisy.any())
+        self.uniform = bool(np.all(period == period[0]) and np.all(odom_d == odom_d[0]))
+        self.ideal = (self.uniform and period[0] == 1 and odom_d[0] == 0
+                      and not self.any_noise)
+        if not self.ideal:
+            self.Ro = int(odom_d.max()) + 1
+            self.obuf = np.zeros((self.Ro, 4, n))   # measured x, y, th, v by step % Ro
+            if self.any_noise:
+                self.rngs = {int(i): np.random.default_rng(int(s.seed[i]))
+                             for i in np.flatnonzero(self.noisy)}
+                self.blk = 256
+                self.nbuf = np.zeros((n, self.blk, 3))
+                self.ncount = np.zeros(n, dtype=np.int64)    # measurements taken per case
+
+    def measure(self, k: int, pos: np.ndarray, th: np.ndarray, pv: np.ndarray) -> None:
+        """Measure the plant's state at step ``k`` for every case whose period is due.
+
+        Parameters
+        ----------
+        k : int
+            The step.
+        pos, th, pv : numpy.ndarray
+            The plant's position (2, N), heading and speed.
+        """
+        take = (k % self.period) == 0
+        if not take.any():
+            return
+        mx, my, mth = pos[0], pos[1], th
+        if self.any_noise:
+            nz = take & self.noisy
+            if nz.any():
+                blk, nbuf = self.blk, self.nbuf
+                j = self.ncount % blk
+                for i in np.flatnonzero(nz & (j == 0)):
+                    nbuf[i] = self.rngs[int(i)].standard_normal((blk, 3))
+                draw = nbuf[self.idx, j]
+                sx, sy, sth = self.noise[:, 0], self.noise[:, 1], self.noise[:, 2]
+                mx = np.where(nz, mx + sx * draw[:, 0], mx)
+                my = np.where(nz, my + sy * draw[:, 1], my)
+                mth = np.where(nz, wrap(th + sth * draw[:, 2]), th)
+                self.ncount[nz] += 1
+        slot = k % self.Ro
+        sel = take if not take.all() else slice(None)
+        obuf = self.obuf
+        obuf[slot, 0, sel] = mx[sel]
+        obuf[slot, 1, sel] = my[sel]
+        obuf[slot, 2, sel] = mth[sel]
+        obuf[slot, 3, sel] = pv[sel]
+
+    def read(self, k: int) -> tuple[Any, Any, Any, Any, Any]:
+        """``(due, position, heading, speed, measured step)`` of the odometry due at ``k``.
+
+        ``due`` is True (every case), False (none: the rest is None) or a mask of cases.
+
+        Parameters
+        ----------
+        k : int
+            The step.
+
+        Returns
+        -------
+        tuple
+            ``(due, position (2, N), heading, speed, measured step)``.
+        """
+        ms = k - self.odom_d
+        dmask = (ms >= 0) & ((ms % self.period) == 0)
+        if self.uniform:
+            due = bool(dmask[0])
+        else:
+            due = dmask if dmask.any() else False
+        if due is False:
+            return False, None, None, None, None
+        slot = ms % self.Ro
+        idx = self.idx
+        mpos = self.obuf[slot, 0:2, idx].T
+        mth, mv = self.obuf[slot, 2, idx], self.obuf[slot, 3, idx]
+        return due, mpos, mth, mv, (ms if not self.uniform else int(ms[0]))

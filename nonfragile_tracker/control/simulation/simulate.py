@@ -3,9 +3,11 @@
 :func:`simulate_tracking` runs exactly the sequence of the ROS lockstep loop:
 for each step ``k`` with an odometry sample due (every step for the paper's plant)
 the measured pose (yaw through a quaternion, as in the message), its stamp and the
-reference sample at that stamp go into :meth:`Tracker.step`, and its command is
-given to :meth:`UnicyclePlant.command`; then :meth:`UnicyclePlant.advance` applies
+reference sample at that stamp go into :meth:`.Tracker.step`, and its command is
+given to :meth:`.UnicyclePlant.command`; then :meth:`.UnicyclePlant.advance` applies
 the command in force (held at steps without odometry).
+
+See doc/ros-interface.md, section "Time and lockstep" (equal to the simulation).
 """
 from __future__ import annotations
 
@@ -16,8 +18,11 @@ from typing import Callable, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .loop import (Command, PlantConfig, Tracker, TrackerConfig, UnicyclePlant,
-                   odometry_period_steps, quaternion_to_yaw, step_time, yaw_to_quaternion)
+from .interfaces import ControllerFactory, Plant, PlantFactory, make_controller, make_plant
+from .tracker import Command, TrackerConfig
+from .plant import PlantConfig, UnicyclePlant, odometry_period_steps
+from .model import quaternion_to_yaw, yaw_to_quaternion
+from .timing import step_time
 from .metrics import TrackingMetrics, tracking_metrics
 from .reference import Path, RefSample
 from .sensors import OdometrySample
@@ -99,7 +104,8 @@ class TrackingRun:
 
 
 def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, path: Path,
-                      steps: int) -> TrackingRun:
+                      steps: int, *, controller: str | ControllerFactory | None = None,
+                      plant: str | PlantFactory | None = None) -> TrackingRun:
     """Run the nonlinear tracking loop for ``steps`` plant steps (``steps + 1`` samples).
 
     The tracker takes its step from the odometry stamps (``dt = 0``, the default); a
@@ -117,6 +123,9 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
         The reference path, sampled at each odometry stamp.
     steps : int
         Number of plant steps.
+    controller, plant : str or callable, optional
+        The controller and the plant (:func:`~.interfaces.make_controller`,
+        :func:`~.interfaces.make_plant`; default our law and the unicycle).
 
     Returns
     -------
@@ -128,25 +137,27 @@ def simulate_tracking(plant_config: PlantConfig, tracker_config: TrackerConfig, 
         If the tracker's ``dt`` is set and disagrees with the odometry period.
     """
     report_override(plant_config, tracker_config)
-    tracker = Tracker(tracker_config)
+    tracker = make_controller(tracker_config, controller)
     dt = plant_config.dt
 
     def command(meas: OdometrySample, th: float, k: int, ref: RefSample) -> Command:
         if meas.step == k:
-            return tracker.step(meas.x, meas.y, th, ref, meas.v)
+            return tracker.step(meas.x, meas.y, th, ref, meas.v, measured_rate=meas.w)
         ts = step_time(meas.step, dt)
-        return tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts)
+        return tracker.step(meas.x, meas.y, th, path.sample(ts), meas.v, stamp=ts,
+                            measured_rate=meas.w)
 
-    return run_loop(plant_config, steps, command, lambda k: path.sample(step_time(k, dt)))
+    return run_loop(make_plant(plant_config, plant), steps, command,
+                    lambda k: path.sample(step_time(k, dt)))
 
 
 def report_override(plant_config: PlantConfig, tracker_config: TrackerConfig) -> str | None:
     """Warn (once per call) when the tracker's ``dt`` override disagrees with the odometry.
 
     The odometry period of a lockstep run is ``plant dt`` times the odometry decimation;
-    a ``dt`` set by hand more than :data:`control.simulation.timing.CHANGE` away from it
+    a ``dt`` set by hand more than :data:`.control.simulation.timing.CHANGE` away from it
     is what the tracker node reports on /diagnostics
-    (:func:`control.simulation.timing.period_disagreement`).
+    (:func:`.control.simulation.timing.period_disagreement`).
 
     Parameters
     ----------
@@ -165,7 +176,7 @@ def report_override(plant_config: PlantConfig, tracker_config: TrackerConfig) ->
     return msg
 
 
-def run_loop(plant_config: PlantConfig, steps: int,
+def run_loop(plant: PlantConfig | Plant, steps: int,
              command: Callable[[OdometrySample, float, int, RefSample], Command],
              reference: Callable[[int], RefSample]) -> TrackingRun:
     """The lockstep sequence of the ROS nodes, in process: the one simulation loop.
@@ -174,16 +185,17 @@ def run_loop(plant_config: PlantConfig, steps: int,
     quaternion, as in the message) goes to ``command(measurement, yaw, k, reference(k))``, whose
     command the plant takes (after its command latency); otherwise the command in force
     is held.  ``reference(k)`` is logged with step ``k``.  Used by
-    :func:`simulate_tracking` and :func:`control.simulation.follow.simulate_following`.
+    :func:`simulate_tracking` and :func:`.control.simulation.follow.simulate_following`.
 
     Parameters
     ----------
-    plant_config : PlantConfig
-        The simulated robot.
+    plant : Plant or PlantConfig
+        The simulated robot (:class:`~.interfaces.Plant`, at its initial state), or the
+        settings of a :class:`~.plant.UnicyclePlant`.
     steps : int
         Number of plant steps (``steps + 1`` samples).
     command : callable
-        ``command(measurement, yaw, k, reference)`` returns the :class:`Command` for an
+        ``command(measurement, yaw, k, reference)`` returns the :class:`.Command` for an
         odometry sample (``yaw`` [rad] read back through a quaternion).
     reference : callable
         ``reference(k)`` is the reference sample logged at step ``k``.
@@ -192,10 +204,11 @@ def run_loop(plant_config: PlantConfig, steps: int,
     -------
     TrackingRun
     """
-    plant = UnicyclePlant(plant_config)
+    if isinstance(plant, PlantConfig):
+        plant = UnicyclePlant(plant)
     rows: list[tuple[float | bool, ...]] = []
     append = rows.append
-    dt = plant_config.dt
+    dt = plant.dt
     cmd_v, cmd_w = plant.cmd
     for k in range(steps + 1):
         t = step_time(k, dt)
@@ -283,7 +296,7 @@ def rk4_delay_steps(out: np.ndarray, N: int, steps: int, dt: float,
     ``out[:N + 1]`` holds the initial function on ``[-N dt, 0]``; ``out[N + k + 1]`` is
     written from ``out[N + k]``.  The delayed state at the half step is the mean of the
     two neighbouring samples.  Shared by :func:`simulate_delay_loop` and the batched loop
-    (:func:`control.simulation.batch.simulate_delay_loop_batch`), so both integrate the same way.
+    (:func:`.control.simulation.batch.simulate_delay_loop_batch`), so both integrate the same way.
 
     Parameters
     ----------

@@ -1,24 +1,13 @@
 """Robustness study: sample perturbations, latencies, lags and initial poses; run the batch.
 
 :func:`sample_study_cases` draws ``N`` cases (seeded) around a base scenario,
-:func:`run_study` runs them with :func:`control.simulation.batch.simulate_batch` (split over
-workers when ``N`` is large: local processes or a Dask cluster, :mod:`..parallel`) and
-:func:`summarize` reports the worst case, the
-distribution of settling time and steady error, and the fraction of cases inside the
-certified region:
+:func:`run_study` runs them with
+:func:`~nonfragile_tracker.control.simulation.batch.simulate_batch` (split over workers
+when ``N`` is large, :mod:`nonfragile_tracker.parallel`) and :func:`summarize` reports the
+worst case, the distribution of settling time and steady error, and the fraction of cases
+inside the certified region of the gain.  No ROS import.
 
-* ``||Delta(t)||_2 <= 1`` at all times (what Theorem 1's ``E Delta F`` covers), and
-* the loop latency (command plus odometry latency) at most the certified latency of
-  the gain file's design record (``certified_h_max`` of ``latency-design`` or
-  ``certified_latency`` of ``design``/``synthesize``; 0 s if none is recorded), and
-* no actuator lag, or lags at most the record's ``actuator_lag`` with the latency at
-  most its ``lag_certified_h_max``.
-
-The batch runs with ``exact=False`` (cheaper forms of the same values, 3-4 x faster; a
-case agrees with its single run to about 1e-14, see
-:func:`control.simulation.batch.simulate_batch`).
-Percentiles are numpy's (linear interpolation): settling time over the cases that
-settle, steady error over the cases that stay finite.  No ROS import.
+See doc/study.md (the certified region, the figures, the batch simulation).
 """
 from __future__ import annotations
 
@@ -35,7 +24,8 @@ from ...parallel import EXECUTORS, default_workers, map_tasks
 from .batch import (BatchCases, BatchRun, PathBatch, perturbation_schedule, sample_deltas,
                     simulate_batch)
 from .errors import BatchError
-from .loop import PlantConfig, TrackerConfig
+from .plant import PlantConfig
+from .tracker import TrackerConfig
 from .simulate import steps_for_duration
 
 __all__ = ['StudySpec', 'StudyCases', 'StudyResult', 'sample_study_cases', 'run_study',
@@ -53,7 +43,7 @@ MIN_CASES_PER_JOB = 1000
 
 
 def default_jobs() -> int:
-    """Cores this process may use (:func:`..parallel.default_workers`)."""
+    """Cores this process may use (:func:`.parallel.default_workers`)."""
     return default_workers()
 
 
@@ -172,7 +162,7 @@ def certified_limits(design: Mapping[str, Any] | None) -> dict[str, float]:
     Parameters
     ----------
     design : mapping or None
-        The gain file's design record (:func:`control.simulation.gains.read_gain_design`; ``None``:
+        The gain file's design record (:func:`.control.simulation.gains.read_gain_design`; ``None``:
         nothing recorded).
 
     Returns
@@ -281,13 +271,13 @@ def run_study(spec: StudySpec, plant: PlantConfig, tracker: TrackerConfig, path:
     E, F : array_like
         Perturbation structure.
     design : mapping, optional
-        The gain file's design record (:func:`control.simulation.gains.read_gain_design`).
+        The gain file's design record (:func:`.control.simulation.gains.read_gain_design`).
     jobs : int, optional
         Workers, i.e. shares of the cases (default: the cores available); fewer are used
         when there are fewer than :data:`MIN_CASES_PER_JOB` cases per worker, none (this
         process) for one share on the local executor.
     executor : {'local', 'dask'} or concurrent.futures.Executor
-        Where the shares run (:func:`..parallel.map_tasks`): local processes, a Dask
+        Where the shares run (:func:`.parallel.map_tasks`): local processes, a Dask
         cluster (``scheduler`` address, or a LocalCluster of ``jobs`` workers), or an
         executor the caller made.  The cases and their results do not depend on it.
     scheduler : str, optional

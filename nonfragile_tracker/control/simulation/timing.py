@@ -1,32 +1,23 @@
 """The tracker's step from the odometry stamps: the interval that passed and the period.
 
-A robot's odometry comes at 20-100 Hz, with jitter, dropped and bunched messages; a
-controller that integrates with a constant it was told, instead of the time that passed,
-tracks badly when the constant is wrong and nothing says so.  :class:`PeriodEstimator`
-takes the time of each step (the odometry stamp) and gives
+A controller that integrates with a constant it was told, instead of the time that
+passed, tracks badly when the constant is wrong and nothing says so.
+:class:`PeriodEstimator` takes the odometry stamp of each step and gives the interval since
+the previous step (in whole nanoseconds), a period robust to jitter, dropped and bunched
+messages (the lower median of the last :data:`WINDOW` intervals, gaps above
+:data:`GAP_FACTOR` periods left out) and a report when it moves by more than
+:data:`CHANGE`; :func:`period_disagreement` compares a period set by hand.  Stamps only,
+never a clock; plain floats; no ROS.
 
-* the interval since the previous step (:meth:`PeriodEstimator.observe_ns`), in whole
-  nanoseconds as ROS stamps are, so that a constant period gives the same interval to
-  the bit at every step (lockstep runs and the batch simulation agree exactly);
-* the period, the lower median of the last :data:`WINDOW` positive intervals
-  (:attr:`PeriodEstimator.period`): a dropped message (one interval of two periods), a
-  bunched pair (a short and a long one) or jitter leave it where it is, a lasting change
-  of the rate moves it within half a window; an interval above :data:`GAP_FACTOR` periods
-  is a gap (a stalled driver, a stamp jump), not counted - unless more than half a window
-  of them come in a row: then the rate has dropped and they are the new period's;
-* a report when the period moves by more than :data:`CHANGE` from the one last reported
-  (:meth:`PeriodEstimator.rate_change`) and the comparison with a period set by hand
-  (:func:`period_disagreement`).
-
-Stamps only, never a clock: lockstep runs stay deterministic.  Plain floats; no ROS.
+See doc/ros-interface.md, section "tracker" (the "Timing" parameters and the estimate).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
 
-__all__ = ['WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR', 'PeriodEstimator',
-           'period_disagreement']
+__all__ = ['step_time_ns', 'step_time', 'WINDOW', 'CHANGE', 'MAX_INTERVAL', 'GAP_FACTOR',
+           'PeriodEstimator', 'period_disagreement']
 
 #: Number of recent intervals whose median is the period.
 WINDOW = 9
@@ -36,6 +27,40 @@ GAP_FACTOR = 4.0
 MAX_INTERVAL = 1e6
 #: Relative change of the period (or disagreement with a set one) that is reported.
 CHANGE = 0.2
+
+
+def step_time_ns(k: int, dt: float) -> int:
+    """Stamp of step ``k`` in integer nanoseconds (``k * round(dt * 1e9)``).
+
+    Parameters
+    ----------
+    k : int
+        Step index.
+    dt : float
+        Step (s).
+
+    Returns
+    -------
+    int
+    """
+    return k * int(round(dt * 1e9))
+
+
+def step_time(k: int, dt: float) -> float:
+    """Time of step ``k`` in seconds, computed exactly as a ROS node reads a stamp.
+
+    Parameters
+    ----------
+    k : int
+        Step index.
+    dt : float
+        Step (s).
+
+    Returns
+    -------
+    float
+    """
+    return step_time_ns(k, dt) * 1e-9
 
 
 class PeriodEstimator:

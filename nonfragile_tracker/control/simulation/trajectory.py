@@ -1,47 +1,16 @@
 """Timed trajectories: position, velocity, acceleration and heading at any time.
 
-One type, :class:`Trajectory`, with two kinds behind it:
+One type, :class:`Trajectory`, with two kinds behind it: an analytic
+:class:`~nonfragile_tracker.control.simulation.reference.Path` (circle, figure eight; its
+samples are exactly the path's), or a piecewise polynomial from timed points (a cubic
+spline through positions, a smoothing spline for noisy points, the quintic Hermite
+interpolant when velocities and accelerations are given).  Before its first time it holds
+its first point at rest, after its last time its last point.  The heading is the direction
+of travel (driving backwards included).  Bad input raises :class:`~.errors.TrajectoryError`
+naming the source, the index and the value.
 
-* **analytic** - a :class:`control.simulation.reference.Path` (circle, figure eight).  ``sample(t)``
-  returns exactly ``path.sample(t)`` (same floats), so lockstep runs and golden bags are
-  unchanged; its time range is unbounded.
-* **piecewise polynomial** - built from timed points (a waypoint file, a nav_msgs/Path,
-  a trajectory_msgs/MultiDOFJointTrajectory; the node layer turns messages into arrays):
-
-  - positions only (``t, x, y``): an interpolating **cubic spline**
-    (:class:`scipy.interpolate.CubicSpline`).  A cubic spline is the lowest-order
-    interpolant that is twice continuously differentiable (C2), which is exactly what the
-    tracker needs: the law uses position, velocity and the acceleration feed-forward
-    ``xi_d''``; a C2 curve has no velocity or acceleration jumps at the waypoints.  Ends
-    are *clamped* to the given end velocities (default zero: a trajectory starts and ends
-    at rest, so holding the end point afterwards does not jump the velocity); with
-    ``ends='natural'`` the second derivative is zero at the ends instead (for a piece of
-    a longer motion).
-  - ``smoothing > 0`` (noisy planner or recorded output): a cubic **smoothing spline**
-    (:func:`scipy.interpolate.make_smoothing_spline`, penalised second derivative with
-    weight ``lam = smoothing``) - still C2 but it does not pass through every noisy
-    point (interpolating noise gives large accelerations).
-  - positions, velocities and accelerations at every point (MultiDOFJointTrajectory,
-    nav2_msgs/Trajectory): the quintic Hermite interpolant
-    (:meth:`scipy.interpolate.BPoly.from_derivatives`), which matches all three at every
-    point and is therefore C2 with the planner's own velocities and accelerations.
-
-  Before the first time the trajectory holds its first point at rest, after the last
-  time it holds the last point at rest (:attr:`Trajectory.t_end`: the tracker stops).
-
-The representation is close to nav2_msgs/Trajectory (Kilted and later; Jazzy's nav_msgs
-has no Trajectory message): per point ``time_from_start``, pose ``(x, y, yaw)``,
-velocity and acceleration in the trajectory frame (``odom``).
-
-**Heading and driving backwards.**  The heading is the direction of travel:
-``atan2(vy, vx)`` forwards and ``atan2(-vy, -vx)`` when the point's direction is
-backwards.  The direction per point comes from a signed ``speed`` column (negative:
-backwards), or from a given ``yaw`` (backwards when the velocity points against it).
-The tracking law itself uses ``xi_d = [x, vx, y, vy]`` and the signed speed, so a robot
-facing along the heading drives backwards with ``v < 0``.
-
-Bad input raises :class:`TrajectoryError` (an :class:`InputError`) naming the source
-(file or topic), the index and the value.
+See doc/trajectories.md, sections "Sources" (the fits, heading and driving backwards) and
+"Start, end and bad input".
 """
 from __future__ import annotations
 
@@ -126,6 +95,9 @@ class Trajectory:
         self.path = path
         self.source = source
         self.kind = kind
+        #: it continues a motion (a replanned path, :mod:`.replan`): a
+        #: follower takes it without a new run (:meth:`~.follow.Follower.splice`)
+        self.spliced = False
         self._pp = pp
         if pp is not None:
             knots = cast(np.ndarray, knots)            # given with pp by the factories
@@ -154,7 +126,7 @@ class Trajectory:
         Parameters
         ----------
         path : Path
-            A :mod:`control.simulation.reference` path.
+            A :mod:`.control.simulation.reference` path.
 
         Returns
         -------
@@ -386,7 +358,8 @@ def _direction_from_yaw_chord(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: 
 
 def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *,
                    ends: str = 'rest', smoothing: float = 0.0,
-                   source: str = 'waypoints') -> Trajectory:
+                   source: str = 'waypoints',
+                   start_velocity: tuple[float, float] | None = None) -> Trajectory:
     """Twice-differentiable trajectory through timed waypoints.
 
     Parameters
@@ -406,6 +379,9 @@ def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *
         0 interpolates; ``> 0`` fits a cubic smoothing spline with this penalty ``lam``.
     source : str
         File or topic name for error messages.
+    start_velocity : (float, float), optional
+        With ``ends='rest'`` and no smoothing: the clamped velocity ``(vx, vy)`` (m/s) at the
+        first point instead (a path spliced onto a motion, :mod:`.replan`).
 
     Returns
     -------
@@ -456,6 +432,8 @@ def from_waypoints(t: Any, x: Any, y: Any, yaw: Any = None, speed: Any = None, *
                         ch = P[max(i, j)] - P[min(i, j)]
                         nrm = float(np.hypot(*ch))
                         v[:] = abs(speed[i]) * ch / nrm if nrm > 0 else 0.0
+            if start_velocity is not None:
+                v0[:] = start_velocity
             bc: str | tuple[tuple[int, np.ndarray], tuple[int, np.ndarray]] = ((1, v0), (1, v1))
         else:
             bc = 'natural'
@@ -679,12 +657,15 @@ def path_samples(path: Path, t_ns: Any) -> TrajectorySamples:
 
 
 def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
-             source: str = 'path') -> np.ndarray:
+             source: str = 'path', start_speed: float = 0.0) -> np.ndarray:
     """Times for untimed points: trapezoidal speed profile along the polyline's arc length.
 
     Accelerates at ``max_accel`` from rest to ``cruise_speed``, cruises, and brakes to rest
     at the last point (a triangle if the path is too short to reach the cruise speed).
-    Consecutive duplicate points must be removed first.
+    Consecutive duplicate points must be removed first.  With ``start_speed > 0`` (a path
+    spliced onto a motion, :mod:`.replan`) the profile starts at that
+    speed instead: it accelerates (or brakes) from it to the cruise speed at ``max_accel``;
+    a path too short to stop from it at ``max_accel`` brakes over its whole length, harder.
 
     Parameters
     ----------
@@ -696,6 +677,8 @@ def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
         Acceleration and braking (m/s^2), > 0.
     source : str
         Where the points came from (for messages).
+    start_speed : float, optional
+        Speed at the first point (m/s, >= 0; default 0: from rest).
 
     Returns
     -------
@@ -705,11 +688,16 @@ def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
     for name, v in (('cruise_speed', cruise_speed), ('max_accel', max_accel)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise TrajectoryError(f'{source}: {name} must be a finite number > 0, got {v!r}')
+    if not (math.isfinite(start_speed) and start_speed >= 0):
+        raise TrajectoryError(f'{source}: start_speed must be a finite number >= 0, got '
+                              f'{start_speed!r}')
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     seg = np.hypot(np.diff(x), np.diff(y))
     s = np.concatenate([[0.0], np.cumsum(seg)])
     L = float(s[-1])
+    if start_speed > 0:
+        return _moving_time_law(s, float(cruise_speed), float(max_accel), float(start_speed))
     v, a = float(cruise_speed), float(max_accel)
     s_acc = v * v / (2 * a)
     if 2 * s_acc > L:                     # triangle profile
@@ -726,6 +714,43 @@ def time_law(x: Any, y: Any, cruise_speed: float, max_accel: float, *,
         else:
             rem = max(L - si, 0.0)
             out[i] = 2 * t_acc + t_cruise - math.sqrt(2 * rem / a)
+    return out
+
+
+def _moving_time_law(s: np.ndarray, cruise: float, a: float, v0: float) -> np.ndarray:
+    """Times at arc lengths ``s`` of the profile from ``v0``: ramp, cruise, brake to rest.
+
+    Three phases of constant acceleration (the ramp's ``+-a``, 0, the braking's ``-ab``);
+    within a phase from speed ``va`` at ``sa`` and ``ta``, ``v(s) = sqrt(va^2 + 2 A (s -
+    sa))`` and ``t = ta + (v - va) / A`` (``ta + (s - sa) / va`` when ``A = 0``).
+    """
+    L = float(s[-1])
+    if v0 * v0 > 2 * a * L:             # cannot stop at a: brake over the whole length
+        phases = [(0.0, v0, -v0 * v0 / (2 * L))]
+    else:
+        # from v0 to the cruise speed and down to rest needs max(v0, cruise)^2 ... : a
+        # triangle when it does not fit (only when v0 < cruise: above it, v0^2 / 2a <= L)
+        vp = cruise
+        if v0 < cruise and (2 * cruise ** 2 - v0 * v0) / (2 * a) > L:
+            vp = math.sqrt((2 * a * L + v0 * v0) / 2)
+        s1 = abs(vp * vp - v0 * v0) / (2 * a)
+        s2 = max(L - vp * vp / (2 * a), s1)
+        phases = [(0.0, v0, a if vp >= v0 else -a), (s1, vp, 0.0), (s2, vp, -a)]
+    out = np.empty_like(s)
+    ta = 0.0
+    bounds = [p[0] for p in phases[1:]] + [math.inf]
+    for (sa, va, A), sb in zip(phases, bounds):
+        sel = (s >= sa) & (s < sb) if sb < math.inf else s >= sa
+        ds = s[sel] - sa
+        if A == 0.0:
+            out[sel] = ta + ds / va
+            tb = ta + (sb - sa) / va if sb < math.inf else ta
+        else:
+            v = np.sqrt(np.maximum(va * va + 2 * A * ds, 0.0))
+            out[sel] = ta + (v - va) / A
+            vb = math.sqrt(max(va * va + 2 * A * (sb - sa), 0.0)) if sb < math.inf else 0.0
+            tb = ta + (vb - va) / A
+        ta = tb
     return out
 
 
@@ -901,7 +926,7 @@ def load_waypoints(path: str | os.PathLike[str], *, ends: str = 'rest',
 
 
 def check_frame(frame_id: str, expected: str, source: str) -> None:
-    """Raise :class:`TrajectoryError` unless ``frame_id == expected``.
+    """Raise :class:`.TrajectoryError` unless ``frame_id == expected``.
 
     Parameters
     ----------

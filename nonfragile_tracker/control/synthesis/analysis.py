@@ -2,6 +2,8 @@
 
 Used by the CLI (``analyse``, ``margins``), the paper reproduction and the
 benchmarks, so the numbers they print are computed in one place.
+
+See doc/cli.md, sections "analyse" and "margins".
 """
 from __future__ import annotations
 

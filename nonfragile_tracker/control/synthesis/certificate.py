@@ -3,22 +3,12 @@
 Theorem 1 (:mod:`.lmi`), the delay-dependent design (:mod:`.delay_dependent`) and the
 input-delay design (:mod:`.input_delay`) prove stability with different
 Lyapunov-Krasovskii functionals, but each certificate is checked the same way, in numpy,
-from the returned matrices alone (never from the solver's word):
+from the returned matrices alone (never from the solver's word): :func:`eigen_figures`
+computes the eigenvalues, :func:`passes` decides; :class:`Verification` is the base of the
+three verification records, :class:`CertifiedGain` of the three synthesis results.
 
-* one symmetric matrix (``V`` of Theorem 1, ``Psi`` of the other two) must be negative
-  definite with a relative slack: ``max eig < -tol * ||matrix||``;
-* some matrices of the functional must be positive definite (smallest eigenvalue > 0);
-* a Petersen scalar (``eps`` or ``lam``; ``None`` for the nominal condition) must be > 0;
-* anything not finite fails.
-
-:func:`eigen_figures` computes those eigenvalues once for every module and
-:func:`passes` decides; :class:`Verification` is the base of the three verification
-records (``ok``, ``tolerance``, ``scale``, the worst eigenvalue, a one-line report and a
-dict), :class:`CertifiedGain` the base of the three synthesis results (the gain with its
-certificate and the solver's facts).  Each module keeps its own matrices, its own
-verification matrix and the names of its record's fields (public API, gain-file and JSON
-output unchanged).  The derivations are in doc/theory.md (#theorem-1,
-#delay-dependent-design, #input-delay-command-latency); the layout in doc/developing.md.
+See doc/theory.md, section "How every certificate is checked" (the rules), and the
+derivations (#theorem-1, #delay-dependent-design, #input-delay-command-latency).
 """
 from __future__ import annotations
 

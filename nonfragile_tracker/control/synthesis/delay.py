@@ -1,27 +1,14 @@
 """Exact stability analysis of the delayed closed loop (plain numpy / scipy, no ROS).
 
-The closed loop of the paper (eq. 7) with a *constant* gain perturbation is the
-linear retarded delay system ::
+The closed loop of the paper (eq. 7) with a *constant* gain perturbation is a linear
+retarded delay system.  This module computes its rightmost characteristic roots
+(:func:`rightmost_roots`), spectral abscissa (:func:`spectral_abscissa`) and stability
+(:func:`is_stable`), the delay margin from the exact imaginary-axis crossings
+(:func:`delay_margin`), and a *measured* fragility margin (:func:`fragility_margin`, inner
+search :func:`worst_case_abscissa`).  Nothing is conservative, but the measured margin can
+only err on the optimistic side, and only constant ``Delta`` are covered.
 
-    xi'(t) = A0 xi(t) + A1 xi(t - tau),   A0 = A + B (K + E Delta F),  A1 = A_tau,
-
-whose characteristic equation is ``det T(s) = 0`` with
-``T(s) = s I - A0 - A1 exp(-s tau)``.  It is exponentially stable iff every
-characteristic root has a negative real part.  This module computes
-
-* the rightmost characteristic roots (:func:`rightmost_roots`), the spectral
-  abscissa (:func:`spectral_abscissa`) and a stability test (:func:`is_stable`);
-* the delay margin (:func:`delay_margin`) from the exact imaginary-axis
-  crossings;
-* a *measured* fragility margin (:func:`fragility_margin`): the largest scale
-  ``alpha`` of the gain perturbation ``alpha E Delta F`` for which a worst-case
-  search over constant ``||Delta||_2 <= 1`` finds no destabilizing ``Delta``
-  (:func:`worst_case_abscissa` is the inner search).
-
-Nothing here is conservative, but the fragility margin is *measured*: a local
-search can miss the worst case, so it can only err on the optimistic side (see
-its Notes).  Unlike the LMI certificates of :mod:`.lmi`, only *constant*
-perturbations ``Delta`` are covered.
+See doc/theory.md, section "Exact analysis of the delay loop".
 """
 from __future__ import annotations
 
@@ -1023,14 +1010,14 @@ class FragilityResult:
     alpha_upper : float
         Smallest scale at which a destabilizing ``Delta`` was found
         (``alpha <= alpha_upper <= alpha (1 + rtol)``); ``inf`` if none.
-    worst_delta : ndarray, shape (q, r)
-        ``||Delta||_2 <= 1`` with ``A + B (K + alpha_upper E Delta F)`` not
+    worst_delta : ndarray
+        Shape ``(q, r)``: ``||Delta||_2 <= 1`` with ``A + B (K + alpha_upper E Delta F)`` not
         exponentially stable (abscissa ``>= -1e-10``); at ``alpha = inf`` the
         worst case found at ``alpha_max``; zero if the nominal loop is unstable.
     worst_abscissa : float
         Worst-case spectral abscissa found over ``||Delta||_2 <= 1`` at scale 1.
-    worst_delta_at_1 : ndarray, shape (q, r)
-        Its maximizer.
+    worst_delta_at_1 : ndarray
+        Its maximizer, shape ``(q, r)``.
     evaluations : int
         Number of spectral-abscissa evaluations.
     """

@@ -5,16 +5,11 @@ Closed loop (constant delay ``h``, time-varying gain perturbation)::
     x'(t) = A_c(t) x(t) + A_d x(t - h),   A_c(t) = A + B (K + E D(t) F),  D^T D <= I,
 
 with ``A_d = problem.A_tau``.  Unlike Theorem 1 (:mod:`.lmi`) the condition depends on
-``h``, so it can certify loops that Theorem 1 cannot.  Sources: Fridman and Shaked, IEEE TAC
-47(11), 2002 (descriptor method, ``P3 = eps P2``); Fridman, European J. Control 20(6), 2014
-(Jensen's inequality).  For fixed ``eps`` the synthesis is an LMI; ``eps`` is found on a log
-grid refined by golden section, ``h_max`` by bisection (the LMI is monotone in ``h``), and
-every certificate is verified in numpy (:func:`verify_delay_dependent`).
+``h``, so it can certify loops that Theorem 1 cannot; every certificate is verified in
+numpy (:func:`verify_delay_dependent`).
 
-The functional, the derivation step by step, the normalisation, the gain bound for a
-non-symmetric ``X``, the ``eps`` search and the caveats (constant delays only; ``t`` in
-normalised units) are in the documentation: doc/theory.md, section "Delay-dependent design"
-(#delay-dependent-design).
+See doc/theory.md, section "Delay-dependent design" (#delay-dependent-design): the
+sources, the functional, the derivation, the ``eps`` and ``h_max`` searches, the caveats.
 """
 from __future__ import annotations
 

@@ -1,17 +1,11 @@
 """Objectives on top of Theorem 1: each a bisection over the convex synthesis LMI.
 
-* :func:`max_perturbation_scale` - largest ``s`` such that Theorem 1 holds with
-  ``F -> s F`` (under a gain bound: without one, high gain makes ``s`` unbounded).
-* :func:`max_decay_rate` - largest ``alpha`` such that Theorem 1 holds for the
-  shifted system ``A + alpha I``, ``e^{alpha tau} A_tau``: then
-  ``xi_a(t) = e^{alpha t} xi(t)`` satisfies the shifted delay equation, so the
-  certificate proves ``|xi(t)| <= c e^{-alpha t}`` (a certified decay rate).
-* :func:`min_gain_norm` - smallest ``kappa`` with Theorem 1 feasible under
-  ``||K||_2 <= kappa``.
+:func:`max_perturbation_scale` (largest scale ``s`` of ``F``), :func:`max_decay_rate`
+(largest certified decay rate ``alpha``) and :func:`min_gain_norm` (smallest gain bound
+``kappa``); the gain returned is the one synthesized at the last feasible point, with its
+verified certificate (:func:`.lmi.synthesize` verifies every solve).
 
-Feasibility is monotone in each parameter, so bisection finds the boundary to
-``rel_tol``; the returned gain is the one synthesized at the last feasible point,
-with its verified certificate (:func:`lmi.synthesize` verifies every solve).
+See doc/cli.md, section "design" (each objective, why bisection finds it).
 """
 from __future__ import annotations
 

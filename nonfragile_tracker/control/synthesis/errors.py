@@ -1,18 +1,14 @@
 """The synthesis's errors: a malformed problem, and LMI syntheses that give no certified gain.
 
 Under the package's root error (:mod:`nonfragile_tracker.errors`), each also deriving from
-the builtin of its meaning, with the exit code the CLI maps it to::
+the builtin of its meaning: :class:`ProblemError` (an ``InputError``, exit 2) for a problem
+file or matrix that is malformed; :class:`LmiError` (a ``RuntimeError``) with
+:class:`InfeasibleError` (exit 3, no certified gain exists as posed), :class:`SolverFailure`
+and :class:`CertificateError` (exit 4).  The LMI errors were in
+:mod:`nonfragile_tracker.errors`; the package's foundation may not import the control core,
+so they live here now.
 
-    NonfragileError
-    +-- InputError (ValueError)          exit 2
-    |   +-- ProblemError                        a problem file or matrix is malformed
-    +-- LmiError (RuntimeError)          exit 4
-        +-- InfeasibleError              exit 3  no certified gain exists (as posed)
-        +-- SolverFailure                exit 4  solver missing or no usable status
-        +-- CertificateError             exit 4  a solver point failed independent verification
-
-(``LmiError`` and its subclasses were in :mod:`nonfragile_tracker.errors`; the package's
-foundation may not import the control core, so they live here now.)
+See doc/cli.md, section "Exit codes and errors".
 """
 from __future__ import annotations
 

@@ -6,16 +6,11 @@ Closed loop (the command computed from the state acts ``h(t)`` seconds later)::
     h_min <= h(t) <= h_max,   D(t)^T D(t) <= I,
 
 with ``h(t)`` and ``D(t)`` time-varying without a rate bound; ``A_tau`` is handled
-delay-independently, as in Theorem 1 (:mod:`.lmi`).  Sources: Fridman, *Introduction to
-Time-Delay Systems*, Birkhaeuser 2014 (descriptor method, decay-rate weights); Park, Ko,
-Jeong, Automatica 47(1), 2011 (reciprocally convex combination).  Certificates are verified
-in numpy (:func:`.input_delay_certificate.verify_input_delay`, with the records in that
-module); ``h_max`` is found by bisection (monotone), the decay rate by bisection too (a
-verified lower bound).
+delay-independently, as in Theorem 1 (:mod:`.lmi`).  Certificates are verified in numpy
+(:func:`.input_delay_certificate.verify_input_delay`).
 
-The functional, the derivation with the Petersen rows for ``E D F`` on the delayed state,
-the congruence, normalisation and caveats are in the documentation: doc/theory.md, section
-"Input delay (command latency)" (#input-delay-command-latency).
+See doc/theory.md, section "Input delay (command latency)" (#input-delay-command-latency):
+the sources, the functional, the derivation, normalisation and caveats.
 """
 from __future__ import annotations
 
@@ -411,7 +406,7 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
     solver : str
         cvxpy solver.
     verify_tol : float
-        Relative tolerance of :func:`verify_input_delay`.
+        Relative tolerance of :func:`.input_delay_certificate.verify_input_delay`.
 
     Returns
     -------
@@ -427,7 +422,7 @@ def synthesize_input_delay(problem: Problem, h_min: float, h_max: float, *,
     SolverFailure
         The solver failed for every ``eps`` tried.
     CertificateError
-        The best point fails :func:`verify_input_delay`.
+        The best point fails :func:`.input_delay_certificate.verify_input_delay`.
     """
     t0 = time.perf_counter()
     h0, h1 = check_interval(h_min, h_max)
@@ -543,7 +538,7 @@ def certify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float, *,
     ``d = 1/lam`` after the Schur complement
     ``[[Phi_0 + d V^T V, U], [U^T, -d I]] < 0`` (no tuning scalar is needed); solved as
     ``maximize t`` with every block ``<= -t I`` / ``>= t I`` and a trace bound, and
-    certified iff ``t >= margin`` and :func:`verify_input_delay` passes.
+    certified iff ``t >= margin`` and :func:`.input_delay_certificate.verify_input_delay` passes.
 
     ``slope`` of the result is ``d t / d h_max`` at the solution, by the envelope theorem:
     ``h_max`` enters only the weights ``(h_max - h_min)^2`` and ``exp(-2 alpha h_max)`` of
@@ -572,7 +567,7 @@ def certify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float, *,
     solver : str, optional
         cvxpy solver.
     verify_tol : float, optional
-        Relative tolerance of :func:`verify_input_delay`.
+        Relative tolerance of :func:`.input_delay_certificate.verify_input_delay`.
 
     Returns
     -------
@@ -892,7 +887,7 @@ class _DecaySearch:
 
     ``lo``/``best`` is the largest certified rate and its result, ``hi`` the smallest
     refuted one (``inf``: none yet) with its score ``hi_s``; ``last`` the ``eps`` of every
-    success, ``slopes`` ``dt/dalpha`` by rate (:func:`_alpha_slope`).
+    success, ``slopes`` ``dt/dalpha`` by rate (``_alpha_slope``).
     """
 
     def __init__(self, problem: Problem, h_min: float, h_max: float, kw: dict[str, Any],
@@ -1085,7 +1080,7 @@ def max_input_delay_decay_rate(problem: Problem, h_min: float, h_max: float, *,
     success (a failing rate is not climbed: the climb at the end checks the other
     ``eps``); then
     Newton steps on the strictness ``t(alpha) - margin`` from the certified end, with the
-    slope ``dt/dalpha`` read from the dual of the same solve (:func:`_alpha_slope`,
+    slope ``dt/dalpha`` read from the dual of the same solve (``_alpha_slope``,
     envelope theorem), until the next step would gain less than a quarter of the
     tolerance ``rel_tol * hi``; a step that is refuted hands the bracket to false position
     (:func:`.search.largest_feasible_bracketed`); finally one climb just above the result

@@ -289,7 +289,7 @@ def verify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float,
     check: see ``ok``.
 
     When only the relative slack fails, the test is repeated in the solver's congruent
-    coordinates (:func:`_congruent_ok`; ``congruent`` of the result).
+    coordinates (``_congruent_ok``; ``congruent`` of the result).
 
     Parameters
     ----------
@@ -329,7 +329,7 @@ def verify_input_delay(problem: Problem, K: Any, h_min: float, h_max: float,
 # argument checks
 
 def check_interval(h_min: Any, h_max: Any) -> tuple[float, float]:
-    """The latency interval as floats, or :class:`InputError` for a bad one.
+    """The latency interval as floats, or :class:`.InputError` for a bad one.
 
     Parameters
     ----------

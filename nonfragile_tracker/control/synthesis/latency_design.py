@@ -1,49 +1,15 @@
 """From "my robot has this latency" to a certified tracker gain with its figures.
 
 :func:`design_for_latency` runs the input-delay synthesis of :mod:`.input_delay` for a
-latency interval ``[h_min, h_max]`` (and an optional first-order actuator lag), then
-measures the returned gain with the exact delay-loop analysis of :mod:`.delay` and
-returns everything a gain file should record (:meth:`LatencyDesign.metadata`).
+latency interval ``[h_min, h_max]`` (and an optional first-order actuator lag, certified on
+the exact lagged loop, :func:`lagged_problem`), measures the returned gain with the exact
+delay-loop analysis of :mod:`.delay` (:func:`exact_abscissa`, over the perturbations of
+:func:`perturbation_set`) and returns everything a gain file records
+(:meth:`LatencyDesign.metadata`); its figures are settled on a 3-digit grid
+(:data:`FIGURE_DIGITS`) so that every machine records the same.
 
-Actuator lag ``T`` (``u_act' = (u(t - h) - u_act) / T``): the synthesis runs on the
-widened interval ``[h_min, h_max + T]`` (a lag's low-frequency phase is that of a
-delay ``T``: a heuristic for the synthesis only); the *claim* is then certified on the
-exact lagged loop - the augmented state ``(xi, u_act)`` of :func:`lagged_problem` with
-the fixed gain ``[K, 0]`` - by :func:`.input_delay.certify_input_delay`.  A gain whose
-lagged loop is not certified for ``[h_min, h_max]`` is never returned.
-
-The exact figures (true delay margin, worst spectral abscissa over ``[h_min, h_max]``)
-are for constant perturbations ``D`` in ``{0, the problem's listed perturbations, +-I}``
-and the worst ``||D|| <= 1`` searched (:func:`perturbation_set`), and constant delays, on
-the loop the design is for - the lagged loop when a lag is given - with the problem's
-state delay: ``x' = A x + A_tau x(t - tau) + B (K + E D F) x(t - h)``
-(:func:`exact_abscissa`, a spectral discretization of the two-delay loop).  They can
-refute a certificate, never confirm one: every certified ``h_max`` is below the true
-margin.  With a lag, only the lagged loop's figures are printed (the loop without the lag
-is not the robot); the gain file still records ``certified_h_max`` of the loop without
-the lag (the robustness study's region for cases without a lag).
-
-Cost (issue 24: at most 3 x a plain ``synthesize``): the time is the number of SDP solves.
-The decay rate is searched by Newton steps on the synthesis LMI's strictness
-(:func:`.input_delay.max_input_delay_decay_rate`), the lagged loop's certified latency by
-Newton steps on the certification LMI's strictness from 0.8 of the exact margin
-(:func:`.input_delay.certified_input_delay_of_gain`), each slope read from the dual of
-the solve just made (envelope theorem), so that every step is one solve and lands on a
-certified value while the strictness is convex (it is, on the paper's loops).  On the
-paper problem with a 50 ms lag: ``[0, 0.03]`` s 9 synthesis + 2 certification solves
-(the previous bracketed searches 14 + 6, the bisections before them 99 + 23), ``[0, 0.15]``
-s 8 + 2 (17 + 7; 164 + 23); figures 1.5111 1/s / 0.1485 s and 0.7167 1/s / 0.2208 s (were
-1.511 / 0.1484 and 0.716 / 0.2206).  The solver, its tolerances and the margin are
-unchanged, and every certificate is verified in numpy as before.
-
-Same answer on every machine (issue 29): the searches stop within their tolerance at a
-point that moves with the solver's last digits (OpenBLAS picks its kernels by CPU:
-0.7163 and 0.7167 1/s under two kernels), so the recorded decay rate and certified
-latency are the largest certified values of a fixed 3-digit grid
-(:func:`.search.settle_on_grid`, :data:`FIGURE_DIGITS`): 0.716 1/s and 0.221 s on
-``[0, 0.15]`` s under the Haswell, Sandybridge and Prescott kernels alike (2-3 more
-solves).  ``K`` itself still moves by about 1 % between kernels (the decay rate is a flat
-function of it): it is judged by its certificate and figures, never by its digits.
+See doc/theory.md, section "Synthesis choices" (the ``latency-design`` entry: the lag, the
+exact figures, the cost and the same figures on every CPU).
 """
 from __future__ import annotations
 
@@ -66,9 +32,13 @@ from .search import largest_feasible_bracketed, resolution, settle_on_grid
 
 __all__ = ['OBJECTIVES', 'LatencyDesign', 'LatencyPlan', 'lagged_problem', 'perturbation_set',
            'exact_abscissa', 'exact_figures', 'design_for_latency', 'latency_figures',
-           'delay_interval', 'plan_from_identification']
+           'delay_interval', 'plan_from_identification', 'GAIN_COMPENSATED',
+           'certify_turn_gain_uncertainty', 'gain_verdict']
 
 OBJECTIVES = ('decay', 'max-delay')
+#: A static channel gain is compensated when its interval excludes 1 and it is more than this
+#: far from 1 (a skid-steer's turn gain, 0.6-0.7; a few per mille of creep is not).
+GAIN_COMPENSATED = 0.02
 #: First trial of the certified-latency search, as a fraction of the exact margin: the
 #: certified latency of the paper's designs is 0.80-0.86 of it (with and without a lag),
 #: so the search starts with a short bracket (any value is correct, only the count changes).
@@ -164,6 +134,94 @@ class LatencyDesign:
         lines.append(f'verification: max eig Psi = '
                      f'{self.synthesis.verification.max_eig_Psi:.4g} -> OK')
         return '\n'.join(lines)
+
+
+def certify_turn_gain_uncertainty(problem: Problem, K: Any, h_min: float, h_max: float,
+                                  eps: float, lag: float = 0.0) -> bool:
+    """Whether ``K`` stays certified when the base's turn rate is off by up to ``eps``.
+
+    A turn-rate gain ``1 + delta`` (``|delta| <= eps``: what is left of a compensated
+    ``gain_w``'s interval) scales the normal component of the law's input: ``u`` becomes
+    ``(I + delta n n^T) u`` with ``n`` the unit normal of the heading, a time-varying
+    multiplicative input uncertainty ``B (I + Delta(t)) K``, ``||Delta|| <= eps``.  It is
+    added to the problem's own ``E D F`` as a second block, ``E' = [E, s I]``,
+    ``F' = [F; s K]`` with ``s = sqrt(eps)``: one full ``||D|| <= 1`` contains
+    ``diag(D_1, D_2)``, so the certificate covers ``E D_1 F + eps D_2 K`` (and the cross
+    terms, ``s``-scaled: conservative; without the scaling they are the whole ``E D K``), and
+    the input-delay condition is decided for ``[h_min, h_max]`` through the lag.  Covers the
+    feedback loop; the feedforward's share of the error (``delta`` times the reference's
+    normal acceleration) is a bounded disturbance, not covered.
+
+    Parameters
+    ----------
+    problem : Problem
+        The loop (its ``E``, ``F`` are kept).
+    K : array_like, shape (m, n)
+        The gain.
+    h_min, h_max : float
+        The residual delay interval (s) certified.
+    eps : float
+        The relative turn-gain uncertainty (>= 0).
+    lag : float, optional
+        Actuator time constant (s); 0 for none.
+
+    Returns
+    -------
+    bool
+    """
+    K = np.asarray(K, dtype=float)
+    eps = as_finite_float(eps, 'eps', low=0.0)
+    m = problem.m
+    s = math.sqrt(eps)
+    p = Problem(A=problem.A, B=problem.B, A_tau=problem.A_tau, tau=problem.tau,
+                E=np.hstack([problem.E, s * np.eye(m)]), F=np.vstack([problem.F, s * K]),
+                name=f'{problem.name}+gain{eps:g}', options=dict(problem.options))
+    if lag > 0:
+        p = lagged_problem(p, lag)
+        K = np.hstack([K, np.zeros((m, m))])
+    return bool(certify_input_delay(p, K, h_min, h_max).certified)
+
+
+def gain_verdict(plan: LatencyPlan, problem: Problem, K: Any
+                 ) -> tuple[str, dict[str, Any]] | None:
+    """What the certificate says of the compensated gains' remaining uncertainty, if any.
+
+    A compensated turn gain: :func:`certify_turn_gain_uncertainty` with the relative width
+    left of its interval.  A compensated speed gain acts on the speed state, not on the
+    input: not covered, and said so.
+
+    Parameters
+    ----------
+    plan : LatencyPlan
+        The plan (its compensated gains and their intervals, delay interval and lag).
+    problem : Problem
+        The loop the gain was designed for.
+    K : array_like
+        The designed gain.
+
+    Returns
+    -------
+    (str, dict) or None
+        A line for the summary and the design record's entries; ``None`` when no gain is
+        compensated.
+    """
+    gains = plan.gain_parameters()
+    if not gains:
+        return None
+    if 'gain_v' in gains:
+        return ('the certificate does not cover the compensated speed gain\'s uncertainty (it '
+                'acts on the speed state, which the LMIs do not model)',
+                {'gain_uncertainty_certified': False})
+    g = gains['gain_w']
+    lo, hi = plan.gain_intervals[1]
+    eps = max(hi / g - 1.0, 1.0 - lo / g, 0.0)
+    ok = certify_turn_gain_uncertainty(problem, K, plan.h_min, plan.h_max, eps, plan.lag)
+    return (f'turn gain {g:.4f} compensated; with its remaining uncertainty +-{100 * eps:.2f} % '
+            f'(a multiplicative input uncertainty) the gain is '
+            f'{"certified" if ok else "NOT certified"} for the residual delay '
+            f'[{plan.h_min:.4f}, {plan.h_max:.4f}] s through the lag {plan.lag:.4f} s '
+            '(the feedback loop; the feedforward\'s share is a bounded error, not covered)',
+            {'turn_gain_uncertainty': eps, 'gain_uncertainty_certified': ok})
 
 
 def lagged_problem(problem: Problem, lag: float) -> Problem:
@@ -614,6 +672,14 @@ class LatencyPlan:
 
     The acceleration limits identified (0 = not seen to bind: unknown) go to the
     tracker's ``max_linear_accel`` and ``max_angular_accel``.
+
+    The static channel gains identified (``gain_v``, ``gain_w`` with their intervals; 1 and
+    NaN when not identified, e.g. read from a file) go to the tracker's ``gain_v``,
+    ``gain_w`` when they matter (:data:`GAIN_COMPENSATED`: the interval excludes 1 and the
+    gain is more than 2 % from it; a skid-steer's turn gain): the tracker then divides its
+    commands by them.  The design's certificate is for the compensated loop with unit gain;
+    what is left of a turn gain's uncertainty (its interval over the gain, a multiplicative
+    input uncertainty) is decided by :func:`gain_verdict`, a speed gain's is not covered.
     """
 
     predictor: bool
@@ -633,6 +699,26 @@ class LatencyPlan:
     max_linear_accel: float = 0.0
     max_angular_accel: float = 0.0
     commands_follow_odometry: bool | None = None
+    #: The identified static gains of the speed and of the turn rate.
+    gains: tuple[float, float] = (1.0, 1.0)
+    #: Their intervals, low and high each (NaN: not identified).
+    gain_intervals: tuple[tuple[float, float], tuple[float, float]] = (
+        (math.nan, math.nan), (math.nan, math.nan))
+
+    def gain_parameters(self) -> dict[str, float]:
+        """The tracker's ``gain_v`` / ``gain_w`` for the gains that matter (see the class).
+
+        Returns
+        -------
+        dict
+            ``{'gain_w': 0.64}`` for a skid-steer; empty when no gain needs compensating.
+        """
+        out = {}
+        for name, g, (lo, hi) in zip(('gain_v', 'gain_w'), self.gains, self.gain_intervals):
+            if math.isfinite(g) and g > 0 and abs(g - 1.0) > GAIN_COMPENSATED \
+                    and math.isfinite(lo) and math.isfinite(hi) and not lo <= 1.0 <= hi:
+                out[name] = float(g)
+        return out
 
     def tracker_parameters(self) -> dict[str, float]:
         """The tracker's predictor parameters this plan assumes (all 0 without predictor)."""
@@ -665,6 +751,11 @@ class LatencyPlan:
             **{k: v for k, v in self.tracker_parameters().items()},
             'max_linear_accel': float(self.max_linear_accel),      # 0 = unknown
             'max_angular_accel': float(self.max_angular_accel)}
+        for name, g, iv in zip(('v', 'w'), self.gains, self.gain_intervals):
+            if math.isfinite(g):
+                out[f'identified_gain_{name}'] = float(g)
+                out[f'identified_gain_{name}_interval'] = [float(iv[0]), float(iv[1])]
+        out.update({f'compensated_{k}': v for k, v in self.gain_parameters().items()})
         if self.latency_range_from:
             out['latency_range_from'] = self.latency_range_from
         return out
@@ -687,6 +778,13 @@ class LatencyPlan:
         if self.max_linear_accel or self.max_angular_accel:
             head += (f'\nacceleration limits: max_linear_accel {self.max_linear_accel:.4g} m/s^2, '
                      f'max_angular_accel {self.max_angular_accel:.4g} rad/s^2 (0 = unknown)')
+        for name, g in self.gain_parameters().items():
+            lo, hi = self.gain_intervals[name == 'gain_w']
+            head += (f'\nchannel gain: {name} = {g:.4f} (interval [{lo:.4f}, {hi:.4f}]), '
+                     'compensated (the command is divided by it); the design\'s certificate '
+                     'takes it as exact: the rest of its uncertainty '
+                     f'(+-{100 * max(hi - g, g - lo) / g:.2f} %) is decided apart '
+                     '(gain_verdict)')
         if self.predictor:
             return (head + f'\npredictor: predict_latency = {self.predict_latency:.4f} s (low end '
                     f'of the range: the residual delay stays >= 0), predict_odom_latency = '
@@ -728,7 +826,7 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
     Parameters
     ----------
     ident : Identification
-        From :func:`.identify.identify_latency` or :func:`.identify.read_identification`.
+        From :func:`.identify.identify_latency` or :func:`.records.read_identification`.
     predictor : bool
         Design for the tracker with its predictor at the low end of the latency range
         (the residual delay) or for the uncompensated law (the whole delay).
@@ -775,4 +873,7 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
                        latency_range_from=str(ident.latency_range_from),
                        max_linear_accel=float(ident.max_linear_accel),
                        max_angular_accel=float(ident.max_angular_accel),
-                       commands_follow_odometry=ident.commands_follow_odometry)
+                       commands_follow_odometry=ident.commands_follow_odometry,
+                       gains=(float(ident.gain_v), float(ident.gain_w)),
+                       gain_intervals=((float(ident.gain_v_low), float(ident.gain_v_high)),
+                                       (float(ident.gain_w_low), float(ident.gain_w_high))))

@@ -4,16 +4,13 @@ Closed loop (paper eq. 7)::
 
     xi' = (A + B (K + E D(t) F)) xi + A_tau xi(t - tau),   D^T D <= I.
 
-The synthesis LMI (paper eq. 8/16) is solved in ``X = P^-1``, ``W = Q^-1``, ``R = K X``
-(``K = R X^-1``), normalised by maximising the strictness ``t`` under a trace bound and
-accepted only if ``t >= margin``.  Every returned gain passes an independent numpy check
-(:func:`verify_certificate`, from ``(K, P, Q, eps)`` only); with ``K`` fixed the condition
-is linear in ``(P, Q, 1/eps)`` (:func:`certify_gain`).
+The synthesis LMI (paper eq. 8/16) is solved in ``X = P^-1``, ``W = Q^-1``, ``R = K X``,
+normalised by maximising its strictness; every returned gain passes an independent numpy
+check (:func:`verify_certificate`), and a fixed ``K`` is certified by :func:`certify_gain`.
 
-The LMI, the normalisation, the equivalent verification matrix and Petersen's lemma are
-written out in the documentation: doc/theory.md, section "Theorem 1" (#theorem-1), and the
-synthesis choices (gain bound, moderate gains, fallbacks, reduced LMI) in the section after
-it.
+See doc/theory.md, section "Theorem 1: non-fragile synthesis and certificates" (#theorem-1):
+the LMI, the normalisation, the verification matrix, Petersen's lemma; the synthesis
+choices in the section after it.
 """
 from __future__ import annotations
 
@@ -526,7 +523,7 @@ class UntrustedGainWarning(UserWarning):
 class _MinNormProgram:
     """Stage 2 of unbounded synthesis: the smallest gain-norm bound at a given margin.
 
-    Same variables and normalization as the unbounded :class:`_Theorem1Program`
+    Same variables and normalization as the unbounded ``_Theorem1Program``
     (``tr X + tr W + eps <= 1``), margin fixed to ``t_req`` (a parameter), and
     ``minimize s`` s.t. ``[[s I, R], [R^T, X]] >= 0``, i.e. ``R X^-1 R^T <= s I``:
     with ``X >= t_req I`` this bounds ``||K||_2 = ||R X^-1||_2 <= sqrt(s / t_req)``.
@@ -566,7 +563,7 @@ def _min_norm_program(problem: Problem, nominal: bool) -> _MinNormProgram:
 
 def _min_norm_stage(problem: Problem, nominal: bool, solver: str, t_req: float,
                     verify_tol: float) -> SynthesisResult | None:
-    """Stage 2 (see :class:`_MinNormProgram`); ``None`` if it gives no verified gain."""
+    """Stage 2 (see ``_MinNormProgram``); ``None`` if it gives no verified gain."""
     prog = _min_norm_program(problem, nominal)
     t0 = time.perf_counter()
     try:
@@ -617,7 +614,7 @@ def _verified(problem: Problem, **kw: Any) -> SynthesisResult:
     """:func:`_verified_chain`; for ``n >= COMPACT_FROM_N`` the paper's form as a last resort.
 
     When no point of the reduced program verifies, the whole chain is run again with the
-    paper's form (:class:`_Theorem1Program`), whose verdict (a verified gain,
+    paper's form (``_Theorem1Program``), whose verdict (a verified gain,
     ``InfeasibleError`` at the edge of feasibility, ``CertificateError``) is the answer:
     the reduction never makes the outcome worse than the paper's form, only faster when
     it verifies.
@@ -859,20 +856,20 @@ def synthesize(problem: Problem, *, nominal: bool = False, margin: float | None 
     solver : str
         cvxpy solver name; default ``problem.options['solver']`` or ``'CLARABEL'``.
     gain_bound : float, optional
-        Also impose ``||K||_2 <= gain_bound`` (see :class:`_Theorem1Program`).
+        Also impose ``||K||_2 <= gain_bound`` (see ``_Theorem1Program``).
     moderate : bool
         Without ``gain_bound``: two stages (default).  Stage 1 finds the largest margin
         ``t_max`` (the most strictly feasible point, whose gain can be huge: norms of
         1e6-1e7 on random problems); stage 2 keeps ``t >= max(margin,
         0.5 t_max)`` and minimizes the gain-norm bound ``s`` with ``R X^-1 R^T <= s I``
-        (:class:`_MinNormProgram`).  ``extra`` records ``rule``, ``t_max`` and the
+        (``_MinNormProgram``).  ``extra`` records ``rule``, ``t_max`` and the
         stage-1 norm.  ``False``: stage 1 only (the behaviour before).
     verify_tol : float
         Relative tolerance of :func:`verify_certificate`.
     decouple : bool
         If the data split into independent blocks (:func:`decoupled_blocks`, e.g. several
         robots), solve each block and assemble a block-diagonal certificate (see
-        :func:`_synthesize_blocks`), verified on the whole problem; on failure the whole
+        ``_synthesize_blocks``), verified on the whole problem; on failure the whole
         problem is solved as one.  ``extra['blocks']`` lists the block sizes.
 
     Returns

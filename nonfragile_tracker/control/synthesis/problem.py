@@ -1,18 +1,10 @@
 """Synthesis problems (A, B, A_tau, tau, E, F, options): validation and YAML files.
 
-A problem file is a YAML mapping::
+:class:`Problem` holds one problem, validated (every check names the offending field; all
+errors are :class:`~nonfragile_tracker.control.synthesis.errors.ProblemError`); problem
+files are YAML mappings read and written here.
 
-    name: paper
-    A: [[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]]
-    B: [[0, 0], [1, 0], [0, 0], [0, 1]]
-    A_tau: [[0.01, 0, 0, 0], ...]
-    tau: 0.2
-    E: [[1, 0], [0, 1]]
-    F: [[0.5, 0.5, 0.5, 0.5], [0.5, 0.5, 0.5, 0.5]]
-    perturbations: {Delta_1: [[-1, 0], [0, -1]], Delta_2: [[1, 0], [0, 1]]}
-    options: {margin: 1.0e-6}
-
-Every check names the offending field; all errors are :class:`ProblemError`.
+See doc/cli.md, section "Gain synthesis and analysis" (the problem file).
 """
 from __future__ import annotations
 
@@ -34,7 +26,7 @@ __all__ = ['ProblemError', 'Problem', 'as_matrix', 'load_problem', 'problem_from
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None] | None = None
               ) -> np.ndarray:
-    """:func:`control.validate.as_matrix` raising :class:`ProblemError` (problem files).
+    """:func:`.control.validate.as_matrix` raising :class:`.ProblemError` (problem files).
 
     Parameters
     ----------

@@ -1,35 +1,16 @@
 """A region of attraction of the tracker on the robot: its clamps, its speed premise, Delta.
 
-The tracker commands ``u = u_d + (K + E Delta F) e`` (``e = xi - xi_d``, ``u`` the
-acceleration of the linearized robot, ``u_d`` the feedforward of the reference it follows)
-and applies it through its own clamps: the tangential part ``a = u . t`` clipped to
-``|a| <= max_linear_accel`` and the turn rate ``w = (u . n) / v`` clipped to
-``|w| <= max_angular_speed`` (``t``, ``n`` the heading's unit vectors).  While ``|v| >= V``
-(``V`` at least the tracker's speed floor, so the floor does not act) each body-frame part
-of ``u`` saturates at a level of at least ``u_max = min(max_linear_accel, V W)``; the loop
-is::
+The tracker applies ``u = u_d + (K + E Delta F) e`` through its own clamps (tangential
+acceleration, turn rate).  A generalized sector condition with a scalar multiplier (it holds
+at every heading), a delay-independent Krasovskii functional and Petersen's lemma for
+``||Delta|| <= 1`` give one SDP that certifies an ellipsoid of constant initial histories;
+the speed premise is kept inside it (``V`` searched or given), and two solves maximize the
+position radius.  Command latency and actuator lag are not covered (the scope is printed,
+:meth:`SaturationCertificate.model`); a refusal names the failed premise.  The certificate
+is checked independently in numpy (:func:`verify_saturation`).
 
-    e' = A e + B (u~ - u_d) + A_tau e(t - tau),   u~ = R sat_body(R' u),  ||u_d|| <= d.
-
-The generalized sector condition (Tarbouriech, Garcia, Gomes da Silva and Queinnec, 2011,
-Lemma 1.6) with a *scalar* multiplier ``T = t I`` holds for that saturation at every heading
-``R`` (rotation-invariant) wherever ``||(K + E Delta F - G) e|| <= u_max - d``; with a
-delay-independent Krasovskii functional and Petersen's lemma for ``||Delta|| <= 1``, one
-SDP certifies that every constant initial history in an ellipsoid converges.  The speed
-premise is *kept*: the ellipsoid lies in the slab ``||e_v|| <= cruise - V`` of the velocity
-error (``C_v P^-1 C_v' <= (cruise - V)^2 I``), and ``e`` never leaves the ellipsoid, so
-``|v| >= ||q_d|| - ||e_v|| >= V`` along every certified trajectory (``q_d`` the reference
-velocity, ``||q_d|| >= cruise``).  ``V`` is searched (or given).
-
-Two solves: the first in ``W = P^-1`` (convex in everything) bounds the position error of
-``E(P, 1)``; the second, in ``P`` with its ``T`` fixed, maximizes the position radius of the
-set actually certified, ``e0' (P + tau Q) e0 <= 1``.  Command latency and actuator lag are
-*not* covered (the sector condition with an input delay is not implemented); the scope is
-printed with the figure (:meth:`SaturationCertificate.model`).
-
-The derivation is in the documentation: doc/theory.md, section "Saturation: a certified
-region of attraction" (#saturation-a-certified-region-of-attraction).  The certificate is
-checked independently in numpy (:func:`verify_saturation`).
+See doc/theory.md, section "Saturation: a certified region of attraction"
+(#saturation-a-certified-region-of-attraction), and its "Derivation".
 """
 from __future__ import annotations
 

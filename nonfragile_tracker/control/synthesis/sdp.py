@@ -1,27 +1,12 @@
 """Shared SDP plumbing for the LMI syntheses (Theorem 1, delay-dependent, input delay).
 
-One place for what every synthesis module needs around cvxpy:
+The symmetric part (:func:`sym`), the solver defaults and accepted statuses, one solve that
+maps solver exceptions (:func:`solve`), one verdict on a solved point (:func:`classify`),
+and ONE bounded, per-thread cache of parametrized cvxpy programs (:func:`cached_program`,
+:func:`clear_cache`, :func:`cached_programs`).  No ROS import; cvxpy is imported lazily by
+the programs themselves.
 
-* :func:`sym` - the symmetric part of a matrix (numpy);
-* the solver defaults :data:`DEFAULT_SOLVER` and :data:`DEFAULT_MARGIN` and the
-  accepted status sets :data:`OK_STATUSES` / :data:`INFEASIBLE_STATUSES`;
-* :func:`solve` - solve a cvxpy problem, map a solver exception to
-  :class:`~nonfragile_tracker.control.synthesis.errors.SolverFailure`, return the status and
-  the time spent inside the solver;
-* :func:`classify` - decide from ``(status, t, margin)`` whether a point is usable,
-  an infeasibility or a solver failure (the synthesis modules turn that into
-  :class:`~nonfragile_tracker.control.synthesis.errors.InfeasibleError` / ``SolverFailure``
-  with their own message);
-* ONE bounded program cache: parametrized (DPP) cvxpy problems are expensive to build
-  and cheap to re-solve with new parameter values, so each module builds a program
-  once per shape/option key through :func:`cached_program`.  The cache is an LRU of
-  at most :data:`CACHE_SIZE` programs shared by all modules of a thread (one cache per
-  thread: a cached program is mutated by every solve, so threads of one process - a Dask
-  worker with several threads - must not share it); :func:`clear_cache`
-  drops them (benchmarks use it to measure a cold build), :func:`cached_programs`
-  lists them (diagnostics).
-
-No ROS import; cvxpy is imported lazily by the programs themselves.
+See doc/developing.md, section "SDP plumbing".
 """
 from __future__ import annotations
 

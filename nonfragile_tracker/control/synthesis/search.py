@@ -1,15 +1,15 @@
 """The searches of the syntheses, one place each.
 
-* :func:`largest_feasible` - the one bisection for every "largest value that is still
-  certified/feasible" search (decay rate, perturbation scale, delay);
-* :func:`largest_feasible_bracketed` - the same search once a bracket is known, by false
-  position on a continuous score (the solver's strictness ``t``) instead of halving;
-* :func:`golden_section_max` - golden-section refinement of a scalar;
-* :func:`eps_search` - the line search over the tuning scalar ``eps`` of the
-  delay-dependent and input-delay LMIs: a whole log grid, or a local climb on it from
-  a warm start, then golden-section refinement around the best grid point;
-* :func:`resolution` and :func:`settle_on_grid` - the stopping rule that makes a search's
-  result the same on every machine: the largest certified point of a fixed grid.
+:func:`largest_feasible` is the one bisection for every "largest value that is still
+certified" search, :func:`largest_feasible_bracketed` the same once a bracket is known (false
+position on the solver's strictness), :func:`golden_section_max` a golden-section
+refinement, :func:`eps_search` the line search over the tuning scalar ``eps`` of the
+delay-dependent and input-delay LMIs (a log grid or a local climb from a warm start, then
+golden section), and :func:`resolution` / :func:`settle_on_grid` the stopping rule that
+makes a search's result the same on every machine (the largest certified point of a fixed
+grid).
+
+See doc/theory.md, section "Synthesis choices", and doc/across-machines.md.
 """
 from __future__ import annotations
 

@@ -1,26 +1,14 @@
 """Design-space sweeps: certified latency designs over a grid, in parallel, and their front.
 
-A user choosing a design asks what each extra 50 ms of certified latency costs in decay
-rate and gain norm, with or without the predictor, for their lag.  :func:`sweep_points`
-makes the grid (latency interval x lag x gain bound x objective x predictor),
-:func:`run_sweep` designs every point with :func:`.latency_design.design_for_latency` -
-each design verified in numpy and, with a lag, certified on the exact lagged loop - on
-an executor of :mod:`..parallel` (local processes, Dask distributed), and
-:func:`pareto_front` / :func:`plot_sweep` show the trade-off.
+What each extra 50 ms of certified latency costs in decay rate and gain norm, with or
+without the predictor, for a lag: :func:`sweep_points` makes the grid (latency interval x
+lag x gain bound x objective x predictor), :func:`run_sweep` designs every point with
+:func:`.latency_design.design_for_latency` on an executor of :mod:`nonfragile_tracker.parallel`,
+and :func:`pareto_front` / :func:`plot_sweep` show the trade-off.  The records are the same
+on every executor, in the order of the points.  No ROS import.
 
-The delay interval of a point follows the one rule of
-:func:`.latency_design.delay_interval`: with the predictor (at the low end of the latency
-interval) the residual ``[0, (L_hi - L_lo) + T]`` is certified, without it
-``[L_lo, L_hi + T]``, ``T`` the command period (sample and hold).  The *certified command
-latency* of a design - what the robot may have - is then ``L_lo + H - T`` with the
-predictor and ``H - T`` without, ``H`` the certified ``h_max`` of the loop the design
-is for (the lagged loop when there is a lag).
-
-A design is a pure function of its point and the problem (one thread, a fresh or cached
-SDP program of the same shape): a sweep's records are the same on every executor, in the
-order of the points.  On an engine the designs are handed out longest first
-(:func:`_cost`; the records keep the points' order), so that two workers finish together.
-No ROS import.
+See doc/cli.md, section "sweep" (the delay interval of a point, the certified command
+latency, the order of the work).
 """
 from __future__ import annotations
 
@@ -187,7 +175,7 @@ def run_sweep(problem: Problem, points: Sequence[SweepPoint], *,
     tol : float
         Tolerance of each certified ``h_max`` (s).
     executor, workers, scheduler
-        As in :func:`..parallel.map_tasks` (``'local'`` processes by default, ``'dask'``,
+        As in :func:`.parallel.map_tasks` (``'local'`` processes by default, ``'dask'``,
         or a ``concurrent.futures.Executor``).
     """
     T = as_finite_float(command_period, 'command period', low=0.0, low_inclusive=False)

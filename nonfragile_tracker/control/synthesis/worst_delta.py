@@ -8,6 +8,8 @@ rank-one (``q x 1`` or ``1 x r``) ``Delta``, sign-diagonal and random partial is
 otherwise; :func:`worst_delta` evaluates them and refines the best by a projected
 coordinate search on the ball (interior maxima included).  A search, so a lower bound of
 the true worst case: it can refute a certificate, never confirm one.
+
+See doc/theory.md, section "Synthesis choices" (the exact figures' Delta).
 """
 from __future__ import annotations
 
