@@ -154,22 +154,35 @@ def test_two_namespaced_systems_on_one_domain(ros_env):
     probe = Probe(int(env['ROS_DOMAIN_ID']))
     from nav_msgs.msg import Odometry as Odom
     from nonfragile_tracker.nodes.common import DATA_QOS
-    last = {}
-    for ns in ('r1', 'r2'):
-        probe.node.create_subscription(Odom, f'/{ns}/odom', lambda m, ns=ns: last.__setitem__(
-            ns, (m.pose.pose.position.x, m.pose.pose.position.y)), DATA_QOS)
+    last, worst = {}, {}
+
+    def seen(m, ns):
+        r = math.hypot(m.pose.pose.position.x, m.pose.pose.position.y)
+        last[ns] = r
+        worst[ns] = max(worst.get(ns, 0.0), abs(r - radii[ns]))
+
+    radii = {'r1': 0.5, 'r2': 1.5}
+    for ns in radii:
+        probe.node.create_subscription(Odom, f'/{ns}/odom', lambda m, ns=ns: seen(m, ns),
+                                       DATA_QOS)
     procs = []
     try:
-        for ns, radius in (('r1', 0.5), ('r2', 1.5)):
+        for ns, radius in radii.items():
             remap = ['-r', f'__ns:=/{ns}']
             procs.append(start('tracker', env, *remap))
             procs.append(start('reference', env, *remap, '-p', f'radius:={radius}'))
             procs.append(start('plant', env, *remap, '-p', 'duration:=0.0', '-p',
                                f'initial_pose:=[{radius + 0.1}, 0.0, 1.5707963267948966]'))
-        assert probe.wait_for(lambda: len(last) == 2, timeout=20)
-        probe.spin(8.0)
-        r1, r2 = (math.hypot(*last[ns]) for ns in ('r1', 'r2'))
-        assert abs(r1 - 0.5) < 0.03 and abs(r2 - 1.5) < 0.03, (r1, r2)
+        # Each system converges to its own circle (how soon depends on when its nodes came
+        # up, which on a loaded machine is seconds apart) ...
+        assert probe.wait_for(lambda: len(last) == 2 and all(
+            abs(last[ns] - radii[ns]) < 0.03 for ns in radii), timeout=40), last
+        # ... and then stays there: a tracker that heard the other system's odometry or
+        # reference would be pulled 1 m off within this window
+        worst.clear()
+        probe.spin(4.0)
+        assert set(worst) == set(radii), worst
+        assert all(worst[ns] < 0.03 for ns in radii), worst
     finally:
         for p in procs:
             stop(p)
