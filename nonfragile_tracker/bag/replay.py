@@ -483,11 +483,20 @@ def _twist_msg(cmd: Command) -> Any:
     return Twist(Vector3(float(cmd.v), 0.0, 0.0), Vector3(0.0, 0.0, float(cmd.w)))
 
 
-def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
+def _deviation(cmd: Command, rec: Any) -> float:
+    """The larger of the speed and yaw-rate differences between a command and a recorded one."""
     tw = _twist(rec)
-    return bool(abs(cmd.v - tw.linear.x) <= atol and abs(cmd.w - tw.angular.z) <= atol)
+    return max(abs(cmd.v - tw.linear.x), abs(cmd.w - tw.angular.z))
 
 
+def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
+    return bool(_deviation(cmd, rec) <= atol)
+
+
+#: A command reproduced to this many units of round-off (relative to max(1, |v|, |w|)) is
+#: the tracker's own: no other reference state is tried for it (the replay's start,
+#: recovered from the first recorded command, may differ from the tracker's in the last bits).
+ROUND_OFF = 64 * np.finfo(float).eps
 #: How far back (s) before the first recorded command the tracker's first input may lie
 #: (a tracker may process a burst of queued inputs when it starts).
 START_SEARCH = 1.0
@@ -688,6 +697,11 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded: list[Timed],
             # many states behind: the later ones keep their turn)
             cands = [default] + list(range(default - 1, applied - 1, -1))[:32] \
                 + list(range(default + 1, max(hi, default) + 1))[:31]
+            # the state that reproduces the command exactly, else the closest within atol:
+            # two states may differ by so little (a reference part that barely changed) that
+            # both agree within atol, and the wrong one shows tens of commands later, when
+            # a clamp no longer hides it
+            best = math.inf
             for s in cands:
                 trial = inputs.fork()
                 for e in tl.events[applied:s]:
@@ -697,12 +711,16 @@ def _run(tl: _RefTimeline, odoms: list[ReplayEvent], recorded: list[Timed],
                 if cmd is None and s == default:
                     chosen = (s, trial, None)        # an input the tracker ignores
                     break
-                if cmd is not None and _agrees(cmd, recorded[k][1], atol):
-                    chosen = (s, trial, cmd)
-                    swaps += s != default
-                    break
+                if cmd is not None:
+                    off = _deviation(cmd, recorded[k][1])
+                    if off <= atol and off < best:
+                        chosen, best = (s, trial, cmd), off
+                        if off <= ROUND_OFF * max(1.0, abs(cmd.v), abs(cmd.w)):
+                            break
             if chosen is None:
                 matching = False
+            elif chosen[2] is not None:
+                swaps += chosen[0] != default
         if chosen is None:
             trial = inputs.fork()
             for e in tl.events[applied:default]:
