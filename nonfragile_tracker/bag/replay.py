@@ -486,14 +486,15 @@ def _twist_msg(cmd: Command) -> Any:
 def _deviation(cmd: Command, rec: Any) -> float:
     """The larger of the speed and yaw-rate differences between a command and a recorded one."""
     tw = _twist(rec)
-    return max(abs(cmd.v - tw.linear.x), abs(cmd.w - tw.angular.z))
+    return float(max(abs(cmd.v - tw.linear.x), abs(cmd.w - tw.angular.z)))
 
 
 def _agrees(cmd: Command, rec: Any, atol: float) -> bool:
     return bool(_deviation(cmd, rec) <= atol)
 
 
-#: A command reproduced to this many units of round-off (relative to max(1, |v|, |w|)) is
+#: A command reproduced to this many units of round-off (relative to the larger of 1 and the
+#: command's speed and yaw rate) is
 #: the tracker's own: no other reference state is tried for it (the replay's start,
 #: recovered from the first recorded command, may differ from the tracker's in the last bits).
 ROUND_OFF = 64 * np.finfo(float).eps
