@@ -49,6 +49,7 @@ import hashlib
 import importlib
 import json
 import math
+import re
 import pkgutil
 import statistics
 import sys
@@ -456,13 +457,16 @@ def plot(med: dict, controllers: list[str], trajs: list[str], rates: list[float]
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(6.2 * cols, 4.2 * rows), squeeze=False)
     colors = plt.rcParams['axes.prop_cycle'].by_key()['color']
+    if len(controllers) > len(colors):          # a colour of its own for every controller
+        colors = [plt.get_cmap('tab20')(i) for i in range(20)]
+    markers = 'os^Dv<>phX*P'
     for ax, tname in zip(axes.flat, trajs):
         for i, c in enumerate(controllers):
             for rate, style in zip(rates, ('-', '--')):
                 ys = [med.get((c, tname, rate, lat), {}).get('rms', math.nan) * 1e3
                       for lat in lats]
-                ax.plot([lat * 1e3 for lat in lats], ys, style, marker='o', ms=3.5,
-                        color=colors[i % len(colors)],
+                ax.plot([lat * 1e3 for lat in lats], ys, style, marker=markers[i % len(markers)],
+                        ms=3.5, color=colors[i % len(colors)],
                         label=f'{c}' if rate == rates[0] else None)
         ax.axhline(adapter.DIVERGED * 1e3, color='0.6', lw=0.8, ls=':')
         ax.set_yscale('log')
@@ -482,6 +486,40 @@ def plot(med: dict, controllers: list[str], trajs: list[str], rates: list[float]
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def read_table(path: Path) -> dict:
+    """The RMS medians of a written table (its per-run sections ``### <trajectory>, <rate>
+    Hz``), as :func:`plot` takes them: ``med``, ``controllers``, ``trajs``, ``rates``, ``lats``
+    in the table's order."""
+    med: dict = {}
+    controllers: list[str] = []
+    trajs: list[str] = []
+    rates: list[float] = []
+    lats: list[float] = []
+    section = None
+    for line in Path(path).read_text().splitlines():
+        head = re.fullmatch(r'### (.+), ([\d.]+) Hz', line)
+        if head:
+            section = (head.group(1), float(head.group(2)))
+            for seen, x in ((trajs, section[0]), (rates, section[1])):
+                if x not in seen:
+                    seen.append(x)
+            continue
+        if line.startswith('#'):
+            section = None
+        cells = [c.strip() for c in line.strip('|').split('|')]
+        if section is None or len(cells) < 3 or not re.fullmatch(r'[\d.]+', cells[1]):
+            continue
+        c, lat, rms = cells[0], float(cells[1]) * 1e-3, cells[2]
+        controllers += [c] if c not in controllers else []
+        lats += [lat] if lat not in lats else []
+        med[(c, section[0], section[1], lat)] = {
+            'rms': float(rms) * 1e-3 if re.fullmatch(r'[\d.]+', rms) else math.nan}
+    if not med:
+        raise SystemExit(f'{path}: no per-run sections ("### <trajectory>, <rate> Hz")')
+    return {'med': med, 'controllers': controllers, 'trajs': trajs, 'rates': rates,
+            'lats': sorted(lats)}
 
 
 def run_table(quick: bool = False, jobs: int = 1, only: str = '', log=print) -> dict:
@@ -647,7 +685,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--controllers', default='', help='comma list of row labels (default all)')
     ap.add_argument('--ablation', action='store_true', help='only: ours on the figure eight '
                     'with the shipped / bring-up gain, without / with the predictor')
+    ap.add_argument('--replot', default=None, metavar='TABLE',
+                    help='only: draw the plot (--plot, default doc/images/peers_latency.png) '
+                    'from a written table (benchmarks/peers_table.md) without running')
     args = ap.parse_args(argv)
+    if args.replot:
+        t = read_table(Path(args.replot))
+        plot_path = Path(args.plot or ROOT / 'doc' / 'images' / 'peers_latency.png')
+        plot(t['med'], t['controllers'], t['trajs'], t['rates'], t['lats'], plot_path)
+        print(f'plot: {plot_path} ({len(t["med"])} cells of {args.replot})')
+        return 0
     if args.ablation:
         print('figure eight, 50 Hz, RMS after 10 s (mm), median of 3 seeds\n')
         print(ablation())
