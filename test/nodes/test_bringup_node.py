@@ -207,10 +207,13 @@ def test_a_stall_of_the_node_itself_is_not_odometry_silence(rig):
     os.killpg(r.procs['bringup'].pid, signal.SIGSTOP)
     time.sleep(0.8)
     os.killpg(r.procs['bringup'].pid, signal.SIGCONT)
-    r.wait_for('did not run for')
-    time.sleep(1.0)
+    # (whether the node says it did not run depends on which callback its executor runs
+    # first after the stall: its tick - then the warning - or the queued odometry - then
+    # nothing to say; under two CPU hogs the odometry came first.  Either way it drives on)
+    time.sleep(1.5)
     assert r.procs['bringup'].poll() is None, r.log()
     assert 'odometry silent' not in r.log()
+    assert 'phase analyse' not in r.log(), r.log()       # still exciting: the stall was judged
     r.procs['bringup'].send_signal(signal.SIGINT)
     assert r.wait_node() == 0, r.log()
 
