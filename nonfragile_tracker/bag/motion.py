@@ -33,7 +33,8 @@ if TYPE_CHECKING:
         geometry_msgs__msg__TwistStamped as TwistStampedMsg
     from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as OdometryMsg
 
-__all__ = ['MotionData', 'read_motion', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
+__all__ = ['MotionData', 'read_motion', 'read_poses', 'TWIST', 'TWIST_STAMPED', 'ODOMETRY',
+           'POSE_STAMPED', 'TRUTH_TYPES',
            'CMD_TYPES', 'ODOM_TYPES']
 
 TWIST = 'geometry_msgs/msg/Twist'
@@ -176,3 +177,71 @@ def _motion_rows(path: Any, reader: Any, conns: list[Any], ctopic: str, ctype: s
         raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
                        'damaged - try `nonfragile_tracker bag repair`') from None
     return crows, orows
+
+
+#: Types an external pose (``identify --truth``) may have: a motion-capture or simulator pose.
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+TRUTH_TYPES = (POSE_STAMPED, ODOMETRY)
+
+
+def read_poses(path: str | os.PathLike[str], topic: str) -> OdometrySamples:
+    """The poses of ``topic`` (PoseStamped or Odometry), by header stamp (receive time if 0).
+
+    For an external pose (motion capture, a simulator's true pose) beside the odometry:
+    :func:`~nonfragile_tracker.control.identification.slip.identify_side_slip`.
+
+    Parameters
+    ----------
+    path : path-like
+        A rosbag2 bag directory.
+    topic : str
+        The pose topic (looked up as :func:`.pick_topic` does; no fallback by type).
+
+    Returns
+    -------
+    OdometrySamples
+        Pose only (``v``, ``w`` None); repeated stamps dropped.
+
+    Raises
+    ------
+    MissingTopicsError
+        The topic is absent, of another type, or has no messages.
+    BagError, BagNotFoundError
+        As :func:`nonfragile_tracker.bag.reader.open_reader`.
+    """
+    reader = open_reader(path)
+    rows: list[tuple[int, int, float, float, float]] = []
+    try:
+        available: dict[str, str] = {}
+        for c in reader.connections:
+            available.setdefault(c.topic, c.msgtype)
+        name = pick_topic(available, topic, TRUTH_TYPES, role='external pose',
+                          option='--truth', by_type=False)
+        conns = [c for c in reader.connections if c.topic == name
+                 and c.msgtype == available[name]]
+        ts = jazzy_typestore()
+        try:
+            for conn, timestamp, raw in reader.messages(connections=conns):
+                msg: Any = ts.deserialize_cdr(raw, conn.msgtype)
+                pose = msg.pose.pose if conn.msgtype == ODOMETRY else msg.pose
+                st = msg.header.stamp
+                q = pose.orientation
+                rows.append((timestamp, int(st.sec) * 1_000_000_000 + int(st.nanosec),
+                             float(pose.position.x), float(pose.position.y),
+                             quaternion_to_yaw(q.x, q.y, q.z, q.w)))
+        except (ReaderError, ValueError, IndexError, KeyError, AssertionError) as exc:
+            raise BagError(f'{path}: a message cannot be read ({exc}); the bag is '
+                           'damaged - try `nonfragile_tracker bag repair`') from None
+    finally:
+        reader.close()
+    if not rows:
+        raise MissingTopicsError(f'external pose: topic {name} in {path} has no messages',
+                                 [name])
+    recv = np.array([r[0] for r in rows], dtype=np.int64)
+    stamp = np.array([r[1] for r in rows], dtype=np.int64)
+    t_ns = stamp if bool(np.any(stamp > 0)) else recv
+    p = np.array([r[2:] for r in rows], dtype=float)
+    order = np.argsort(t_ns, kind='stable')
+    t_ns, p = t_ns[order], p[order]
+    keep = np.concatenate([[True], np.diff(t_ns) > 0])
+    return OdometrySamples(t_ns[keep] * 1e-9, p[keep, 0], p[keep, 1], p[keep, 2])

@@ -86,6 +86,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         lines.append(f'note: {note}')
     if args.cross_check and 'twist' in (res.source_v, res.source_w):
         lines += _cross_check(args, data, res)
+    if args.truth:
+        res, slip_line = _side_slip(args, data, res)
+        lines.append(slip_line)
     print('\n'.join(lines))
     if args.output:
         write_identification(args.output, res, overwrite=True)
@@ -110,6 +113,28 @@ def cmd_identify(args: argparse.Namespace) -> int:
               f'  without the predictor (--no-predictor): --delay-interval {bare.h_min:.4f} '
               f'{bare.h_max:.4f} --lag {bare.lag:.4f}')
     return 0
+
+
+def _side_slip(args: argparse.Namespace, data: MotionData, res: Identification
+               ) -> tuple[Identification, str]:
+    """The side slip from ``--truth`` (the identification with its table when it matters)."""
+    from dataclasses import replace
+    from ..bag.motion import read_poses
+    from ..control.identification.errors import IdentificationError
+    from ..control.identification.slip import identify_side_slip
+    truth = read_poses(args.bag, args.truth)
+    try:
+        slip = identify_side_slip(data.odometry, truth)
+    except IdentificationError as exc:
+        return res, f'side slip from {args.truth}: not identified ({exc})'
+    line = f'side slip from {args.truth}: {slip.summary()}'
+    if not slip.significant:
+        return res, line
+    rates = ', '.join(f'{r:g}' for r in slip.rates)
+    coefs = ', '.join(f'{c:.4g}' for c in slip.coefficients)
+    return (replace(res, side_slip_rates=slip.rates, side_slip=slip.coefficients),
+            line + f'\n  tracker: side_slip_rates [{rates}], side_slip [{coefs}] (in -o, and '
+            'latency-design --identification writes them into the gain file)')
 
 
 def _limits_line(res: Identification) -> str:
@@ -179,6 +204,10 @@ def register(subparsers: Subparsers) -> None:
     p.add_argument('--source', choices=['auto', 'twist', 'pose'], default='auto',
                    help='measure v, w from the odometry twist (auto: when not all zero) or '
                    'from differenced poses')
+    p.add_argument('--truth', metavar='TOPIC', help='an external pose of the base in the bag '
+                   '(PoseStamped or Odometry: motion capture, a simulator\'s true pose, e.g. '
+                   'pose): identify the side slip the odometry does not see (side_slip_rates, '
+                   'side_slip; docs: theory, "Side slip")')
     p.add_argument('--no-cross-check', dest='cross_check', action='store_false',
                    help='skip the check of a twist-based estimate against the poses alone')
     p.add_argument('--max-latency', type=float, default=1.0, help='latency search limit (s)')

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         h_min, h_max = plan.h_min, plan.h_max
         lag = plan.lag if args.lag is None else args.lag
         extra = {**plan.tracker_parameters(), **plan.actuator_parameters(),
-                 **plan.gain_parameters()}
+                 **plan.gain_parameters(), **plan.slip_parameters()}
         record = plan.metadata()
     else:
         h_min, h_max = args.delay_interval

@@ -31,7 +31,7 @@ from ..control.validate import as_matrix
 __all__ = ['stamp_ns', 'ns_to_stamp', 'fill_pose', 'pose_from_odom', 'fill_reference',
            'reference_from_msgs', 'path_arrays', 'path_to_trajectory', 'multidof_to_trajectory',
            'MultiDOFArrays', 'multidof_arrays', 'multidof_cdr', 'multidof_from_cdr',
-           'PREDICT_PARAMS', 'LIMIT_PARAMS', 'GAIN_PARAMS', 'tracker_config',
+           'PREDICT_PARAMS', 'LIMIT_PARAMS', 'GAIN_PARAMS', 'SLIP_PARAMS', 'tracker_config',
            'LAW_DEFAULTS', 'tracker_config_from']
 
 
@@ -203,6 +203,8 @@ PREDICT_PARAMS = ('predict_latency', 'predict_odom_latency', 'predict_lag_v', 'p
 LIMIT_PARAMS = ('max_linear_accel', 'max_angular_accel')
 #: Tracker parameters of the base's static channel gains (1 = none: no compensation).
 GAIN_PARAMS = ('gain_v', 'gain_w')
+#: Tracker parameters of the base's side-slip table ([0] and [0]: none).
+SLIP_PARAMS = ('side_slip_rates', 'side_slip')
 
 
 #: The tracker node's defaults for the parameters of the law (nodes/tracker.PARAMS; a test
@@ -213,7 +215,7 @@ LAW_DEFAULTS: dict[str, Any] = {
     'delay_compensation': False, 'A_tau': [0.0] * 16, 'tau': 0.0,
     'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
     'predict_lag_w': 0.0, 'max_linear_accel': 0.0, 'max_angular_accel': 0.0,
-    'gain_v': 1.0, 'gain_w': 1.0,
+    'gain_v': 1.0, 'gain_w': 1.0, 'side_slip_rates': [0.0], 'side_slip': [0.0],
 }
 
 
@@ -249,8 +251,8 @@ def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
     values : mapping
         The tracker's parameter values by name (``K``, ``K_shape``, ``E``, ``F``,
         ``Delta``, ``A_tau``, ``dt``, speeds, ``tau``, ``delay_compensation``; the
-        predictor and acceleration-limit ones default to 0, the channel gains to 1,
-        ``controller`` to our law).
+        predictor and acceleration-limit ones default to 0, the channel gains to 1, the
+        side-slip table to none, ``controller`` to our law).
 
     Raises
     ------
@@ -277,7 +279,17 @@ def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
                          A_tau=tuple(map(tuple, a_tau.tolist())),
                          tau=values['tau'], controller=controller,
                          **{n: values.get(n, 0.0) for n in PREDICT_PARAMS + LIMIT_PARAMS},
-                         **{n: values.get(n, 1.0) for n in GAIN_PARAMS})
+                         **{n: values.get(n, 1.0) for n in GAIN_PARAMS},
+                         side_slip_rates=_floats(values, 'side_slip_rates'),
+                         side_slip=_floats(values, 'side_slip'))
+
+
+def _floats(values: Mapping[str, Any], name: str) -> tuple[float, ...]:
+    """A parameter's list of numbers as a tuple (its default when missing)."""
+    val = values.get(name, LAW_DEFAULTS[name])
+    if isinstance(val, (str, bytes)) or not hasattr(val, '__iter__'):
+        raise LoopConfigError(f'{name} must be a list of numbers, got {val!r}')
+    return tuple(val)
 
 
 def _yaw(q: _Quaternion, source: str, i: int) -> float:

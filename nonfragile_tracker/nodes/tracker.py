@@ -123,6 +123,11 @@ PARAMS = [
     Param('gain_w', 1.0, 'the base\'s static turn-rate gain (identify\'s gain_w; a '
           'skid-steer turns at about 0.6-0.7 of its command): the command sent is the law\'s '
           'turn rate over it; 1 = none', low=0.05, high=20.0, read_only=True),
+    Param('side_slip_rates', [0.0], 'turn rates |w| (rad/s, increasing from 0) of the base\'s '
+          'side-slip table (identify --truth\'s side_slip_rates)', read_only=True),
+    Param('side_slip', [0.0], 'side-slip coefficient c (s) at each of side_slip_rates: the '
+          'base slides outward at c(|w|) v w, which its odometry does not see; the tracker '
+          'adds that slide to the odometry\'s position; all 0 = none', read_only=True),
     Param('lockstep_subscribers', 0, 'lockstep: answer an odometry step only once cmd_vel has '
           'this many matched subscribers (plant and recorder: 2); until then the step is left '
           'for the plant to republish; real time: adopt a trajectory re-timed in the '

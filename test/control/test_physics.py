@@ -282,32 +282,48 @@ def test_command_latency_and_stalls_are_the_transport_of_the_kinematic_plant():
 
 def _identify(base: str):
     """Step commands at 20 Hz for 20 s (random levels held 1 s), 50 Hz odometry, then
-    ``identify_latency`` on what the base's odometry said."""
+    ``identify_latency`` on what the base's odometry said, and the side slip from the true
+    pose beside it (an external pose with 1 mm of noise: ``identify --truth``); the
+    identification carries the side-slip table when it is significant."""
+    from dataclasses import replace
     from nonfragile_tracker.control.identification.identify import (
         CommandSamples, OdometrySamples, identify_latency)
+    from nonfragile_tracker.control.identification.slip import identify_side_slip
     plant = physics.PhysicsPlant(PlantConfig(dt=0.01, odom_rate=50.0), base)
     rng = np.random.default_rng(3)
     vmax = min(plant.spec.max_linear_speed, 1.0)
     levels = [(rng.uniform(0.1, 0.5) * vmax, rng.uniform(-1.0, 1.0)) for _ in range(20)]
-    cmd, odom = [], []
+    cmd, odom, truth = [], [], []
     for k in range(2000):
         sample = plant.odometry()
         if sample is not None:
-            odom.append((step_time(sample.step, plant.dt), sample.x, sample.y, sample.th,
-                         sample.v, sample.w))
+            t = step_time(sample.step, plant.dt)
+            odom.append((t, sample.x, sample.y, sample.th, sample.v, sample.w))
+            truth.append((t, plant.x + rng.normal(0.0, 1e-3), plant.y + rng.normal(0.0, 1e-3),
+                          plant.th))
         if k % 5 == 0:
             v, w = levels[k // 100]
             plant.command(v, w)
             cmd.append((step_time(k, plant.dt), v, w))
         plant.advance()
     c, o = np.array(cmd).T, np.array(odom).T
-    return identify_latency(CommandSamples(*c), OdometrySamples(*o))
+    ident = identify_latency(CommandSamples(*c), OdometrySamples(*o))
+    slip = identify_side_slip(OdometrySamples(*o), OdometrySamples(*np.array(truth).T))
+    if slip.significant:
+        ident = replace(ident, side_slip_rates=slip.rates, side_slip=slip.coefficients)
+    return ident, slip
 
 
 @pytest.fixture(scope='module')
-def identified():
-    """Each base identified once (about 2 s each)."""
+def identified_with_slip():
+    """Each base identified once (about 2 s each), with its side slip."""
     return {base: _identify(base) for base in BASES}
+
+
+@pytest.fixture(scope='module')
+def identified(identified_with_slip):
+    """Each base's identification."""
+    return {base: pair[0] for base, pair in identified_with_slip.items()}
 
 
 def test_identification_measures_the_skid_steers_turn_gain(identified):
@@ -342,10 +358,11 @@ EIGHTS = {'turtlebot3': (0.4, 0.3, 25.0), 'jackal': (1.0, 0.2, 25.0),
           'jackal_skid': (1.0, 0.2, 25.0)}
 
 
-def _track(base, ident, compensate=True):
+def _track(base, ident, compensate=True, slip=False, seed=None):
     """The figure eight with our tracker (the shipped gain) on ``base``, its predictor set
-    from the identification, the gains compensated or not: (true-pose RMS after 5 s,
-    odometry-frame RMS (what the tracker sees), final odometry drift), all in m."""
+    from the identification, the gains compensated or not, the side slip (``slip``) too or
+    not, 1 mm / 1 mrad odometry noise with ``seed``: (true-pose RMS after 5 s, odometry-frame
+    RMS (what the tracker sees), final odometry drift), all in m."""
     from nonfragile_tracker.control.simulation.follow import simulate_following
     from nonfragile_tracker.control.simulation.gains import read_gain_file
     from nonfragile_tracker.control.simulation.reference import figure_eight
@@ -359,15 +376,18 @@ def _track(base, ident, compensate=True):
             super().advance()
             odom.append(self.odom_pose)
 
-    pc = PlantConfig(dt=0.01, th0=path.rest_heading)
+    noise = {} if seed is None else dict(odom_noise=(1e-3, 1e-3, 1e-3), noise_seed=seed)
+    pc = PlantConfig(dt=0.01, th0=path.rest_heading, **noise)
     spec = physics.PhysicsPlant(pc, base).spec
+    table = dict(side_slip_rates=ident.side_slip_rates, side_slip=ident.side_slip) if slip \
+        else {}
     tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'),
                        max_linear_speed=spec.max_linear_speed,
                        max_angular_speed=spec.max_angular_speed,
                        predict_latency=ident.latency_s, predict_lag_v=ident.tau_v_s,
                        predict_lag_w=ident.tau_w_s,
                        gain_v=ident.gain_v if compensate else 1.0,
-                       gain_w=ident.gain_w if compensate else 1.0)
+                       gain_w=ident.gain_w if compensate else 1.0, **table)
     run = simulate_following(pc, tc, Trajectory.analytic(path), int(round(seconds / pc.dt)),
                              plant=lambda c: Logged(c, base))
     o = np.array([(pc.x0, pc.y0, pc.th0)] + odom)
@@ -393,14 +413,44 @@ def test_the_skid_steer_tracks_only_with_its_turn_gain_compensated(identified):
     of what the tracker asks and it tracks 17.9 mm RMS off even in its own odometry (true
     pose 27.9 mm); with the identified gain (0.641) it tracks its odometry within 1.0 mm.
     Its true pose stays 15.6 mm off: the body slides sideways in the turns and the encoders
-    do not see it (16 mm of drift at the end, with or without compensation) - the issue's
-    10 mm goal is not met by a tracker that closes its loop on this odometry."""
+    do not see it (16 mm of drift at the end, with or without compensation); the side slip
+    identified from an external pose closes that (the next tests)."""
     ident = identified['jackal_skid']
     without = _track('jackal_skid', ident, compensate=False)
     with_ = _track('jackal_skid', ident)
     assert without[1] > 10e-3 and with_[1] < 3e-3, (without, with_)
     assert with_[0] < 0.7 * without[0] and with_[0] < 20e-3, (without, with_)
     assert with_[2] > 5e-3            # the drift is the skid's, not the tracker's
+
+
+def test_the_side_slip_is_found_on_the_skid_steer_only(identified_with_slip):
+    """From the true pose beside the odometry (1 mm noise) the skid-steer's slide is
+    significant and outward (c > 0 where it turns: measured 0.034 s at 0.25 rad/s, 0.070 s
+    at 0.5 rad/s, the window drift 3.5 -> 2.1 mm); the two-wheel bases' is not (drift
+    1.4 mm, unexplained noise: no table, nothing compensated)."""
+    ident, slip = identified_with_slip['jackal_skid']
+    assert slip.significant and ident.side_slip == slip.coefficients, slip
+    assert slip.rates[:2] == (0.25, 0.5), slip
+    assert 0.03 < slip.coefficients[1] < 0.12 and slip.low[1] > 0.0, slip
+    assert slip.residual_rms < 0.8 * slip.drift_rms
+    for base in ('turtlebot3', 'jackal'):
+        ident, slip = identified_with_slip[base]
+        assert not slip.significant and ident.side_slip == (), slip
+
+
+def test_the_skid_steer_tracks_its_true_pose_within_10_mm_with_its_side_slip(identified):
+    """Issue 39's 10 mm on the skid-steer: with the turn gain and the side slip identified
+    from the true pose compensated, the figure eight's true-pose RMS after 5 s, median of
+    three odometry-noise seeds (the skid's contacts make single runs spread by a few mm), is
+    within 10 mm (measured 2.0-3.6, median 2.2 mm), against 15-18 mm (median 17.6) with the
+    turn gain alone; the tracker then holds its estimate of the true pose, not the odometry
+    (15 mm from it: the slide)."""
+    ident = identified['jackal_skid']
+    gain_only = [_track('jackal_skid', ident, seed=s)[0] for s in (1, 2, 3)]
+    slip = [_track('jackal_skid', ident, slip=True, seed=s)[0] for s in (1, 2, 3)]
+    assert float(np.median(slip)) <= 10e-3, (slip, gain_only)
+    assert float(np.median(gain_only)) > 12e-3, (slip, gain_only)
+    assert float(np.median(slip)) < 0.6 * float(np.median(gain_only)), (slip, gain_only)
 
 
 @pytest.mark.parametrize('base, v0', [('turtlebot3', 0.1), ('jackal', 0.5), ('jackal_skid', 0.5)])

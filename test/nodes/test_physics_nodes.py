@@ -2,7 +2,8 @@
 nonfragile_tracker.control.simulation.physics:turtlebot3``): the lockstep run through the nodes
 equals the in-process simulation of the same base to round-off (MuJoCo is deterministic across
 processes), its odometry is the encoders' and its true pose is on the pose topic; the
-skid-steer with the tracker's ``gain_w`` parameter (its turn gain compensated) likewise."""
+skid-steer with the tracker's ``gain_w`` parameter (its turn gain compensated) likewise, and
+with its side-slip table (``side_slip_rates``, ``side_slip``) too."""
 import math
 import os
 
@@ -26,8 +27,10 @@ MODEL = 'nonfragile_tracker.control.simulation.physics:{}'
 NO_DELAY = {'tau': 0.0, 'A_tau': [0.0] * 16}
 
 
-@pytest.mark.parametrize('base, tracker', [('turtlebot3', {'max_linear_speed': 0.22}),
-                                           ('jackal_skid', {'gain_w': 0.64})])
+@pytest.mark.parametrize('base, tracker', [
+    ('turtlebot3', {'max_linear_speed': 0.22}), ('jackal_skid', {'gain_w': 0.64}),
+    ('jackal_skid', {'gain_w': 0.64, 'side_slip_rates': [0.25, 0.5],
+                     'side_slip': [0.034, 0.07]})])
 def test_a_physics_base_through_the_nodes_equals_the_simulation(tmp_path, base, tracker):
     start = {'initial_pose': [0.5, 0.0, math.pi / 2], 'initial_speed': 0.1}    # on the path
     ov = {'plant': {'ros__parameters': {'duration': DURATION, 'model': MODEL.format(base),

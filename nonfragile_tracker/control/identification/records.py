@@ -23,6 +23,8 @@ import numpy as np
 import yaml
 
 from ...errors import InputError
+from ..simulation.errors import LoopConfigError
+from ..simulation.slip import check_slip_table
 from ..validate import as_finite_float
 from .errors import IdentificationError
 
@@ -164,6 +166,10 @@ class Identification:
     commands_follow_odometry: bool | None = None
     #: seconds excluded from the fit because the motion did not follow the commands
     excluded_s: float = 0.0
+    #: the side-slip table to compensate (rad/s, s; ``identify --truth``, see
+    #: :mod:`.slip`): empty when not identified or not significant
+    side_slip_rates: tuple[float, ...] = ()
+    side_slip: tuple[float, ...] = ()
 
     @property
     def latency_interval_s(self) -> tuple[float, float]:
@@ -254,6 +260,11 @@ def write_identification(path: str | os.PathLike[str], result: Identification, *
                      f'{"true" if result.commands_follow_odometry else "false"}')
     if result.excluded_s > 0:
         lines.append(f'  excluded_s: {_num(result.excluded_s)}')
+    if result.side_slip:
+        lines.append('  side_slip_rates: [' + ', '.join(map(_num, result.side_slip_rates))
+                     + ']   # rad/s')
+        lines.append('  side_slip: [' + ', '.join(map(_num, result.side_slip))
+                     + ']   # s: lateral speed -c(|w|) v w')
     text = '\n'.join(lines) + '\n'
     read_identification_text(text, str(p))            # never write what cannot be read back
     p.write_text(text)
@@ -266,7 +277,7 @@ _FIELDS = ('source', 'latency_s', 'latency_interval_s', 'tau_v_s', 'tau_v_interv
 
 _OPTIONAL = ('command_period_s', 'command_age_s', 'latency_range_s', 'latency_range_from',
              'max_linear_accel', 'max_angular_accel', 'accel_limits_from',
-             'commands_follow_odometry', 'excluded_s')
+             'commands_follow_odometry', 'excluded_s', 'side_slip_rates', 'side_slip')
 
 
 def _yaml_str(text: str) -> str:
@@ -383,6 +394,10 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
     if driven is not None and not isinstance(driven, bool):
         raise IdentificationError(f'{where}: {FILE_KEY}.commands_follow_odometry must be '
                                   f'true or false, got {driven!r}')
+    try:
+        slip = check_slip_table(d.get('side_slip_rates', ()), d.get('side_slip', ()))
+    except LoopConfigError as exc:
+        raise IdentificationError(f'{where}: {FILE_KEY}: {exc}') from None
     return Identification(lat, lat_lo, lat_hi, tv, tv_lo, tv_hi, tw, tw_lo, tw_hi, rate, n,
                           rv, rw, source=d['source'], command_period_s=period,
                           command_age_low_s=age[0], command_age_high_s=age[1],
@@ -394,7 +409,8 @@ def read_identification_text(text: str, where: str = '<text>') -> Identification
                           max_angular_accel=_number(where, 'max_angular_accel',
                                                     d.get('max_angular_accel', 0.0)),
                           commands_follow_odometry=driven,
-                          excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)))
+                          excluded_s=_number(where, 'excluded_s', d.get('excluded_s', 0.0)),
+                          side_slip_rates=slip[0], side_slip=slip[1])
 
 
 def read_identification(path: str | os.PathLike[str]) -> Identification:

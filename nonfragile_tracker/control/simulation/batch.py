@@ -374,6 +374,10 @@ def _check_run(tracker: TrackerConfig, steps: Any, tolerance: Any) -> None:
         raise BatchError('the batch simulation does not vectorize the tracker\'s gain '
                          'compensation (gain_v, gain_w); set them to 1 or use '
                          'simulate_tracking for single runs')
+    if tracker.slides:
+        raise BatchError('the batch simulation does not vectorize the tracker\'s side-slip '
+                         'correction (side_slip_rates, side_slip); leave them empty or use '
+                         'simulate_tracking for single runs')
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise BatchError(f'steps must be an integer >= 1, got {steps!r}')
     if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):

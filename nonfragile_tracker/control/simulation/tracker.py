@@ -28,6 +28,7 @@ from .law import VectorLaw, feedback
 from .plant import ANCHOR
 from .predictor import SUBSTEP, LatencyPredictor, invert_lag
 from .reference import RefSample
+from .slip import SlideReckoner, check_slip_table
 from .timing import MAX_INTERVAL, PeriodEstimator
 
 __all__ = ['TrackerConfig', 'Command', 'Tracker', 'VectorTracker', 'validate_gain']
@@ -132,6 +133,8 @@ class TrackerConfig:
     max_angular_accel: float = 0.0
     gain_v: float = 1.0
     gain_w: float = 1.0
+    side_slip_rates: tuple[float, ...] = ()
+    side_slip: tuple[float, ...] = ()
     #: The tracking law, ``module:factory`` (:mod:`.interfaces`); '' = this module's
     #: :class:`Tracker`.  Whatever runs a controller from this configuration makes this one.
     controller: str = ''
@@ -181,6 +184,9 @@ class TrackerConfig:
                 raise LoopConfigError(f'{name} (the base\'s static {name[-1]} gain, identify\'s '
                                       f'{name}) must be a finite number > 0, got {val!r}')
             object.__setattr__(self, name, float(val))
+        rates, coefficients = check_slip_table(self.side_slip_rates, self.side_slip)
+        object.__setattr__(self, 'side_slip_rates', rates)
+        object.__setattr__(self, 'side_slip', coefficients)
 
         K_eff = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
@@ -199,6 +205,11 @@ class TrackerConfig:
     def compensates(self) -> bool:
         """True if the commands are divided by channel gains (``gain_v`` or ``gain_w`` != 1)."""
         return self.gain_v != 1.0 or self.gain_w != 1.0
+
+    @property
+    def slides(self) -> bool:
+        """True if a side-slip table with a coefficient != 0 is set (it corrects the pose)."""
+        return any(self.side_slip)
 
     @property
     def predicts(self) -> bool:
@@ -301,6 +312,10 @@ class Tracker:
         self._ramp: tuple[float, float, float] | None = None
         #: The time (ns) of the previous step (its interval to this one is what passed).
         self._last_step_ns: int | None = None
+        #: The side slip's dead reckoning (``config.slides``), None without a table.
+        self.slide: SlideReckoner | None = (
+            SlideReckoner(config.side_slip_rates, config.side_slip)
+            if config.slides else None)
 
     def reset(self, v: float | None = None) -> None:
         """Forget the compensator state (re-initialised from the next measured speed).
@@ -321,6 +336,8 @@ class Tracker:
             self._ref_hist.clear()
         if self.predictor is not None:
             self.predictor.reset()
+        if self.slide is not None:
+            self.slide.forget()
 
     def retune(self, predict_latency: float, lag_v: float, lag_w: float) -> None:
         """Assume another command latency and actuator lags from now on (online tuning).
@@ -409,7 +426,8 @@ class Tracker:
         stamp_ns : int, optional
             Measurement time (ns), the same as ``stamp``: the interval's exact clock.
         measured_rate : float, optional
-            Measured yaw rate (rad/s); the law does not use it (the seam passes it on).
+            Measured yaw rate (rad/s); only the side-slip correction uses it (with
+            ``config.slides``: the slide of an interval needs the speed and the yaw rate).
 
         Returns
         -------
@@ -422,6 +440,12 @@ class Tracker:
             passed = h = c.dt
         else:
             h = self.timing.period or 0.0
+        if self.slide is not None:              # the slide the odometry does not see
+            dx, dy = self.slide.update(
+                th, math.nan if measured_speed is None else float(measured_speed),
+                math.nan if measured_rate is None else float(measured_rate), passed)
+            x, y = x + dx, y + dy
+            th = th + self.slide.course_offset(measured_speed)
         vmax = c.max_linear_speed
         if self.v is None:
             self.v = float(measured_speed) if measured_speed is not None else 0.0

@@ -704,6 +704,21 @@ class LatencyPlan:
     #: Their intervals, low and high each (NaN: not identified).
     gain_intervals: tuple[tuple[float, float], tuple[float, float]] = (
         (math.nan, math.nan), (math.nan, math.nan))
+    #: The side-slip table identified (rad/s, s; empty: none), compensated as it is.
+    side_slip_rates: tuple[float, ...] = ()
+    side_slip: tuple[float, ...] = ()
+
+    def slip_parameters(self) -> dict[str, list[float]]:
+        """The tracker's ``side_slip_rates`` / ``side_slip`` (empty without a table).
+
+        Returns
+        -------
+        dict
+        """
+        if not self.side_slip:
+            return {}
+        return {'side_slip_rates': list(self.side_slip_rates),
+                'side_slip': list(self.side_slip)}
 
     def gain_parameters(self) -> dict[str, float]:
         """The tracker's ``gain_v`` / ``gain_w`` for the gains that matter (see the class).
@@ -756,6 +771,7 @@ class LatencyPlan:
                 out[f'identified_gain_{name}'] = float(g)
                 out[f'identified_gain_{name}_interval'] = [float(iv[0]), float(iv[1])]
         out.update({f'compensated_{k}': v for k, v in self.gain_parameters().items()})
+        out.update({f'compensated_{k}': v for k, v in self.slip_parameters().items()})
         if self.latency_range_from:
             out['latency_range_from'] = self.latency_range_from
         return out
@@ -785,6 +801,12 @@ class LatencyPlan:
                      'takes it as exact: the rest of its uncertainty '
                      f'(+-{100 * max(hi - g, g - lo) / g:.2f} %) is decided apart '
                      '(gain_verdict)')
+        if self.side_slip:
+            head += ('\nside slip: ' + ', '.join(
+                f'c({r:g} rad/s) = {c:.4f} s' for r, c in zip(self.side_slip_rates,
+                                                              self.side_slip))
+                     + ' (the tracker adds the slide to the odometry\'s position; not in the '
+                     'certificate: a correction of the measurement)')
         if self.predictor:
             return (head + f'\npredictor: predict_latency = {self.predict_latency:.4f} s (low end '
                     f'of the range: the residual delay stays >= 0), predict_odom_latency = '
@@ -876,4 +898,6 @@ def plan_from_identification(ident: Identification, *, predictor: bool = True,
                        commands_follow_odometry=ident.commands_follow_odometry,
                        gains=(float(ident.gain_v), float(ident.gain_w)),
                        gain_intervals=((float(ident.gain_v_low), float(ident.gain_v_high)),
-                                       (float(ident.gain_w_low), float(ident.gain_w_high))))
+                                       (float(ident.gain_w_low), float(ident.gain_w_high))),
+                       side_slip_rates=tuple(ident.side_slip_rates),
+                       side_slip=tuple(ident.side_slip))
