@@ -16,7 +16,7 @@ from launch.substitutions import LaunchConfiguration
 def generate_launch_description():
     cmd = ['ros2', 'run', 'nonfragile_tracker', 'nonfragile_tracker', 'bringup',
            '--robot', LaunchConfiguration('robot'), '--box', LaunchConfiguration('box'),
-           '--out', LaunchConfiguration('out')]
+           '--out', LaunchConfiguration('out'), '--truth', LaunchConfiguration('truth')]
     accel = LaunchConfiguration('accel_segment')
     return LaunchDescription([
         DeclareLaunchArgument('robot', default_value='',
@@ -28,6 +28,10 @@ def generate_launch_description():
                               choices=['true', 'false'],
                               description='allow steps faster than the base follows (its '
                               'acceleration limits are identified)'),
+        DeclareLaunchArgument('truth', default_value='',
+                              description='an external pose of the base (PoseStamped: motion '
+                              'capture) recorded beside the odometry; its side slip is '
+                              'identified and compensated; empty: none'),
         DeclareLaunchArgument('out', default_value='runs',
                               description='folder of the run folders'),
         ExecuteProcess(cmd=cmd + ['--accel-segment'], output='screen',

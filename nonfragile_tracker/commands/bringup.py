@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import EXIT_INTERRUPTED, EXIT_RUN, InputError
+from ..interface import topics
 from .argtypes import positive_float
 from .common import Subparsers
 
@@ -77,6 +78,8 @@ def cmd_bringup(args: argparse.Namespace) -> int:
         'odom_timeout': float(args.odom_timeout if args.odom_timeout is not None
                               else robot.input_timeout),
         'gains': str(gains.resolve()), 'problem': str(problem.resolve()),
+        'truth_topic': args.truth if args.truth is not None else
+        (topics.POSE if args.simulate else ''),
         'robot': json.dumps(dataclasses.asdict(robot))}}}
     if args.simulate:
         plant = runner.scenario_parameters(Path(args.simulate), None).get('plant', {}).get(
@@ -195,6 +198,11 @@ def register(subparsers: Subparsers) -> None:
     p.add_argument('--simulate', metavar='SCENARIO',
                    help="start this package's plant in real time with the scenario's plant "
                    'parameters (no robot needed), e.g. config/latency_scenario.yaml')
+    p.add_argument('--truth', metavar='TOPIC', help='an external pose of the base '
+                   '(geometry_msgs/PoseStamped: motion capture) recorded beside the odometry: '
+                   'the side slip the odometry does not see is identified from it and '
+                   'compensated (default with --simulate: the plant\'s true pose, pose; '
+                   'otherwise none; "" = none)')
     p.add_argument('--out', default='runs', help='directory for run directories (default runs/)')
     p.add_argument('--name', help='run directory name (default run_<date>_<time>)')
     p.set_defaults(func=cmd_bringup)

@@ -76,6 +76,9 @@ PARAMS = [
     Param('robot', '{}', 'the robot settings as JSON (the keys of '
           'nonfragile_tracker.interface.robot.RobotConfig)',
           read_only=True),
+    Param('truth_topic', '', 'an external pose of the base (geometry_msgs/PoseStamped: motion '
+          'capture, a simulator\'s true pose) recorded beside the odometry: the side slip the '
+          'odometry does not see is identified from it; empty = none', read_only=True),
     Param('dry_plan_only', False, 'plan, print the extent and end without moving (tests)',
           read_only=True),
 ]
@@ -97,6 +100,7 @@ class BringupConfig:
     problem: Path
     robot: RobotConfig
     dry_plan_only: bool
+    truth_topic: str = ''
 
 
 def bringup_config(values: dict[str, Any]) -> BringupConfig:
@@ -132,7 +136,8 @@ def bringup_config(values: dict[str, Any]) -> BringupConfig:
                          trial_duration=values['trial_duration'],
                          odom_timeout=values['odom_timeout'], gains=Path(values['gains']),
                          problem=Path(values['problem']), robot=robot,
-                         dry_plan_only=values['dry_plan_only'])
+                         dry_plan_only=values['dry_plan_only'],
+                         truth_topic=str(values['truth_topic']))
 
 
 def _say(text: str) -> None:
@@ -152,13 +157,17 @@ def _tracker_values(path: Path) -> dict[str, Any]:
 class _Recording:
     """One bag of a driven phase: odometry, commands and the reference samples."""
 
-    def __init__(self, path: Path, cmd_topic: str, cmd_type: str, odom_topic: str):
+    def __init__(self, path: Path, cmd_topic: str, cmd_type: str, odom_topic: str,
+                 truth_topic: str = ''):
         self.cmd_topic, self.odom_topic = cmd_topic, odom_topic
-        self.writer = BagWriter(path, connections={
+        connections = {
             odom_topic: topics.TYPES[topics.ODOM], cmd_topic: cmd_type,
             topics.REF_POSE: topics.TYPES[topics.REF_POSE],
             topics.REF_TWIST: topics.TYPES[topics.REF_TWIST],
-            topics.REF_ACCEL: topics.TYPES[topics.REF_ACCEL]})
+            topics.REF_ACCEL: topics.TYPES[topics.REF_ACCEL]}
+        if truth_topic:
+            connections[truth_topic] = topics.TYPES[topics.POSE]
+        self.writer = BagWriter(path, connections=connections)
         self.path = path
 
     def write(self, topic: str, msg: Any) -> None:
@@ -192,6 +201,8 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.pub = self.create_publisher(TwistStamped if self.stamped else Twist,
                                          robot.cmd_vel_topic, DATA_QOS)
         self.create_subscription(Odometry, robot.odom_topic, self._on_odom, DATA_QOS)
+        if cfg.truth_topic:
+            self.create_subscription(PoseStamped, cfg.truth_topic, self._on_truth, DATA_QOS)
         self.phase = 'wait'
         self.phase_start = time.monotonic()
         self.started_wall = time.monotonic()
@@ -318,11 +329,19 @@ class BringupNode(AdapterNode[BringupConfig]):
             if ref is not None and self.recording is not None:
                 self._record_reference(stamp, ref)
             if self.phase == 'trial' and ref is not None and t > 0:
+                slide = getattr(self.follower.tracker, 'slide', None)
+                if slide is not None:           # the tracker's estimate of the true pose
+                    x, y = x + slide.offset[0], y + slide.offset[1]
                 along, cross, _ = path_errors(x, y, th, ref)
                 self.trial_err.append((t, along, cross))
             self._command(cmd.v, cmd.w)
             if self.follower.finished:
                 self._end_drive()
+
+    def _on_truth(self, msg: PoseStamped) -> None:
+        """Record the external pose (the side slip is identified from it, not driven by)."""
+        if not self.stopped and self.recording is not None:
+            self.recording.write(self.config.truth_topic, msg)
 
     def _record_reference(self, stamp: int, ref: Any) -> None:
         assert self.recording is not None
@@ -380,7 +399,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.excitation_figs = {'planned_' + k: v for k, v in
                                 ext.__dict__.items()}
         self.recording = _Recording(cfg.run_dir / 'bag', robot.cmd_vel_topic, self.cmd_type,
-                                    robot.odom_topic)
+                                    robot.odom_topic, cfg.truth_topic)
         tracker = self._tracker(_tracker_values(cfg.gains))
         self.follower = Follower(tracker, self.plan.trajectory(self.start), max_start_distance=0.0)
         self.origin_ns = self.stamps[-1] + int(0.2e9)
@@ -402,7 +421,8 @@ class BringupNode(AdapterNode[BringupConfig]):
                 'settings': {'robot': self.config.robot.__dict__,
                              'problem': str(self.config.problem),
                              'odom_period': self.odom_period,
-                             'accel_segment': self.config.accel_segment},
+                             'accel_segment': self.config.accel_segment,
+                             'truth_topic': self.config.truth_topic},
                 'excitation': self.excitation_figs})
         elif self.phase == 'trial':
             self._trial_figures()
@@ -464,6 +484,8 @@ class BringupNode(AdapterNode[BringupConfig]):
         _say(f'identified: latency {o["latency_s"]:.4f} s, lags {o["tau_v_s"]:.4f} / '
              f'{o["tau_w_s"]:.4f} s, accel limits {o["max_linear_accel"]:.3g} m/s^2 / '
              f'{o["max_angular_accel"]:.3g} rad/s^2 (0 = not seen)')
+        if self.config.truth_topic:
+            _say(str(o.get('side_slip', '')))
         _say(f'designed: ||K|| = {o["gain_norm"]:.3f}, certified residual up to '
              f'{o["certified_h_max"]:.4f} s with the lag {o["lag"]:.4f} s; wrote '
              f'{o["gain_file"]}')
@@ -483,7 +505,7 @@ class BringupNode(AdapterNode[BringupConfig]):
         self.trial_plan = plan_trial(self.plan, duration=cfg.trial_duration,
                                      max_linear_accel=cfg.robot.max_linear_accel)
         self.recording = _Recording(cfg.run_dir / 'trial_bag', cfg.robot.cmd_vel_topic,
-                                    self.cmd_type, cfg.robot.odom_topic)
+                                    self.cmd_type, cfg.robot.odom_topic, cfg.truth_topic)
         self.follower = Follower(self._tracker(values), self.trial_plan.trajectory(self.start),
                                  max_start_distance=0.0)
         self.origin_ns = self.last_stamp + int(0.3e9)

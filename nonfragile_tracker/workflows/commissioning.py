@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from ..control.synthesis.latency_design import LatencyDesign, LatencyPlan
 
 __all__ = ['BringupRefusal', 'bringup_limits', 'identify_recording', 'identify_samples',
+           'side_slip_from_truth',
            'design_gain',
            'write_robot_file', 'write_report', 'analyse', 'report', 'run_child',
            'IDENTIFICATION_FILE', 'GAIN_FILE', 'ROBOT_FILE', 'REPORT_FILE',
@@ -179,6 +180,43 @@ class DesignOutcome:
     summary: str
 
 
+def side_slip_from_truth(bag: str | os.PathLike[str], ident: Identification, truth_topic: str,
+                         *, odom_topic: str = 'odom') -> tuple[Identification, str]:
+    """The identification with the side-slip table from an external pose, when it matters.
+
+    Parameters
+    ----------
+    bag : path-like
+        The recording (odometry and ``truth_topic``).
+    ident : Identification
+        What :func:`identify_recording` found.
+    truth_topic : str
+        The external pose's topic; '' = none (``ident`` unchanged).
+    odom_topic : str
+        The odometry's topic.
+
+    Returns
+    -------
+    (Identification, str)
+        ``ident`` with ``side_slip_rates`` / ``side_slip`` set when the table is significant
+        (:class:`~nonfragile_tracker.control.identification.slip.SideSlip`), and one line
+        saying what was found (or why nothing was: no topic, too little turning).
+    """
+    if not truth_topic:
+        return ident, 'side slip: no external pose (truth_topic): not identified'
+    from ..bag.motion import read_motion, read_poses
+    from ..control.identification.slip import identify_side_slip
+    try:
+        data = read_motion(bag, odom_topic=odom_topic)
+        slip = identify_side_slip(data.odometry, read_poses(bag, truth_topic))
+    except InputError as exc:
+        return ident, f'side slip from {truth_topic}: not identified ({exc})'
+    line = f'side slip from {truth_topic}: {slip.summary()}'
+    if not slip.significant:
+        return ident, line
+    return replace(ident, side_slip_rates=slip.rates, side_slip=slip.coefficients), line
+
+
 def design_gain(ident: Identification, problem: str | os.PathLike[str],
                 gain_file: str | os.PathLike[str], *, extra: Mapping[str, Any] | None = None
                 ) -> DesignOutcome:
@@ -227,7 +265,7 @@ def design_gain(ident: Identification, problem: str | os.PathLike[str],
             'problem file') from None
     meta = {**res.metadata(), **plan.metadata()}
     params: dict[str, Any] = {**plan.tracker_parameters(), **plan.actuator_parameters(),
-                              **plan.gain_parameters()}
+                              **plan.gain_parameters(), **plan.slip_parameters()}
     verdict = gain_verdict(plan, prob, res.K)
     if verdict is not None:
         meta.update(verdict[1])
@@ -372,6 +410,8 @@ def analyse(bag: str | os.PathLike[str], run_dir: str | os.PathLike[str],
                                    accel_segment=bool(settings['accel_segment']))
     except InputError as exc:
         return {'ok': False, 'phase': 'identify', 'refusal': str(exc)}
+    ident, slip_line = side_slip_from_truth(bag, ident, str(settings.get('truth_topic') or ''),
+                                            odom_topic=robot.odom_topic)
     write_identification(run / IDENTIFICATION_FILE, ident, overwrite=True)
     ident_fig = plot_identification(bag, ident, run / 'identification.png',
                                      cmd_topic=robot.cmd_vel_topic, odom_topic=robot.odom_topic)
@@ -403,7 +443,9 @@ def analyse(bag: str | os.PathLike[str], run_dir: str | os.PathLike[str],
             'predict_latency': out.plan.predict_latency, 'summary': out.summary,
             'identification_file': str(run / IDENTIFICATION_FILE),
             'gain_file': str(out.gain_file), 'robot_file': str(run / ROBOT_FILE),
-            'identification_png': str(ident_fig)}
+            'identification_png': str(ident_fig),
+            'side_slip': slip_line, 'side_slip_rates': list(ident.side_slip_rates),
+            'side_slip_coefficients': list(ident.side_slip)}
 
 
 def run_child(task_file: str) -> int:
@@ -500,6 +542,7 @@ def write_report(run_dir: str | os.PathLike[str], outcome: Mapping[str, Any],
                   f'- acceleration limits {_limit(outcome["max_linear_accel"], "m/s^2")}, '
                   f'{_limit(outcome["max_angular_accel"], "rad/s^2")}',
                   *[f'- note: {n}' for n in outcome.get('notes', [])],
+                  *([f'- {outcome["side_slip"]}'] if outcome.get('side_slip') else []),
                   '', '![identified responses](identification.png)', '',
                   '## Design (the certified interval)', '', '```text', outcome['summary'],
                   '```', '']
