@@ -16,9 +16,12 @@ every controller's is.  Trajectories: the figure eight of ``physics_bases.EIGHTS
 it) and the line-arc lap ``config/trajectories/line_arc_lap.csv`` re-timed within the
 base's limits (``physics_bases.ROBOT_LIMITS``' speeds - the TurtleBot3 0.15 m/s, where its
 outer wheel stays below the motors' no-load speed in the lap's 0.4 m arcs - and the base
-file's accelerations, 80 % as the tracker node does).  Controllers: ours as shipped (shipped gain, no predictor), ours with the
-shipped gain + ``monitor_tune``, ours with the shipped gain + the predictor and gain
-compensation ``physics_bases.identify`` finds on the base (:data:`OURS_IDENTIFIED`), WPILib LTV and RAMSETE, Nav2 RPP and MPPI (Jazzy, stock;
+file's accelerations, 80 % as the tracker node does).  Controllers: ours as shipped (the shipped gain, ``monitor_tune`` on: the
+tracker's default), the same with ``monitor_tune`` off, ours with the shipped gain + the predictor and gain
+compensation ``physics_bases.identify`` finds on the base (:data:`OURS_IDENTIFIED`), ours
+after the bring-up's chain in process (:data:`OURS_BRINGUP`: the same identification with
+the acceleration limits and the side slip from the true pose, then ``latency-design``:
+the designed gain with everything the gain file sets), WPILib LTV and RAMSETE, Nav2 RPP and MPPI (Jazzy, stock;
 MPPI with the first seed only: 30-40 s of numpy a run).  Scored by
 :func:`peers.adapter.score` on the TRUE pose (after 10 s while the trajectory is active),
 and beside it the same time-indexed RMS of the odometry's pose (what the controller sees;
@@ -53,8 +56,16 @@ TRAJECTORIES = ('figure eight', 'line-arc lap')
 #: random steps through its odometry, at the run's latency): the predictor's latency and
 #: lags and the gain compensation - issue 39's bring-up chain short of a new gain design.
 OURS_IDENTIFIED = 'ours, shipped gain + identified predictor'
-CONTROLLERS = ('ours, shipped default', 'ours, shipped gain + monitor_tune', OURS_IDENTIFIED,
-               'WPILib LTV',
+#: Ours after the bring-up's chain in process: ``physics_bases.identify`` (latency, lags,
+#: acceleration limits, channel gains, and the side slip from the true pose) then
+#: ``latency-design`` from it (``commissioning.design_gain``, the bring-up's own step): the
+#: designed gain with the gain file's tracker settings.
+OURS_BRINGUP = 'ours after bring-up (identified, designed)'
+#: Ours as shipped (the tracker's defaults: ``monitor_tune`` on) and with the tuning off:
+#: the rows of benchmarks/peers.py.
+SHIPPED, UNTUNED = peers_bench.OURS_DEFAULT, peers_bench.OURS_UNTUNED
+CONTROLLERS = (SHIPPED, UNTUNED, OURS_IDENTIFIED,
+               OURS_BRINGUP, 'WPILib LTV',
                'WPILib RAMSETE', 'Nav2 RPP (Jazzy)', 'Nav2 MPPI (Jazzy)')
 HEAVY = ('Nav2 MPPI (Jazzy)',)
 PATH_FOLLOWERS = ('Nav2 RPP (Jazzy)', 'Nav2 MPPI (Jazzy)')
@@ -107,6 +118,25 @@ def _identified(base: str, lat: float) -> dict:
     return _IDENT[(base, lat)]
 
 
+_DESIGNS: dict = {}
+
+
+def _designed(base: str, lat: float) -> dict:
+    """The gain file's tracker section of the bring-up's chain on ``base`` at ``lat``."""
+    if (base, lat) not in _DESIGNS:
+        import tempfile
+        import yaml
+        import physics_bases
+        from nonfragile_tracker.workflows.commissioning import design_gain
+        ident = physics_bases.identify(base, dict(dt=0.01, cmd_latency=lat, odom_rate=50.0))
+        with tempfile.TemporaryDirectory() as d:
+            out = design_gain(ident, ROOT / 'config' / 'paper_problem.yaml',
+                              Path(d) / 'gains.yaml')
+            data = yaml.safe_load(out.gain_file.read_text())
+        _DESIGNS[(base, lat)] = dict(data['/**/tracker']['ros__parameters'])
+    return _DESIGNS[(base, lat)]
+
+
 def one(job: tuple) -> dict:
     """One run: ``(controller, base, trajectory, latency, seed)``."""
     label, base, tname, lat, seed = job
@@ -126,7 +156,13 @@ def one(job: tuple) -> dict:
         base_kw.update(predict_latency=ident['latency_s'], predict_lag_v=ident['tau_v_s'],
                        predict_lag_w=ident['tau_w_s'], gain_v=ident['gain_v'],
                        gain_w=ident['gain_w'])
-    tc = TrackerConfig(K=read_gain_file(ROOT / 'config' / 'tracker_gains.yaml'), **base_kw)
+    if label == OURS_BRINGUP:
+        from nonfragile_tracker.interface.msgconv import tracker_config_from
+        values = _designed(base, lat)
+        K = np.reshape(values['K'], values['K_shape'])
+        tc = tracker_config_from({**values, **base_kw}, K)
+    else:
+        tc = TrackerConfig(K=read_gain_file(ROOT / 'config' / 'tracker_gains.yaml'), **base_kw)
     odom: list[tuple[float, float]] = []
 
     class Logged(physics.PhysicsPlant):
@@ -136,7 +172,8 @@ def one(job: tuple) -> dict:
 
     peers, _ = peers_bench.discover_peers()
     t0 = time.perf_counter()
-    factory = adapter.OURS if label == OURS_IDENTIFIED else peers_bench._factory(label, peers)
+    factory = adapter.OURS if label in (OURS_IDENTIFIED, OURS_BRINGUP) else \
+        peers_bench._factory(label, peers)
     pr = adapter.run(factory, pc, tc, traj, duration,
                      plant=lambda c: Logged(c, base))
     wall = time.perf_counter() - t0
@@ -217,6 +254,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f'({len(results)} runs from {args.from_json})')
         return 0
     t0 = time.perf_counter()
+    if OURS_BRINGUP in ctrls:                 # designed once here, inherited by the workers
+        for b in bases:
+            for lat in lats:
+                print(f'bring-up chain: {b} at {lat * 1e3:g} ms', file=sys.stderr, flush=True)
+                _designed(b, lat)
     print(f'{len(todo)} runs', file=sys.stderr, flush=True)
     jobs = args.jobs or os.cpu_count() or 1
     if jobs > 1:

@@ -12,8 +12,12 @@ Per base (TurtleBot3 Burger-like, Jackal-like two-wheel, Jackal-like skid-steer)
 * **identified** - ``identify_latency`` on 20 s of random steps (20 Hz commands) through the
   base's own odometry: latency, lags, gains, acceleration limits (truth: the firmware's
   ramps; 0 = not seen to bind);
+* **side slip** - ``identify_side_slip`` on the same drive against the true pose (1 mm
+  noise, as a motion capture gives it): the table at 0.25 and 0.5 rad/s, the lateral drift
+  it explains, compensated when significant;
 * **tracking** - the figure eight with the shipped gain and the predictor set from the
-  identification (gains compensated; the skid-steer also without): true-pose RMS after 5 s,
+  identification (gains and side slip compensated; the skid-steer also with the turn gain
+  only and with neither): true-pose RMS after 5 s,
   the RMS in the odometry frame (what the tracker sees) and the odometry's final drift.
 
 Two conditions: ``ideal`` (no command latency, odometry every 10 ms step) and ``late`` (50 ms
@@ -26,7 +30,8 @@ it to 0.15 m/s, where its outer wheel stays below the motors' no-load speed in t
 0.4 m arcs), then with the gain file it wrote the figure eight (``run --scenario``, lockstep,
 40 s) and the line-arc lap (``run --trajectory config/trajectories/line_arc_lap.csv``), each
 recorded with the true pose (``--record-all``): the true-pose RMS after 10 s (the eight) or
-2 s (the lap), the RMS in the odometry frame (``bag report``) and the odometry's drift.
+2 s (the lap), the same of the odometry's pose (what the tracker sees: its estimate less the
+side slip it compensates) and the odometry's drift.
 
 Usage::
 
@@ -53,6 +58,7 @@ if str(ROOT) not in sys.path:
 
 from nonfragile_tracker.control.identification.identify import (  # noqa: E402
     CommandSamples, OdometrySamples, identify_latency)
+from nonfragile_tracker.control.identification.slip import identify_side_slip  # noqa: E402
 from nonfragile_tracker.control.simulation import physics  # noqa: E402
 from nonfragile_tracker.control.simulation.follow import simulate_following  # noqa: E402
 from nonfragile_tracker.control.simulation.gains import read_gain_file  # noqa: E402
@@ -102,25 +108,41 @@ def step_response(base: str, channel: str, latency: float) -> tuple[float, float
 
 
 def identify(base: str, condition: dict) -> object:
-    """``identify_latency`` on 20 s of random steps through the base's odometry."""
+    """``identify_latency`` on 20 s of random steps through the base's odometry, and the side
+    slip from the true pose beside it (1 mm noise): the table when it is significant."""
+    from dataclasses import replace
     plant = physics.PhysicsPlant(PlantConfig(**condition), base)
     rng = np.random.default_rng(3)
     vmax = min(plant.spec.max_linear_speed, 1.0)
     levels = [(rng.uniform(0.1, 0.5) * vmax, rng.uniform(-1.0, 1.0)) for _ in range(20)]
-    cmd, odom = [], []
+    cmd, odom, truth = [], [], []
     for k in range(2000):
         s = plant.odometry()
         if s is not None:
-            odom.append((step_time(s.step, plant.dt), s.x, s.y, s.th, s.v, s.w))
+            t = step_time(s.step, plant.dt)
+            odom.append((t, s.x, s.y, s.th, s.v, s.w))
+            truth.append((t, plant.x + rng.normal(0.0, 1e-3), plant.y + rng.normal(0.0, 1e-3),
+                          plant.th))
         if k % 5 == 0:
             v, w = levels[k // 100]
             plant.command(v, w)
             cmd.append((step_time(k, plant.dt), v, w))
         plant.advance()
-    return identify_latency(CommandSamples(*np.array(cmd).T), OdometrySamples(*np.array(odom).T))
+    o = OdometrySamples(*np.array(odom).T)
+    ident = identify_latency(CommandSamples(*np.array(cmd).T), o)
+    slip = identify_side_slip(o, OdometrySamples(*np.array(truth).T))
+    SLIPS[(base, str(condition))] = slip
+    if slip.significant:
+        ident = replace(ident, side_slip_rates=slip.rates, side_slip=slip.coefficients)
+    return ident
 
 
-def track(base: str, condition: dict, ident: object, compensate: bool = True) -> dict:
+#: The side slip of each identification, by (base, condition).
+SLIPS: dict = {}
+
+
+def track(base: str, condition: dict, ident: object, compensate: bool = True,
+          slip: bool = True) -> dict:
     """The figure eight on ``base``: RMS figures (m) and the loop's sim speed."""
     radius, rate, seconds = EIGHTS[base]
     path = figure_eight(radius=radius, rate=rate)
@@ -138,7 +160,9 @@ def track(base: str, condition: dict, ident: object, compensate: bool = True) ->
                        predict_latency=ident.latency_s, predict_lag_v=ident.tau_v_s,
                        predict_lag_w=ident.tau_w_s,
                        gain_v=ident.gain_v if compensate else 1.0,
-                       gain_w=ident.gain_w if compensate else 1.0)
+                       gain_w=ident.gain_w if compensate else 1.0,
+                       side_slip_rates=ident.side_slip_rates if slip else (),
+                       side_slip=ident.side_slip if slip else ())
     t0 = time.perf_counter()
     run = simulate_following(pc, tc, Trajectory.analytic(path), int(round(seconds / pc.dt)),
                              plant=lambda c: Logged(c, base))
@@ -179,11 +203,25 @@ def measure(repeat: int) -> dict:
             c['track'] = {k: runs[0][k] for k in runs[0] if k != 'speed'}
             c['track']['speed'] = [r['speed'] for r in runs]
             assert all(r['true_rms'] == runs[0]['true_rms'] for r in runs), 'not deterministic'
+            sl = SLIPS[(base, str(cond))]
+            c['side_slip'] = {'rates': sl.rates, 'c': sl.coefficients, 'low': sl.low,
+                              'high': sl.high, 'drift_rms': sl.drift_rms,
+                              'residual_rms': sl.residual_rms, 'significant': sl.significant}
             if base == 'jackal_skid':
-                c['track_uncompensated'] = track(base, cond, ident, compensate=False)
+                c['track_uncompensated'] = track(base, cond, ident, compensate=False,
+                                                 slip=False)
+                c['track_gain_only'] = track(base, cond, ident, slip=False)
             row[name] = c
         out[base] = row
     return out
+
+
+def _slip_cell(sl: dict) -> str:
+    parts = [f"{sl['c'][j]:.3f} ({sl['low'][j]:.3f}-{sl['high'][j]:.3f})"
+             for j in range(min(2, len(sl['c'])))]
+    return (' / '.join(parts) + f"; {1e3 * sl['drift_rms']:.2f} -> "
+            f"{1e3 * sl['residual_rms']:.2f}" + ('' if sl['significant'] else
+                                                 ' (not significant: not compensated)'))
 
 
 def _med(xs: list[float]) -> str:
@@ -220,9 +258,12 @@ def table(res: dict, condition: str) -> str:
     row('identified accel limits (truth)', lambda r: '%.2f / %.2f (%.1f / %.1f)' % (
         r[condition]['identified']['max_linear_accel'],
         r[condition]['identified']['max_angular_accel'], *r['limits']))
+    row('identified side slip c (s) at 0.25 / 0.5 rad/s (95 % interval); window drift -> '
+        'residual (mm)', lambda r: _slip_cell(r[condition]['side_slip']))
     row('figure eight: true-pose RMS after 5 s (mm)', lambda r: (
         f"{1e3 * r[condition]['track']['true_rms']:.2f}" + (
-            f" (uncompensated {1e3 * r[condition]['track_uncompensated']['true_rms']:.2f})"
+            f" (turn gain only {1e3 * r[condition]['track_gain_only']['true_rms']:.2f}, "
+            f"uncompensated {1e3 * r[condition]['track_uncompensated']['true_rms']:.2f})"
             if 'track_uncompensated' in r[condition] else '')))
     row('figure eight: true-pose max after 5 s (mm)',
         lambda r: f"{1e3 * r[condition]['track']['true_max']:.2f}")
@@ -266,17 +307,11 @@ def true_pose_figures(bag: Path, after: float) -> dict:
     t = (np.array(stamps, dtype=float) - t0) * 1e-9
     e = np.array([math.dist(truth[ns], ref[ns]) for ns in stamps])
     d = np.array([math.dist(truth[ns], odom[ns]) for ns in stamps])
+    o = np.array([math.dist(odom[ns], ref[ns]) for ns in stamps])
     m = t >= after
     return {'true_rms': math.sqrt(float(np.mean(e[m] ** 2))), 'true_max': float(e[m].max()),
-            'drift_final': float(d[-1]), 'drift_max': float(d.max())}
-
-
-def _figure(out: str, label: str) -> float:
-    """A figure (m) of ``run``'s printed report: the first line starting with ``label``."""
-    for line in out.splitlines():
-        if line.startswith(label):
-            return float(line.split()[-2] if line.split()[-1] == 'm' else line.split()[-1])
-    raise RuntimeError(f'no {label!r} in the report:\n{out[-2000:]}')
+            'drift_final': float(d[-1]), 'drift_max': float(d.max()),
+            'odom_rms': math.sqrt(float(np.mean(o[m] ** 2)))}
 
 
 def nodes(out_dir: Path) -> dict:
@@ -298,16 +333,17 @@ def nodes(out_dir: Path) -> dict:
         row: dict = {'bringup': [ln for ln in text.splitlines()
                                  if re.match(r'\[bringup\] (identified|designed|trial):', ln)]}
         gains = out_dir / f'{base}_bringup' / 'gains.yaml'
-        row['gain_w'] = 'gain_w:' in gains.read_text().split('gain_design:')[0]
+        head = gains.read_text().split('gain_design:')[0]
+        row['gain_w'] = 'gain_w:' in head
+        row['side_slip'] = 'side_slip:' in head
+        row['bringup'] += [ln for ln in text.splitlines() if ln.startswith('[bringup] side slip')]
         for name, extra, after in (('eight', [], 10.0), ('lap', [
                 '--trajectory', 'config/trajectories/line_arc_lap.csv', '--duration', '60'],
                 2.0)):
             log(f'{base}: the {name} with the files the bring-up wrote')
-            text = cli('run', '--scenario', scenario, '--gains', str(gains), '--record-all',
+            cli('run', '--scenario', scenario, '--gains', str(gains), '--record-all',
                        '--out', str(out_dir), '--name', f'{base}_{name}', *extra)
-            fig = true_pose_figures(out_dir / f'{base}_{name}' / 'bag', after)
-            fig['odom_rms'] = _figure(text, 'RMS error after settling')
-            row[name] = fig
+            row[name] = true_pose_figures(out_dir / f'{base}_{name}' / 'bag', after)
         res[base] = row
     return res
 
@@ -323,15 +359,17 @@ def nodes_table(res: dict) -> str:
             ('bring-up: trial', lambda r: next((ln.split(': ', 1)[1].split(';')[0]
                                                 for ln in r['bringup'] if 'trial' in ln), '-')),
             ('gain_w compensated', lambda r: 'yes' if r['gain_w'] else 'no'),
+            ('side slip compensated (identified from the true pose)',
+             lambda r: 'yes' if r.get('side_slip') else 'no'),
             ('eight: true-pose RMS / max after 10 s (mm)', lambda r: '%.2f / %.2f' % (
                 1e3 * r['eight']['true_rms'], 1e3 * r['eight']['true_max'])),
-            ('eight: odometry-frame RMS after settling (mm)',
+            ('eight: odometry-frame RMS after 10 s (mm)',
              lambda r: f"{1e3 * r['eight']['odom_rms']:.2f}"),
             ('eight: odometry drift final / max (mm)', lambda r: '%.1f / %.1f' % (
                 1e3 * r['eight']['drift_final'], 1e3 * r['eight']['drift_max'])),
             ('lap: true-pose RMS / max after 2 s (mm)', lambda r: '%.2f / %.2f' % (
                 1e3 * r['lap']['true_rms'], 1e3 * r['lap']['true_max'])),
-            ('lap: odometry-frame RMS after settling (mm)',
+            ('lap: odometry-frame RMS after 2 s (mm)',
              lambda r: f"{1e3 * r['lap']['odom_rms']:.2f}"),
             ('lap: odometry drift final / max (mm)', lambda r: '%.1f / %.1f' % (
                 1e3 * r['lap']['drift_final'], 1e3 * r['lap']['drift_max']))):
