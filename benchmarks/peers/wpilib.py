@@ -63,6 +63,7 @@ The output is the wpimath ``ChassisSpeeds`` as ``Command(v=vx, w=omega)``.
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 from functools import lru_cache
 from typing import Any
@@ -142,6 +143,16 @@ class _WpilibPeer:
 
     def reset(self, v: float | None = None) -> None:
         """Stateless laws: nothing to forget (``v`` unused)."""
+
+    def __deepcopy__(self, memo: dict) -> '_WpilibPeer':
+        """A copy sharing the wpimath object (which cannot be copied; the laws keep no state
+        in it but the last pose error, which only ``AtReference`` reads): the bag replay and
+        the input rules copy a controller to try a step."""
+        new = copy.copy(self)
+        for key, val in self.__dict__.items():
+            if not key.startswith(('_ltv', '_ramsete')):
+                setattr(new, key, copy.deepcopy(val, memo))
+        return new
 
     def _calculate(self, current: Pose2d, ref: Pose2d, v_ref: float, w_ref: float
                    ) -> tuple[float, float]:

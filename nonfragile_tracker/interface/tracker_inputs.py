@@ -26,6 +26,7 @@ from ..control.simulation.interfaces import Controller, ControllerFactory, make_
 from ..control.identification.monitor import MonitorSettings
 from ..control.identification.tuning import Tuned, TuningSettings, parse_script
 from ..control.simulation.tracker import Command, Tracker, TrackerConfig
+from ..control.simulation.wrappers import Clamped
 from ..control.simulation.reference import RefSample
 from ..control.simulation.replan import (OVERRIDE_TIME, SEARCH_DISTANCE, Nearest, OverrideWatch,
                                         reanchor, splice_path)
@@ -300,6 +301,9 @@ class TrackerInputs:
         self.tracker: Controller = make_controller(config, controller)
         if self.rules.tune is not None and isinstance(self.tracker, Tracker):
             self.tracker = Tuned(self.tracker, *self.rules.tune)
+        elif not isinstance(self.tracker, Tracker):     # ours clamps itself; any other law
+            self.tracker = Clamped(self.tracker, config.max_linear_speed,
+                                   config.max_angular_speed)
         self.on_reject = on_reject
         self.on_jump = on_jump
         self.on_splice = on_splice

@@ -49,6 +49,7 @@ from ..control.simulation.reference import RefSample
 from ..control.simulation.replan import Nearest
 from ..control.simulation.timing import period_disagreement
 from ..control.simulation.trajectory import Trajectory, TrajectoryError
+from ..control.simulation.wrappers import clamp_command
 from ..interface.msgconv import MultiDOFArrays, multidof_from_cdr, tracker_config
 from ..interface.robot import check_topic_name
 from ..interface.tracker_inputs import (INPUT_DEFAULTS, MONITOR_DEFAULTS, InputRules, Rejection,
@@ -1153,11 +1154,9 @@ class TrackerNode(LifecycleNodeMixin, AdapterNode[TrackerSettings]):
         lockstep, the node clock's now in real time (what diff_drive_controller checks
         against its cmd_vel_timeout) - and the body frame.
         """
-        c = self.config.tracker
-        if not (math.isfinite(v) and math.isfinite(w)):     # never reached by the law
-            v = w = 0.0
-        self._cmd.linear.x = max(-c.max_linear_speed, min(c.max_linear_speed, v))
-        self._cmd.angular.z = max(-c.max_angular_speed, min(c.max_angular_speed, w))
+        c = self.config.tracker          # the input rules' law is within them already
+        self._cmd.linear.x, self._cmd.angular.z, _ = clamp_command(
+            v, w, c.max_linear_speed, c.max_angular_speed)
         if self._cmd_msg is not self._cmd:
             if stamp is None or self.mode == 'realtime':
                 stamp = self.get_clock().now().nanoseconds

@@ -372,3 +372,26 @@ def test_the_driver_picks_up_any_peer_module_with_the_factory_shape(tmp_path, mo
     assert mod.SEEN == [pc]
     for name in ('peers.zz_fake', 'peers.zz_broken'):
         sys.modules.pop(name, None)
+
+
+def test_the_input_rules_clamp_a_peer_as_the_node_does_and_a_peer_copies():
+    """The node, its bag replay and an in-process run send a peer's command through the
+    same input rules: they hold it within the speed limits (the LTV asks 12 m/s 0.9 m
+    behind its reference; before, only the node's publisher clamped it, so a replay of a
+    peer's run differed by 11 m/s), and they copy the law to try a step (the LTV holds a
+    wpimath object that cannot be copied: the replay stopped with a TypeError)."""
+    import copy
+    from nonfragile_tracker.control.simulation.wrappers import Clamped, clamp_command
+    from nonfragile_tracker.interface.tracker_inputs import TrackerInputs
+    tc = TrackerConfig(K=read_gain_file(ROOT / 'config' / 'tracker_gains.yaml'),
+                       max_linear_speed=1.0, max_angular_speed=2.0)
+    inputs = TrackerInputs(tc, controller='peers.wpilib:ltv')
+    assert isinstance(inputs.tracker, Clamped)
+    ref = RefSample(0.0, 0.9, 0.0, 0.28, 0.0, 0.0, 0.0, 0.0)
+    raw = inputs.tracker.law.step(0.0, 0.0, 0.0, ref, 0.0, stamp=0.0)
+    cmd = inputs.tracker.step(0.0, 0.0, 0.0, ref, 0.0, stamp=0.0)
+    assert raw.v > 5.0 and (cmd.v, cmd.saturated) == (1.0, True), (raw, cmd)
+    assert clamp_command(raw.v, raw.w, 1.0, 2.0)[:2] == (cmd.v, cmd.w)
+    assert clamp_command(math.nan, 0.1, 1.0, 2.0) == (0.0, 0.0, True)
+    twin = copy.deepcopy(inputs.tracker)
+    assert twin.step(0.0, 0.0, 0.0, ref, 0.0, stamp=0.0) == cmd

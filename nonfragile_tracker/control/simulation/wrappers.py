@@ -26,7 +26,7 @@ if TYPE_CHECKING:    # pragma: no cover - types only
     from .reference import RefSample
     from .timing import PeriodEstimator
 
-__all__ = ['Predicted', 'RateLimited', 'measurement_time']
+__all__ = ['Predicted', 'RateLimited', 'Clamped', 'clamp_command', 'measurement_time']
 
 
 def measurement_time(ref: RefSample, stamp: float | None, stamp_ns: int | None) -> float:
@@ -222,3 +222,96 @@ class RateLimited:
         if cv == cmd.v and cw == cmd.w:
             return cmd
         return cmd._replace(v=cv, w=cw, saturated=True)
+
+
+def clamp_command(v: float, w: float, max_linear_speed: float, max_angular_speed: float
+                  ) -> tuple[float, float, bool]:
+    """``(v, w)`` within the speed limits (a non-finite one: stop), and whether it changed.
+
+    The rule of every command a tracker sends on ``cmd_vel`` (the node's, the bag replay's).
+
+    Parameters
+    ----------
+    v, w : float
+        Speed (m/s) and yaw rate (rad/s).
+    max_linear_speed, max_angular_speed : float
+        The limits (m/s, rad/s).
+
+    Returns
+    -------
+    (float, float, bool)
+    """
+    v, w = float(v), float(w)
+    if not (math.isfinite(v) and math.isfinite(w)):
+        return 0.0, 0.0, True
+    cv = max(-max_linear_speed, min(max_linear_speed, v))
+    cw = max(-max_angular_speed, min(max_angular_speed, w))
+    return cv, cw, cv != v or cw != w
+
+
+class Clamped:
+    """A law whose commands are held within the speed limits (:func:`clamp_command`).
+
+    Our law clamps its own commands; a peer's or a user's may not: the tracker's input
+    rules wrap any other law in this, so the node, its bag replay and an in-process run
+    send the same clamped command.  A clamped command counts as ``saturated``.
+
+    Parameters
+    ----------
+    law : Controller
+        The law to wrap.
+    max_linear_speed, max_angular_speed : float
+        The limits (m/s, rad/s).
+    """
+
+    def __init__(self, law: Controller, max_linear_speed: float, max_angular_speed: float):
+        self.law = law
+        self.limits = (float(max_linear_speed), float(max_angular_speed))
+
+    @property
+    def timing(self) -> PeriodEstimator:
+        """The wrapped law's period estimate."""
+        return self.law.timing
+
+    @property
+    def horizon(self) -> float:
+        """The wrapped law's horizon (s)."""
+        return self.law.horizon
+
+    def reset(self, v: float | None = None) -> None:
+        """Reset the wrapped law.
+
+        Parameters
+        ----------
+        v : float, optional
+            Speed (m/s) it starts from.
+        """
+        self.law.reset(v)
+
+    def step(self, x: float, y: float, th: float, ref: RefSample,
+             measured_speed: float | None = None, stamp: float | None = None,
+             stamp_ns: int | None = None, measured_rate: float | None = None) -> Command:
+        """The wrapped law's command, within the limits.
+
+        Parameters
+        ----------
+        x, y, th : float
+            Measured pose (m, m, rad).
+        ref : RefSample
+            The reference sample.
+        measured_speed : float, optional
+            Measured speed (m/s).
+        stamp : float, optional
+            Measurement time (s).
+        stamp_ns : int, optional
+            The same in integer nanoseconds.
+        measured_rate : float, optional
+            Measured yaw rate (rad/s).
+
+        Returns
+        -------
+        Command
+        """
+        cmd = self.law.step(x, y, th, ref, measured_speed, stamp, stamp_ns, measured_rate)
+        v, w, changed = clamp_command(cmd.v, cmd.w, *self.limits)
+        return cmd._replace(v=v, w=w, saturated=True) if changed else cmd
