@@ -76,7 +76,7 @@ DURATION = 40.0
 SETTLE = 10.0
 START = (0.0, -0.1, math.pi / 4, 0.0)
 #: label -> (tracker node ``controller`` parameter or None for the default, peers.py label)
-CONTROLLERS = {'ours': (None, 'ours, shipped default'),
+CONTROLLERS = {'ours': (None, peers_bench.OURS_DEFAULT),
                'ltv': ('peers.wpilib:ltv', 'WPILib LTV')}
 ZERO_PREDICT = {'predict_latency': 0.0, 'predict_odom_latency': 0.0, 'predict_lag_v': 0.0,
                 'predict_lag_w': 0.0}
@@ -86,9 +86,41 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+#: Real time, ``--reference trajectory``: the eight as a timed waypoint file (10 ms knots),
+#: which the reference node publishes as a trajectory starting this long after its start
+#: and the tracker samples at each odometry stamp, as the adapter does.
+START_DELAY = 3.0
+
+
+def eight_file() -> Path:
+    """The figure eight r 1 m at 0.2 rad/s as a waypoint file (t, x, y, yaw, speed; 10 ms)."""
+    from nonfragile_tracker.control.simulation.reference import figure_eight
+    path = Path(tempfile.gettempdir()) / 'nfpeers_ros_eight.csv'
+    eight = figure_eight(radius=1.0, rate=0.2)
+    t = np.arange(0.0, DURATION + 5.0 + 1e-9, 0.01)
+    rows = ['t,x,y,yaw,speed']
+    for ti in t:
+        r = eight.sample(float(ti))
+        rows.append(f'{ti:.2f},{r.x!r},{r.y!r},{r.heading!r},{math.hypot(r.vx, r.vy)!r}')
+    text = '\n'.join(rows) + '\n'
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+    return path
+
+
+def file_trajectory():
+    """The trajectory the tracker rebuilds from the reference node's Path of :func:`eight_file`."""
+    from nonfragile_tracker.nodes.trajectory_io import path_to_trajectory, trajectory_to_path
+    from nonfragile_tracker.control.simulation.trajectory import load_waypoints
+    traj, _ = path_to_trajectory(trajectory_to_path(load_waypoints(eight_file()), 0, 'odom'),
+                                 frame='odom', source='eight')
+    return traj
+
+
 def node_parameters(controller: str | None, latency: float, seed: int,
-                    mode: str = 'realtime') -> dict:
-    """The four nodes' parameters of one run (``mode``: realtime or lockstep)."""
+                    mode: str = 'realtime', reference: str = 'samples') -> dict:
+    """The four nodes' parameters of one run (``mode``: realtime or lockstep; ``reference``:
+    the built-in path's samples, or the eight as a trajectory file, :func:`eight_file`)."""
     from nonfragile_tracker.workflows import runner
     r = adapter.REALISTIC
     plant = {'cmd_latency': latency, 'noise_seed': seed, 'duration': DURATION,
@@ -100,6 +132,9 @@ def node_parameters(controller: str | None, latency: float, seed: int,
     if controller:
         tracker['controller'] = controller
     ov = {'plant': {'ros__parameters': plant}, 'tracker': {'ros__parameters': tracker}}
+    if reference == 'trajectory':
+        ov['reference'] = {'ros__parameters': {'trajectory_file': str(eight_file()),
+                                               'start_delay': START_DELAY}}
     if mode == 'realtime':
         runner.merge(ov, runner.realtime_overrides())
     return runner.scenario_parameters(CONFIG / 'latency_scenario.yaml',
@@ -123,8 +158,17 @@ def bag_figures(bag: Path, settle: float = SETTLE) -> dict:
     ps, px, py = (np.array(c, dtype=float) for c in zip(*rows))
     rs = ref.stamp_ns.astype(float)
     out = {'span_s': float((ps[-1] - ps[0]) * 1e-9), 'ref_lead_s': float((ps[0] - rs[0]) * 1e-9)}
+    t0 = ps[0]          # a trajectory (--reference trajectory) starts at its stamp: from there
+    from nonfragile_tracker.bag.reader import MissingTopicsError
+    try:
+        for _, msg in read_messages(bag, 'trajectory'):
+            t0 = max(t0, float(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec))
+            out['trajectory_start_s'] = float((t0 - ps[0]) * 1e-9)
+            break
+    except MissingTopicsError:      # the built-in path's samples: from the first pose
+        pass
     for sfx, after in (('', settle), ('_late', SETTLE_LATE)):
-        keep = (ps >= ps[0] + after * 1e9) & (ps >= rs[0]) & (ps <= rs[-1])
+        keep = (ps >= t0 + after * 1e9) & (ps >= rs[0]) & (ps <= rs[-1])
         e = np.hypot(px[keep] - np.interp(ps[keep], rs, ref.x),
                      py[keep] - np.interp(ps[keep], rs, ref.y))
         out['rms' + sfx] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
@@ -141,10 +185,12 @@ def bag_figures(bag: Path, settle: float = SETTLE) -> dict:
 
 
 def ros_run(controller: str | None, latency: float, seed: int, run_dir: Path,
-            mode: str = 'realtime') -> dict:
+            mode: str = 'realtime', reference: str = 'samples') -> dict:
     """One run through the nodes (every topic recorded), scored (or ``error``)."""
     from nonfragile_tracker.workflows import runner
-    params = node_parameters(controller, latency, seed, mode)
+    params = node_parameters(controller, latency, seed, mode, reference)
+    if reference == 'trajectory':       # time for the start delay
+        params['plant']['ros__parameters']['duration'] = DURATION + START_DELAY
     run_dir.mkdir(parents=True)
     pp = os.pathsep.join([str(HERE)] + ([os.environ['PYTHONPATH']]
                                         if os.environ.get('PYTHONPATH') else []))
@@ -168,9 +214,11 @@ def ros_run(controller: str | None, latency: float, seed: int, run_dir: Path,
     return out
 
 
-def adapter_run(label: str, latency: float, seed: int, jitter: bool) -> dict:
+def adapter_run(label: str, latency: float, seed: int, jitter: bool,
+                reference: str = 'samples') -> dict:
     """The adapter's figures of a cell (peers.py's base at ``latency``; ``jitter``: with
-    its 10 ms command-latency jitter, else none)."""
+    its 10 ms command-latency jitter, else none; ``reference`` 'trajectory': the eight of
+    :func:`eight_file` as the tracker rebuilds it)."""
     from nonfragile_tracker.control.simulation.reference import figure_eight
     from nonfragile_tracker.control.simulation.trajectory import Trajectory
     over = {} if jitter else {'cmd_latency_jitter': 0.0}
@@ -183,7 +231,8 @@ def adapter_run(label: str, latency: float, seed: int, jitter: bool) -> dict:
         from nonfragile_tracker.control.simulation.tracker import TrackerConfig
         tc = TrackerConfig(K=read_gain_file(CONFIG / 'tracker_gains.yaml'),
                            **peers_bench.scenario_tracker())
-    traj = Trajectory.analytic(figure_eight(radius=1.0, rate=0.2))
+    traj = (file_trajectory() if reference == 'trajectory' else
+            Trajectory.analytic(figure_eight(radius=1.0, rate=0.2)))
     pr = adapter.run(peers_bench._factory(label, peers), pc, tc, traj, DURATION)
     s, late = adapter.score(pr, SETTLE), adapter.score(pr, SETTLE_LATE)
     return {'rms': s.rms, 'max': s.max, 'diverged': s.diverged, 'rms_late': late.rms,
@@ -233,6 +282,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--mode', choices=('realtime', 'lockstep'), default='realtime',
                     help='the nodes on wall timers (default) or in lockstep (must equal the '
                     'adapter without jitter to round-off)')
+    ap.add_argument('--reference', choices=('samples', 'trajectory'), default='samples',
+                    help='the built-in eight\'s samples (default; in real time the tracker '
+                    'takes the newest, 0-10 ms old, and the path starts at the reference '
+                    'node\'s start) or the eight as a trajectory file, sampled by the tracker '
+                    f'at each odometry stamp as the adapter does, starting {START_DELAY:g} s '
+                    'after the reference node')
     ap.add_argument('--json', help='every run\'s figures as JSON')
     ap.add_argument('--keep', help='keep the run folders (bags, logs) here')
     ap.add_argument('--from-json', help='the nodes\' figures of an earlier --json (no runs '
@@ -253,13 +308,14 @@ def main(argv: list[str] | None = None) -> int:
             for seed in seeds:
                 key = f'{c}/{lat:g}/{seed}'
                 log(f'{key}: the adapter, then the nodes ({args.mode}, {DURATION:g} s)')
-                raw[key] = {k: adapter_run(label, lat + off, seed, jit) for k, off, jit in cols}
+                raw[key] = {k: adapter_run(label, lat + off, seed, jit, args.reference)
+                            for k, off, jit in cols}
                 run_dir = tmp / (f'{args.mode}_' + key.replace('/', '_'))
                 if old and (run_dir / 'bag').exists():       # score the kept bag again
                     raw[key]['ros'] = {**old[key]['ros'], **bag_figures(run_dir / 'bag')}
                 else:
                     raw[key]['ros'] = old[key]['ros'] if old else ros_run(
-                        spec, lat, seed, run_dir, args.mode)
+                        spec, lat, seed, run_dir, args.mode, args.reference)
                 r = raw[key]['ros']
                 if 'rms' in r:
                     msg = (f"{r['rms'] * 1e3:.3f} mm (max {r['max'] * 1e3:.2f}), command "
