@@ -77,9 +77,10 @@ def test_the_follower_and_the_input_rules_take_it(new_files):
     direct = simulate_tracking(plant, tc, path, 1200)
     assert np.max(np.abs(run.error - direct.error)) < 1e-9
     assert float(run.error[-1]) < 0.2 * float(run.error[0])
-    inputs = TrackerInputs(tc)
-    assert type(inputs.tracker).__name__ == 'Kanayama'
-    assert type(inputs.fork().tracker).__name__ == 'Kanayama'
+    inputs = TrackerInputs(tc)           # the law, held within the speed limits as ours
+    assert type(inputs.tracker).__name__ == 'Clamped'
+    assert type(inputs.tracker.law).__name__ == 'Kanayama'
+    assert type(inputs.fork().tracker.law).__name__ == 'Kanayama'
 
 
 def test_a_second_plant_is_one_file_and_a_name(new_files):

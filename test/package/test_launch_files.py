@@ -36,7 +36,7 @@ def arguments(path):
                             'trajectory', 'enable_stamped_cmd_vel', 'rviz'}),
     ('robot.launch.py', {'robot', 'gains', 'trajectory', 'trajectory_topic', 'namespace',
                          'use_sim_time', 'autostart', 'nav2'}),
-    ('bringup.launch.py', {'robot', 'box', 'accel_segment', 'out'}),
+    ('bringup.launch.py', {'robot', 'box', 'accel_segment', 'out', 'truth'}),
 ])
 def test_launch_arguments(name, expected):
     tree, declared, used = arguments(LAUNCH / name)

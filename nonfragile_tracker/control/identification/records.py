@@ -167,7 +167,8 @@ class Identification:
     #: seconds excluded from the fit because the motion did not follow the commands
     excluded_s: float = 0.0
     #: the side-slip table to compensate (rad/s, s; ``identify --truth``, see
-    #: :mod:`.slip`): empty when not identified or not significant
+    #: :mod:`nonfragile_tracker.control.identification.slip`): empty when not identified or
+    #: not significant
     side_slip_rates: tuple[float, ...] = ()
     side_slip: tuple[float, ...] = ()
 
