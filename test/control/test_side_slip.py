@@ -178,7 +178,6 @@ def _skid_bag(bag):
     from nonfragile_tracker.control.simulation.model import yaw_to_quaternion
     from nonfragile_tracker.control.simulation.plant import PlantConfig
     from nonfragile_tracker.control.simulation.timing import step_time
-    pytest.importorskip('mujoco')
 
     def stamp(m, t):
         ns = int(round(t * 1e9))

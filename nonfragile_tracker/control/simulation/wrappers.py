@@ -1,12 +1,13 @@
-"""Parts any tracking law can be wrapped with: the latency predictor and the rate limits.
+"""Parts any tracking law can be wrapped with: the latency predictor, the rate and speed limits.
 
-Our law (:class:`~.tracker.Tracker`) has both built in, fused with its compensator (the lag
-inversion needs the compensator's next speed); these wrappers give the same two parts to any
+Our law (:class:`~.tracker.Tracker`) has them built in, fused with its compensator (the lag
+inversion needs the compensator's next speed); these wrappers give the same parts to any
 :class:`~.interfaces.Controller` - a peer's law, a user's - without touching it:
 :class:`Predicted` evaluates the law on the pose predicted at the time the command acts
 (:class:`~.predictor.LatencyPredictor`, the tracker's own), :class:`RateLimited` keeps each
 command within the base's acceleration limits of the previous one (:func:`~.actuator.within`,
-the tracker's own rule).  The third part, timing, is each law's ``timing`` (a
+the tracker's own rule), :class:`Clamped` within the speed limits (:func:`clamp_command`, the
+rule of every ``cmd_vel``).  Timing is each law's ``timing`` (a
 :class:`~.timing.PeriodEstimator`), which the wrappers pass through.
 
 See doc/theory.md, section "Latency predictor", and doc/developing.md, section "Layout".
@@ -50,7 +51,33 @@ def measurement_time(ref: RefSample, stamp: float | None, stamp_ns: int | None) 
     return ref.t if stamp is None else float(stamp)
 
 
-class Predicted:
+class _Wrapper:
+    """What every wrapper passes through to its law: its timing, horizon and reset."""
+
+    law: Controller
+
+    @property
+    def timing(self) -> PeriodEstimator:
+        """The wrapped law's period estimate."""
+        return self.law.timing
+
+    @property
+    def horizon(self) -> float:
+        """The wrapped law's horizon (s)."""
+        return self.law.horizon
+
+    def reset(self, v: float | None = None) -> None:
+        """Reset the wrapped law.
+
+        Parameters
+        ----------
+        v : float, optional
+            Speed (m/s) it starts from.
+        """
+        self.law.reset(v)
+
+
+class Predicted(_Wrapper):
     """A law evaluated where the robot will be when its command acts.
 
     The pose measured at ``stamp`` is replaced by the pose predicted at ``stamp +
@@ -78,11 +105,6 @@ class Predicted:
         self.predictor = LatencyPredictor(
             cmd_latency, odom_latency,
             ActuatorModel(lag_v, lag_w, max_linear_accel, max_angular_accel), SUBSTEP)
-
-    @property
-    def timing(self) -> PeriodEstimator:
-        """The wrapped law's period estimate."""
-        return self.law.timing
 
     @property
     def horizon(self) -> float:
@@ -137,7 +159,7 @@ class Predicted:
         return cmd
 
 
-class RateLimited:
+class RateLimited(_Wrapper):
     """A law whose commands change by at most the base's acceleration limits per interval.
 
     Each command is moved at most ``max_linear_accel`` (``max_angular_accel``) times the
@@ -158,16 +180,6 @@ class RateLimited:
         self.limits = (float(max_linear_accel), float(max_angular_accel))
         self._last: tuple[float, float] | None = None
         self._last_t: float | None = None
-
-    @property
-    def timing(self) -> PeriodEstimator:
-        """The wrapped law's period estimate."""
-        return self.law.timing
-
-    @property
-    def horizon(self) -> float:
-        """The wrapped law's horizon (s)."""
-        return self.law.horizon
 
     def reset(self, v: float | None = None) -> None:
         """Forget the previous command (the next starts from the measured speed).
@@ -249,7 +261,7 @@ def clamp_command(v: float, w: float, max_linear_speed: float, max_angular_speed
     return cv, cw, cv != v or cw != w
 
 
-class Clamped:
+class Clamped(_Wrapper):
     """A law whose commands are held within the speed limits (:func:`clamp_command`).
 
     Our law clamps its own commands; a peer's or a user's may not: the tracker's input
@@ -267,26 +279,6 @@ class Clamped:
     def __init__(self, law: Controller, max_linear_speed: float, max_angular_speed: float):
         self.law = law
         self.limits = (float(max_linear_speed), float(max_angular_speed))
-
-    @property
-    def timing(self) -> PeriodEstimator:
-        """The wrapped law's period estimate."""
-        return self.law.timing
-
-    @property
-    def horizon(self) -> float:
-        """The wrapped law's horizon (s)."""
-        return self.law.horizon
-
-    def reset(self, v: float | None = None) -> None:
-        """Reset the wrapped law.
-
-        Parameters
-        ----------
-        v : float, optional
-            Speed (m/s) it starts from.
-        """
-        self.law.reset(v)
 
     def step(self, x: float, y: float, th: float, ref: RefSample,
              measured_speed: float | None = None, stamp: float | None = None,
