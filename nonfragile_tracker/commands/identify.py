@@ -118,23 +118,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
 def _side_slip(args: argparse.Namespace, data: MotionData, res: Identification
                ) -> tuple[Identification, str]:
     """The side slip from ``--truth`` (the identification with its table when it matters)."""
-    from dataclasses import replace
-    from ..bag.motion import read_poses
-    from ..control.identification.errors import IdentificationError
-    from ..control.identification.slip import identify_side_slip
-    truth = read_poses(args.bag, args.truth)
-    try:
-        slip = identify_side_slip(data.odometry, truth)
-    except IdentificationError as exc:
-        return res, f'side slip from {args.truth}: not identified ({exc})'
-    line = f'side slip from {args.truth}: {slip.summary()}'
-    if not slip.significant:
+    from ..workflows.commissioning import side_slip_from_truth
+    res, line = side_slip_from_truth(args.bag, res, args.truth, odometry=data.odometry,
+                                     strict=True)
+    if not res.side_slip:
         return res, line
-    rates = ', '.join(f'{r:g}' for r in slip.rates)
-    coefs = ', '.join(f'{c:.4g}' for c in slip.coefficients)
-    return (replace(res, side_slip_rates=slip.rates, side_slip=slip.coefficients),
-            line + f'\n  tracker: side_slip_rates [{rates}], side_slip [{coefs}] (in -o, and '
-            'latency-design --identification writes them into the gain file)')
+    rates = ', '.join(f'{r:g}' for r in res.side_slip_rates)
+    coefs = ', '.join(f'{c:.4g}' for c in res.side_slip)
+    return res, (line + f'\n  tracker: side_slip_rates [{rates}], side_slip [{coefs}] (in -o, '
+                 'and latency-design --identification writes them into the gain file)')
 
 
 def _limits_line(res: Identification) -> str:

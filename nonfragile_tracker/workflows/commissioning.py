@@ -181,7 +181,8 @@ class DesignOutcome:
 
 
 def side_slip_from_truth(bag: str | os.PathLike[str], ident: Identification, truth_topic: str,
-                         *, odom_topic: str = 'odom') -> tuple[Identification, str]:
+                         *, odom_topic: str = 'odom', odometry: OdometrySamples | None = None,
+                         strict: bool = False) -> tuple[Identification, str]:
     """The identification with the side-slip table from an external pose, when it matters.
 
     Parameters
@@ -193,7 +194,12 @@ def side_slip_from_truth(bag: str | os.PathLike[str], ident: Identification, tru
     truth_topic : str
         The external pose's topic; '' = none (``ident`` unchanged).
     odom_topic : str
-        The odometry's topic.
+        The odometry's topic (read unless ``odometry`` is given).
+    odometry : OdometrySamples, optional
+        The bag's odometry, already read.
+    strict : bool
+        Raise when ``truth_topic`` cannot be read (``identify --truth``); else say so in the
+        line (the bring-up: its analysis goes on without a side slip).
 
     Returns
     -------
@@ -201,14 +207,26 @@ def side_slip_from_truth(bag: str | os.PathLike[str], ident: Identification, tru
         ``ident`` with ``side_slip_rates`` / ``side_slip`` set when the table is significant
         (:class:`~nonfragile_tracker.control.identification.slip.SideSlip`), and one line
         saying what was found (or why nothing was: no topic, too little turning).
+
+    Raises
+    ------
+    MissingTopicsError
+        With ``strict``, if ``truth_topic`` is absent, of another type or empty.
     """
     if not truth_topic:
         return ident, 'side slip: no external pose (truth_topic): not identified'
     from ..bag.motion import read_motion, read_poses
     from ..control.identification.slip import identify_side_slip
     try:
-        data = read_motion(bag, odom_topic=odom_topic)
-        slip = identify_side_slip(data.odometry, read_poses(bag, truth_topic))
+        truth = read_poses(bag, truth_topic)
+    except InputError as exc:
+        if strict:
+            raise
+        return ident, f'side slip from {truth_topic}: not identified ({exc})'
+    try:
+        if odometry is None:
+            odometry = read_motion(bag, odom_topic=odom_topic).odometry
+        slip = identify_side_slip(odometry, truth)
     except InputError as exc:
         return ident, f'side slip from {truth_topic}: not identified ({exc})'
     line = f'side slip from {truth_topic}: {slip.summary()}'
