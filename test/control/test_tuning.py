@@ -210,3 +210,33 @@ def test_a_tuning_script_reads_back_exactly_and_bad_text_is_refused():
     t = made[0]
     assert t.changes == 1 and t.last_change == (int(2.0e9), 0.08, 0.05, 0.05)
     assert (t.config.predict_latency, t.config.predict_lag_w) == (0.08, 0.05)
+
+
+def test_a_new_time_base_restarts_the_tuning_clock():
+    """The tracker node's input rules step the law by odometry stamp on reference samples
+    (absolute stamps, about 1.8e9 s) until a trajectory comes, then by the trajectory's own
+    time (from 0): through the nodes in real time the trajectory came after a few such steps,
+    the tuning's next estimate stayed due at 1.8e9 s and the shipped tracker never tuned in
+    40 s (2.5 mm on the eight against 0.55 tuned).  Now a step back in time (or beyond
+    MAX_INTERVAL) starts the window and the clock again: the same base tuned as if the
+    first steps had not been."""
+    path, plant = _base(0.1)
+    tc = TrackerConfig(K=K)
+
+    def run(prelude):
+        t = Tuned(Tracker(tc), MonitorSettings(max_linear_speed=1.0, max_angular_speed=2.0))
+        r = path.sample(0.0)
+        for k in range(prelude):                       # steps on the absolute stamps
+            s = 1_796_234_977_000_000_000 + k * 20_000_000
+            t.step(r.x, r.y, r.heading, r._replace(t=s * 1e-9), 0.28, stamp=s * 1e-9,
+                   stamp_ns=s, measured_rate=0.0)
+        t.reset()
+        made = [t]
+        simulate_tracking(plant, tc, path, 1500, controller=lambda c: made[0])
+        return t
+    fresh, late = run(0), run(8)
+    assert fresh.changes >= 1 and late.changes == fresh.changes, (fresh.changes, late.changes)
+    assert late.tracker.config.predict_latency == pytest.approx(
+        fresh.tracker.config.predict_latency, abs=0.01)
+    assert late.tracker.config.predict_lag_w == pytest.approx(
+        fresh.tracker.config.predict_lag_w, abs=0.01)

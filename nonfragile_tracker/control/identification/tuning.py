@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from ..simulation.predictor import LatencyPredictor
 from ..simulation.tracker import Command, Tracker, TrackerConfig
 from ..simulation.reference import RefSample
-from ..simulation.timing import PeriodEstimator
+from ..simulation.timing import MAX_INTERVAL, PeriodEstimator
 from ..simulation.wrappers import measurement_time
 from .errors import MonitorError
 from .monitor import LatencyEstimate, MonitorSettings, MonitorWorker
@@ -210,6 +210,9 @@ class Tuned:
         #: step's stamp (ns; the stamp in s rounded when the step had none).
         self.last_change: tuple[int, float, float, float] | None = None
         self._next: float | None = None
+        #: The time of the previous step (s): a jump back or beyond MAX_INTERVAL is a new
+        #: time base.
+        self._last_t: float | None = None
         self._script = sorted(self.settings.script)
         # the estimator's scipy.signal import (0.3 s, seconds under load) paid here, at the
         # node's configure, not in the first estimate inside an odometry callback
@@ -302,6 +305,13 @@ class Tuned:
         """
         t = measurement_time(ref, stamp, stamp_ns)
         window = self.worker.window
+        last, self._last_t = self._last_t, t
+        if last is not None and math.isfinite(t) and not 0.0 <= t - last <= MAX_INTERVAL:
+            # another time base (steps on reference samples by odometry stamp, then a
+            # followed trajectory's own time): the window and the tuning clock start again;
+            # the prediction tuned so far stays
+            window.clear()
+            self._next = None
         if measured_speed is not None and measured_rate is not None and math.isfinite(t):
             window.add_odometry(t, measured_speed, measured_rate)
             self._tune(t, stamp_ns if stamp_ns is not None else int(round(t * 1e9)))
