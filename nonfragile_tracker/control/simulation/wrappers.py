@@ -27,7 +27,7 @@ if TYPE_CHECKING:    # pragma: no cover - types only
     from .reference import RefSample
     from .timing import PeriodEstimator
 
-__all__ = ['Predicted', 'RateLimited', 'Clamped', 'clamp_command', 'measurement_time']
+__all__ = ['Wrapper', 'Predicted', 'RateLimited', 'Clamped', 'clamp_command', 'measurement_time']
 
 
 def measurement_time(ref: RefSample, stamp: float | None, stamp_ns: int | None) -> float:
@@ -51,8 +51,9 @@ def measurement_time(ref: RefSample, stamp: float | None, stamp_ns: int | None) 
     return ref.t if stamp is None else float(stamp)
 
 
-class _Wrapper:
-    """What every wrapper passes through to its law: its timing, horizon and reset."""
+class Wrapper:
+    """The base of the wrappers: what each passes through to its ``law`` unchanged (its
+    timing, its horizon, its reset); a wrapper overrides what it changes."""
 
     law: Controller
 
@@ -77,7 +78,7 @@ class _Wrapper:
         self.law.reset(v)
 
 
-class Predicted(_Wrapper):
+class Predicted(Wrapper):
     """A law evaluated where the robot will be when its command acts.
 
     The pose measured at ``stamp`` is replaced by the pose predicted at ``stamp +
@@ -159,7 +160,7 @@ class Predicted(_Wrapper):
         return cmd
 
 
-class RateLimited(_Wrapper):
+class RateLimited(Wrapper):
     """A law whose commands change by at most the base's acceleration limits per interval.
 
     Each command is moved at most ``max_linear_accel`` (``max_angular_accel``) times the
@@ -261,7 +262,7 @@ def clamp_command(v: float, w: float, max_linear_speed: float, max_angular_speed
     return cv, cw, cv != v or cw != w
 
 
-class Clamped(_Wrapper):
+class Clamped(Wrapper):
     """A law whose commands are held within the speed limits (:func:`clamp_command`).
 
     Our law clamps its own commands; a peer's or a user's may not: the tracker's input
