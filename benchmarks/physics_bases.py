@@ -348,8 +348,31 @@ def nodes(out_dir: Path) -> dict:
     return res
 
 
+def nodes_median(runs: list[dict]) -> dict:
+    """Several ``nodes`` results as one: each figure the median of the runs (``*_all``: every
+    run's true-pose RMS), the bring-up's lines and flags those of the first run."""
+    out: dict = {}
+    for base in runs[0]:
+        row = dict(runs[0][base])
+        for name in ('eight', 'lap'):
+            figs = [r[base][name] for r in runs]
+            row[name] = {k: statistics.median(f[k] for f in figs) for k in figs[0]}
+            row[name]['true_rms_all'] = [f['true_rms'] for f in figs]
+        row['runs'] = len(runs)
+        out[base] = row
+    return out
+
+
+def _rms_cell(fig: dict) -> str:
+    cell = '%.2f / %.2f' % (1e3 * fig['true_rms'], 1e3 * fig['true_max'])
+    runs = fig.get('true_rms_all', [])
+    if len(runs) > 1:
+        cell += ' (RMS %.2f-%.2f over %d runs)' % (1e3 * min(runs), 1e3 * max(runs), len(runs))
+    return cell
+
+
 def nodes_table(res: dict) -> str:
-    """The ``--nodes`` table (rows: figures, columns: bases)."""
+    """The ``--nodes`` table (rows: figures, columns: bases; medians with ``--repeat``)."""
     bases = list(res)
     lines = ['| through the nodes (bring-up, then its files) | ' + ' | '.join(bases) + ' |',
              '|---|' + '---|' * len(bases)]
@@ -361,14 +384,12 @@ def nodes_table(res: dict) -> str:
             ('gain_w compensated', lambda r: 'yes' if r['gain_w'] else 'no'),
             ('side slip compensated (identified from the true pose)',
              lambda r: 'yes' if r.get('side_slip') else 'no'),
-            ('eight: true-pose RMS / max after 10 s (mm)', lambda r: '%.2f / %.2f' % (
-                1e3 * r['eight']['true_rms'], 1e3 * r['eight']['true_max'])),
+            ('eight: true-pose RMS / max after 10 s (mm)', lambda r: _rms_cell(r['eight'])),
             ('eight: odometry-frame RMS after 10 s (mm)',
              lambda r: f"{1e3 * r['eight']['odom_rms']:.2f}"),
             ('eight: odometry drift final / max (mm)', lambda r: '%.1f / %.1f' % (
                 1e3 * r['eight']['drift_final'], 1e3 * r['eight']['drift_max'])),
-            ('lap: true-pose RMS / max after 2 s (mm)', lambda r: '%.2f / %.2f' % (
-                1e3 * r['lap']['true_rms'], 1e3 * r['lap']['true_max'])),
+            ('lap: true-pose RMS / max after 2 s (mm)', lambda r: _rms_cell(r['lap'])),
             ('lap: odometry-frame RMS after 2 s (mm)',
              lambda r: f"{1e3 * r['lap']['odom_rms']:.2f}"),
             ('lap: odometry drift final / max (mm)', lambda r: '%.1f / %.1f' % (
@@ -379,19 +400,33 @@ def nodes_table(res: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--repeat', type=int, default=3, help='timing repetitions (median)')
+    ap.add_argument('--repeat', type=int, help='repetitions, medians (default 3 in process: the '
+                    'timings; 1 with --nodes)')
     ap.add_argument('--json', type=Path, help='write every raw figure here')
     ap.add_argument('--nodes', type=Path, metavar='DIR',
-                    help='item 4 through the nodes instead (bring-up, eight, lap per base)')
+                    help='item 4 through the nodes instead (bring-up, eight, lap per base; '
+                    '--repeat runs of each, default 1 here, medians)')
+    ap.add_argument('--from-json', type=Path, nargs='+', metavar='JSON',
+                    help='with --nodes: the table of earlier runs\' JSON files (medians)')
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     if args.nodes:
-        res = nodes(args.nodes)
+        repeat = args.repeat or 1
+        if args.from_json:
+            runs = [json.loads(f.read_text()) for f in args.from_json]
+        else:
+            runs = []
+            for i in range(repeat):
+                d = args.nodes if repeat == 1 else args.nodes / f'run{i + 1}'
+                runs.append(nodes(d))
+                (d / 'nodes.json').write_text(json.dumps(runs[-1], indent=1))
+        res = nodes_median(runs)
         print(nodes_table(res))
-        print(f'(one run per base; {time.perf_counter() - t0:.0f} s in all)')
+        print(f'({len(runs)} run(s) per base, medians; {time.perf_counter() - t0:.0f} s in all)')
         if args.json:
             args.json.write_text(json.dumps(res, indent=1))
         return 0
+    args.repeat = args.repeat or 3
     res = measure(args.repeat)
     for condition in CONDITIONS:
         print(table(res, condition))
