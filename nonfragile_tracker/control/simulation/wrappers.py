@@ -52,8 +52,10 @@ def measurement_time(ref: RefSample, stamp: float | None, stamp_ns: int | None) 
 
 
 class Wrapper:
-    """The base of the wrappers: what each passes through to its ``law`` unchanged (its
-    timing, its horizon, its reset); a wrapper overrides what it changes."""
+    """The base of the wrappers: what each passes through to its ``law`` unchanged.
+
+    The law's timing, horizon and reset; a wrapper overrides what it changes.
+    """
 
     law: Controller
 
