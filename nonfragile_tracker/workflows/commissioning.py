@@ -31,6 +31,7 @@ from ..interface.robot import (GAIN_FILE, IDENTIFICATION_FILE, OUTCOME_FILE, REP
                                ROBOT_FILE, RobotConfig, identified_limits, update_robot_file)
 
 if TYPE_CHECKING:
+    from ..bag.motion import MotionData
     from ..control.identification.identify import CommandSamples, Identification, OdometrySamples
     from ..control.synthesis.latency_design import LatencyDesign, LatencyPlan
 
@@ -94,12 +95,19 @@ def identify_recording(bag: str | os.PathLike[str], *, cmd_topic: str = 'cmd_vel
     BringupRefusal
         When the data is not informative, with the cause and what to change.
     """
+    return _read_and_identify(bag, cmd_topic, odom_topic, odom_period, accel_segment)[1]
+
+
+def _read_and_identify(bag: str | os.PathLike[str], cmd_topic: str, odom_topic: str,
+                       odom_period: float, accel_segment: bool
+                       ) -> tuple[MotionData, Identification]:
+    """The bag's motion (read once) and :func:`identify_recording`'s identification of it."""
     from ..bag.motion import read_motion
     from ..control.identification.identify import with_source
     data = read_motion(bag, cmd_topic=cmd_topic, odom_topic=odom_topic)
     res = identify_samples(data.commands, data.odometry, odom_period=odom_period,
                            accel_segment=accel_segment)
-    return with_source(res, bag)
+    return data, with_source(res, bag)
 
 
 def identify_samples(commands: CommandSamples, odometry: OdometrySamples, *,
@@ -422,14 +430,13 @@ def analyse(bag: str | os.PathLike[str], run_dir: str | os.PathLike[str],
     run = Path(run_dir)
     robot = RobotConfig(**settings['robot'])
     try:
-        ident = identify_recording(bag, cmd_topic=robot.cmd_vel_topic,
-                                   odom_topic=robot.odom_topic,
-                                   odom_period=float(settings['odom_period']),
-                                   accel_segment=bool(settings['accel_segment']))
+        data, ident = _read_and_identify(bag, robot.cmd_vel_topic, robot.odom_topic,
+                                         float(settings['odom_period']),
+                                         bool(settings['accel_segment']))
     except InputError as exc:
         return {'ok': False, 'phase': 'identify', 'refusal': str(exc)}
     ident, slip_line = side_slip_from_truth(bag, ident, str(settings.get('truth_topic') or ''),
-                                            odom_topic=robot.odom_topic)
+                                            odometry=data.odometry)
     write_identification(run / IDENTIFICATION_FILE, ident, overwrite=True)
     ident_fig = plot_identification(bag, ident, run / 'identification.png',
                                      cmd_topic=robot.cmd_vel_topic, odom_topic=robot.odom_topic)
