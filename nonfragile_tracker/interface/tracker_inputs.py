@@ -84,7 +84,8 @@ class InputRules:
     retime : bool
         Re-time a trajectory that exceeds ``limits`` (else follow it as sent).
     limits : Limits
-        The base's limits trajectories are re-timed within.
+        The limits trajectories are re-timed within: the motion's, the command's limits
+        times the channel gains ``gain_v``, ``gain_w`` (:meth:`.Limits.of_motion`).
     accel_fraction : float
         The share of the acceleration limits a trajectory may use, in [0.05, 1]
         (``trajectory_accel_fraction``).
@@ -169,7 +170,7 @@ def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRule
         frame=str(v['odom_frame']), max_stamp_jump=float(v['max_stamp_jump']),
         wait_for_trajectory=bool(v['wait_for_trajectory']),
         cruise_speed=float(v['cruise_speed']), max_accel=float(v['max_accel']),
-        retime=bool(v['retime']), limits=Limits.from_values(v),
+        retime=bool(v['retime']), limits=Limits.from_values(v).of_motion(*_gains(v)),
         accel_fraction=float(v['trajectory_accel_fraction']),
         rest_speed=float(v['rest_speed']), start_tolerance=float(v['start_tolerance']),
         max_start_distance=float(v['max_start_distance']), replan=bool(v['replan']),
@@ -177,6 +178,21 @@ def input_rules(values: Mapping[str, Any], mode: str | None = None) -> InputRule
         override_tolerance=float(v['override_tolerance']),
         override_time=float(v['override_time']),
         tune=_tuning(values) if v['monitor_tune'] and v['monitor'] else None)
+
+
+def _gains(values: Mapping[str, Any]) -> tuple[float, float]:
+    """``gain_v``, ``gain_w`` among the tracker's values (1 where missing or not > 0).
+
+    The law's configuration refuses a gain that is not > 0; the re-timer takes it as 1.
+    """
+    out = []
+    for name in ('gain_v', 'gain_w'):
+        try:
+            g = float(values.get(name, 1.0))
+        except (TypeError, ValueError):
+            g = 1.0
+        out.append(g if math.isfinite(g) and g > 0 else 1.0)
+    return out[0], out[1]
 
 
 def monitor_settings(values: Mapping[str, Any]) -> MonitorSettings:

@@ -1,6 +1,7 @@
 """The tracker's channel-gain compensation (TrackerConfig gain_v, gain_w): off by default and
 then bit-identical, the command sent is the law's motion over the gain, bad gains and the
-batch refuse.  On a skid-steer it is what makes the figure eight track (test_physics.py)."""
+batch refuse; the limits are the command's and the law works within them times the
+gains.  On a skid-steer it is what makes the figure eight track (test_physics.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +15,7 @@ from nonfragile_tracker.control.simulation.plant import PlantConfig
 from nonfragile_tracker.control.simulation.tracker import Tracker, TrackerConfig
 from nonfragile_tracker.control.simulation.reference import figure_eight
 from nonfragile_tracker.control.simulation.simulate import simulate_tracking
+from nonfragile_tracker.interface.tracker_inputs import input_rules
 
 K = read_gain_file(CONFIG / 'tracker_gains.yaml')
 
@@ -44,10 +46,18 @@ def test_gains_of_one_change_nothing_bit_for_bit(extra):
                                             predict_lag_w=0.04, max_linear_accel=1.0,
                                             max_angular_accel=3.0)])
 def test_the_command_is_the_laws_motion_over_the_gain(extra):
-    """The law, its limits, rate limit and predictor run on the motion; only the sent
-    command is divided (the rest of each step - error, acceleration, flags - is unchanged)."""
-    plain = _commands(TrackerConfig(K=K, **extra))
-    comp = _commands(TrackerConfig(K=K, gain_v=0.98, gain_w=0.64, **extra))
+    """The law, its limits, rate limit and predictor run on the motion, within the command's
+    limits times the gains; only the sent command is divided (the rest of each step -
+    error, acceleration, flags - is that of the plain law within those motion limits)."""
+    gains = dict(gain_v=0.98, gain_w=0.64)
+    comp_config = TrackerConfig(K=K, **gains, **extra)
+    m = comp_config.motion_limits
+    motion = dict(extra, max_linear_speed=m.max_linear_speed,
+                  max_angular_speed=m.max_angular_speed)
+    if extra:
+        motion.update(max_linear_accel=m.max_linear_accel, max_angular_accel=m.max_angular_accel)
+    plain = _commands(TrackerConfig(K=K, **motion))
+    comp = _commands(comp_config)
     assert max(abs(c.w) for c in plain) > 0.1 and max(abs(c.w) for c in comp) < 2.0
     assert [c.v / 0.98 for c in plain] == [c.v for c in comp]
     assert [c.w / 0.64 for c in plain] == [c.w for c in comp]
@@ -88,6 +98,34 @@ def test_the_command_sent_stays_within_the_speed_limits():
     assert max(abs(c.w) for c in comp) == 0.5
     clipped = [i for i, c in enumerate(comp) if abs(plain[i].w) / 0.25 > 0.5]
     assert clipped and all(comp[i].saturated and abs(comp[i].w) == 0.5 for i in clipped)
+
+
+def test_the_limits_are_the_commands_and_the_motion_is_within_them_times_the_gains():
+    """max_*_speed / max_*_accel are the command's (cmd_vel's, the firmware's ramp): a base
+    turning at 0.64 of its command turns at most 0.64 of them (motion_limits, the re-timer's
+    limits), and the command sent changes no faster than max_angular_accel."""
+    tc = TrackerConfig(K=K, gain_w=0.64, max_angular_speed=2.0, max_angular_accel=6.0,
+                       max_linear_accel=1.5, predict_latency=0.05, predict_lag_w=0.05)
+    m = tc.motion_limits
+    assert (m.max_linear_speed, m.max_linear_accel) == (1.0, 1.5)
+    assert m.max_angular_speed == pytest.approx(1.28) and \
+        m.max_angular_accel == pytest.approx(3.84)
+    assert TrackerConfig(K=K).motion_limits.max_angular_speed == 2.0
+    rules = input_rules({'max_angular_speed': 2.0, 'max_angular_accel': 6.0, 'gain_w': 0.64,
+                         'gain_v': 'bad'})
+    assert rules.limits.max_angular_speed == pytest.approx(1.28)
+    assert rules.limits.max_angular_accel == pytest.approx(3.84)
+    assert rules.limits.max_linear_speed == 0.0            # not given: none (the bad gain: 1)
+    # a turn the law asks for at once: the commands ramp at the command's limit
+    path = figure_eight(radius=0.5, rate=0.6)
+    tracker = Tracker(tc)
+    cmds = []
+    for k in range(300):
+        ref = path.sample(0.01 * k)
+        cmds.append(tracker.step(ref.x, ref.y + 0.05 * (k > 100), ref.heading, ref, 0.3,
+                                 stamp=ref.t).w)
+    steps = np.abs(np.diff(cmds))
+    assert steps.max() == pytest.approx(6.0 * 0.01, rel=1e-9)   # binds, and no more
 
 
 @pytest.mark.parametrize('gains', [dict(gain_w=0.0), dict(gain_v=-1.0), dict(gain_w=float('nan')),

@@ -143,6 +143,29 @@ class Limits:
         """
         return cls(**{n: float(values.get(n, 0.0) or 0.0) for n in LIMIT_NAMES})
 
+    def of_motion(self, gain_v: float = 1.0, gain_w: float = 1.0) -> 'Limits':
+        """The limits of the motion a base with static channel gains makes within these.
+
+        The limits are the command's (``cmd_vel``, as a base's firmware and ``identify``
+        see them); a base that turns at ``gain_w`` of its commanded rate (a skid-steer)
+        turns at most ``gain_w * max_angular_speed`` and changes its turn rate at most
+        ``gain_w * max_angular_accel``, and likewise in ``v``.  Gains of 1: these limits.
+
+        Parameters
+        ----------
+        gain_v, gain_w : float
+            The static gains (> 0; the tracker's ``gain_v``, ``gain_w``).
+
+        Returns
+        -------
+        Limits
+        """
+        if gain_v == 1.0 and gain_w == 1.0:
+            return self
+        return Limits(self.max_linear_speed * gain_v, self.max_linear_accel * gain_v,
+                      self.max_angular_speed * gain_w, self.max_angular_accel * gain_w,
+                      self.min_turning_radius)
+
     def accel_share(self, fraction: float) -> 'Limits':
         """These limits with the accelerations scaled by ``fraction`` (a trajectory's share).
 

@@ -25,6 +25,7 @@ from .actuator import ActuatorModel, within
 from .batch_data import Schedule, Settings
 from .errors import LoopConfigError
 from .law import VectorLaw, feedback
+from .limits import Limits
 from .plant import ANCHOR
 from .predictor import SUBSTEP, LatencyPredictor, invert_lag
 from .reference import RefSample
@@ -96,7 +97,9 @@ class TrackerConfig:
 
     ``max_linear_accel`` (m/s^2) and ``max_angular_accel`` (rad/s^2) are the base's
     acceleration limits (0 = unknown, off): the tracker rate-limits its commands to them
-    and its predictor models them (see :class:`Tracker`).
+    and its predictor models them (see :class:`Tracker`).  Every limit is the command's
+    (``cmd_vel``, as the base's firmware and ``identify`` see it); with channel gains the
+    law works within the limits of the motion, :attr:`motion_limits`.
 
     ``controller`` names the law (``package.module:factory``, :mod:`.interfaces`; '', the
     default, our :class:`Tracker`): every other field is the tracker's setting for any law.
@@ -112,8 +115,12 @@ class TrackerConfig:
     rate limit and its predictor work on the motion the base makes; the command sent is
     that motion over the gain (``v / gain_v``, ``w / gain_w``), clipped to
     ``max_linear_speed`` / ``max_angular_speed`` (limits of the command, ``cmd_vel``, as the
-    node clips it; a clipped one counts as saturated), the last operation of a step.  With
-    both at 1 the commands are unchanged bit for bit.
+    node clips it; a clipped one counts as saturated), the last operation of a step.  The
+    law's speed clamps, its rate limit and its predictor's actuator model use the limits
+    times the gains (:attr:`motion_limits`: a skid-steer turning at 0.63 of its command
+    turns at most 0.63 of ``max_angular_speed``, and its firmware's ramp of the command
+    is 0.63 of ``max_angular_accel`` in its motion).  With both at 1 the commands are
+    unchanged bit for bit.
     """
 
     K: tuple[tuple[float, ...], ...]
@@ -140,6 +147,8 @@ class TrackerConfig:
     controller: str = ''
     #: The gain actually applied, ``K + E D F`` (set from ``K`` and ``perturbation``).
     K_effective: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
+    #: The limits of the motion the law commands: the command's limits times the gains.
+    motion_limits: Limits = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         K = validate_gain(self.K)
@@ -191,6 +200,9 @@ class TrackerConfig:
         K_eff = self.K if self.perturbation is None else tuple(
             tuple(a + b for a, b in zip(rk, rp)) for rk, rp in zip(self.K, self.perturbation))
         object.__setattr__(self, 'K_effective', K_eff)   # the gain actually applied: K + E D F
+        object.__setattr__(self, 'motion_limits', Limits(
+            self.max_linear_speed, self.max_linear_accel, self.max_angular_speed,
+            self.max_angular_accel).of_motion(self.gain_v, self.gain_w))
 
     def __deepcopy__(self, memo: dict[int, Any]) -> TrackerConfig:
         """Itself: every field is immutable (tuples of floats), so copies share it."""
@@ -297,10 +309,11 @@ class Tracker:
             self._ref_hist = deque()
         self.predictor: LatencyPredictor | None = None
         if config.predicts:
+            m = config.motion_limits
             self.predictor = LatencyPredictor(
                 config.predict_latency, config.predict_odom_latency,
                 ActuatorModel(config.predict_lag_v, config.predict_lag_w,
-                              config.max_linear_accel, config.max_angular_accel),
+                              m.max_linear_accel, m.max_angular_accel),
                 config.dt or SUBSTEP)
         #: The last command sent (v, w), for the rate limit; None until the first.
         self._last_cmd: tuple[float, float] | None = None
@@ -357,8 +370,9 @@ class Tracker:
         c = replace(self.config, predict_latency=predict_latency, predict_lag_v=lag_v,
                     predict_lag_w=lag_w)
         self.config = c
-        actuator = ActuatorModel(c.predict_lag_v, c.predict_lag_w, c.max_linear_accel,
-                                 c.max_angular_accel)
+        m = c.motion_limits
+        actuator = ActuatorModel(c.predict_lag_v, c.predict_lag_w, m.max_linear_accel,
+                                 m.max_angular_accel)
         if self.predictor is None:
             self.predictor = LatencyPredictor(c.predict_latency, c.predict_odom_latency,
                                               actuator, c.dt or SUBSTEP)
@@ -446,7 +460,8 @@ class Tracker:
                 math.nan if measured_rate is None else float(measured_rate), passed)
             x, y = x + dx, y + dy
             th = th + self.slide.course_offset(measured_speed)
-        vmax = c.max_linear_speed
+        m = c.motion_limits
+        vmax, wmax = m.max_linear_speed, m.max_angular_speed
         if self.v is None:
             self.v = float(measured_speed) if measured_speed is not None else 0.0
             if not math.isfinite(self.v):
@@ -473,13 +488,13 @@ class Tracker:
         e, u1, u2, a, w, floored = feedback(x, y, cth, sth, v, xd, ud, c.K_effective,
                                             c.min_speed)
         saturated = False
-        amax = c.max_linear_accel
+        amax = m.max_linear_accel
         if amax > 0.0 and abs(a) > amax:          # the base cannot follow more than this
             a, saturated = math.copysign(amax, a), True
-        if w > c.max_angular_speed:
-            w, saturated = c.max_angular_speed, True
-        elif w < -c.max_angular_speed:
-            w, saturated = -c.max_angular_speed, True
+        if w > wmax:
+            w, saturated = wmax, True
+        elif w < -wmax:
+            w, saturated = -wmax, True
         v_next = v + a * h
         if v_next > vmax:
             v_next, saturated = vmax, True
@@ -509,8 +524,8 @@ class Tracker:
             self._sent = (t_meas, cmd_v, w)
         if c.compensates:                          # the motion over the base's gains,
             cmd_v, w = cmd_v / c.gain_v, w / c.gain_w      # within the command's limits
-            if abs(cmd_v) > vmax:
-                cmd_v, saturated = math.copysign(vmax, cmd_v), True
+            if abs(cmd_v) > c.max_linear_speed:
+                cmd_v, saturated = math.copysign(c.max_linear_speed, cmd_v), True
             if abs(w) > c.max_angular_speed:
                 w, saturated = math.copysign(c.max_angular_speed, w), True
         return Command(v=cmd_v, w=w, a=a, u=(u1, u2), error=e, saturated=saturated,
@@ -524,15 +539,16 @@ class Tracker:
         """
         c = self.config
         saturated = False
-        vmax = c.max_linear_speed
+        m = c.motion_limits
+        vmax, wmax = m.max_linear_speed, m.max_angular_speed
         if c.predict_lag_v > 0.0:
             cmd_v = invert_lag(v_next, p.v, c.predict_lag_v, h)
             if abs(cmd_v) > vmax:
                 cmd_v, saturated = math.copysign(vmax, cmd_v), True
         if c.predict_lag_w > 0.0:
             w = invert_lag(w, p.w, c.predict_lag_w, h)
-            if abs(w) > c.max_angular_speed:
-                w, saturated = math.copysign(c.max_angular_speed, w), True
+            if abs(w) > wmax:
+                w, saturated = math.copysign(wmax, w), True
         if not (math.isfinite(cmd_v) and math.isfinite(w)):
             cmd_v = w = 0.0
         return cmd_v, w, saturated
@@ -545,14 +561,14 @@ class Tracker:
         the previous one is ``(v0, 0)`` (the compensator's initial speed, at rest in
         rotation: the predictor's initial state).
         """
-        c = self.config
+        m = self.config.motion_limits
         pv, pw = self._last_cmd if self._last_cmd is not None else (v0, 0.0)
-        if c.max_linear_accel > 0.0:
-            cv2 = within(cv, pv, c.max_linear_accel * since)
+        if m.max_linear_accel > 0.0:
+            cv2 = within(cv, pv, m.max_linear_accel * since)
         else:
             cv2 = cv
-        if c.max_angular_accel > 0.0:
-            cw2 = within(cw, pw, c.max_angular_accel * since)
+        if m.max_angular_accel > 0.0:
+            cw2 = within(cw, pw, m.max_angular_accel * since)
         else:
             cw2 = cw
         limited = cv2 != cv or cw2 != cw
