@@ -8,7 +8,7 @@ import pytest
 
 from conftest import CONFIG
 from nonfragile_tracker.control.identification.excitation import (
-    FAST_LINEAR_ACCEL, GENTLE_LINEAR_ACCEL, ExcitationError, margin_for, plan_excitation,
+    FAST_LINEAR_ACCEL, GENTLE_ANGULAR_ACCEL, GENTLE_LINEAR_ACCEL, ExcitationError, margin_for, plan_excitation,
     plan_trial)
 from nonfragile_tracker.control.simulation.follow import simulate_following
 from nonfragile_tracker.control.simulation.gains import read_gain_file
@@ -40,6 +40,22 @@ def test_extent_inside_the_box_and_the_limits(box, vmax, wmax, rate, accel):
     assert np.ptp(plan.w) >= 0.5 * ext.max_turn_rate          # w changes sign: large w steps
     holds = [t1 - t0 for name, t0, t1 in plan.segments if name.startswith('step')]
     assert min(holds) >= 25.0 / rate
+
+
+def test_the_turns_reach_a_laps_when_the_speed_allows_at_gentle_ramps():
+    """At 0.5 m/s and 2 rad/s in a 1 m box the figure eight turns at 1 rad/s (a lap's 0.4 m
+    arcs at 0.4 m/s, where a skid-steer's side slip grows; CLOTHOID_RADII), and the turn
+    rate still changes at the gentle ramps outside the acceleration segment: the clothoid's
+    plus a gentle speed ramp on the circle's curvature."""
+    plan = plan_excitation(1.0, 0.5, 2.0, accel_segment=False)
+    ext = plan.extent()
+    assert ext.max_turn_rate >= 1.0 and ext.max_speed <= 0.5
+    assert ext.max_distance <= 1.0 - 0.5 * margin_for(1.0)
+    dw = np.diff(plan.w) / np.diff(plan.t)
+    assert np.abs(dw).max() <= (GENTLE_ANGULAR_ACCEL + GENTLE_LINEAR_ACCEL / plan.radius) \
+        * (1 + 1e-9)
+    # the default limits: the turns of the 0.3 m/s bring-up (the speed binds, not the ramp)
+    assert plan_excitation(1.0).extent().max_turn_rate == pytest.approx(0.6, abs=0.01)
 
 
 def test_ramps_gentle_without_the_accel_segment_fast_with_it():

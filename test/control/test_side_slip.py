@@ -105,8 +105,8 @@ def test_the_tracker_tracks_the_odometry_plus_the_slide():
     assert trk.slide.offset == before
 
 
-def _drive(table, seconds=60.0, w_max=0.8, seed=4, frame=(0.0, 0.0, 0.0)):
-    """A kinematic base that slides by ``table``: (odometry, external pose) samples."""
+def _drive(table, seconds=60.0, w_max=0.8, seed=4, frame=(0.0, 0.0, 0.0), rates=RATES):
+    """A kinematic base that slides by ``table`` (on ``rates``): (odometry, external pose)."""
     rng = np.random.default_rng(seed)
     dt, n = 0.02, int(seconds / 0.02)
     levels = [(rng.uniform(0.1, 0.4), rng.uniform(-w_max, w_max)) for _ in range(n // 50 + 1)]
@@ -115,7 +115,7 @@ def _drive(table, seconds=60.0, w_max=0.8, seed=4, frame=(0.0, 0.0, 0.0)):
     c, s = math.cos(frame[2]), math.sin(frame[2])
     for k in range(n):
         v, w = levels[k // 50]
-        vy = -slip_coefficient(RATES, table, w) * v * w if table else 0.0
+        vy = -slip_coefficient(rates, table, w) * v * w if table else 0.0
         odom.append((k * dt, ox, oy, th, v, w))
         truth.append((k * dt, frame[0] + c * x - s * y + rng.normal(0, 1e-3),
                       frame[1] + s * x + c * y + rng.normal(0, 1e-3), th + frame[2]))
@@ -140,6 +140,21 @@ def test_the_identification_finds_a_known_table_in_any_frame(frame):
         assert slip.low[j] <= TABLE[j] <= slip.high[j], slip
         assert abs(slip.coefficients[j] - TABLE[j]) < 0.01, slip
     assert slip.residual_rms < 0.5 * slip.drift_rms
+
+
+@pytest.mark.parametrize('w_max, knots', [(0.6, (0.25, 0.5)), (0.9, (0.25, 0.5, 1.0))])
+def test_the_table_reaches_the_turns_driven(w_max, knots):
+    """A slide growing with the turn rate, c = 0.02 + 0.1 |w| s: turns up to 0.9 rad/s (95 %
+    below 0.86) give the knot at 1 rad/s (KNOT_REACH: a table on 0.25 and 0.5 alone is flat
+    beyond 0.5, 0.035 s short at 0.85 rad/s) and c at 0.85 rad/s to 0.01 s; turns up to
+    0.6 rad/s (95 % below 0.57) stop at 0.5."""
+    rates = (0.25, 0.5, 1.0)
+    truth_table = tuple(0.02 + 0.1 * r for r in rates)
+    odom, truth = _drive(truth_table, w_max=w_max, rates=rates)
+    slip = identify_side_slip(odom, truth)
+    assert slip.rates == knots and slip.significant, slip
+    if len(knots) == 3:
+        assert abs(slip_coefficient(slip.rates, slip.coefficients, 0.85) - 0.105) < 0.01, slip
 
 
 def test_no_slide_is_found_not_significant_and_the_file_keeps_a_table(tmp_path):

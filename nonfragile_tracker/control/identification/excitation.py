@@ -50,6 +50,10 @@ FAST_SHARE = 0.3
 LEVELS = (0.5, 1.0, 0.6, 0.9, 0.4, 0.8, 0.55, 1.0)
 #: Fraction of the speed limits the reference uses: the rest is the feedback's.
 HEADROOM = 0.8
+#: Longest clothoid at a crossing of the figure eight (in radii; its turn rate reverses
+#: there at the gentle angular ramp): three radii let the turns reach 1.1 rad/s at the gentle
+#: 1.2 rad/s^2 (a lap's arcs, where a skid-steer's side slip grows), one radius 0.6 rad/s.
+CLOTHOID_RADII = 3.0
 #: Knot spacing of the reference trajectory (s).
 KNOT_DT = 0.02
 #: Integration step of the plan (s).
@@ -326,8 +330,9 @@ def _plan(radius: float, box: float, vmax: float, wmax: float, rate: float, a_li
           a_ang: float, lin: float, fast: bool, total: float, notes: tuple[str, ...]) -> Plan:
     """The excitation on circles of ``radius`` (see :func:`plan_excitation`)."""
     # the top speed: within the turn-rate limit on the circles, and a clothoid at the
-    # crossings (dw/dt = v^2 dkappa/ds <= a_ang) no longer than the radius
-    v_top = HEADROOM * min(vmax, wmax * radius, radius * math.sqrt(0.5 * a_ang))
+    # crossings (dw/dt = v^2 dkappa/ds <= a_ang) no longer than CLOTHOID_RADII radii
+    v_top = HEADROOM * min(vmax, wmax * radius,
+                           radius * math.sqrt(0.5 * CLOTHOID_RADII * a_ang))
     if v_top < 0.05:
         raise ExcitationError(f'with a box of {box:g} m (circles of {radius:.2f} m) and '
                               f'|w| <= {wmax:g} rad/s the top speed would be {v_top:.3f} m/s, '

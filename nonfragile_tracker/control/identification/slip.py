@@ -22,12 +22,17 @@ from ..simulation.slip import hat_basis
 from .errors import InsufficientExcitationError, NotEnoughDataError
 from .records import OdometrySamples
 
-__all__ = ['SideSlip', 'identify_side_slip', 'DEFAULT_RATES', 'WINDOW']
+__all__ = ['SideSlip', 'identify_side_slip', 'DEFAULT_RATES', 'KNOT_REACH', 'WINDOW']
 
-#: Turn rates (rad/s) the table may have: those the recording covers (its 95th percentile).
-#: Below the first the coefficient is the first's (the slide ``c v w`` vanishes with ``w``
-#: and a coefficient at 0 rad/s would be fitted from nothing).
+#: Turn rates (rad/s) the table may have: those the recording covers (up to
+#: :data:`KNOT_REACH` times its 95th percentile of ``|w|``).  Below the first the
+#: coefficient is the first's (the slide ``c v w`` vanishes with ``w`` and a coefficient at
+#: 0 rad/s would be fitted from nothing).
 DEFAULT_RATES = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: A rate up to this factor above the recording's 95th percentile of ``|w|`` is a knot: turns
+#: at 0.8 of it weigh its coefficient by 0.6 (from the knot below at half the rate), so it
+#: is measured, where the table would otherwise stop at half the turns driven.
+KNOT_REACH = 1.25
 #: Length (s) of the windows the displacements are compared over.
 WINDOW = 0.5
 #: Fewest windows to fit from.
@@ -95,8 +100,8 @@ def identify_side_slip(odometry: OdometrySamples, truth: OdometrySamples, *,
     window : float
         Window length (s).
     rates : tuple of float
-        Candidate turn rates of the table (rad/s, increasing); those up to the recording's
-        95th percentile of ``|w|`` are kept.
+        Candidate turn rates of the table (rad/s, increasing); those up to
+        :data:`KNOT_REACH` times the recording's 95th percentile of ``|w|`` are kept.
 
     Returns
     -------
@@ -128,11 +133,12 @@ def identify_side_slip(odometry: OdometrySamples, truth: OdometrySamples, *,
                                  f'{span:.2f} s, {n_win} windows of {window} s; record at '
                                  f'least {MIN_WINDOWS * window:g} s of driving with both')
     q95 = float(np.quantile(np.abs(w), 0.95))
-    knots = tuple(r for r in rates if r <= q95)
+    knots = tuple(r for r in rates if r <= KNOT_REACH * q95)
     if not knots:
         raise InsufficientExcitationError(
             f'side slip: the base turned too little (95 % of |w| below {q95:.3f} rad/s); '
-            f'drive turns of at least {rates[0]:g} rad/s while the external pose is recorded')
+            f'drive turns of at least {rates[0] / KNOT_REACH:g} rad/s while the external pose '
+            'is recorded')
     # per interval, the lateral slide of a unit coefficient j, in the odometry frame
     dt = np.diff(t)
     mid = th[:-1] + 0.5 * np.diff(th)
