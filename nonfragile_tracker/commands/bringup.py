@@ -164,8 +164,9 @@ def register(subparsers: Subparsers) -> None:
         'latency, lags and limits, design a gain certified for them, verify it in a short '
         'trial, and write the robot file, the gain file and a report into the run folder. '
         'Ctrl-C, SIGTERM, odometry silence, leaving the box and any error command zero '
-        'velocity and end the run.  The box check uses the odometry: it does not protect '
-        'against odometry drift or obstacles.')
+        'velocity and end the run.  The box check uses the odometry (in the trial plus the '
+        'side slip the tracker reckons): it does not protect against odometry drift or '
+        'obstacles.')
     p.add_argument('--robot', metavar='FILE', help='robot file (ROS 2 parameter file with a '
                    '/**/tracker section: topics, frames, TwistStamped, limits); default: '
                    'odom, cmd_vel, Twist, no known limits')

@@ -315,7 +315,12 @@ class BringupNode(AdapterNode[BringupConfig]):
                 self._begin(x, y, th)
             return
         assert self.start is not None
-        d = math.hypot(x - self.start[0], y - self.start[1])
+        # where the robot is: the odometry, plus the slide the trial's tracker reckons when it
+        # compensates a side slip (the odometry of a skid-steer drifts outward of its turns)
+        slide = getattr(self.follower.tracker, 'slide', None) \
+            if self.phase == 'trial' and self.follower is not None else None
+        bx, by = (x, y) if slide is None else (x + slide.offset[0], y + slide.offset[1])
+        d = math.hypot(bx - self.start[0], by - self.start[1])
         self.farthest = max(self.farthest, d)
         if d > self.config.box_radius:
             self.stop(f'left the box: {d:.3f} m from the start pose > box '
@@ -329,7 +334,6 @@ class BringupNode(AdapterNode[BringupConfig]):
             if ref is not None and self.recording is not None:
                 self._record_reference(stamp, ref)
             if self.phase == 'trial' and ref is not None and t > 0:
-                slide = getattr(self.follower.tracker, 'slide', None)
                 if slide is not None:           # the tracker's estimate of the true pose
                     x, y = x + slide.offset[0], y + slide.offset[1]
                 along, cross, _ = path_errors(x, y, th, ref)
