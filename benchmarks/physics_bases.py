@@ -217,8 +217,8 @@ def measure(repeat: int) -> dict:
 
 
 def _slip_cell(sl: dict) -> str:
-    parts = [f"{sl['c'][j]:.3f} ({sl['low'][j]:.3f}-{sl['high'][j]:.3f})"
-             for j in range(min(2, len(sl['c'])))]
+    parts = [f"{r:g}: {sl['c'][j]:.3f} ({sl['low'][j]:.3f}-{sl['high'][j]:.3f})"
+             for j, r in enumerate(sl['rates'])]
     return (' / '.join(parts) + f"; {1e3 * sl['drift_rms']:.2f} -> "
             f"{1e3 * sl['residual_rms']:.2f}" + ('' if sl['significant'] else
                                                  ' (not significant: not compensated)'))
@@ -258,7 +258,7 @@ def table(res: dict, condition: str) -> str:
     row('identified accel limits (truth)', lambda r: '%.2f / %.2f (%.1f / %.1f)' % (
         r[condition]['identified']['max_linear_accel'],
         r[condition]['identified']['max_angular_accel'], *r['limits']))
-    row('identified side slip c (s) at 0.25 / 0.5 rad/s (95 % interval); window drift -> '
+    row('identified side slip c (s) per rate (rad/s; 95 % interval); window drift -> '
         'residual (mm)', lambda r: _slip_cell(r[condition]['side_slip']))
     row('figure eight: true-pose RMS after 5 s (mm)', lambda r: (
         f"{1e3 * r[condition]['track']['true_rms']:.2f}" + (
