@@ -72,3 +72,44 @@ def test_future_start_is_waited_for_and_a_far_robot_is_refused():
     far.set_trajectory(traj)                                # a new trajectory: new start
     assert far.refused is None and not far.started
     assert math.isfinite(far.step(0.0, 0.0, 0.0, 2.0, 0.0).v)
+
+
+class _Turning:
+    """A law that, past the trajectory's end, still asks for a turn at rest (v 1 mm/s)."""
+
+    horizon = 0.0
+
+    def __init__(self, config):
+        self.config, self.resets = config, 0
+
+    def reset(self, *args):
+        self.resets += 1
+
+    def step(self, x, y, th, ref, measured_speed=None, stamp=None, measured_rate=None):
+        from nonfragile_tracker.control.simulation.tracker import Command
+        return Command(v=0.001, w=-0.69)
+
+
+@pytest.mark.parametrize('max_angular_accel', [0.0, 6.0])
+def test_the_stop_at_the_end_ramps_within_the_acceleration_limit(max_angular_accel):
+    """At rest after the end, the last command (w -0.69 rad/s, a skid-steer's at its lap's
+    end) ramps to zero at max_angular_accel (0.12 rad/s per 20 ms step; the run finishes
+    when it is there), not in one step (35 rad/s^2); without a limit one zero command."""
+    K = read_gain_file(CONFIG / 'tracker_gains.yaml')
+    law = _Turning(TrackerConfig(K=K, max_angular_accel=max_angular_accel))
+    traj = from_waypoints([0.0, 1.0], [0.0, 0.0], [0.0, 0.0], source='t')
+    f = Follower(law, traj)
+    out = []
+    for k in range(60):
+        out.append(f.step(0.0, 0.0, 0.0, 0.02 * k))
+        if f.finished:
+            break
+    w = np.array([c.w for c in out])
+    after = w[int(round(1.0 / 0.02)) + 1:]
+    assert after[-1] == 0.0 and f.finished
+    if max_angular_accel:
+        assert np.abs(np.diff(w)).max() <= 6.0 * 0.02 + 1e-12
+        assert f.finished_at == pytest.approx(1.02 + 0.02 * math.ceil(0.69 / 0.12))
+        assert np.all(after[1:-1] < 0) and np.all(np.diff(after) > 0)      # toward zero
+    else:
+        assert after.tolist() == [0.0] and f.finished_at == pytest.approx(1.02)

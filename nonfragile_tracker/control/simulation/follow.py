@@ -3,8 +3,8 @@
 :class:`Follower` is the one step function of a tracker that samples its trajectory
 itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
 :class:`~.trajectory.Trajectory` at ``t`` and calls :meth:`.tracker.Tracker.step`; it waits
-at rest before the trajectory's first time and, after its end, commands zero once the
-speed is below ``rest_speed``.  :func:`simulate_following` is the in-process run with
+at rest before the trajectory's first time and, after its end, stops once the speed is
+below ``rest_speed`` (the last command ramped to zero within the law's acceleration limits).  :func:`simulate_following` is the in-process run with
 exactly the node's sequence, so a lockstep ROS run and it agree to round-off.  No ROS import.
 
 See doc/trajectories.md, section "Start, end and bad input".
@@ -12,9 +12,10 @@ See doc/trajectories.md, section "Start, end and bad input".
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 
+from .actuator import within
 from .limits import ACCEL_FRACTION, Limits, within_limits
 from .interfaces import Controller, ControllerFactory, PlantFactory, make_controller, make_plant
 from .tracker import Command, TrackerConfig
@@ -125,7 +126,10 @@ class Follower:
     trajectory : Trajectory
         What to follow; time ``t`` of :meth:`step` is trajectory time (s).
     rest_speed : float
-        After ``t_end``, ``|cmd v|`` below this (m/s) ends the run with a zero command.
+        After ``t_end``, ``|cmd v|`` below this (m/s) ends the run: with a zero command, or,
+        for a law configured with acceleration limits (a ``TrackerConfig``'s
+        ``max_*_accel``, the command's), the last command ramped to zero within them (a turn
+        still asked for at rest is not cut in one step), the run finished at zero.
     start_tolerance : float
         A trajectory starting at rest and first followed more than this (s) after its
         start time is re-based to start then (:func:`start_offset`).
@@ -161,6 +165,8 @@ class Follower:
         self.finished = False
         self.ended = False          # past t_end (still settling until finished)
         self.finished_at: float | None = None
+        #: ``(t, v, w)`` of the last command of the stop ramp (see :meth:`step`), or None.
+        self._stopping: tuple[float, float, float] | None = None
         self.last_ref: RefSample | None = None
         self.started = False        # the first step at or after t_start has been taken
         self.offset = 0.0           # trajectory time = t - offset (see start_offset)
@@ -182,6 +188,7 @@ class Follower:
         self.trajectory = trajectory
         self.finished = self.ended = False
         self.finished_at = None
+        self._stopping = None
 
     def step(self, x: float, y: float, th: float, t: float,
              measured_speed: float | None = None, measured_rate: float | None = None
@@ -218,6 +225,8 @@ class Follower:
         self.last_ref = ref
         if self.finished or self.refused:
             return Command(v=0.0, w=0.0)
+        if self._stopping is not None:
+            return self._stop_step(t)
         if t < self.trajectory.t_start:
             # not started: wait at rest (holding a point with v = 0 would turn the robot
             # on the spot); the compensator starts from the measured speed at t_start
@@ -233,11 +242,43 @@ class Follower:
         if t > self.trajectory.t_end:
             self.ended = True
             if abs(cmd.v) < self.rest_speed:
-                self.finished = True
-                self.finished_at = t
-                self.tracker.reset(0.0)
-                return Command(v=0.0, w=0.0, error=cmd.error)
+                if cmd.w != 0.0 and any(self._stop_limits()):
+                    self._stopping = (t, cmd.v, cmd.w)     # ramp to rest from this command
+                    return cmd
+                return self._finish(t, cmd.error)
         return cmd
+
+    def _stop_limits(self) -> tuple[float, float]:
+        """The acceleration limits (command's, m/s^2, rad/s^2; 0 = none) the stop ramps at.
+
+        Those of a controller configured with them (our law's ``TrackerConfig``); else none,
+        and the stop is one zero command.
+        """
+        c = getattr(self.tracker, 'config', None)
+        if not isinstance(c, TrackerConfig):
+            return 0.0, 0.0
+        return c.max_linear_accel, c.max_angular_accel
+
+    def _stop_step(self, t: float) -> Command:
+        """The next command of the stop ramp: the last moved toward zero within the limits."""
+        t0, v, w = cast(tuple[float, float, float], self._stopping)
+        h = max(t - t0, 0.0)
+        av, aw = self._stop_limits()
+        v = within(0.0, v, av * h) if av > 0 else 0.0
+        w = within(0.0, w, aw * h) if aw > 0 else 0.0
+        if v == 0.0 and w == 0.0:
+            return self._finish(t)
+        self._stopping = (t, v, w)
+        return Command(v=v, w=w)
+
+    def _finish(self, t: float, error: tuple[float, float, float, float] | None = None
+                ) -> Command:
+        """End the run at ``t``: the zero command, the law reset."""
+        self._stopping = None
+        self.finished = True
+        self.finished_at = t
+        self.tracker.reset(0.0)
+        return Command(v=0.0, w=0.0) if error is None else Command(v=0.0, w=0.0, error=error)
 
     def _start(self, x: float, y: float, t: float) -> None:
         """The first step on the trajectory: re-base a late start, check the distance."""
