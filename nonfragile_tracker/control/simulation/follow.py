@@ -4,8 +4,9 @@
 itself (at the odometry stamp): ``step(x, y, th, t, speed)`` samples the
 :class:`~.trajectory.Trajectory` at ``t`` and calls :meth:`.tracker.Tracker.step`; it waits
 at rest before the trajectory's first time and, after its end, stops once the speed is
-below ``rest_speed`` (the last command ramped to zero within the law's acceleration limits).  :func:`simulate_following` is the in-process run with
-exactly the node's sequence, so a lockstep ROS run and it agree to round-off.  No ROS import.
+below ``rest_speed`` (the last command ramped to zero within the law's acceleration
+limits).  :func:`simulate_following` is the in-process run with exactly the node's
+sequence, so a lockstep ROS run and it agree to round-off.  No ROS import.
 
 See doc/trajectories.md, section "Start, end and bad input".
 """

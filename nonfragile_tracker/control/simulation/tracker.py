@@ -116,11 +116,12 @@ class TrackerConfig:
     that motion over the gain (``v / gain_v``, ``w / gain_w``), clipped to
     ``max_linear_speed`` / ``max_angular_speed`` (limits of the command, ``cmd_vel``, as the
     node clips it; a clipped one counts as saturated), the last operation of a step.  The
-    law's speed clamps, its rate limit and its predictor's actuator model use the limits
-    times the gains (:attr:`motion_limits`: a skid-steer turning at 0.63 of its command
-    turns at most 0.63 of ``max_angular_speed``, and its firmware's ramp of the command
-    is 0.63 of ``max_angular_accel`` in its motion).  With both at 1 the commands are
-    unchanged bit for bit.
+    law's speed clamps and its predictor's actuator model use the limits times the gains
+    (:attr:`motion_limits`: a skid-steer turning at 0.63 of its command turns at most 0.63
+    of ``max_angular_speed``, and its firmware's ramp of the command is 0.63 of
+    ``max_angular_accel`` in its motion); its rate limit holds the motion to the limits'
+    numbers (the command may change at up to ``max_angular_accel / gain_w``, which the
+    base's firmware ramps).  With both at 1 the commands are unchanged bit for bit.
     """
 
     K: tuple[tuple[float, ...], ...]
@@ -561,14 +562,18 @@ class Tracker:
         the previous one is ``(v0, 0)`` (the compensator's initial speed, at rest in
         rotation: the predictor's initial state).
         """
-        m = self.config.motion_limits
+        # the command's limits on the motion (not times the gains): a skid-steer's command
+        # then changes at up to max_angular_accel / gain_w, which its firmware ramps; held
+        # to the firmware's own ramp (times gain_w) a 100 Hz loop fell into a limit cycle of
+        # the rate limit against the lag inversion (skid-steer lap 28 mm against 7 mm)
+        c = self.config
         pv, pw = self._last_cmd if self._last_cmd is not None else (v0, 0.0)
-        if m.max_linear_accel > 0.0:
-            cv2 = within(cv, pv, m.max_linear_accel * since)
+        if c.max_linear_accel > 0.0:
+            cv2 = within(cv, pv, c.max_linear_accel * since)
         else:
             cv2 = cv
-        if m.max_angular_accel > 0.0:
-            cw2 = within(cw, pw, m.max_angular_accel * since)
+        if c.max_angular_accel > 0.0:
+            cw2 = within(cw, pw, c.max_angular_accel * since)
         else:
             cw2 = cw
         limited = cv2 != cv or cw2 != cw
